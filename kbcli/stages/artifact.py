@@ -1,0 +1,86 @@
+"""The in-memory form of a stage output, independent of how it is stored.
+
+An artifact carries its kind, the full config that made it, the seed, references to its input
+artifacts (kind and sha256, recursively: the provenance chain), small metadata (``attrs``) and
+arrays (``data``, nested dicts become HDF5 groups). :mod:`kbcli.io.artifact` writes it to HDF5.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from kbcli import __version__
+
+#: Current schema version of every artifact kind. Bump a kind's version when its layout changes.
+SCHEMA_VERSIONS: dict[str, int] = {
+    "keyboard": 1,
+    "model": 1,
+    "scene": 1,
+    "history": 1,
+    "detection": 1,
+    "run": 1,
+    "closed_loop": 1,
+    "evaluation": 1,
+}
+
+
+@dataclass
+class Artifact:
+    """One stage output.
+
+    Attributes
+    ----------
+    kind : str
+        One of :data:`SCHEMA_VERSIONS`.
+    config : dict
+        The full, JSON-serialisable config of the stage that made it.
+    seed : int or None
+        The seed it was made with (None for deterministic stages).
+    data : dict
+        Arrays (numpy) by name; a nested dict is a group.
+    attrs : dict
+        Small JSON-serialisable metadata (summaries, names).
+    inputs : dict
+        Role -> reference of each input artifact (see :func:`ref`).
+    sha256 : str or None
+        Hash of the file it was read from (None when made in memory).
+    """
+
+    kind: str
+    config: dict
+    seed: int | None = None
+    data: dict[str, Any] = field(default_factory=dict)
+    attrs: dict[str, Any] = field(default_factory=dict)
+    inputs: dict[str, dict] = field(default_factory=dict)
+    schema_version: int | None = None
+    kbcli_version: str = __version__
+    sha256: str | None = None
+    path: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in SCHEMA_VERSIONS:
+            raise ValueError(f"unknown artifact kind {self.kind!r}; valid: {', '.join(SCHEMA_VERSIONS)}")
+        if self.schema_version is None:
+            self.schema_version = SCHEMA_VERSIONS[self.kind]
+
+    def array(self, name: str) -> np.ndarray:
+        """A dataset by slash path ('samples/actions')."""
+        node: Any = self.data
+        for part in name.split("/"):
+            node = node[part]
+        return np.asarray(node)
+
+
+def ref(art: Artifact) -> dict:
+    """A reference to an input artifact: kind, sha256, file name and its own inputs (the chain)."""
+    import os
+
+    return {
+        "kind": art.kind,
+        "sha256": art.sha256,
+        "file": os.path.basename(art.path) if art.path else None,
+        "inputs": art.inputs,
+    }

@@ -1,0 +1,45 @@
+"""Shared drawing helpers."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
+
+from kbcli.core.keyboard import Keyboard
+
+
+def save(fig: Figure, path: str | os.PathLike, dpi: int = 110) -> None:
+    """Save atomically (temporary file, then rename) and close the figure."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent or ".")
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=dpi, bbox_inches="tight", metadata={"Software": None})
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    finally:
+        plt.close(fig)
+
+
+def draw_keyboard(ax, kb: Keyboard, *, labels: bool = True, alpha: float = 1.0,
+                  edge: str = "black", fill: bool = True, offset=(0.0, 0.0)) -> None:
+    """Draw the keys at the reference pose (shifted by ``offset``) on ``ax``."""
+    cmap = plt.get_cmap("tab20")
+    s = kb.config.key_size
+    for k, (cx, cy) in enumerate(kb.key_centres()):
+        x, y = cx - s / 2 + offset[0], cy - s / 2 + offset[1]
+        ax.add_patch(Rectangle((x, y), s, s, facecolor=cmap(k % 20) if fill else "none",
+                               edgecolor=edge, lw=0.8, alpha=alpha))
+        if labels:
+            pitch, tempo = kb.features[k]
+            ax.text(x + s / 2, y + s / 2, f"{kb.names[k]}\n{tempo:.0f} bpm", ha="center",
+                    va="center", fontsize=6.5)
