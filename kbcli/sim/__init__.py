@@ -1,0 +1,127 @@
+"""The simulated world: an arm reaching on a pad, and the keyboard at its (hidden) true pose.
+
+Only this package imports pymunk (in :mod:`kbcli.sim.arm`). The rest of kbcli sees a reacher,
+``reach(targets, rng) -> landed finger positions``, and :class:`World`, which turns an action into
+what the robot hears. The world holds the ground truth; robot-side code only gets ``World.touch``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from kbcli.core.keyboard import Keyboard
+from kbcli.errors import ConfigError
+
+MODES = ("ideal", "dynamics")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimConfig:
+    """The arm and how it reaches.
+
+    Parameters
+    ----------
+    mode : str
+        ``ideal``: the finger lands exactly on the target (the paper's Sect. IV); ``dynamics``: a
+        pymunk two-link arm driven by motors (Sect. IV-C).
+    base : tuple of float
+        Pad coordinates of the shoulder joint.
+    link_lengths : tuple of float
+        Upper arm and forearm lengths, px.
+    reach_noise : float
+        Std (px) of the landing scatter: motor noise in ``dynamics`` mode, Gaussian scatter of the
+        landing point in ``ideal`` mode.
+    """
+
+    mode: str = "ideal"
+    base: tuple[float, float] = (400.0, 0.0)
+    link_lengths: tuple[float, float] = (320.0, 280.0)
+    reach_noise: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ConfigError(f"unknown mode {self.mode!r}; valid: {', '.join(MODES)}")
+        l1, l2 = self.link_lengths
+        if not (l1 > 0 and l2 > 0 and np.isfinite(l1) and np.isfinite(l2)):
+            raise ConfigError(f"link_lengths must be positive, got {self.link_lengths!r}")
+        if not (np.isfinite(self.reach_noise) and self.reach_noise >= 0):
+            raise ConfigError(f"reach_noise must be >= 0 px, got {self.reach_noise!r}")
+        object.__setattr__(self, "base", (float(self.base[0]), float(self.base[1])))
+        object.__setattr__(self, "link_lengths", (float(l1), float(l2)))
+
+    def to_dict(self) -> dict:
+        return {"mode": self.mode, "base": list(self.base), "link_lengths": list(self.link_lengths),
+                "reach_noise": self.reach_noise}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> SimConfig:
+        known = set(cls.__dataclass_fields__)
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ConfigError(f"unknown sim option(s) {', '.join(unknown)}; valid: {', '.join(sorted(known))}")
+        d = dict(d)
+        for k in ("base", "link_lengths"):
+            if k in d:
+                d[k] = tuple(d[k])
+        return cls(**d)
+
+
+def workspace_check(cfg: SimConfig, points: np.ndarray) -> np.ndarray:
+    """(n,) bool: whether each point is inside the arm's annular workspace."""
+    p = np.asarray(points, float).reshape(-1, 2) - np.asarray(cfg.base)
+    r = np.hypot(p[:, 0], p[:, 1])
+    l1, l2 = cfg.link_lengths
+    return (r >= abs(l1 - l2)) & (r <= l1 + l2) & np.isfinite(r)
+
+
+class IdealReacher:
+    """The finger lands on the target (plus optional Gaussian scatter of ``reach_noise`` px)."""
+
+    def __init__(self, cfg: SimConfig) -> None:
+        self.cfg = cfg
+
+    def reach(self, targets: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """(n, 2) targets -> (n, 2) landed finger positions. Raises OutOfReachError."""
+        from kbcli.errors import OutOfReachError
+
+        t = np.asarray(targets, float).reshape(-1, 2)
+        ok = workspace_check(self.cfg, t)
+        if not ok.all():
+            bad = t[~ok][0]
+            raise OutOfReachError(f"target ({bad[0]:.1f}, {bad[1]:.1f}) is outside the arm's workspace")
+        if self.cfg.reach_noise > 0:
+            t = t + rng.normal(0.0, self.cfg.reach_noise, size=t.shape)
+        return t
+
+
+def make_reacher(cfg: SimConfig):
+    """The reacher for ``cfg.mode``."""
+    if cfg.mode == "ideal":
+        return IdealReacher(cfg)
+    from kbcli.sim.arm import DynamicsReacher  # pymunk only loads when asked for
+
+    return DynamicsReacher(cfg)
+
+
+@dataclass
+class World:
+    """The keyboard at its true pose, an arm and a perception channel.
+
+    ``touch`` is all the robot side may call: it reaches for the actions and returns where the
+    finger landed (proprioception) and the perceived sound features (NaN rows for silence).
+    """
+
+    keyboard: Keyboard
+    reacher: object
+    pose: np.ndarray | None = None
+    family: str = "translation"
+    touches: int = field(default=0, init=False)
+
+    def touch(self, actions: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 2) actions -> landed (n, 2), perceived features (n, D)."""
+        landed = self.reacher.reach(np.asarray(actions, float).reshape(-1, 2), rng)
+        self.touches += len(landed)
+        heard = self.keyboard.perceive(landed, self.pose, self.family, rng=rng)
+        return landed, heard

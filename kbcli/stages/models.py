@@ -1,0 +1,32 @@
+"""Build and load model artifacts (kind ``model``), whatever made them.
+
+A model artifact's config always holds a ``keyboard`` table (the instrument it models) and a
+``strategy``: ``exact`` (the keyboard's own geometry) or the exploration strategy that learned it.
+"""
+
+from __future__ import annotations
+
+from kbcli.core.model import ExactModel
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages.artifact import Artifact, ref
+
+
+def exact_artifact(kb_art: Artifact) -> Artifact:
+    """A model artifact for the ``exact`` model of a keyboard artifact."""
+    return Artifact(
+        kind="model",
+        config={"strategy": "exact", "keyboard": kb_art.config},
+        seed=None,
+        inputs={"keyboard": ref(kb_art)},
+        attrs={"strategy": "exact"},
+    )
+
+
+def load_model(art: Artifact):
+    """The model (:class:`~kbcli.core.model.SoundModel`) stored in a model artifact."""
+    kb = keyboard_stage.load(art)
+    if art.config["strategy"] == "exact":
+        return ExactModel(kb)
+    from kbcli.core.learned import LearnedModel
+
+    return LearnedModel.from_arrays(art.data["model"])
