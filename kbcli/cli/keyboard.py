@@ -7,8 +7,8 @@ from typing import Annotated
 
 import typer
 
-from kbcli.core.keyboard import KeyboardConfig
 from kbcli.cli.app import command, out, output_path, plot_app
+from kbcli.core.keyboard import KeyboardConfig
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml
 from kbcli.stages import keyboard as stage
