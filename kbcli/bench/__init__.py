@@ -1,0 +1,1 @@
+"""Benchmarks behind ``kbcli bench ...``: simulations that print tables (not tests)."""

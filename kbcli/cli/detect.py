@@ -1,0 +1,174 @@
+"""``kbcli detect`` (failure detection over a play history, Sect. III-C) and ``kbcli bench detect``."""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from kbcli.cli.app import bench_app, command, err, out, output_path, progress
+from kbcli.core.detect import DETECTORS, DetectorConfig
+from kbcli.errors import ConfigError
+from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.stages import detect as stage
+
+
+@command(name="detect")
+def detect_cmd(
+    history: Annotated[Path, typer.Argument(help="History artifact (kbcli play).")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Detection artifact to write (.h5).")],
+    detector: Annotated[str, typer.Option(
+        "--detector", help=f"Detector: {', '.join(DETECTORS)} (binomial is the paper's).")] = "binomial",
+    n_lt: Annotated[int, typer.Option("--n-lt", help="Long-term window N_LT (Eq. 4).")] = 100,
+    n_st: Annotated[int, typer.Option("--n-st", help="Short-term window N_ST (Eq. 5), < N_LT.")] = 10,
+    threshold: Annotated[float, typer.Option(
+        "--threshold", help="Fire when the score (binomial: upper tail of Eq. 6) falls below it; in (0, 1).")] = 0.01,
+    shift: Annotated[float, typer.Option(
+        "--shift", help="cusum: failure-rate increase it is tuned to (p1 = p0 + shift).")] = 0.15,
+    hazard: Annotated[float, typer.Option("--hazard", help="bocpd: prior change probability per step.")] = 1e-3,
+) -> None:
+    """Run a failure detector online over a play history, one result at a time.
+
+    Reads HISTORY (kind 'history'); writes OUTPUT (kind 'detection': the score per step and the
+    firing steps); prints the first firing and, if the history has a perturbation, the delay after
+    it (post-move actions seen when it fired) and the false alarms before it.
+    """
+    cfg = DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold, shift=shift,
+                         hazard=hazard)
+    hist = read_artifact(history, "history")
+    output_path(output)
+    art = stage.run(cfg, hist)
+    write_artifact(art, output)
+    a = art.attrs
+    if a["first_firing"] is None:
+        msg = f"{detector} never fired in {a['steps']} steps"
+    else:
+        msg = f"{detector} fired {a['n_firings']} time(s), first at step {a['first_firing']}"
+    if a["perturb_at"] is not None:
+        if a["detected_at"] is None:
+            msg += f"; the move at step {a['perturb_at']} was not detected"
+        else:
+            msg += (f"; detected the move at step {a['perturb_at']} at step {a['detected_at']} "
+                    f"(delay {a['delay']} actions, {a['false_alarms']} false alarm(s) before)")
+    out.print(f"wrote {output}: {msg}")
+
+
+def _fmt(v: float, horizon: int) -> str:
+    return f">{horizon}" if math.isinf(v) else f"{v:g}"
+
+
+@command(bench_app, name="detect")
+def bench_detect_cmd(
+    p_pre: Annotated[float | None, typer.Option(
+        "--p-pre", help="Failure rate before the change [default: the --model's on its reference "
+        "pose, else 0.01].")] = None,
+    p_post: Annotated[str | None, typer.Option(
+        "--p-post", help="Comma-separated post-change failure rates instead of the displacement "
+        "categories (e.g. 0.05,0.2).")] = None,
+    model: Annotated[Path | None, typer.Option(
+        "--model", help="Model artifact whose melody player sets the failure rates "
+        "[default: the exact model of the default keyboard].")] = None,
+    streams: Annotated[int, typer.Option("--streams", help="Evaluation streams per category.")] = 400,
+    tune_actions: Annotated[int, typer.Option(
+        "--tune-actions", help="Change-free actions used to tune every detector.")] = 1_000_000,
+    horizon: Annotated[int, typer.Option(
+        "--horizon", help="Post-change actions after which a change counts as missed.")] = 1000,
+    fa_target: Annotated[float, typer.Option(
+        "--fa-target", help="False alarms allowed per 10,000 actions when tuning.")] = 1.0,
+    n_lt: Annotated[int, typer.Option("--n-lt", help="Long-term window of our detectors.")] = 100,
+    n_st: Annotated[int, typer.Option("--n-st", help="Short-term window of our detectors.")] = 10,
+    detectors: Annotated[str, typer.Option(
+        "--detectors", help="Comma-separated subset of binomial,cusum,bocpd,fhddm,ddm,adwin.")] =
+        "binomial,cusum,bocpd,fhddm,ddm,adwin",
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the simulation.")] = 0,
+) -> None:
+    """Benchmark the failure detectors against river's FHDDM, DDM and ADWIN on simulated histories.
+
+    Reads an optional MODEL; writes nothing; prints, per displacement category, each detector's
+    tuned setting, false alarms per 10,000 pre-change actions, median and 90th-percentile detection
+    delay (actions after the change) and missed detections, every detector tuned to at most
+    --fa-target false alarms per 10,000 actions on separate streams.
+    """
+    from kbcli.bench import detect as bench
+    from kbcli.core.melody import DEFAULT_MELODY, parse_melody
+    from kbcli.core.play import expected_failure_rate
+    from kbcli.stages import keyboard as keyboard_stage
+    from kbcli.stages.models import load_model
+
+    rng = np.random.default_rng(seed)
+    m = kb = None
+    note = ""
+    if model is not None:
+        model_art = read_artifact(model, "model")
+        m, kb = load_model(model_art), keyboard_stage.load(model_art)
+        if p_pre is None:
+            measured = float(expected_failure_rate(
+                m, kb, parse_melody(DEFAULT_MELODY, kb), "translation", None, rng=rng,
+                n_samples=4000)[0])
+            p_pre = measured if measured > 0 else 0.01
+            note = (f"p_pre {measured:.4f}: the model's failure rate on the reference pose"
+                    if measured > 0 else "the model never fails on its reference pose: p_pre 0.01")
+    if p_pre is None:
+        p_pre = 0.01
+    try:
+        posts = None if p_post is None else tuple(float(v) for v in p_post.split(",") if v.strip())
+    except ValueError:
+        raise ConfigError(f"--p-post must be comma-separated numbers, got {p_post!r}") from None
+    cfg = bench.BenchConfig(
+        p_pre=p_pre, p_post=posts, streams=streams, tune_actions=tune_actions, horizon=horizon,
+        fa_target=fa_target, n_lt=n_lt, n_st=n_st,
+        detectors=tuple(d.strip() for d in detectors.split(",") if d.strip()),
+    )
+    if any(d in bench.RIVER for d in cfg.detectors):
+        bench._river()  # fail early with a clear message if river is missing
+    if note:
+        err.print(note)
+    n_groups = len(posts) if posts is not None else len(cfg.categories)
+    total = len(cfg.detectors) * (1 + n_groups)
+    t0 = time.perf_counter()
+    res = None
+    for _, partial in progress(bench.run(cfg, rng=rng, model=m, keyboard=kb), total, "benchmark"):
+        res = partial
+    elapsed = time.perf_counter() - t0
+    wide = Console(width=max(out.width, 110), highlight=False)  # the table needs ~100 columns
+    wide.print(f"detection delay = actions after the change until the alarm; p_pre={cfg.p_pre:g}; "
+              f"{cfg.streams} streams per category, change at a step in "
+              f"[{cfg.change_min}, {cfg.change_max}]; every detector tuned on "
+              f"{cfg.tune_actions:,} change-free actions to <= {cfg.fa_target:g} false alarm per "
+              f"10,000 (FA tune); FA eval: false alarms per 10,000 pre-change actions of the "
+              f"evaluation streams; misses (no alarm within {cfg.horizon}) count as infinite delays")
+    for group, g in res.groups.items():
+        table = Table(title=f"{group}: post-change failure rate median {g['median_p_post']:.2f} "
+                            f"(10-90%: {g['p10']:.2f}-{g['p90']:.2f})", title_justify="left")
+        for col in ("detector", "setting", "FA tune", "FA eval", "median", "p90", "missed"):
+            table.add_column(col, justify="left" if col in ("detector", "setting") else "right",
+                             no_wrap=True)
+        for r in res.rows:
+            if r.group == group:
+                table.add_row(r.detector, r.setting, f"{r.tuned_fa:.2f}", f"{r.fa:.2f}",
+                              _fmt(r.median, cfg.horizon), _fmt(r.p90, cfg.horizon),
+                              f"{r.missed}/{r.streams}")
+        wide.print(table)
+    for group in res.groups:
+        rows = {r.detector: r for r in res.rows if r.group == group}
+        river = [r for d, r in rows.items() if d in bench.RIVER and r.tuned_fa <= cfg.fa_target]
+        ours = [r for d, r in rows.items() if d in bench.OURS]
+        if not river or not ours:
+            continue
+        best = min(river, key=lambda r: r.median)
+        fastest = min(ours, key=lambda r: r.median)
+        default = rows.get("binomial")
+        msg = f"{group}: best river {best.detector} median {_fmt(best.median, cfg.horizon)}"
+        if default is not None:
+            verdict = "no worse" if default.median <= best.median else "WORSE"
+            msg += f"; binomial {_fmt(default.median, cfg.horizon)} ({verdict})"
+        beats = "beats it" if fastest.median < best.median else "does not beat it"
+        msg += f"; our fastest {fastest.detector} {_fmt(fastest.median, cfg.horizon)} ({beats})"
+        wide.print(msg)
+    out.print(f"benchmark took {elapsed:.0f} s")

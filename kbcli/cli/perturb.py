@@ -1,0 +1,61 @@
+"""``kbcli perturb``: put the keyboard at a new pose (a scene artifact)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from kbcli.cli.app import command, out, output_path
+from kbcli.errors import ConfigError
+from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.stages import perturb as stage
+
+
+@command(name="perturb")
+def perturb_cmd(
+    keyboard: Annotated[Path, typer.Option("--keyboard", help="Keyboard artifact (.h5) to move.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Scene artifact to write (.h5).")],
+    dx: Annotated[float | None, typer.Option("--dx", help="Displacement along x, px.")] = None,
+    dy: Annotated[float | None, typer.Option("--dy", help="Displacement along y, px.")] = None,
+    angle: Annotated[float | None, typer.Option(
+        "--angle", help="Rotation about the keyboard centre, degrees counter-clockwise (makes the "
+        "move rigid).")] = None,
+    category: Annotated[str | None, typer.Option(
+        "--category", help="Draw a random move instead: small, medium or large (largest per-axis "
+        "displacement in (0,10], (10,20] or (20,40] px).")] = None,
+    family: Annotated[str | None, typer.Option(
+        "--family", help="translation or rigid (rigid draws also turn up to 5 degrees) "
+        "[default translation, rigid with --angle].")] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of a --category draw.")] = 0,
+) -> None:
+    """Move the keyboard: explicit --dx/--dy [--angle], or a random --category draw.
+
+    Reads KEYBOARD (kind 'keyboard'); writes OUTPUT (kind 'scene', the true pose, for the simulated
+    world and the evaluation only); prints the pose. A move that takes any key out of the arm's
+    reach is refused (exit 1, nothing written).
+    """
+    explicit = dx is not None or dy is not None or angle is not None
+    if explicit and category is not None:
+        raise ConfigError("give either --dx/--dy/--angle or --category, not both")
+    if not explicit and category is None:
+        raise ConfigError("give a displacement (--dx, --dy, optionally --angle) or a --category")
+    if family is None:
+        family = "rigid" if angle is not None else "translation"
+    if angle is not None and family != "rigid":
+        raise ConfigError("--angle makes a rigid move; it cannot be used with --family translation")
+    if explicit:
+        d = (dx or 0.0, dy or 0.0)
+        params = d if family == "translation" else (angle or 0.0, *d)
+        cfg = stage.PerturbConfig(family=family, params=params)
+    else:
+        cfg = stage.PerturbConfig(family=family, category=category)
+    kb_art = read_artifact(keyboard, ("keyboard", "model"))
+    output_path(output)
+    art = stage.run(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
+    write_artifact(art, output)
+    pose = ", ".join(f"{k}={v:.2f}" for k, v in art.attrs["pose"].items())
+    what = f"{category} {family} draw (seed {seed})" if category else f"{family} move"
+    out.print(f"wrote {output}: {what}: {pose}")

@@ -1,0 +1,112 @@
+"""``kbcli play`` (Algorithm 1, optional WAV of what was heard) and ``kbcli plot play``."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+import wave
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from kbcli.cli.app import command, out, output_path, plot_app, progress
+from kbcli.core.audio import SAMPLE_RATE, to_pcm16
+from kbcli.core.melody import DEFAULT_MELODY
+from kbcli.errors import ConfigError
+from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.stages import play as stage
+
+
+def write_wav(path: Path, samples: np.ndarray, sample_rate: int) -> None:
+    """Write mono 16-bit PCM atomically (temporary file in the same folder, then rename)."""
+    folder = path.parent if str(path.parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    os.close(fd)
+    try:
+        with wave.open(tmp, "wb") as w:
+            w.setnchannels(1)
+            w.setsampwidth(2)
+            w.setframerate(sample_rate)
+            w.writeframes(to_pcm16(samples))
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+@command(name="play")
+def play_cmd(
+    model: Annotated[Path, typer.Option("--model", help="Model artifact (.h5, kind 'model').")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="History artifact to write (.h5).")],
+    scene: Annotated[Path | None, typer.Option(
+        "--scene", help="Scene artifact (kbcli perturb): where the keyboard moves at --perturb-at.")] = None,
+    melody: Annotated[str, typer.Option(
+        "--melody", help="Notes NOTE:BEATS, looped (the paper's Fig. 3 example by default).")] = DEFAULT_MELODY,
+    steps: Annotated[int, typer.Option("--steps", help="Number of actions.")] = 300,
+    perturb_at: Annotated[int | None, typer.Option(
+        "--perturb-at", help="Step at which the keyboard moves [default steps/2 with a scene].")] = None,
+    mode: Annotated[str, typer.Option("--mode", help="ideal or dynamics reaching.")] = "ideal",
+    reach_noise: Annotated[float, typer.Option("--reach-noise", help="Landing scatter of the arm, px.")] = 0.0,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the robot's and the world's randomness.")] = 0,
+    wav: Annotated[Path | None, typer.Option(
+        "--wav", help="Also write what was heard as a WAV file (silence where the finger missed).")] = None,
+) -> None:
+    """Play a melody in a loop with a model; the keyboard moves at --perturb-at (Algorithm 1).
+
+    Reads MODEL (kind 'model') and optionally SCENE (kind 'scene'); writes OUTPUT (kind 'history':
+    actions, landing points, heard features, aimed notes, MATCH/NO_MATCH per step) and optionally a
+    WAV; prints the failure rates before and after the move.
+    """
+    cfg = stage.PlayConfig(melody=melody, steps=steps, perturb_at=perturb_at, mode=mode,
+                           reach_noise=reach_noise)
+    model_art = read_artifact(model, "model")
+    scene_art = read_artifact(scene, "scene") if scene is not None else None
+    output_path(output)
+    if wav is not None:
+        output_path(wav)
+        if wav.resolve() == output.resolve():
+            raise ConfigError("--wav and --output must be different files")
+    session = stage.Session(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed)
+    for _ in progress(session, cfg.steps, "playing"):
+        pass
+    art = session.artifact()
+    samples = None
+    if wav is not None:
+        samples = stage.heard_audio(art, session.keyboard.features, sample_rate=SAMPLE_RATE)
+    write_artifact(art, output)
+    a = art.attrs
+    msg = f"wrote {output}: {a['steps']} actions, {a['no_match']} NO_MATCH"
+    if a["perturb_at"] is not None:
+        msg += (f"; failure rate {a['failure_rate_before']:.3f} before the move at step "
+                f"{a['perturb_at']}, {a['failure_rate_after']:.3f} after")
+    else:
+        msg += f"; failure rate {a['failure_rate_before']:.3f}"
+    out.print(msg)
+    if samples is not None:
+        write_wav(wav, samples, SAMPLE_RATE)
+        out.print(f"wrote {wav}: {len(samples) / SAMPLE_RATE:.1f} s of what the robot heard")
+
+
+@command(plot_app, name="play")
+def plot_play_cmd(
+    history: Annotated[Path, typer.Argument(help="History artifact (kbcli play).")],
+    detection: Annotated[Path | None, typer.Option(
+        "--detection", help="Detection artifact (kbcli detect) to mark where the detector fired.")] = None,
+    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path("play.png"),
+) -> None:
+    """Draw a play history: aimed note and result per step, running success rate, the move, and
+    (with --detection) the detector's score and firings. Reads HISTORY; writes a PNG."""
+    from kbcli.viz.play import plot_play
+
+    hist = read_artifact(history, "history")
+    det = read_artifact(detection, "detection") if detection is not None else None
+    if det is not None and det.inputs.get("history", {}).get("sha256") not in (None, hist.sha256):
+        raise ConfigError(f"{detection} was computed on another history than {history}")
+    output_path(output)
+    plot_play(hist, output, det)
+    out.print(f"wrote {output}")

@@ -1,0 +1,195 @@
+"""Stage ``perturb``: move the keyboard to a new pose (paper Sect. III-B, Eq. 3).
+
+A scene artifact (kind ``scene``) holds the keyboard, the transform family (``translation``: the
+paper's ``(dx, dy)``; ``rigid``: ``(angle, dx, dy)``, see :mod:`kbcli.core.transforms`) and the true
+parameters, given explicitly or drawn at random by category. The categories follow the paper's
+Sect. IV-B, "displacements up to 10, 20 and 40 pixels": a draw of category ``small``, ``medium`` or
+``large`` has its largest per-axis displacement in (0, 10], (10, 20] or (20, 40] px (uniform over
+that square ring), so the categories do not overlap; a rigid draw also turns the keyboard by an
+angle uniform in [-5, 5] degrees about its centre.
+
+The scene is ground truth: only the simulated world (:class:`kbcli.sim.World`) and the evaluation
+read it, never the robot's side.
+
+A displacement that carries any key (corners and edge midpoints of every key) outside the arm's
+annular workspace is refused with :class:`~kbcli.errors.OutOfReachError`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from kbcli.core import transforms
+from kbcli.core.keyboard import Keyboard
+from kbcli.errors import ConfigError, OutOfReachError
+from kbcli.sim import SimConfig, workspace_check
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages.artifact import Artifact, ref
+
+#: category -> (exclusive lower, inclusive upper) bound of the largest per-axis displacement, px
+CATEGORIES: dict[str, tuple[float, float]] = {
+    "small": (0.0, 10.0),
+    "medium": (10.0, 20.0),
+    "large": (20.0, 40.0),
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class PerturbConfig:
+    """How to move the keyboard: explicit ``params`` or a random draw of ``category``.
+
+    Parameters
+    ----------
+    family : str
+        ``translation`` or ``rigid``.
+    params : tuple of float, optional
+        The transform parameters (``(dx, dy)`` or ``(angle, dx, dy)``, px and degrees).
+    category : str, optional
+        ``small``, ``medium`` or ``large``: draw the parameters (needs a seed).
+    max_angle : float
+        Largest rotation of a rigid draw, degrees.
+    """
+
+    family: str = "translation"
+    params: tuple[float, ...] | None = None
+    category: str | None = None
+    max_angle: float = 5.0
+
+    def __post_init__(self) -> None:
+        names = transforms.check_family(self.family)
+        if (self.params is None) == (self.category is None):
+            raise ConfigError("give either explicit displacement parameters or a category, not both")
+        if self.params is not None:
+            p = tuple(float(v) for v in self.params)
+            if len(p) != len(names):
+                raise ConfigError(
+                    f"a {self.family} displacement takes {len(names)} parameters "
+                    f"({', '.join(names)}), got {len(p)}"
+                )
+            if not all(math.isfinite(v) for v in p):
+                raise ConfigError(f"displacement parameters must be finite, got {p!r}")
+            object.__setattr__(self, "params", p)
+        if self.category is not None and self.category not in CATEGORIES:
+            raise ConfigError(
+                f"unknown category {self.category!r}; valid: {', '.join(CATEGORIES)}"
+            )
+        if not (math.isfinite(self.max_angle) and 0 <= self.max_angle <= 180):
+            raise ConfigError(f"max_angle must be in [0, 180] degrees, got {self.max_angle!r}")
+
+    def to_dict(self) -> dict:
+        return {
+            "family": self.family,
+            "params": None if self.params is None else list(self.params),
+            "category": self.category,
+            "max_angle": self.max_angle,
+        }
+
+
+def draw(
+    category: str, family: str, n: int, *, rng: np.random.Generator, max_angle: float = 5.0
+) -> np.ndarray:
+    """Draw ``n`` displacements of a category.
+
+    Returns
+    -------
+    (n, P) ndarray
+        ``(dx, dy)`` rows for ``translation``, ``(angle, dx, dy)`` for ``rigid``.
+    """
+    names = transforms.check_family(family)
+    if category not in CATEGORIES:
+        raise ConfigError(f"unknown category {category!r}; valid: {', '.join(CATEGORIES)}")
+    lo, hi = CATEGORIES[category]
+    d = np.empty((0, 2))
+    while len(d) < n:  # rejection from the square [-hi, hi]^2 minus [-lo, lo]^2 (accepts >= 3/4)
+        cand = rng.uniform(-hi, hi, size=(2 * n + 8, 2))
+        d = np.vstack([d, cand[np.abs(cand).max(axis=1) > lo]])
+    d = d[:n]
+    if len(names) == 3:
+        angle = rng.uniform(-max_angle, max_angle, size=(n, 1))
+        return np.hstack([angle, d])
+    return d
+
+
+def key_outline(kb: Keyboard) -> np.ndarray:
+    """(8 K, 2) corners and edge midpoints of every key at the reference pose."""
+    h = kb.config.key_size / 2
+    offs = np.array([[-h, -h], [0, -h], [h, -h], [h, 0], [h, h], [0, h], [-h, h], [-h, 0]])
+    return (kb.key_centres()[:, None, :] + offs[None]).reshape(-1, 2)
+
+
+def check_reach(kb: Keyboard, family: str, params: np.ndarray, sim: SimConfig) -> None:
+    """Raise OutOfReachError if the displaced keyboard has a key outside the arm's workspace."""
+    pts = transforms.apply(family, np.asarray(params, float), key_outline(kb), kb.centre)
+    ok = workspace_check(sim, pts)
+    if not ok.all():
+        i = int(np.flatnonzero(~ok)[0])
+        key = kb.names[i // 8]
+        x, y = pts[i]
+        shown = ", ".join(f"{n}={v:g}" for n, v in zip(transforms.FAMILIES[family], params, strict=True))
+        raise OutOfReachError(
+            f"displacement ({shown}) moves key {key} to ({x:.0f}, {y:.0f}), outside the arm's reach"
+        )
+
+
+def run(
+    cfg: PerturbConfig,
+    keyboard_art: Artifact,
+    *,
+    rng: np.random.Generator,
+    seed: int | None = None,
+    sim: SimConfig | None = None,
+) -> Artifact:
+    """The scene artifact: the keyboard at its displaced pose.
+
+    Parameters
+    ----------
+    cfg : PerturbConfig
+    keyboard_art : Artifact
+        A keyboard artifact (or any artifact whose config holds a ``keyboard`` table).
+    rng : numpy.random.Generator
+        Used only for a category draw.
+    seed : int, optional
+        Recorded in the artifact (the seed ``rng`` was made from).
+    sim : SimConfig, optional
+        The arm whose reach is checked (default: ``SimConfig()``).
+
+    Raises
+    ------
+    OutOfReachError
+        If a key would leave the arm's workspace.
+    """
+    sim = SimConfig() if sim is None else sim
+    kb = keyboard_stage.load(keyboard_art)
+    if cfg.params is not None:
+        params = np.asarray(cfg.params, float)
+    else:
+        params = draw(cfg.category, cfg.family, 1, rng=rng, max_angle=cfg.max_angle)[0]
+    check_reach(kb, cfg.family, params, sim)
+    names = transforms.FAMILIES[cfg.family]
+    moved = transforms.apply(cfg.family, params, kb.key_centres(), kb.centre)
+    return Artifact(
+        kind="scene",
+        config={
+            **cfg.to_dict(),
+            "params": [float(v) for v in params],
+            "keyboard": kb.config.to_dict(),
+            "sim": sim.to_dict(),
+        },
+        seed=seed if cfg.category is not None else None,
+        data={"params": params, "key_centres": moved},
+        attrs={
+            "family": cfg.family,
+            "category": cfg.category,
+            "param_names": list(names),
+            "pose": {n: float(v) for n, v in zip(names, params, strict=True)},
+        },
+        inputs={"keyboard": ref(keyboard_art)},
+    )
+
+
+def pose(scene_art: Artifact) -> tuple[str, np.ndarray]:
+    """The true ``(family, params)`` of a scene artifact: for the world and evaluation only."""
+    return scene_art.config["family"], np.asarray(scene_art.config["params"], float)

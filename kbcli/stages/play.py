@@ -1,0 +1,224 @@
+"""Stage ``play``: the robot plays a melody in a loop while the keyboard moves (Algorithm 1).
+
+The stage builds the simulated :class:`~kbcli.sim.World` from the model's keyboard at its reference
+pose; at step ``perturb_at`` it puts the keyboard at the scene's true pose. The robot's side,
+:func:`kbcli.core.play.play`, only gets the world's ``touch``. The history artifact (kind
+``history``) records per step the action, landed point, perceived features, aimed melody note and
+the MATCH (0) / NO_MATCH (1) result, which :mod:`kbcli.stages.detect` reads (Sect. III-C).
+
+:class:`Session` is an iterator over the steps (the CLI wraps it in a progress bar); :func:`run`
+plays a whole session and returns its artifact.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from kbcli.core.melody import DEFAULT_MELODY, parse_melody
+from kbcli.core.play import NO_MATCH, PlayStep, play
+from kbcli.errors import ConfigError
+from kbcli.sim import MODES, SimConfig, World, make_reacher
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages import perturb as perturb_stage
+from kbcli.stages.artifact import Artifact, ref
+from kbcli.stages.models import load_model
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlayConfig:
+    """A play session.
+
+    Parameters
+    ----------
+    melody : str
+        Notes and durations, ``"A:1 D:1 E:0.5 D:2 A:1"`` (see :mod:`kbcli.core.melody`).
+    steps : int
+        Number of actions.
+    perturb_at : int, optional
+        Step from which the keyboard is at the scene's pose (needs a scene; default with a scene:
+        ``steps // 2``).
+    mode : str
+        ``ideal`` or ``dynamics`` reaching (:class:`kbcli.sim.SimConfig`).
+    reach_noise : float
+        Landing scatter of the arm, px.
+    """
+
+    melody: str = DEFAULT_MELODY
+    steps: int = 300
+    perturb_at: int | None = None
+    mode: str = "ideal"
+    reach_noise: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.steps, int) or isinstance(self.steps, bool) or self.steps < 1:
+            raise ConfigError(f"steps must be a whole number >= 1, got {self.steps!r}")
+        if self.perturb_at is not None and not (
+            isinstance(self.perturb_at, int) and 0 <= self.perturb_at < self.steps
+        ):
+            raise ConfigError(
+                f"perturb_at must be a step in [0, {self.steps - 1}], got {self.perturb_at!r}"
+            )
+        if self.mode not in MODES:
+            raise ConfigError(f"unknown mode {self.mode!r}; valid: {', '.join(MODES)}")
+        if not (math.isfinite(self.reach_noise) and self.reach_noise >= 0):
+            raise ConfigError(f"reach_noise must be >= 0 px, got {self.reach_noise!r}")
+
+    def to_dict(self) -> dict:
+        return {
+            "melody": self.melody,
+            "steps": self.steps,
+            "perturb_at": self.perturb_at,
+            "mode": self.mode,
+            "reach_noise": self.reach_noise,
+        }
+
+
+class Session:
+    """One play session, an iterator of :class:`~kbcli.core.play.PlayStep`.
+
+    Parameters
+    ----------
+    cfg : PlayConfig
+    model_art : Artifact
+        Kind ``model``.
+    scene_art : Artifact, optional
+        Kind ``scene``: where the keyboard goes at ``perturb_at``. Without it the keyboard stays.
+    rng : numpy.random.Generator
+        Split into the robot's generator (actions) and the world's (reach and perception noise), so
+        the same seed gives the same actions before the perturbation whatever the scene.
+    seed : int, optional
+        Recorded in the artifact.
+    """
+
+    def __init__(
+        self,
+        cfg: PlayConfig,
+        model_art: Artifact,
+        scene_art: Artifact | None = None,
+        *,
+        rng: np.random.Generator,
+        seed: int | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.model_art = model_art
+        self.scene_art = scene_art
+        self.seed = seed
+        kb = keyboard_stage.load(model_art)
+        self.keyboard = kb
+        self.melody = parse_melody(cfg.melody, kb)
+        model = load_model(model_art)
+        if scene_art is not None:
+            if keyboard_stage.load(scene_art).config != kb.config:
+                raise ConfigError("the scene moves a different keyboard than the model's")
+            self.family, self.params = perturb_stage.pose(scene_art)
+            self.perturb_at = cfg.steps // 2 if cfg.perturb_at is None else cfg.perturb_at
+        else:
+            if cfg.perturb_at is not None:
+                raise ConfigError("perturb_at needs a scene (kbcli perturb) to move the keyboard to")
+            self.family, self.params, self.perturb_at = "translation", None, None
+        self.sim = SimConfig(mode=cfg.mode, reach_noise=cfg.reach_noise)
+        self.world = World(keyboard=kb, reacher=make_reacher(self.sim))
+        robot_rng, world_rng = rng.spawn(2)
+
+        def touch(actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return self.world.touch(actions, world_rng)
+
+        self._player = play(model, self.melody, touch, rng=robot_rng)
+        self.steps: list[PlayStep] = []
+
+    def __len__(self) -> int:
+        return self.cfg.steps
+
+    def __iter__(self) -> Iterator[PlayStep]:
+        for i in range(len(self.steps), self.cfg.steps):
+            if self.perturb_at is not None and i == self.perturb_at:
+                self.world.pose = self.params  # the world moves; the robot is not told
+                self.world.family = self.family
+            st = next(self._player)
+            self.steps.append(st)
+            yield st
+
+    def artifact(self) -> Artifact:
+        """The history artifact of the steps played so far."""
+        st = self.steps
+        n = len(st)
+        d = self.keyboard.features.shape[1]
+        result = np.array([s.result for s in st], dtype=np.uint8)
+        perturbed = np.zeros(n, dtype=bool)
+        if self.perturb_at is not None:
+            perturbed[self.perturb_at:] = True
+        data = {
+            "action": np.array([s.action for s in st], float).reshape(n, 2),
+            "landed": np.array([s.landed for s in st], float).reshape(n, 2),
+            "perceived": np.array([s.perceived for s in st], float).reshape(n, d),
+            "target": np.array([s.target for s in st], dtype=np.int64),
+            "cls": np.array([s.cls for s in st], dtype=np.int64),
+            "heard": np.array([s.heard for s in st], dtype=np.int64),
+            "result": result,
+            "perturbed": perturbed,
+            "melody": {
+                "midi": np.array(self.melody.midi, dtype=np.int64),
+                "durations": np.array(self.melody.durations, float),
+                "keys": np.array(self.melody.keys, dtype=np.int64),
+            },
+        }
+        before = result[~perturbed]
+        after = result[perturbed]
+        attrs = {
+            "steps": n,
+            "perturb_at": self.perturb_at,
+            "melody": self.melody.text,
+            "failure_rate_before": float(before.mean()) if len(before) else None,
+            "failure_rate_after": float(after.mean()) if len(after) else None,
+            "no_match": int((result == NO_MATCH).sum()),
+        }
+        inputs = {"model": ref(self.model_art)}
+        if self.scene_art is not None:
+            inputs["scene"] = ref(self.scene_art)
+        return Artifact(
+            kind="history",
+            config={
+                **self.cfg.to_dict(),
+                "perturb_at": self.perturb_at,
+                "keyboard": self.keyboard.config.to_dict(),
+                "sim": self.sim.to_dict(),
+            },
+            seed=self.seed,
+            data=data,
+            attrs=attrs,
+            inputs=inputs,
+        )
+
+
+def run(
+    cfg: PlayConfig,
+    model_art: Artifact,
+    scene_art: Artifact | None = None,
+    *,
+    rng: np.random.Generator,
+    seed: int | None = None,
+) -> Artifact:
+    """Play a whole session and return its history artifact."""
+    session = Session(cfg, model_art, scene_art, rng=rng, seed=seed)
+    for _ in session:
+        pass
+    return session.artifact()
+
+
+def heard_audio(history: Artifact, keyboard_features: np.ndarray, *, sample_rate: int) -> np.ndarray:
+    """What was heard in a history, as audio samples (see :func:`kbcli.core.audio.render`).
+
+    Silent steps last the aimed note's duration at that note's tempo (from ``keyboard_features``,
+    the reference features of the keys).
+    """
+    from kbcli.core.audio import render
+
+    target = history.array("target")
+    keys = history.array("melody/keys")[target]
+    beats = history.array("melody/durations")[target]
+    tempo = np.asarray(keyboard_features, float)[keys, 1]
+    return render(history.array("perceived"), beats, tempo, sample_rate=sample_rate)

@@ -1,0 +1,264 @@
+"""Failure detectors (Sect. III-C, Eq. 4-6), ``kbcli detect`` and the detector benchmark's parts."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from kbcli.bench import detect as bench
+from kbcli.cli import app
+from kbcli.core import detect as det
+from kbcli.core.detect import DETECTORS, Detector, DetectorConfig, run_batch
+from kbcli.errors import ArtifactError, ConfigError
+from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.stages import detect as stage
+from kbcli.stages.artifact import Artifact
+
+SMALL = {"n_lt": 20, "n_st": 5}  # short windows keep the tests quick
+
+
+def cfg(name: str = "binomial", **kw) -> DetectorConfig:
+    return DetectorConfig(detector=name, **{**SMALL, **kw})
+
+
+def fake_history(result, perturb_at=None) -> Artifact:
+    result = np.asarray(result, dtype=np.uint8)
+    return Artifact(kind="history", config={"steps": len(result)}, seed=0,
+                    data={"result": result, "target": np.zeros(len(result), np.int64)},
+                    attrs={"perturb_at": perturb_at, "steps": len(result)})
+
+
+# -- config and registry ----------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("kw", "word"),
+    [
+        ({"n_st": 100, "n_lt": 100}, "n_st must be smaller"),
+        ({"n_st": 120, "n_lt": 100}, "n_st must be smaller"),
+        ({"n_st": 0}, "n_st must be a whole number >= 1"),
+        ({"n_lt": 0}, "n_lt must be"),
+        ({"threshold": 0.0}, "threshold must be in (0, 1)"),
+        ({"threshold": 1.0}, "threshold must be in (0, 1)"),
+        ({"threshold": float("nan")}, "threshold"),
+        ({"detector": "page"}, "valid: binomial, cusum, bocpd"),
+        ({"prior": (0.0, 1.0)}, "prior"),
+        ({"shift": 1.5}, "shift"),
+        ({"hazard": 0.0}, "hazard"),
+    ],
+)
+def test_bad_config_rejected(kw, word):
+    with pytest.raises(ConfigError, match=word.replace("(", r"\(").replace(")", r"\)")):
+        DetectorConfig(**kw)
+
+
+def test_registry_has_the_three_detectors_and_round_trips():
+    assert set(DETECTORS) == {"binomial", "cusum", "bocpd"}
+    c = DetectorConfig(detector="cusum", n_lt=50, n_st=7, threshold=0.02, prior=(0.5, 2.0))
+    assert DetectorConfig.from_dict(c.to_dict()) == c
+    with pytest.raises(ConfigError, match="unknown detector option"):
+        DetectorConfig.from_dict({"windows": 3})
+
+
+# -- the paper's binomial detector: known answers -------------------------------------------
+def test_binomial_tail_known_answer():
+    table = det.binomial_tail_table(100, 10, (1.0, 1.0))
+    p = 1 / 102  # no failure in the long-term window: Laplace's rule
+    assert table[0, 0] == 1.0
+    assert math.isclose(table[0, 1], 1 - (1 - p) ** 10)
+    assert math.isclose(table[0, 2], 1 - (1 - p) ** 10 - 10 * p * (1 - p) ** 9)
+    p3 = 4 / 102
+    assert math.isclose(table[3, 10], p3**10)
+    assert np.all(np.diff(table, axis=1) <= 0)  # more recent failures: smaller tail
+    assert np.all(np.diff(table, axis=0) >= 0)  # higher p_fail: larger tail
+
+
+def test_binomial_fires_on_the_second_failure_after_a_perfect_history():
+    d = Detector(DetectorConfig())  # the paper's defaults: N_LT 100, N_ST 10, threshold 0.01
+    fired = [d.update(x) for x in [0] * 110 + [1, 1]]
+    assert fired.index(True) == 111  # one failure: tail 0.094 > 0.01; two: 0.0042 < 0.01
+
+
+def test_binomial_counts_windows_like_eq_4_and_5():
+    c = DetectorConfig(n_lt=6, n_st=3, threshold=1e-9)
+    bank = det.make_bank(c, 1)
+    stream = [1, 0, 0, 1, 1, 0, 1, 0, 1, 1, 0, 0, 1]
+    for i, x in enumerate(stream):
+        bank.step(np.array([x]))
+        hist = stream[: i + 1]
+        assert bank.n_f[0] == sum(hist[-3:])  # Eq. 5: the last N_ST results
+        assert bank.k_lt[0] == sum(hist[-9:-3])  # Eq. 4: the N_LT results before them
+        assert bank.k_old[0] == sum(hist[:-3])
+
+
+@pytest.mark.parametrize("name", list(DETECTORS))
+def test_silent_during_warmup(name):
+    c = cfg(name, threshold=0.5)
+    scores, fired = run_batch(c, np.ones((2, c.warmup - 1), np.int8))
+    assert not fired.any() and np.all(scores == 1.0)
+
+
+@pytest.mark.parametrize("name", list(DETECTORS))
+def test_never_fires_without_failures_and_fires_on_a_burst(name):
+    c = cfg(name)
+    zeros = np.zeros((1, 300), np.int8)
+    assert not run_batch(c, zeros)[1].any()
+    burst = zeros.copy()
+    burst[0, 200:] = 1
+    fired = run_batch(c, burst)[1][0]
+    first = int(np.argmax(fired))
+    assert fired.any() and 200 <= first < 210
+
+
+@pytest.mark.parametrize("name", list(DETECTORS))
+def test_fewer_failures_never_fire(name):
+    """Upper tail / one-sided: a drop of the failure rate is not a failure event."""
+    c = cfg(name, threshold=0.05)
+    x = np.zeros((1, 400), np.int8)
+    x[0, :200:2] = 1  # a failure rate of 0.5, then none
+    fired = run_batch(c, x)[1][0]
+    assert not fired[200:].any()
+
+
+@pytest.mark.parametrize("name", list(DETECTORS))
+def test_online_form_equals_batch_form(name):
+    rng = np.random.default_rng(3)
+    x = (rng.random((3, 260)) < np.r_[0.03, 0.1, 0.3][:, None]).astype(np.int8)
+    x[:, 150:] |= (rng.random((3, 110)) < 0.5).astype(np.int8)
+    c = cfg(name, threshold=0.02)
+    scores, fired = run_batch(c, x)
+    for s in range(3):
+        online = list(det.detect_stream(c, x[s].tolist()))
+        np.testing.assert_allclose([o[0] for o in online], scores[s], rtol=1e-10)
+        assert [o[1] for o in online] == fired[s].tolist()
+        # one stream alone gives the same as within the batch (no cross-talk between streams)
+        alone = run_batch(c, x[s : s + 1])
+        np.testing.assert_allclose(alone[0][0], scores[s], rtol=1e-10)
+
+
+@settings(max_examples=25, deadline=None)
+@given(bits=st.lists(st.integers(0, 1), min_size=1, max_size=120),
+       name=st.sampled_from(sorted(DETECTORS)))
+def test_scores_are_probabilities_and_firing_resets(bits, name):
+    c = cfg(name, threshold=0.2)
+    d = Detector(c)
+    since_reset = 0
+    for x in bits:
+        fired = d.update(x)
+        since_reset += 1
+        assert 0.0 <= d.score <= 1.0
+        if fired:
+            assert since_reset >= c.warmup  # never fires during a warm-up
+            since_reset = 0
+
+
+def test_reset_and_first_crossing():
+    d = Detector(cfg())
+    for x in [0] * 30:
+        d.update(x)
+    d.reset()
+    assert not any(d.update(1) for _ in range(cfg().warmup - 1))
+    scores = np.array([[1.0, 0.5, 0.01, 0.001], [1.0, 1.0, 1.0, 1.0]])
+    np.testing.assert_array_equal(det.first_crossing(scores, 0.02), [2, -1])
+
+
+# -- the detect stage and CLI -----------------------------------------------------------------
+def test_summary_delay_convention():
+    s = stage.summarize(np.array([40, 105, 300]), perturb_at=100)
+    assert s["first_firing"] == 40 and s["false_alarms"] == 1
+    assert s["detected_at"] == 105 and s["delay"] == 6  # fired on the 6th post-move result
+    assert stage.summarize(np.array([100]), 100)["delay"] == 1
+    none = stage.summarize(np.zeros(0, int), None)
+    assert none["first_firing"] is None and none["delay"] is None
+
+
+def test_stage_on_a_history_and_round_trip(tmp_path):
+    result = np.r_[np.zeros(150), np.ones(20), np.zeros(30)]
+    art = stage.run(DetectorConfig(), fake_history(result, perturb_at=150))
+    assert art.kind == "detection"
+    assert art.attrs["detected_at"] == 151 and art.attrs["delay"] == 2
+    path = tmp_path / "d.h5"
+    write_artifact(art, path)
+    back = read_artifact(path, "detection")
+    np.testing.assert_array_equal(back.array("firings"), art.array("firings"))
+    assert back.config["detector"] == "binomial" and back.config["n_lt"] == 100
+    with pytest.raises(ArtifactError, match="expected a history"):
+        stage.run(DetectorConfig(), Artifact(kind="scene", config={}))
+
+
+@pytest.fixture
+def history_path(tmp_path):
+    path = tmp_path / "history.h5"
+    write_artifact(fake_history(np.r_[np.zeros(150), np.ones(10), np.zeros(40)], 150), path)
+    return path
+
+
+@pytest.mark.parametrize("name", list(DETECTORS))
+def test_cli_detect(runner, history_path, tmp_path, name):
+    out = tmp_path / f"{name}.h5"
+    r = runner.invoke(app, ["detect", str(history_path), "--detector", name, "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "delay" in r.output and out.exists()
+    assert read_artifact(out, "detection").attrs["delay"] is not None
+
+
+@pytest.mark.parametrize(
+    ("args", "word"),
+    [
+        (["--n-st", "100"], "n_st must be smaller"),
+        (["--n-st", "0"], "n_st must be"),
+        (["--threshold", "1"], "threshold must be in (0, 1)"),
+        (["--threshold", "0"], "threshold must be in (0, 1)"),
+        (["--detector", "adwin"], "unknown detector 'adwin'"),
+    ],
+)
+def test_cli_detect_bad_input(runner, history_path, tmp_path, args, word):
+    out = tmp_path / "bad.h5"
+    r = runner.invoke(app, ["detect", str(history_path), *args, "-o", str(out)])
+    assert r.exit_code == 1
+    lines = r.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("kbcli: error:") and word in lines[0]
+    assert not out.exists()
+
+
+def test_cli_detect_wrong_kind(runner, kb_path, tmp_path):
+    out = tmp_path / "bad.h5"
+    r = runner.invoke(app, ["detect", str(kb_path), "-o", str(out)])
+    assert r.exit_code == 1 and "expected history" in r.output and not out.exists()
+
+
+# -- benchmark building blocks (tiny sizes: the benchmark itself is not a test) ----------------
+def test_bench_streams_and_tuning_meet_the_target():
+    rng = np.random.default_rng(0)
+    x = bench.make_streams(0.0, np.array([1.0, 1.0]), np.array([3, 5]), 8, rng=rng)
+    np.testing.assert_array_equal(x, [[0, 0, 0, 1, 1, 1, 1, 1], [0, 0, 0, 0, 0, 1, 1, 1]])
+    bc = bench.BenchConfig(tune_actions=20_000, change_min=100, change_max=300)
+    tx, lengths = bench.tuning_streams(bc, rng=rng)
+    assert tx.shape == (len(lengths), 300) and lengths.min() >= 100
+    for name in DETECTORS:
+        thr, r = bench.tune_ours(cfg(name), tx, lengths, target=20.0)
+        assert 0 < thr < 1 and r <= 20.0
+
+
+def test_bench_river_and_rates():
+    rng = np.random.default_rng(1)
+    x = bench.make_streams(0.01, np.full(4, 0.9), np.full(4, 150), 260, rng=rng)
+    change = np.full(4, 150)
+    for name in bench.RIVER:
+        alarms = bench.river_run(name, {"ddm": 3.0, "fhddm": -6.0, "adwin": -3.0}[name], x,
+                                 stop_after=change)
+        row = bench._summary("g", name, "", 0.0, alarms, change, horizon=100)
+        assert row.missed == 0 and row.median < 40  # a jump to 0.9 is found by everyone
+    rates = bench.post_rates("large", 5, rng=rng)
+    assert np.all((rates > 0.3) & (rates <= 1.0))
+
+
+def test_bench_config_rejects_bad_values():
+    with pytest.raises(ConfigError, match="p_pre"):
+        bench.BenchConfig(p_pre=0.0)
+    with pytest.raises(ConfigError, match="unknown detector"):
+        bench.BenchConfig(detectors=("kswin",))
+    with pytest.raises(ConfigError, match="n_st must be smaller"):
+        bench.BenchConfig(n_lt=10, n_st=10)
