@@ -1,0 +1,241 @@
+"""``kbcli adapt``, ``kbcli plot adapt`` and ``kbcli bench adapt``."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from kbcli.cli.app import (
+    bench_app,
+    command,
+    err,
+    interactive,
+    out,
+    output_path,
+    plot_app,
+    progress,
+)
+from kbcli.errors import ConfigError
+from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.io.config import load_toml
+from kbcli.stages import adapt as stage
+
+
+def _snapshots(text: str) -> tuple[int, ...]:
+    try:
+        steps = tuple(int(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise ConfigError(f"--snapshots must be step numbers separated by commas, got {text!r}") \
+            from None
+    if any(s < 0 for s in steps):
+        raise ConfigError(f"--snapshots must be steps >= 0, got {text!r}")
+    return steps
+
+
+@command(name="adapt")
+def adapt_cmd(
+    model: Annotated[Path, typer.Option("--model", help="Model artifact (.h5, kind 'model').")],
+    scene: Annotated[Path, typer.Option("--scene", help="Scene artifact (.h5, kind 'scene'): the "
+                                        "displaced keyboard, for the simulated world only.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Run artifact to write (.h5).")],
+    config: Annotated[Path | None, typer.Option(
+        "--config", help="TOML file with an [adapt] table (any AdaptConfig option); flags "
+        "override it.")] = None,
+    strategy: Annotated[str | None, typer.Option(
+        "--strategy", help="random, active or infogain [default infogain].")] = None,
+    posterior: Annotated[str | None, typer.Option(
+        "--posterior", help="likelihood or kde (the paper's Eq. 7) [default likelihood].")] = None,
+    family: Annotated[str | None, typer.Option(
+        "--family", help="translation or rigid [default: the scene's family].")] = None,
+    mode: Annotated[str | None, typer.Option(
+        "--mode", help="ideal or dynamics [default ideal].")] = None,
+    reach_noise: Annotated[float | None, typer.Option(
+        "--reach-noise", help="Landing scatter of the arm, px [default 0].")] = None,
+    feedback: Annotated[str | None, typer.Option(
+        "--feedback", help="landed (the robot feels where it landed) or aim [default landed].")
+    ] = None,
+    model_blur: Annotated[float | None, typer.Option(
+        "--model-blur", help="Soften the model's map by this many px, for a model whose "
+        "boundaries are less certain than it says [default: 1 for a learned model, 0 for the "
+        "exact one].")] = None,
+    max_steps: Annotated[int | None, typer.Option(
+        "--max-steps", "-T", help="Observations at most [default 40].")] = None,
+    resolution: Annotated[float | None, typer.Option(
+        "--resolution", help="Hypothesis grid step, px [default 0.5].")] = None,
+    prior_halfwidth: Annotated[float | None, typer.Option(
+        "--prior-halfwidth", help="Prior box of dx and dy, +-px [default 45].")] = None,
+    stop: Annotated[bool | None, typer.Option(
+        "--stop/--no-stop", help="End at the stopping rule (mass within 1 px >= 0.95) instead of "
+        "always taking T steps [default --no-stop].")] = None,
+    snapshots: Annotated[str, typer.Option(
+        "--snapshots", help="Steps at which to store the posterior (0 = prior).")
+    ] = "0,1,2,3,5,10,20,40",
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the robot's and world's draws.")] = 0,
+) -> None:
+    """Recover the scene's displacement by touching and listening.
+
+    Reads MODEL (kind 'model') and SCENE (kind 'scene', whose keyboard must be the model's).
+    Writes OUTPUT (kind 'run'): per step the action, where it landed, the sound heard and its class,
+    the estimate, its error against the scene's true pose, the posterior entropy and the time
+    spent; plus posterior snapshots. Prints the final error and the steps to an error below 1 px.
+    """
+    values = dict(load_toml(config, "adapt")) if config is not None else {}
+    flags = {"strategy": strategy, "posterior": posterior, "family": family, "mode": mode,
+             "reach_noise": reach_noise, "feedback": feedback, "model_blur": model_blur,
+             "max_steps": max_steps,
+             "resolution": resolution, "prior_halfwidth": prior_halfwidth, "stop": stop}
+    values.update({k: v for k, v in flags.items() if v is not None})
+    model_art = read_artifact(model, "model")
+    scene_art = read_artifact(scene, "scene")
+    values.setdefault("family", scene_art.config.get("family", "translation"))
+    cfg = stage.AdaptConfig.from_dict(values)
+    steps = _snapshots(snapshots)
+    stage.check_inputs(model_art, scene_art)
+    output_path(output)
+    art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
+                    snapshot_steps=steps)
+    write_artifact(art, output)
+    a = art.attrs
+    est = ", ".join(f"{k}={v:.2f}" for k, v in a["estimate"].items())
+    truth = ", ".join(f"{k}={v:.2f}" for k, v in a["truth"].items())
+    reach = a["steps_to_1px"]
+    stop_txt = f"; stopping rule at step {a['stop_step']}" if a["stop_step"] else ""
+    angle = (f", angle error {a['final_angle_error_deg']:.2f} deg"
+             if cfg.family == "rigid" or a["world_family"] == "rigid" else "")
+    out.print(f"wrote {output}: {cfg.strategy}/{cfg.posterior}, {a['steps']} steps; estimate "
+              f"{est} (truth {truth}); final error {a['final_error_px']:.2f} px{angle}; "
+              f"below 1 px {'from step ' + str(reach) if reach else 'never'}{stop_txt}; "
+              f"{a['median_step_ms']:.1f} ms per step")
+
+
+@command(plot_app, name="adapt")
+def plot_adapt_cmd(
+    run: Annotated[Path, typer.Argument(help="Run artifact (kind 'run') from kbcli adapt.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path(
+        "adapt.png"),
+) -> None:
+    """Draw the posterior's evolution (the paper's Fig. 5) and the error and entropy curves.
+
+    Reads RUN (kind 'run'); writes a PNG; prints its path.
+    """
+    from kbcli.viz.adapt import plot_adapt
+
+    art = read_artifact(run, "run")
+    if "snapshots" not in art.data:
+        raise ConfigError(f"{run}: holds no posterior snapshots (rerun kbcli adapt with "
+                          f"--snapshots)")
+    output_path(output)
+    plot_adapt(art, output)
+    out.print(f"wrote {output}")
+
+
+def _fmt_med(v: float, never: int) -> str:
+    s = "-" if math.isnan(v) else f"{v:g}"
+    return f"{s} ({never})" if never else s
+
+
+def _fmt_p(p: float) -> str:
+    return "1" if p >= 0.9995 else f"{p:.0e}" if p < 1e-3 else f"{p:.3f}"
+
+
+@command(bench_app, name="adapt")
+def bench_adapt_cmd(
+    experiments: Annotated[int, typer.Option(
+        "--experiments", help="Runs per strategy and displacement category.")] = 50,
+    section: Annotated[list[str] | None, typer.Option(
+        "--section", help="exact, noise, rigid, kde or learned (repeat for several) [default: all "
+        "but learned, plus learned when --model is given].")] = None,
+    model: Annotated[Path | None, typer.Option(
+        "--model", help="A learned model artifact for the learned section.")] = None,
+    strategy: Annotated[list[str] | None, typer.Option(
+        "--strategy", help="Strategies to run (repeat) [default random, active, infogain].")] = None,
+    category: Annotated[list[str] | None, typer.Option(
+        "--category", help="small, medium, large (repeat) [default all three].")] = None,
+    max_steps: Annotated[int, typer.Option("--max-steps", "-T", help="Steps per run.")] = 40,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of displacements and runs.")] = 0,
+    model_blur: Annotated[float | None, typer.Option(
+        "--model-blur", help="learned section: soften the model's map by this many px [default "
+        "1].")] = None,
+) -> None:
+    """Sample efficiency and speed of the adaptation strategies (issue 5's benchmark).
+
+    Reads MODEL if given. Writes nothing. Prints per section, strategy and category: median
+    observations to an error below 4, 2, 1, 0.5 px (in brackets: runs that never got there within
+    T), the RMSE at steps 1, 2, 3, 5, 10, 20, 40, the Wilcoxon rank-sum p-value against random at
+    each threshold, and the median milliseconds per step (decision plus update).
+    """
+    from kbcli.bench import adapt as bench
+
+    learned = None
+    model_art = None
+    if model is not None:
+        model_art = read_artifact(model, "model")
+        from kbcli.stages.models import load_model
+
+        learned = load_model(model_art)
+    sections = tuple(section) if section else tuple(
+        s for s in bench.SECTIONS if s != "learned" or model is not None)
+    cfg = bench.BenchConfig(
+        experiments=experiments, max_steps=max_steps, seed=seed, sections=sections,
+        strategies=tuple(strategy) if strategy else bench.STRATEGY_ORDER,
+        categories=tuple(category) if category else tuple(bench.CATEGORIES), model_blur=model_blur)
+    cells = bench.plan(cfg, learned)
+    total = sum(len(c.truths) for c in cells)
+    for _ in progress(bench.run_cells(cells), total, "adaptation runs"):
+        pass
+    rows = bench.summarize(cells)
+    titles = {
+        "exact": "exact model, translation, no reach noise",
+        "noise": f"exact model, translation, {cfg.noise:g} px reach noise (aim: the robot knows "
+                 f"only where it aimed; landed: where it landed)",
+        "rigid": "exact model, rigid family (angles up to 5 deg); a threshold of t px also needs "
+                 "the angle within t/2 deg",
+        "kde": "the paper's KDE posterior (Eq. 7) against the likelihood posterior",
+        "learned": "learned model" + (f" ({model})" if model else "")
+                   + (f", map softened by {model_blur:g} px" if model_blur is not None else ""),
+    }
+    # tables are wide: never wrap them at a narrow default width when the output is not a terminal
+    con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
+    for sec in sections:
+        sec_rows = [r for r in rows if r["section"] == sec]
+        if not sec_rows:
+            continue
+        T = sec_rows[0]["T"]
+        t = Table(title=f"{titles[sec]}: {experiments} runs per row, T = {T}",
+                  title_justify="left")
+        t.add_column("strategy")
+        t.add_column("category")
+        for thr in bench.THRESHOLDS:
+            t.add_column(f"<{thr:g}px", justify="right")
+        for s in bench.RMSE_STEPS:
+            if s <= T:
+                t.add_column(f"rmse@{s}", justify="right")
+        t.add_column("p vs random (<4/2/1/0.5)", justify="right")
+        t.add_column("ms/step", justify="right")
+        extra = sec in ("rigid", "learned")
+        if sec == "rigid":
+            t.add_column("final angle rmse", justify="right")
+        if sec == "learned":
+            t.add_column("final err / boundary err", justify="right")
+        bnd = (model_art.attrs.get("boundary_error_px") if model_art is not None else None)
+        for r in sec_rows:
+            cells_txt = [_fmt_med(m, n) for m, n in zip(r["median"], r["never"], strict=True)]
+            rm = [f"{r['rmse'][s]:.2f}" for s in bench.RMSE_STEPS if s <= T]
+            p = " ".join(_fmt_p(v) for v in r["p"]) if r["p"] is not None else ""
+            row = [r["label"], r["category"], *cells_txt, *rm, p, f"{r['ms']:.1f}"]
+            if extra and sec == "rigid":
+                row.append(f"{r['final_angle_rmse']:.2f} deg")
+            if extra and sec == "learned":
+                row.append(f"{r['final_rmse']:.2f} / "
+                           + (f"{bnd:.2f} px" if isinstance(bnd, (int, float)) else "n/a"))
+            t.add_row(*row)
+        con.print(t)
+    err.print("medians: observations until the error first drops below the threshold; (k): runs "
+              "that never got there within T; rmse in px over all runs; p: Wilcoxon rank-sum of "
+              "the observation counts against random", markup=False)

@@ -1,0 +1,447 @@
+"""The adaptation loop of the action space (paper Sect. III-D and III-E), one step at a time.
+
+Each step: the strategy decides an action (:mod:`kbcli.core.strategies`) -> the robot touches
+(a callback: the World in simulation, the arm in a closed loop) -> the perceived sound is classified
+with the model (``model.classify``: Eq. 2 matching; 0 silence, -1 unknown) -> the posterior is
+multiplied by the observation's term (Eq. 7 ``kde`` or the ``likelihood``, Eq. 8; see
+:mod:`kbcli.core.posterior`) -> estimates (maximum-likelihood cell and posterior mean), entropy and
+the stopping rules are read off.
+
+:class:`Adapter` is the robot's side: it never sees the true pose. A closed loop drives it with
+``propose() -> action``, ``observe(landed, perceived)``, ``estimate()``, ``entropy()``,
+``should_stop()``; :func:`adapt` wraps the same calls into an iterator of :class:`Step` records.
+
+Choices
+-------
+- An *unknown* sound (class -1: heard something that matches no known sound) carries no usable
+  information about the pose and is skipped (the posterior is unchanged); silence is an observation.
+- The robot uses the landed finger position (proprioception) as the action of the observation.
+  When it only knows its aim, set ``blur`` to the reach noise: the model raster is blurred by it.
+- A learned model's map is softened by ``model_blur`` (default 1 px; 0 for the exact model): its
+  edges can sit off by more than its probabilities admit, and an unsoftened map lets the touches
+  that contradict it drag the estimate away as evidence piles up. A poor model needs about its own
+  boundary error (which the robot does not know): with a 4 px-boundary-error model, 1 px was not
+  enough and infogain, which seeks exactly the contested edges, did worse than random; 4 px fixed
+  it (see the benchmark notes in :mod:`kbcli.bench.adapt`).
+- The first decision on the flat prior is the most expensive (resampling the full grid); later
+  ones work on the shrinking support of the posterior.
+- The estimate is the posterior mean (``estimator = "mean"``, the RMSE-optimal choice) or the
+  maximum-likelihood cell (``"ml"``, the paper's).
+- Stopping rules (:meth:`Adapter.should_stop`): the paper's, the probability of the
+  maximum-likelihood cell above ``stop_ml`` (off by default: at 0.5 px a well-pinned posterior still
+  spreads over a few cells); and ours, the posterior mass within ``stop_radius`` px (and
+  ``stop_angle`` degrees) of the estimate at least ``stop_mass``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from kbcli.core import transforms
+from kbcli.core.model import UNKNOWN, ExactModel
+from kbcli.core.posterior import (
+    HypothesisGrid,
+    LikelihoodTable,
+    Posterior,
+    cell_sigma,
+    grid_bytes,
+    kde_term,
+    likelihood_term,
+)
+from kbcli.core.strategies import STRATEGIES, Context, get_strategy
+from kbcli.errors import ConfigError
+
+POSTERIORS = ("likelihood", "kde")
+#: Default softening (px) of a learned model's map (``AdapterConfig.model_blur``).
+LEARNED_BLUR = 1.0
+ESTIMATORS = ("mean", "ml")
+
+
+def _num(name: str, v: object, *, lo: float = 0.0, strict: bool = True) -> None:
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+    ok = ok and (v > lo if strict else v >= lo)
+    if not ok:
+        rel = ">" if strict else ">="
+        raise ConfigError(f"{name} must be a finite number {rel} {lo:g}, got {v!r}")
+
+
+def _int(name: str, v: object, lo: int = 1) -> None:
+    if not isinstance(v, int) or isinstance(v, bool) or v < lo:
+        raise ConfigError(f"{name} must be a whole number >= {lo}, got {v!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class AdapterConfig:
+    """How the robot adapts (robot side only: nothing about the simulated world).
+
+    Parameters
+    ----------
+    strategy : str
+        A name in :data:`kbcli.core.strategies.STRATEGIES` (random, active, infogain).
+    posterior : str
+        ``likelihood`` (the model's classifier) or ``kde`` (the paper's Eq. 7 from samples).
+    family : str
+        Transform family (translation or rigid).
+    resolution : float
+        Hypothesis grid step, px.
+    prior_halfwidth : float
+        The prior box of dx and dy, +-px.
+    max_angle, angle_resolution : float
+        Prior range (+-deg) and grid step (deg) of the angle (rigid family).
+    outlier : float
+        eps of the outlier floor (``p_eps = (1 - eps) p + eps / C``; the KDE mixes eps of the prior).
+    blur : float
+        Std (px) of the landing scatter the robot cannot see (0 when it knows where it landed).
+    model_blur : float or None
+        Softening (px, a Gaussian) of the model's map for a model whose boundaries are less
+        certain than its probabilities say; None: ``LEARNED_BLUR`` (1 px) for a learned model, 0
+        for the exact one. A learned model's probabilities are read as calibrated, but its edges
+        can sit a pixel or two off: touches that contradict them then pull the posterior off the
+        truth, and the estimate drifts as evidence piles up (benchmarked: a model with 1.1 px
+        boundary error drifted to 2.1 px RMSE at step 40 unsoftened, 0.28 px with 1 px).
+    cell_average : bool
+        Read the likelihood of a grid cell averaged over the cell (a Gaussian of the cell's spread,
+        :func:`kbcli.core.posterior.cell_sigma`) rather than at its centre; matters for the rigid
+        family, where an angle step moves far keys by more than a raster cell.
+    raster_step : float or None
+        Cell of the model raster, px (None: the grid resolution; half of it for the exact model
+        with the rigid family, whose cell-averaged likelihood needs a finer map).
+    candidates : int
+        Candidate actions per decision (active, infogain).
+    hypotheses : int
+        Posterior cells on which infogain evaluates its candidates.
+    active_keep, active_hypotheses : int
+        Most confusing candidates kept by ``active``, and the cells its simulated updates use.
+    kde_samples : int
+        N, actions drawn from p(action | sound) per observation (kde posterior).
+    kde_bandwidth : float or None
+        Kernel std, px; None: Scott's rule (see :mod:`kbcli.core.posterior`).
+    estimator : str
+        ``mean`` or ``ml``: which estimate :meth:`Adapter.estimate` returns.
+    stop_ml : float or None
+        The paper's rule: stop when the most probable cell holds at least this probability.
+    stop_mass, stop_radius, stop_angle : float
+        Ours: stop when ``stop_mass`` of the posterior lies within ``stop_radius`` px (and
+        ``stop_angle`` deg) of the estimate.
+    max_memory_mb : float
+        Refuse hypothesis grids (and model rasters) that would need more working memory.
+    """
+
+    strategy: str = "infogain"
+    posterior: str = "likelihood"
+    family: str = "translation"
+    resolution: float = 0.5
+    prior_halfwidth: float = 45.0
+    max_angle: float = 5.0
+    angle_resolution: float = 0.25
+    outlier: float = 1e-3
+    blur: float = 0.0
+    model_blur: float | None = None
+    cell_average: bool = True
+    raster_step: float | None = None
+    candidates: int = 256
+    hypotheses: int = 512
+    active_keep: int = 8
+    active_hypotheses: int = 2048
+    kde_samples: int = 10000
+    kde_bandwidth: float | None = None
+    estimator: str = "mean"
+    stop_ml: float | None = None
+    stop_mass: float = 0.95
+    stop_radius: float = 1.0
+    stop_angle: float = 0.5
+    max_memory_mb: float = 2048.0
+
+    def __post_init__(self) -> None:
+        get_strategy(self.strategy)
+        if self.posterior not in POSTERIORS:
+            raise ConfigError(f"unknown posterior {self.posterior!r}; valid: {', '.join(POSTERIORS)}")
+        transforms.check_family(self.family)
+        if self.estimator not in ESTIMATORS:
+            raise ConfigError(f"unknown estimator {self.estimator!r}; valid: {', '.join(ESTIMATORS)}")
+        _num("resolution", self.resolution)
+        _num("prior_halfwidth", self.prior_halfwidth)
+        _num("max_angle", self.max_angle, strict=False)
+        _num("angle_resolution", self.angle_resolution)
+        if self.prior_halfwidth < self.resolution:
+            raise ConfigError("prior_halfwidth must be at least one resolution step")
+        _num("blur", self.blur, strict=False)
+        if self.model_blur is not None:
+            _num("model_blur", self.model_blur, strict=False)
+        if not isinstance(self.cell_average, bool):
+            raise ConfigError(f"cell_average must be true or false, got {self.cell_average!r}")
+        _num("outlier", self.outlier)
+        if self.outlier >= 1:
+            raise ConfigError(f"outlier must be in (0, 1), got {self.outlier!r}")
+        if self.raster_step is not None:
+            _num("raster_step", self.raster_step)
+        for name in ("candidates", "hypotheses", "active_keep", "active_hypotheses"):
+            _int(name, getattr(self, name))
+        _int("kde_samples", self.kde_samples, 10)
+        if self.kde_bandwidth is not None:
+            _num("kde_bandwidth", self.kde_bandwidth)
+        if self.stop_ml is not None:
+            _num("stop_ml", self.stop_ml)
+        _num("stop_mass", self.stop_mass)
+        _num("stop_radius", self.stop_radius)
+        _num("stop_angle", self.stop_angle)
+        _num("max_memory_mb", self.max_memory_mb)
+        cells, need = grid_bytes(self.family, self.prior_halfwidth, self.resolution,
+                                 self.max_angle, self.angle_resolution)
+        if need > self.max_memory_mb * 2**20:
+            raise ConfigError(
+                f"hypothesis grid of {cells:,} cells would need {_size(need)} of working memory, "
+                f"above max_memory_mb = {self.max_memory_mb:g} MB: coarsen the resolution or "
+                f"narrow the prior"
+            )
+
+    @property
+    def grid_cells(self) -> int:
+        return grid_bytes(self.family, self.prior_halfwidth, self.resolution, self.max_angle,
+                          self.angle_resolution)[0]
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> AdapterConfig:
+        known = set(cls.__dataclass_fields__)
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ConfigError(f"unknown adapt option(s) {', '.join(unknown)}; "
+                              f"valid: {', '.join(sorted(known))}")
+        return cls(**d)
+
+
+def _size(nbytes: float) -> str:
+    for unit, scale in (("GB", 2**30), ("MB", 2**20)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.1f} {unit}"
+    return f"{nbytes / 1024:.1f} kB"
+
+
+def build_table(model, cfg: AdapterConfig,
+                area: tuple[float, float, float, float] | None = None) -> LikelihoodTable:
+    """Rasterise ``model`` for ``cfg`` once (share it across adaptations with the same model).
+
+    Raises
+    ------
+    ConfigError
+        When the raster would exceed ``cfg.max_memory_mb``.
+    """
+    area = tuple(model.area if area is None else area)
+    blur = total_blur(model, cfg)
+    step = cfg.raster_step
+    if step is None:  # a rigid grid cell reaches sub-cell precision only on a finer class map
+        fine = cfg.family == "rigid" and isinstance(model, ExactModel) and blur == 0
+        step = cfg.resolution / 2 if fine else cfg.resolution
+    x0, y0, x1, y1 = area
+    cells = math.ceil((x1 - x0) / step) * math.ceil((y1 - y0) / step)
+    per_cell = 2 if (isinstance(model, ExactModel) and blur == 0) else 4 * len(
+        model.class_features_)
+    need = cells * per_cell
+    if need > cfg.max_memory_mb * 2**20:
+        raise ConfigError(f"model raster of {cells:,} cells at {step:g} px would need {_size(need)}, "
+                          f"above max_memory_mb = {cfg.max_memory_mb:g} MB: raise raster_step")
+    return LikelihoodTable.from_model(model, step, eps=cfg.outlier, blur=blur, area=area)
+
+
+def total_blur(model, cfg: AdapterConfig) -> float:
+    """Std (px) the model's map is blurred by: the unseen reach noise and the model softening."""
+    mb = cfg.model_blur
+    if mb is None:
+        mb = 0.0 if isinstance(model, ExactModel) else LEARNED_BLUR
+    return float(math.hypot(cfg.blur, mb))
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Estimates of the transform parameters, in family order (``[angle,] dx, dy``)."""
+
+    ml: np.ndarray
+    mean: np.ndarray
+    ml_prob: float
+
+
+class Adapter:
+    """The robot's side of the adaptation: decide, observe, estimate, stop.
+
+    Parameters
+    ----------
+    model : SoundModel
+        The learned (or exact) model of the instrument at its reference pose.
+    cfg : AdapterConfig
+    rng : numpy.random.Generator
+        Drives the strategy's candidate sampling and the KDE's samples.
+    area : tuple of float, optional
+        Where actions may go (default: the model's working area).
+    centre : (2,) ndarray, optional
+        Rotation centre of the rigid family (default: the centre of ``area``, which is the
+        keyboard's centre at its reference pose).
+    table : LikelihoodTable, optional
+        A prebuilt :func:`build_table` (saves rasterising the model again).
+    """
+
+    def __init__(self, model, cfg: AdapterConfig, *, rng: np.random.Generator,
+                 area: tuple[float, float, float, float] | None = None,
+                 centre: np.ndarray | None = None, table: LikelihoodTable | None = None) -> None:
+        self.model = model
+        self.cfg = cfg
+        self.rng = rng
+        self.area = tuple(float(v) for v in (model.area if area is None else area))
+        x0, y0, x1, y1 = self.area
+        c = np.array([(x0 + x1) / 2, (y0 + y1) / 2]) if centre is None else np.asarray(centre, float)
+        self.grid = HypothesisGrid.build(cfg.family, prior_halfwidth=cfg.prior_halfwidth,
+                                         resolution=cfg.resolution, centre=c,
+                                         max_angle=cfg.max_angle,
+                                         angle_resolution=cfg.angle_resolution)
+        self.table = build_table(model, cfg, self.area) if table is None else table
+        self.posterior = Posterior.uniform(self.grid)
+        self._strategy = get_strategy(cfg.strategy)
+        self._edges: np.ndarray | None = None
+        self._corners: np.ndarray | None = None
+        self.bandwidths: list[float] = []
+
+    # -- deciding ----------------------------------------------------------------------------------
+    def context(self) -> Context:
+        if self._edges is None:
+            self._edges, self._corners = self.table.boundary_points()
+        return Context(self.posterior, self.table, self.area, self._edges, self._corners, self.cfg)
+
+    def propose(self) -> np.ndarray:
+        """(2,) the next action (pad px) chosen by the strategy."""
+        return np.asarray(self._strategy(self.context(), self.rng), float)
+
+    # -- observing ---------------------------------------------------------------------------------
+    def observe(self, action: np.ndarray, perceived: np.ndarray) -> int:
+        """Classify a perceived sound (``model.classify``) and update the posterior with it.
+
+        Parameters
+        ----------
+        action : (2,) ndarray
+            Where the finger landed (or was aimed, see ``blur``).
+        perceived : (D,) ndarray
+            The heard features (NaN for silence).
+
+        Returns
+        -------
+        int
+            The class (0 silence, -1 unknown: skipped).
+        """
+        cls = int(self.model.classify(np.asarray(perceived, float).reshape(1, -1))[0])
+        self.observe_class(action, cls)
+        return cls
+
+    def observe_class(self, action: np.ndarray, cls: int) -> None:
+        """Update the posterior with an already classified observation (Eq. 8)."""
+        if cls == UNKNOWN:
+            return
+        a = np.asarray(action, float).reshape(2)
+        if self.cfg.posterior == "kde":
+            term, bw = kde_term(self.grid, self.model, a, cls, self.rng,
+                                n_samples=self.cfg.kde_samples, eps=self.cfg.outlier,
+                                bandwidth=self.cfg.kde_bandwidth)
+            self.bandwidths.append(bw)
+        else:
+            sigma = cell_sigma(self.grid, a) if self.cfg.cell_average else 0.0
+            term = likelihood_term(self.grid, self.table, a, cls, sigma)
+        self.posterior = self.posterior.update(term)
+
+    # -- reading -----------------------------------------------------------------------------------
+    def estimates(self) -> Estimate:
+        post = self.posterior
+        return Estimate(ml=post.ml(), mean=post.mean(), ml_prob=post.ml_prob())
+
+    def estimate(self) -> np.ndarray:
+        """(P,) the estimate the config asks for (posterior mean or maximum-likelihood cell)."""
+        return self.posterior.mean() if self.cfg.estimator == "mean" else self.posterior.ml()
+
+    def entropy(self) -> float:
+        """Posterior entropy, nats (over grid cells)."""
+        return self.posterior.entropy()
+
+    def mass_near_estimate(self) -> float:
+        """Posterior mass within ``stop_radius`` (and ``stop_angle``) of the estimate."""
+        return self.posterior.mass_within(self.estimate(), self.cfg.stop_radius, self.cfg.stop_angle)
+
+    def should_stop(self) -> bool:
+        """The paper's rule (ML probability >= ``stop_ml``, when set) or ours (mass near the
+        estimate >= ``stop_mass``)."""
+        if self.posterior.n_obs == 0:
+            return False
+        if self.cfg.stop_ml is not None and self.posterior.ml_prob() >= self.cfg.stop_ml:
+            return True
+        return self.mass_near_estimate() >= self.cfg.stop_mass
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step of :func:`adapt`."""
+
+    t: int
+    action: np.ndarray
+    landed: np.ndarray
+    perceived: np.ndarray
+    cls: int
+    ml: np.ndarray
+    mean: np.ndarray
+    estimate: np.ndarray
+    entropy: float
+    ml_prob: float
+    mass: float
+    stop: bool
+    ms: float
+
+
+Touch = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def adapt(adapter: Adapter, touch: Touch, max_steps: int, *, use_landed: bool = True,
+          stop: bool = False) -> Iterator[Step]:
+    """Run the adaptation as an iterator of steps.
+
+    Parameters
+    ----------
+    touch : callable
+        ``touch(action (2,)) -> (landed (2,), perceived (D,))``.
+    max_steps : int
+        At most this many observations.
+    use_landed : bool
+        Observe at the landed position (proprioception) or at the aimed action.
+    stop : bool
+        End at the first step where :meth:`Adapter.should_stop` holds (else run all steps).
+
+    Yields
+    ------
+    Step
+        ``ms`` is the robot's time for the step: deciding plus updating (not the touch).
+    """
+    for t in range(1, max_steps + 1):
+        t0 = time.perf_counter()
+        action = adapter.propose()
+        t1 = time.perf_counter()
+        landed, perceived = touch(action)
+        landed = np.asarray(landed, float).reshape(2)
+        perceived = np.asarray(perceived, float).reshape(-1)
+        t2 = time.perf_counter()
+        cls = adapter.observe(landed if use_landed else action, perceived)
+        post = adapter.posterior
+        ml, mean = post.ml(), post.mean()
+        t3 = time.perf_counter()
+        done = adapter.should_stop()
+        yield Step(t=t, action=action, landed=landed, perceived=perceived, cls=cls, ml=ml,
+                   mean=mean, estimate=mean if adapter.cfg.estimator == "mean" else ml,
+                   entropy=post.entropy(), ml_prob=post.ml_prob(),
+                   mass=adapter.mass_near_estimate(), stop=done,
+                   ms=1e3 * ((t1 - t0) + (t3 - t2)))
+        if stop and done:
+            return
+
+
+__all__ = ["AdapterConfig", "Adapter", "Estimate", "Step", "adapt", "build_table", "STRATEGIES",
+           "POSTERIORS"]

@@ -1,0 +1,253 @@
+"""Where to touch next: the action-selection strategies of the adaptation (paper Sect. III-E).
+
+A strategy is a plain function registered by name with :func:`strategy`::
+
+    fn(ctx: Context, rng: numpy.random.Generator) -> (2,) ndarray   # the next action, pad px
+
+It sees the robot's side only: the current posterior, the rasterised model, the working area and
+the model's class boundaries (never the true pose). Registered:
+
+- ``random`` (the paper's baseline): uniform over the working area (the model's ``area``: the
+  keyboard's reference bounds plus the margin, where the displaced keyboard can plausibly be).
+- ``active`` (the paper's): draw ``candidates`` uniform actions; keep the ``active_keep`` most
+  *confusing* ones, confusion being the entropy of the outcome the model predicts under the current
+  posterior (a coarse subsample of 128 hypotheses); simulate each kept action's outcome under the
+  best (maximum-likelihood) hypothesis, update the posterior with it (on a weighted subsample of up
+  to ``active_hypotheses`` cells) and pick the action whose simulated posterior has the lowest entropy.
+- ``infogain`` (ours): the action with the largest expected information gain
+  ``I(S; H | a) = H[p(s | a)] - E_h H[p(s | a, h)]``, the mutual information between the outcome and
+  the transform over the whole posterior predictive (not only the best hypothesis). It is evaluated
+  on a weighted subsample of at most ``hypotheses`` posterior cells (the exact support once it is
+  small; systematic resampling before). Candidates: a quarter uniform over the area, a quarter on
+  the model's class edges and half on its corners (where three or four sounds meet), each edge or
+  corner point carried into the pad by a hypothesis drawn from the posterior (shifted by half a
+  grid cell, so the boundary falls between cells), so that it falls where the posterior is still
+  undecided.
+
+Both model-based strategies work for hard (exact) and soft (learned) models: for a hard table the
+predictive distribution is a weighted histogram of predicted classes (``bincount``) and the
+conditional entropy is a constant; for a soft one the predictive is a histogram of each point's
+four most probable classes weighted by their probabilities (a learned model mixes two sounds at an
+edge), and the conditional entropy comes from a precomputed per-cell entropy map.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from kbcli.core import transforms
+from kbcli.core.posterior import LikelihoodTable, Posterior
+from kbcli.errors import ConfigError
+
+StrategyFn = Callable[["Context", np.random.Generator], np.ndarray]
+
+#: name -> strategy function (filled by :func:`strategy`).
+STRATEGIES: dict[str, StrategyFn] = {}
+
+#: Hypotheses used by ``active`` to rank candidates by confusion.
+CONFUSION_HYPOTHESES = 128
+
+
+def strategy(name: str) -> Callable[[StrategyFn], StrategyFn]:
+    """Register a strategy function under ``name``."""
+
+    def deco(fn: StrategyFn) -> StrategyFn:
+        STRATEGIES[name] = fn
+        return fn
+
+    return deco
+
+
+def get_strategy(name: str) -> StrategyFn:
+    """The strategy registered as ``name``; ``ConfigError`` listing the valid ones otherwise."""
+    try:
+        return STRATEGIES[name]
+    except KeyError:
+        raise ConfigError(f"unknown strategy {name!r}; valid: {', '.join(STRATEGIES)}") from None
+
+
+@dataclass
+class Context:
+    """What a strategy may look at.
+
+    Attributes
+    ----------
+    posterior : Posterior
+    table : LikelihoodTable
+        The model, rasterised (reference frame).
+    area : tuple of float
+        (xmin, ymin, xmax, ymax) where actions may go.
+    edges, corners : (n, 2) ndarrays
+        The model's class boundaries in the reference frame (:meth:`LikelihoodTable.boundary_points`).
+    cfg : Any
+        The adapter config (``candidates``, ``hypotheses``, ``active_keep``, ``active_hypotheses``).
+    """
+
+    posterior: Posterior
+    table: LikelihoodTable
+    area: tuple[float, float, float, float]
+    edges: np.ndarray
+    corners: np.ndarray
+    cfg: Any
+
+    @property
+    def family(self) -> str:
+        return self.posterior.grid.family
+
+    @property
+    def centre(self) -> np.ndarray:
+        return self.posterior.grid.centre
+
+
+# ---------------------------------------------------------------------------------------------
+# Helpers (vectorised over candidates x hypotheses)
+# ---------------------------------------------------------------------------------------------
+def uniform_actions(area: tuple[float, float, float, float], n: int,
+                    rng: np.random.Generator) -> np.ndarray:
+    """(n, 2) uniform points over ``area``."""
+    x0, y0, x1, y1 = area
+    return rng.uniform((x0, y0), (x1, y1), size=(n, 2))
+
+
+def inverse_points(family: str, hyp: np.ndarray, actions: np.ndarray,
+                   centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Coordinates of ``T_h^-1(a)`` for hypotheses (K, P) x actions (M, 2): two (K, M) arrays."""
+    if family == "translation":
+        return actions[None, :, 0] - hyp[:, 0, None], actions[None, :, 1] - hyp[:, 1, None]
+    p = transforms.inverse_many(family, hyp, actions, centre)
+    return p[..., 0], p[..., 1]
+
+
+def outcome_distribution(table: LikelihoodTable, family: str, hyp: np.ndarray,
+                         weights: np.ndarray, actions: np.ndarray,
+                         centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Posterior predictive of the outcome of each action, and the expected conditional entropy.
+
+    Parameters
+    ----------
+    hyp : (K, P) ndarray
+        Hypotheses.
+    weights : (K,) ndarray
+        Their posterior weights (summing to one).
+    actions : (M, 2) ndarray
+
+    Returns
+    -------
+    pred : (M, C) ndarray
+        ``p(s | a) = sum_h w_h p_eps(s | T_h^-1 a)``.
+    cond : (M,) ndarray
+        ``sum_h w_h H[p_eps(. | T_h^-1 a)]``, nats.
+    """
+    x, y = inverse_points(family, hyp, actions, centre)
+    c, m = table.n_classes, len(actions)
+    if table.hard:
+        cls = table.classes_at(x, y)  # (K, M)
+        flat = (np.arange(m)[None, :] * c + cls).ravel()
+        w = np.broadcast_to(weights[:, None], cls.shape).ravel()
+        pred = np.bincount(flat, weights=w, minlength=m * c).reshape(m, c)
+        pred = (1 - table.eps) * pred + table.eps / c
+        return pred, np.full(m, table.conditional_entropy())
+    cls, p = table.top_at(x, y)  # (K, M, k): the few classes each point can sound
+    flat = (np.arange(m)[None, :, None] * c + cls).ravel()
+    pred = np.bincount(flat, weights=(weights[:, None, None] * p).ravel(), minlength=m * c)
+    pred = (1 - table.eps) * pred.reshape(m, c) / pred.reshape(m, c).sum(axis=1, keepdims=True)
+    # einsum, not BLAS: a threaded BLAS on a busy machine costs more than it saves here
+    cond = np.einsum("k,km->m", weights, table.entropy_at(x, y))
+    return pred + table.eps / c, cond
+
+
+def entropy_rows(p: np.ndarray) -> np.ndarray:
+    """Entropy (nats) of each row of a (M, C) array of distributions."""
+    q = np.where(p > 0, p, 1.0)
+    return -(p * np.log(q)).sum(axis=-1)
+
+
+def _clip(area: tuple[float, float, float, float], pts: np.ndarray) -> np.ndarray:
+    x0, y0, x1, y1 = area
+    return np.clip(pts, (x0, y0), (x1, y1))
+
+
+def boundary_candidates(ctx: Context, n_edges: int, n_corners: int, hyp: np.ndarray,
+                        weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Model edge and corner points carried into the pad by hypotheses drawn from ``weights``.
+
+    Returns
+    -------
+    (n, 2) ndarray, n <= n_edges + n_corners (fewer when the model has no edges or corners).
+    """
+    src = []
+    if len(ctx.edges) and n_edges > 0:
+        src.append(ctx.edges[rng.integers(len(ctx.edges), size=n_edges)])
+    if len(ctx.corners) and n_corners > 0:
+        src.append(ctx.corners[rng.integers(len(ctx.corners), size=n_corners)])
+    if not src:
+        return np.empty((0, 2))
+    pts = np.vstack(src)
+    h = hyp[rng.choice(len(hyp), size=len(pts), p=weights)]
+    # put the boundary half a cell off the hypothesis, between grid cells: then every cell lies
+    # cleanly on one side and the cell nearest the truth always agrees with the outcome
+    h = h.copy()
+    h[:, -2:] += rng.choice([-0.5, 0.5], size=(len(h), 2)) * ctx.posterior.grid.resolution
+    if ctx.family == "translation":
+        out = pts + h
+    else:
+        out = transforms.apply_many(ctx.family, h, pts[:, None, :], ctx.centre)[:, 0, :]
+    return _clip(ctx.area, out)
+
+
+# ---------------------------------------------------------------------------------------------
+# The strategies
+# ---------------------------------------------------------------------------------------------
+@strategy("random")
+def random_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
+    """Uniform over the working area (the paper's baseline)."""
+    return uniform_actions(ctx.area, 1, rng)[0]
+
+
+@strategy("active")
+def active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
+    """The paper's: most confusing candidates, then the largest simulated entropy reduction under
+    the best hypothesis."""
+    cfg, post, table = ctx.cfg, ctx.posterior, ctx.table
+    cands = uniform_actions(ctx.area, cfg.candidates, rng)
+    grid = post.grid
+    idx, w = post.sample_hypotheses(CONFUSION_HYPOTHESES, rng)
+    pred, _ = outcome_distribution(table, ctx.family, grid.params(idx), w, cands, ctx.centre)
+    confusion = entropy_rows(pred)
+    keep = np.argsort(-confusion, kind="stable")[: cfg.active_keep]
+    kept = cands[keep]
+    # simulate each kept action under the maximum-likelihood hypothesis
+    ml = grid.params(np.array([post.ml_index()]))
+    mx, my = inverse_points(ctx.family, ml, kept, ctx.centre)
+    simulated = table.classes_at(mx, my)[0]  # (k,)
+    # update a weighted subsample of the posterior with each simulated outcome
+    idx2, w2 = post.sample_hypotheses(cfg.active_hypotheses, rng)
+    x, y = inverse_points(ctx.family, grid.params(idx2), kept, ctx.centre)  # (K, k)
+    logw = np.log(w2)[:, None] + table.log_prob(x, y, simulated[None, :])
+    logw -= logw.max(axis=0, keepdims=True)
+    q = np.exp(logw)
+    q /= q.sum(axis=0, keepdims=True)
+    after = entropy_rows(q.T)
+    return kept[int(np.argmin(after))]
+
+
+@strategy("infogain")
+def infogain_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
+    """Largest expected information gain over the whole posterior predictive."""
+    cfg, post = ctx.cfg, ctx.posterior
+    idx, w = post.sample_hypotheses(cfg.hypotheses, rng)
+    hyp = post.grid.params(idx)
+    m = cfg.candidates
+    n_uniform = m // 4
+    n_edges = m // 4
+    cands = np.vstack([
+        uniform_actions(ctx.area, n_uniform, rng),
+        boundary_candidates(ctx, n_edges, m - n_uniform - n_edges, hyp, w, rng),
+    ])
+    pred, cond = outcome_distribution(ctx.table, ctx.family, hyp, w, cands, ctx.centre)
+    gain = entropy_rows(pred) - cond
+    return cands[int(np.argmax(gain))]

@@ -1,0 +1,308 @@
+"""Stage ``adapt``: recover a displaced keyboard's pose with few touches (paper Sect. III-D, III-E).
+
+:func:`experiment` runs one adaptation of the robot's :class:`~kbcli.core.adapt.Adapter` against a
+simulated :class:`~kbcli.sim.World` at a given true pose; :func:`run` does it for a model artifact
+and a scene artifact and returns a ``run`` artifact. The scene is read only to build the world and
+to score the estimates: the robot's side never sees it.
+
+Per step the artifact stores the action, where the finger landed, the perceived features and class,
+the estimates (posterior mean and maximum-likelihood cell), the error against the truth (px, and
+degrees for rotations), the entropy (nats), the probability of the most probable cell, the mass
+near the estimate, whether the stopping rule held, and the robot's time (``timing/step_ms``: the
+only dataset that is not reproducible bit for bit, being wall-clock); plus posterior snapshots at
+chosen steps (``snapshots/log_translation``: the log of the translation marginal; and, rigid family,
+``snapshots/angle``: the angle marginal).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from kbcli.core import transforms
+from kbcli.core.adapt import POSTERIORS, Adapter, AdapterConfig, adapt, build_table
+from kbcli.core.keyboard import Keyboard
+from kbcli.core.posterior import LikelihoodTable
+from kbcli.errors import ArtifactError, ConfigError, KbcliError
+from kbcli.sim import MODES, SimConfig, World, make_reacher
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages.artifact import Artifact, ref
+from kbcli.stages.models import load_model
+
+FEEDBACKS = ("landed", "aim")
+DEFAULT_SNAPSHOTS = (0, 1, 2, 3, 5, 10, 20, 40)
+
+
+@dataclass(frozen=True, kw_only=True)
+class AdaptConfig:
+    """One adaptation: the robot's settings (see :class:`kbcli.core.adapt.AdapterConfig`, whose
+    fields are repeated here) plus the simulated arm's and the loop's.
+
+    Parameters
+    ----------
+    mode : str
+        ``ideal`` or ``dynamics`` (:class:`kbcli.sim.SimConfig`).
+    reach_noise : float
+        Landing scatter of the arm, px.
+    feedback : str
+        ``landed``: the robot observes where its finger landed (proprioception); ``aim``: only where
+        it aimed, and blurs its likelihood by ``reach_noise``.
+    model_blur : float or None
+        Extra softening of the model's map, px (see :class:`kbcli.core.adapt.AdapterConfig`;
+        None: 1 px for a learned model, 0 for the exact one).
+    max_steps : int
+        T, observations at most.
+    stop : bool
+        End at the stopping rule (else always run T steps and record when the rule fired).
+    """
+
+    strategy: str = "infogain"
+    posterior: str = "likelihood"
+    family: str = "translation"
+    mode: str = "ideal"
+    reach_noise: float = 0.0
+    feedback: str = "landed"
+    model_blur: float | None = None
+    max_steps: int = 40
+    stop: bool = False
+    resolution: float = 0.5
+    prior_halfwidth: float = 45.0
+    max_angle: float = 5.0
+    angle_resolution: float = 0.25
+    outlier: float = 1e-3
+    cell_average: bool = True
+    raster_step: float | None = None
+    candidates: int = 256
+    hypotheses: int = 512
+    active_keep: int = 8
+    active_hypotheses: int = 2048
+    kde_samples: int = 10000
+    kde_bandwidth: float | None = None
+    estimator: str = "mean"
+    stop_ml: float | None = None
+    stop_mass: float = 0.95
+    stop_radius: float = 1.0
+    stop_angle: float = 0.5
+    max_memory_mb: float = 2048.0
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ConfigError(f"unknown mode {self.mode!r}; valid: {', '.join(MODES)}")
+        if self.feedback not in FEEDBACKS:
+            raise ConfigError(f"unknown feedback {self.feedback!r}; valid: {', '.join(FEEDBACKS)}")
+        if not isinstance(self.max_steps, int) or isinstance(self.max_steps, bool) \
+                or self.max_steps < 1:
+            raise ConfigError(f"max_steps must be a whole number >= 1, got {self.max_steps!r}")
+        if not isinstance(self.stop, bool):
+            raise ConfigError(f"stop must be true or false, got {self.stop!r}")
+        self.sim_config()
+        self.adapter_config()
+
+    def sim_config(self) -> SimConfig:
+        return SimConfig(mode=self.mode, reach_noise=self.reach_noise)
+
+    def adapter_config(self) -> AdapterConfig:
+        """The robot-side config (``blur`` is the reach noise under ``aim`` feedback)."""
+        d = {k: v for k, v in asdict(self).items() if k in AdapterConfig.__dataclass_fields__}
+        d["blur"] = float(self.reach_noise) if self.feedback == "aim" else 0.0
+        return AdapterConfig(**d)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> AdaptConfig:
+        """Build from a mapping (a TOML table, an artifact's config); unknown keys are rejected."""
+        known = set(cls.__dataclass_fields__)
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ConfigError(f"unknown adapt option(s) {', '.join(unknown)}; "
+                              f"valid: {', '.join(sorted(known))}")
+        return cls(**d)
+
+
+def _errors(est: np.ndarray, truth: np.ndarray, robot_family: str,
+            world_family: str) -> tuple[float, float]:
+    """Translation error (px) and angle error (deg) of an estimate against the truth."""
+    t_err = float(np.hypot(*(est[-2:] - truth[-2:])))
+    a_est = float(est[0]) if robot_family == "rigid" else 0.0
+    a_true = float(truth[0]) if world_family == "rigid" else 0.0
+    return t_err, abs(a_est - a_true)
+
+
+def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndarray, *,
+               rng: np.random.Generator, world_family: str | None = None,
+               table: LikelihoodTable | None = None,
+               snapshot_steps: tuple[int, ...] = ()) -> dict[str, np.ndarray]:
+    """One adaptation against a world whose keyboard sits at ``true_params``.
+
+    Parameters
+    ----------
+    model : SoundModel
+        The robot's model (exact or learned).
+    keyboard : Keyboard
+        The instrument (world side).
+    true_params : (P,) ndarray
+        The true displacement in ``world_family`` parameters (default: ``cfg.family``).
+    rng : numpy.random.Generator
+        Split into the robot's and the world's generators.
+    table : LikelihoodTable, optional
+        A prebuilt :func:`kbcli.core.adapt.build_table` for ``model`` (rasterise once, reuse).
+    snapshot_steps : tuple of int
+        Steps (0: the prior) at which to keep the posterior.
+
+    Returns
+    -------
+    dict of ndarrays, per step t = 1..T (T = ``max_steps``, fewer when ``cfg.stop`` ends early)
+        ``actions`` (T, 2), ``landed`` (T, 2), ``perceived`` (T, D), ``classes`` (T,),
+        ``estimates`` (T, P) maximum-likelihood cell, ``means`` (T, P) posterior mean,
+        ``errors`` (T,) px error of the estimate (``cfg.estimator``) vs truth, ``ml_errors`` (T,),
+        ``angle_errors`` (T,) deg, ``entropy`` (T,) nats, ``ml_prob`` (T,), ``mass`` (T,),
+        ``stop`` (T,) bool, ``step_ms`` (T,); ``snapshot_steps`` (S,), ``snapshots`` (S, ny, nx)
+        log translation marginals, ``snapshot_angles`` (S, A) angle marginals (rigid); ``dx``,
+        ``dy``, ``angles`` grid axes.
+    """
+    world_family = cfg.family if world_family is None else world_family
+    truth = np.asarray(true_params, float)
+    robot_rng, world_rng = rng.spawn(2)
+    acfg = cfg.adapter_config()
+    adapter = Adapter(model, acfg, rng=robot_rng, table=table)
+    world = World(keyboard, make_reacher(cfg.sim_config()), truth, world_family)
+
+    def touch(action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        landed, heard = world.touch(action[None, :], world_rng)
+        return landed[0], heard[0]
+
+    snaps = sorted(set(int(s) for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps))
+    snap_t, snap_log, snap_ang = [], [], []
+
+    def snapshot(t: int) -> None:
+        post = adapter.posterior
+        snap_t.append(t)
+        with np.errstate(divide="ignore"):
+            snap_log.append(np.log(post.translation_marginal()).astype(np.float32))
+        pa = post.marginals()[0]
+        snap_ang.append(np.ones(1) if pa is None else pa)
+
+    if 0 in snaps:
+        snapshot(0)
+    rec: dict[str, list] = {k: [] for k in ("actions", "landed", "perceived", "classes", "estimates",
+                                            "means", "errors", "ml_errors", "angle_errors",
+                                            "entropy", "ml_prob", "mass", "stop", "step_ms")}
+    for st in adapt(adapter, touch, cfg.max_steps, use_landed=cfg.feedback == "landed",
+                    stop=cfg.stop):
+        err, aerr = _errors(st.estimate, truth, cfg.family, world_family)
+        ml_err, _ = _errors(st.ml, truth, cfg.family, world_family)
+        for k, v in (("actions", st.action), ("landed", st.landed), ("perceived", st.perceived),
+                     ("classes", st.cls), ("estimates", st.ml), ("means", st.mean),
+                     ("errors", err), ("ml_errors", ml_err), ("angle_errors", aerr),
+                     ("entropy", st.entropy), ("ml_prob", st.ml_prob), ("mass", st.mass),
+                     ("stop", st.stop), ("step_ms", st.ms)):
+            rec[k].append(v)
+        if st.t in snaps:
+            snapshot(st.t)
+    out = {k: np.asarray(v) for k, v in rec.items()}
+    out["classes"] = out["classes"].astype(np.int64)
+    out["stop"] = out["stop"].astype(bool)
+    g = adapter.grid
+    out.update(dx=g.dx, dy=g.dy, angles=g.angles, snapshot_steps=np.asarray(snap_t, np.int64))
+    if snap_t:
+        out["snapshots"] = np.stack(snap_log)
+        out["snapshot_angles"] = np.stack(snap_ang)
+    if cfg.posterior == "kde":
+        out["bandwidths"] = np.asarray(adapter.bandwidths, float)
+    return out
+
+
+def steps_below(errors: np.ndarray, threshold: float) -> int | None:
+    """First step (1-based) with ``errors < threshold``; None if never."""
+    hit = np.flatnonzero(np.asarray(errors) < threshold)
+    return int(hit[0] + 1) if len(hit) else None
+
+
+def check_inputs(model_artifact: Artifact, scene_artifact: Artifact) -> None:
+    """Refuse artifacts of the wrong kind and a scene whose keyboard is not the model's."""
+    if model_artifact.kind != "model":
+        raise ArtifactError(f"{model_artifact.path or 'model'}: is a {model_artifact.kind} "
+                            f"artifact, expected model")
+    if scene_artifact.kind != "scene":
+        raise ArtifactError(f"{scene_artifact.path or 'scene'}: is a {scene_artifact.kind} "
+                            f"artifact, expected scene")
+    km, ks = model_artifact.config.get("keyboard"), scene_artifact.config.get("keyboard")
+    if km != ks:
+        diff = sorted(k for k in set(km or {}) | set(ks or {})
+                      if (km or {}).get(k) != (ks or {}).get(k))
+        raise KbcliError(f"the scene's keyboard does not match the model's (differs in "
+                         f"{', '.join(diff) or 'everything'}): perturb the keyboard the model "
+                         f"was learned on")
+
+
+def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
+        rng: np.random.Generator, seed: int | None = None,
+        snapshot_steps: tuple[int, ...] = DEFAULT_SNAPSHOTS, model=None) -> Artifact:
+    """Adapt to a scene with a model: the ``run`` artifact.
+
+    Parameters
+    ----------
+    seed : int, optional
+        Recorded in the artifact (``rng`` should be ``default_rng(seed)``).
+    model : SoundModel, optional
+        The already loaded model of ``model_artifact`` (saves loading it again).
+
+    Raises
+    ------
+    ArtifactError, KbcliError
+        Wrong kinds, mismatching keyboards.
+    """
+    check_inputs(model_artifact, scene_artifact)
+    model = load_model(model_artifact) if model is None else model
+    kb = keyboard_stage.load(scene_artifact)
+    world_family = scene_artifact.config["family"]
+    truth = np.asarray(scene_artifact.config["params"], float)
+    res = experiment(cfg, model, kb, truth, rng=rng, world_family=world_family,
+                     snapshot_steps=snapshot_steps)
+    names = transforms.FAMILIES[cfg.family]
+    errors = res["errors"]
+    angle_ok = res["angle_errors"] < 0.5
+    reach1 = steps_below(np.where(angle_ok, errors, np.inf), 1.0)
+    stop_at = np.flatnonzero(res["stop"])
+    final = res["means"][-1] if cfg.estimator == "mean" else res["estimates"][-1]
+    attrs = {
+        "strategy": cfg.strategy,
+        "posterior": cfg.posterior,
+        "family": cfg.family,
+        "world_family": world_family,
+        "steps": int(len(errors)),
+        "final_error_px": float(errors[-1]),
+        "final_angle_error_deg": float(res["angle_errors"][-1]),
+        "steps_to_1px": reach1,
+        "stop_step": int(stop_at[0] + 1) if len(stop_at) else None,
+        "final_entropy": float(res["entropy"][-1]),
+        "estimate": {n: float(v) for n, v in zip(names, final, strict=True)},
+        "truth": {n: float(v) for n, v in
+                  zip(transforms.FAMILIES[world_family], truth, strict=True)},
+        "grid_cells": cfg.adapter_config().grid_cells,
+        "median_step_ms": float(np.median(res["step_ms"])),
+    }
+    timing = {"step_ms": res.pop("step_ms")}
+    data = {k: v for k, v in res.items()}
+    data["timing"] = timing
+    return Artifact(
+        kind="run",
+        config={"adapt": cfg.to_dict(), "keyboard": model_artifact.config["keyboard"],
+                "snapshot_steps": [int(s) for s in snapshot_steps]},
+        seed=seed,
+        data=data,
+        attrs=attrs,
+        inputs={"model": ref(model_artifact), "scene": ref(scene_artifact)},
+    )
+
+
+def build_shared_table(cfg: AdaptConfig, model) -> LikelihoodTable:
+    """The model raster for ``cfg`` (to share across many :func:`experiment` calls)."""
+    return build_table(model, cfg.adapter_config())
+
+
+__all__ = ["AdaptConfig", "experiment", "run", "check_inputs", "steps_below", "build_shared_table",
+           "POSTERIORS", "FEEDBACKS", "DEFAULT_SNAPSHOTS"]

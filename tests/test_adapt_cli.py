@@ -1,0 +1,166 @@
+"""``kbcli adapt``, ``kbcli plot adapt``, ``kbcli bench adapt``, the stage API and bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kbcli.cli import app
+from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model import ExactModel
+from kbcli.errors import ArtifactError, ConfigError, KbcliError
+from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.stages import adapt as stage
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages.models import exact_artifact
+from kbcli.stages.perturb import PerturbConfig
+from kbcli.stages.perturb import run as perturb_run
+
+
+@pytest.fixture
+def files(tmp_path):
+    kb_art = keyboard_stage.run(KeyboardConfig())
+    write_artifact(kb_art, tmp_path / "kb.h5")
+    model = exact_artifact(kb_art)
+    write_artifact(model, tmp_path / "model.h5")
+    rng = np.random.default_rng(0)
+    write_artifact(perturb_run(PerturbConfig(params=(8.3, -5.6)), kb_art, rng=rng),
+                   tmp_path / "scene.h5")
+    write_artifact(perturb_run(PerturbConfig(family="rigid", params=(1.2, 4.0, 6.5)), kb_art,
+                               rng=rng), tmp_path / "rigid.h5")
+    other = keyboard_stage.run(KeyboardConfig(cols=6))
+    write_artifact(perturb_run(PerturbConfig(params=(3.0, 3.0)), other, rng=rng),
+                   tmp_path / "other_scene.h5")
+    return tmp_path
+
+
+def _one_line_error(result, *fragments):
+    assert result.exit_code == 1, result.output
+    lines = [ln for ln in result.output.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("kbcli: error:"), result.output
+    for f in fragments:
+        assert f in lines[0], lines[0]
+
+
+def _adapt(runner, files, *extra, out="run.h5", scene="scene.h5", model="model.h5"):
+    return runner.invoke(app, ["adapt", "--model", str(files / model), "--scene",
+                               str(files / scene), "-o", str(files / out), "--prior-halfwidth",
+                               "20", *extra])
+
+
+def test_adapt_writes_a_run_and_plots_it(runner, files):
+    r = _adapt(runner, files, "--max-steps", "12", "--seed", "3")
+    assert r.exit_code == 0, r.output
+    assert "final error" in r.output and "below 1 px" in r.output
+    art = read_artifact(files / "run.h5", "run")
+    d = art.data
+    assert d["actions"].shape == (12, 2) and d["errors"].shape == (12,)
+    assert d["estimates"].shape == (12, 2) and d["entropy"].shape == (12,)
+    assert d["timing"]["step_ms"].shape == (12,) and d["classes"].dtype.kind == "i"
+    assert list(d["snapshot_steps"]) == [0, 1, 2, 3, 5, 10]
+    assert d["snapshots"].shape == (6, 81, 81)
+    assert d["errors"][-1] < 1.0 and art.attrs["steps_to_1px"] <= 12
+    assert art.inputs["model"]["kind"] == "model" and art.inputs["scene"]["kind"] == "scene"
+    assert art.config["adapt"]["max_steps"] == 12 and art.seed == 3
+    r = runner.invoke(app, ["plot", "adapt", str(files / "run.h5"), "-o", str(files / "a.png")])
+    assert r.exit_code == 0, r.output
+    assert (files / "a.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_adapt_is_deterministic_except_timing(runner, files):
+    for name in ("a.h5", "b.h5"):
+        r = _adapt(runner, files, "--max-steps", "6", "--strategy", "active", out=name)
+        assert r.exit_code == 0, r.output
+    a = read_artifact(files / "a.h5").data
+    b = read_artifact(files / "b.h5").data
+    for k in a:
+        if k != "timing":
+            np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+
+
+def test_adapt_rigid_scene_and_kde_posterior(runner, files):
+    r = _adapt(runner, files, "--max-steps", "5", "--posterior", "kde", "--snapshots", "0,5",
+               scene="rigid.h5")
+    assert r.exit_code == 0, r.output
+    art = read_artifact(files / "run.h5", "run")
+    assert art.config["adapt"]["family"] == "rigid"  # the scene's family by default
+    assert art.data["estimates"].shape == (5, 3) and "angle error" in r.output
+    assert art.data["snapshot_angles"].shape[0] == 2
+
+
+def test_stage_experiment_api():
+    kb = Keyboard(KeyboardConfig())
+    cfg = stage.AdaptConfig(max_steps=8, prior_halfwidth=20.0, strategy="random")
+    res = stage.experiment(cfg, ExactModel(kb), kb, np.array([3.0, 4.0]),
+                           rng=np.random.default_rng(0), snapshot_steps=(0, 8))
+    for key in ("actions", "landed", "classes", "estimates", "means", "errors", "angle_errors",
+                "entropy", "step_ms"):
+        assert len(res[key]) == 8, key
+    assert res["snapshots"].shape == (2, 81, 81)
+    assert np.all(res["angle_errors"] == 0)
+    cfg2 = stage.AdaptConfig.from_dict(cfg.to_dict())
+    assert cfg2 == cfg
+    with pytest.raises(ConfigError, match="unknown adapt option"):
+        stage.AdaptConfig.from_dict({"strategy": "random", "speed": 3})
+    with pytest.raises(ConfigError, match="feedback"):
+        stage.AdaptConfig(feedback="telepathy")
+
+
+def test_stage_refuses_mismatched_inputs(files):
+    model = read_artifact(files / "model.h5")
+    scene = read_artifact(files / "scene.h5")
+    with pytest.raises(ArtifactError):
+        stage.run(stage.AdaptConfig(), scene, scene, rng=np.random.default_rng(0))
+    with pytest.raises(KbcliError, match="keyboard"):
+        stage.run(stage.AdaptConfig(), model, read_artifact(files / "other_scene.h5"),
+                  rng=np.random.default_rng(0))
+
+
+@pytest.mark.parametrize(
+    "args, kwargs, fragments",
+    [
+        ((), {"model": "scene.h5"}, ["scene artifact, expected model"]),
+        ((), {"scene": "model.h5"}, ["model artifact, expected scene"]),
+        ((), {"scene": "other_scene.h5"}, ["keyboard does not match"]),
+        (("--max-steps", "0"), {}, ["max_steps", ">= 1"]),
+        (("--strategy", "greedy"), {}, ["unknown strategy", "infogain"]),
+        (("--posterior", "particles"), {}, ["unknown posterior", "kde"]),
+        (("--resolution", "0.005"), {}, ["would need", "GB"]),
+        (("--snapshots", "a,b"), {}, ["--snapshots"]),
+        (("--model-blur", "-1"), {}, ["model_blur"]),
+        (("--feedback", "vision"), {}, ["unknown feedback"]),
+        ((), {"model": "missing.h5"}, ["no such file"]),
+    ],
+)
+def test_adapt_bad_input(runner, files, args, kwargs, fragments):
+    r = _adapt(runner, files, *args, out="bad.h5", **kwargs)
+    _one_line_error(r, *fragments)
+    assert not (files / "bad.h5").exists()
+    assert not list(files.glob(".bad.h5*"))
+
+
+def test_plot_adapt_refuses_other_kinds(runner, files):
+    r = runner.invoke(app, ["plot", "adapt", str(files / "model.h5"), "-o", str(files / "x.png")])
+    _one_line_error(r, "expected run")
+    assert not (files / "x.png").exists()
+
+
+def test_bench_adapt_small(runner):
+    r = runner.invoke(app, ["bench", "adapt", "--experiments", "2", "-T", "4", "--section",
+                            "exact", "--strategy", "random", "--strategy", "infogain",
+                            "--category", "small"])
+    assert r.exit_code == 0, r.output
+    assert "infogain" in r.output and "rmse@3" in r.output and "p vs random" in r.output
+    r = runner.invoke(app, ["bench", "adapt", "--section", "learned", "--experiments", "2"])
+    _one_line_error(r, "learned model")
+
+
+def test_experiment_in_dynamics_mode():
+    kb = Keyboard(KeyboardConfig())
+    cfg = stage.AdaptConfig(max_steps=3, prior_halfwidth=10.0, mode="dynamics", reach_noise=0.5)
+    res = stage.experiment(cfg, ExactModel(kb), kb, np.array([2.0, -1.0]),
+                           rng=np.random.default_rng(1))
+    assert res["landed"].shape == (3, 2)
+    # the arm does not land exactly where it aimed, and the robot observes where it landed
+    assert not np.allclose(res["landed"], res["actions"])
+    assert np.isfinite(res["errors"]).all()

@@ -1,0 +1,199 @@
+"""The action-selection strategies (registry, each one exercised) and the Adapter loop."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from kbcli.core.adapt import Adapter, AdapterConfig, adapt, build_table
+from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model import ExactModel
+from kbcli.core.posterior import LikelihoodTable, Posterior
+from kbcli.core.strategies import (
+    STRATEGIES,
+    entropy_rows,
+    get_strategy,
+    outcome_distribution,
+)
+from kbcli.errors import ConfigError
+from kbcli.sim import SimConfig, World, make_reacher
+
+KB = Keyboard(KeyboardConfig())
+MODEL = ExactModel(KB)
+CFG = AdapterConfig(prior_halfwidth=25.0)
+TABLE = build_table(MODEL, CFG)
+SOFT = LikelihoodTable.from_model(MODEL, 0.5, eps=1e-3, blur=1.5)
+
+
+def make_touch(truth, family="translation", noise=0.0, seed=0):
+    world = World(KB, make_reacher(SimConfig(reach_noise=noise)), np.asarray(truth, float), family)
+    rng = np.random.default_rng(seed)
+
+    def touch(a):
+        landed, heard = world.touch(a[None], rng)
+        return landed[0], heard[0]
+
+    return touch
+
+
+def test_registry_and_unknown_name():
+    assert set(STRATEGIES) == {"random", "active", "infogain"}
+    with pytest.raises(ConfigError, match="random, active, infogain"):
+        get_strategy("greedy")
+    with pytest.raises(ConfigError, match="valid"):
+        AdapterConfig(strategy="greedy")
+
+
+@pytest.mark.parametrize("name", sorted(STRATEGIES))
+@pytest.mark.parametrize("family", ["translation", "rigid"])
+@pytest.mark.parametrize("soft", [False, True])
+def test_every_strategy_proposes_an_action_in_the_area(name, family, soft):
+    cfg = AdapterConfig(strategy=name, family=family, prior_halfwidth=10.0, max_angle=2.0,
+                        angle_resolution=0.5, candidates=64, hypotheses=64, active_hypotheses=256)
+    ad = Adapter(MODEL, cfg, rng=np.random.default_rng(0), table=SOFT if soft else TABLE)
+    touch = make_touch([3.0, -2.0] if family == "translation" else [1.0, 3.0, -2.0], family)
+    x0, y0, x1, y1 = KB.area
+    for _ in range(3):
+        a = ad.propose()
+        assert a.shape == (2,) and x0 <= a[0] <= x1 and y0 <= a[1] <= y1
+        ad.observe(*touch(a))
+    # same generator state, same decision
+    a1 = Adapter(MODEL, cfg, rng=np.random.default_rng(7), table=TABLE).propose()
+    a2 = Adapter(MODEL, cfg, rng=np.random.default_rng(7), table=TABLE).propose()
+    assert np.array_equal(a1, a2)
+
+
+def test_outcome_distribution_hard_equals_one_hot_soft():
+    hard_table = LikelihoodTable.from_model(MODEL, 1.0, eps=1e-3)
+    onehot = LikelihoodTable(hard_table.origin, 1.0, hard_table.n_classes, 1e-3,
+                             probs=np.eye(hard_table.n_classes, dtype=np.float32)[
+                                 hard_table.classes])
+    rng = np.random.default_rng(1)
+    hyp = rng.uniform(-20, 20, size=(30, 2))
+    w = rng.dirichlet(np.ones(30))
+    acts = rng.uniform((150, 200), (650, 500), size=(40, 2))
+    p1, c1 = outcome_distribution(hard_table, "translation", hyp, w, acts, KB.centre)
+    p2, c2 = outcome_distribution(onehot, "translation", hyp, w, acts, KB.centre)
+    assert np.allclose(p1.sum(axis=1), 1) and np.allclose(p2.sum(axis=1), 1)
+    assert np.allclose(p1, p2, atol=1e-6) and np.allclose(c1, c2, atol=1e-5)
+
+
+def test_infogain_beats_random_candidates_on_the_prior():
+    """On the flat prior, the chosen action's outcome entropy is near the best a touch can do."""
+    cfg = AdapterConfig(prior_halfwidth=45.0)
+    ad = Adapter(MODEL, cfg, rng=np.random.default_rng(2), table=TABLE)
+    ctx = ad.context()
+    idx, w = ctx.posterior.sample_hypotheses(2048, np.random.default_rng(3))
+    hyp = ctx.posterior.grid.params(idx)
+    a = get_strategy("infogain")(ctx, np.random.default_rng(4))
+    rand = np.random.default_rng(5).uniform((150, 200), (650, 500), size=(200, 2))
+    p, _ = outcome_distribution(TABLE, "translation", hyp, w, np.vstack([a, rand]), KB.centre)
+    h = entropy_rows(p)
+    assert h[0] >= np.quantile(h[1:], 0.95)
+    assert h[0] > math.log(6)  # an early touch can tell ~9 keys apart
+
+
+@pytest.mark.parametrize("name, budget", [("infogain", 10), ("active", 14)])
+def test_model_based_strategies_pin_the_translation(name, budget):
+    cfg = AdapterConfig(strategy=name, prior_halfwidth=25.0)
+    truth = np.array([7.3, -12.6])
+    ad = Adapter(MODEL, cfg, rng=np.random.default_rng(8), table=TABLE)
+    steps = list(adapt(ad, make_touch(truth), budget))
+    err = [np.hypot(*(s.estimate - truth)) for s in steps]
+    assert err[-1] < 1.0
+    assert steps[-1].entropy < steps[0].entropy
+
+
+def test_random_strategy_learns_slowly_but_surely():
+    cfg = AdapterConfig(strategy="random", prior_halfwidth=25.0)
+    truth = np.array([-4.2, 9.9])
+    ad = Adapter(MODEL, cfg, rng=np.random.default_rng(9), table=TABLE)
+    steps = list(adapt(ad, make_touch(truth), 30))
+    assert np.hypot(*(steps[-1].estimate - truth)) < 3.0
+    assert steps[-1].entropy < steps[0].entropy
+
+
+def test_rigid_adaptation_recovers_angle_and_translation():
+    cfg = AdapterConfig(family="rigid", prior_halfwidth=15.0, max_angle=3.0)
+    truth = np.array([1.7, -6.2, 4.4])
+    ad = Adapter(MODEL, cfg, rng=np.random.default_rng(10))
+    steps = list(adapt(ad, make_touch(truth, "rigid"), 16))
+    est = steps[-1].estimate
+    assert np.hypot(*(est[1:] - truth[1:])) < 1.0 and abs(est[0] - truth[0]) < 0.5
+
+
+def test_aim_only_feedback_with_noise_uses_the_blurred_model():
+    cfg = AdapterConfig(prior_halfwidth=25.0, blur=2.0, raster_step=1.0)
+    truth = np.array([3.1, 5.2])
+    ad = Adapter(MODEL, cfg, rng=np.random.default_rng(11))
+    assert not ad.table.hard
+    steps = list(adapt(ad, make_touch(truth, noise=2.0, seed=3), 20, use_landed=False))
+    assert np.hypot(*(steps[-1].estimate - truth)) < 2.0
+
+
+def test_adapter_api_unknown_sound_stop_rule_and_kde():
+    cfg = AdapterConfig(prior_halfwidth=25.0, stop_mass=0.9)
+    ad = Adapter(MODEL, cfg, rng=np.random.default_rng(12), table=TABLE)
+    assert not ad.should_stop()
+    before = ad.entropy()
+    assert ad.observe(np.array([300.0, 300.0]), np.array([1000.0, 1000.0])) == -1  # unknown
+    assert ad.entropy() == before and ad.posterior.n_obs == 0
+    # silence left of the keyboard: rules out the hypotheses that put a key there
+    assert ad.observe(np.array([190.0, 300.0]), np.array([np.nan, np.nan])) == 0
+    assert ad.entropy() < before
+    truth = np.array([2.0, 3.0])
+    steps = list(adapt(ad, make_touch(truth), 40, stop=True))
+    assert steps[-1].stop and len(steps) < 40
+    assert ad.should_stop() and ad.mass_near_estimate() >= 0.9
+    e = ad.estimates()
+    assert e.ml.shape == (2,) and e.mean.shape == (2,) and 0 < e.ml_prob <= 1
+    kde = Adapter(MODEL, AdapterConfig(posterior="kde", prior_halfwidth=25.0, kde_samples=2000),
+                  rng=np.random.default_rng(13), table=TABLE)
+    steps = list(adapt(kde, make_touch(truth), 8))
+    assert np.hypot(*(steps[-1].estimate - truth)) < 3.0 and len(kde.bandwidths) == 8
+
+
+def test_paper_stopping_rule():
+    cfg = AdapterConfig(prior_halfwidth=5.0, stop_ml=0.5, stop_mass=1.0)
+    ad = Adapter(MODEL, cfg, rng=np.random.default_rng(14), table=TABLE)
+    term = np.full(ad.grid.shape, -30.0)
+    term[3, 4] = 0
+    ad.posterior = Posterior.update(ad.posterior, term)
+    assert ad.should_stop()
+
+
+class _SoftWrapper:
+    """A non-exact model (same geometry): gets the learned-model defaults."""
+
+    def __init__(self, m):
+        self._m = m
+        self.class_features_ = m.class_features_
+        self.match_threshold = m.match_threshold
+        self.area = m.area
+
+    def raster(self, step=1.0):
+        return self._m.raster(step)
+
+    def classify(self, perceived):
+        return self._m.classify(perceived)
+
+    def sample_actions(self, cls, n, rng):
+        return self._m.sample_actions(cls, n, rng)
+
+
+def test_learned_models_are_softened_by_default():
+    from kbcli.core.adapt import LEARNED_BLUR, total_blur
+
+    soft = _SoftWrapper(MODEL)
+    cfg = AdapterConfig(prior_halfwidth=10.0, raster_step=1.0)
+    assert total_blur(MODEL, cfg) == 0.0 and total_blur(soft, cfg) == LEARNED_BLUR
+    assert total_blur(soft, AdapterConfig(model_blur=0.0, blur=2.0)) == 2.0
+    with pytest.raises(ConfigError, match="model_blur"):
+        AdapterConfig(model_blur=-1.0)
+    ad = Adapter(soft, cfg, rng=np.random.default_rng(15))
+    assert not ad.table.hard
+    truth = np.array([-3.3, 2.2])
+    steps = list(adapt(ad, make_touch(truth), 12))
+    assert np.hypot(*(steps[-1].estimate - truth)) < 1.5
