@@ -1,0 +1,91 @@
+"""``kbcli run`` (the closed loop: play, detect, adapt, resume) and ``kbcli plot run``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from kbcli.cli.app import command, out, output_path, plot_app, progress
+from kbcli.core.detect import DetectorConfig
+from kbcli.core.melody import DEFAULT_MELODY
+from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages import run as stage
+from kbcli.stages.adapt import AdaptConfig
+
+
+def _pct(v: float | None) -> str:
+    return "n/a" if v is None else f"{100 * v:.1f}%"
+
+
+@command(name="run")
+def run_cmd(
+    model: Annotated[Path, typer.Option("--model", help="Model artifact (kind 'model'), e.g. data/default-model.h5.")],
+    scene: Annotated[Path, typer.Option("--scene", help="Scene artifact (kbcli perturb): where the keyboard moves.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Closed-loop artifact to write (.h5).")],
+    melody: Annotated[str, typer.Option(help="Notes NOTE:BEATS, looped.")] = DEFAULT_MELODY,
+    steps: Annotated[int, typer.Option(help="Play touches (adaptation touches come on top).")] = 600,
+    perturb_at: Annotated[int, typer.Option(help="Touches after which the keyboard moves.")] = 200,
+    strategy: Annotated[str, typer.Option(help="Adaptation strategy: random, active or infogain.")] = "infogain",
+    posterior: Annotated[str, typer.Option(help="likelihood or kde (the paper's product of KDEs).")] = "likelihood",
+    family: Annotated[str, typer.Option(help="Transform family the robot estimates: translation or rigid.")] = "translation",
+    mode: Annotated[str, typer.Option(help="ideal or dynamics reaching.")] = "ideal",
+    reach_noise: Annotated[float, typer.Option(help="Landing scatter of the arm, px.")] = 0.0,
+    max_adapt_steps: Annotated[int, typer.Option(help="Touches at most per adaptation.")] = 40,
+    detector: Annotated[str, typer.Option(help="Failure detector: binomial (the paper's), cusum or bocpd.")] = "binomial",
+    n_lt: Annotated[int, typer.Option(help="Detector long-term window N_LT.")] = 100,
+    n_st: Annotated[int, typer.Option(help="Detector short-term window N_ST.")] = 10,
+    threshold: Annotated[float, typer.Option(help="Detector threshold, in (0, 1).")] = 0.01,
+    seed: Annotated[int, typer.Option(help="Seed of the robot's and the world's randomness.")] = 0,
+) -> None:
+    """Play, notice the move, adapt, resume: the closed loop as the robot lives it.
+
+    Reads MODEL and SCENE; the keyboard moves to the scene's pose after --perturb-at touches (the
+    robot is not told). Writes OUTPUT (kind 'closed_loop': every touch with its phase, result and
+    detector score) and prints the success rate before the move, after it, and after adaptation.
+    """
+    cfg = stage.LoopConfig(
+        melody=melody, steps=steps, perturb_at=perturb_at, max_adapt_steps=max_adapt_steps,
+        detector=DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold),
+        adapt=AdaptConfig(strategy=strategy, posterior=posterior, family=family, mode=mode,
+                          reach_noise=reach_noise, stop=True),
+    )
+    model_art = read_artifact(model, "model")
+    scene_art = read_artifact(scene, "scene")
+    output_path(output)
+    session = stage.LoopSession(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed)
+    for _ in progress(session, None, "playing"):
+        pass
+    art = session.artifact()
+    write_artifact(art, output)
+    a = art.attrs
+    out.print(f"wrote {output}")
+    out.print(f"success before the move {_pct(a['success_before'])}, after it "
+              f"{_pct(a['success_after_perturbation'])}, after adaptation "
+              f"{_pct(a['success_after_adaptation'])}")
+    if a["detected_at"] is None:
+        out.print("the detector did not fire after the move")
+    else:
+        corr = ", ".join(f"{k} {v:+.2f}" for k, v in a["correction"].items())
+        true = ", ".join(f"{k} {v:+.2f}" for k, v in a["truth"].items())
+        out.print(f"detected {a['detection_delay']} touches after the move; adapted in "
+                  f"{a['adapt_touches']} touches: estimate {corr} (truth {true}, error "
+                  f"{a['correction_error_px']:.2f} px)")
+
+
+@command(plot_app, name="run")
+def plot_run_cmd(
+    artifact: Annotated[Path, typer.Argument(help="Closed-loop artifact (kbcli run).")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path("run.png"),
+) -> None:
+    """Draw a closed-loop session: success over time, the move, the detection, the adaptation
+    touches on the keyboard. Writes a PNG."""
+    from kbcli.viz.loop import plot_loop
+
+    art = read_artifact(artifact, "closed_loop")
+    output_path(output)
+    plot_loop(art.data["steps"], art.attrs, keyboard_stage.load(art), output)
+    out.print(f"wrote {output}")

@@ -1,0 +1,212 @@
+"""Stage ``run``: the closed loop, play -> detect -> adapt -> resume (paper Sect. III, IV-C).
+
+The world (:class:`~kbcli.sim.World`) starts with the keyboard at its reference pose and moves it to
+the scene's pose after ``perturb_at`` touches, without telling the robot. The robot's side,
+:func:`kbcli.core.loop.closed_loop`, only gets the world's ``touch``. The ``closed_loop`` artifact
+records every touch (phase, action, landed point, heard features, MATCH/NO_MATCH, detector score,
+the correction in force) and summarises the success rate of playing before the perturbation, after
+it (until the robot adapted) and after adaptation.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from kbcli.core import transforms
+from kbcli.core.adapt import build_table
+from kbcli.core.detect import DetectorConfig
+from kbcli.core.loop import ADAPT, PLAY, LoopStep, closed_loop
+from kbcli.core.melody import DEFAULT_MELODY, parse_melody
+from kbcli.errors import ConfigError
+from kbcli.sim import World, make_reacher
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages import perturb as perturb_stage
+from kbcli.stages.adapt import AdaptConfig, check_inputs
+from kbcli.stages.artifact import Artifact, ref
+from kbcli.stages.models import load_model
+
+
+@dataclass(frozen=True, kw_only=True)
+class LoopConfig:
+    """A closed-loop session.
+
+    Parameters
+    ----------
+    melody : str
+        The melody played in a loop (see :mod:`kbcli.core.melody`).
+    steps : int
+        Play touches in the session (adaptation touches come on top).
+    perturb_at : int
+        Touches after which the world moves the keyboard to the scene's pose.
+    max_adapt_steps : int
+        At most this many touches per adaptation.
+    detector : DetectorConfig
+        The failure detector (Sect. III-C).
+    adapt : AdaptConfig
+        How the robot adapts (strategy, posterior, family, stopping rule; ``mode`` and
+        ``reach_noise`` also set the simulated arm).
+    """
+
+    melody: str = DEFAULT_MELODY
+    steps: int = 600
+    perturb_at: int = 200
+    max_adapt_steps: int = 40
+    detector: DetectorConfig = field(default_factory=DetectorConfig)
+    adapt: AdaptConfig = field(default_factory=lambda: AdaptConfig(stop=True))
+
+    def __post_init__(self) -> None:
+        for name in ("steps", "max_adapt_steps"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or v < 1:
+                raise ConfigError(f"{name} must be a whole number >= 1, got {v!r}")
+        if not (isinstance(self.perturb_at, int) and 0 <= self.perturb_at < self.steps):
+            raise ConfigError(f"perturb_at must be a step in [0, {self.steps - 1}], got {self.perturb_at!r}")
+        if self.perturb_at < self.detector.warmup:
+            raise ConfigError(
+                f"perturb_at ({self.perturb_at}) must leave the detector its warm-up of "
+                f"n_lt + n_st = {self.detector.warmup} results before the keyboard moves"
+            )
+
+    def to_dict(self) -> dict:
+        return {
+            "melody": self.melody,
+            "steps": self.steps,
+            "perturb_at": self.perturb_at,
+            "max_adapt_steps": self.max_adapt_steps,
+            "detector": self.detector.to_dict(),
+            "adapt": self.adapt.to_dict(),
+        }
+
+
+def _rate(results: np.ndarray) -> float | None:
+    return float(1.0 - results.mean()) if len(results) else None
+
+
+class LoopSession:
+    """One closed-loop session: iterate it for :class:`~kbcli.core.loop.LoopStep` records, then
+    take :meth:`artifact`.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Split into the robot's generator and the world's (reach and perception noise).
+    """
+
+    def __init__(self, cfg: LoopConfig, model_art: Artifact, scene_art: Artifact, *,
+                 rng: np.random.Generator, seed: int | None = None, model=None) -> None:
+        check_inputs(model_art, scene_art)
+        self.cfg, self.model_art, self.scene_art, self.seed = cfg, model_art, scene_art, seed
+        self.keyboard = keyboard_stage.load(scene_art)
+        self.model = load_model(model_art) if model is None else model
+        self.melody = parse_melody(cfg.melody, self.keyboard)
+        self.world_family, self.truth = perturb_stage.pose(scene_art)
+        self.world = World(keyboard=self.keyboard, reacher=make_reacher(cfg.adapt.sim_config()))
+        robot_rng, world_rng = rng.spawn(2)
+        acfg = cfg.adapt.adapter_config()
+        self._robot = closed_loop(
+            self.model, self.melody, self._touch(world_rng),
+            play_steps=cfg.steps, detector=cfg.detector, adapter=acfg,
+            max_adapt_steps=cfg.max_adapt_steps, rng=robot_rng,
+            table=build_table(self.model, acfg),
+        )
+        self.steps: list[LoopStep] = []
+        self.moved_at: int | None = None
+
+    def _touch(self, world_rng: np.random.Generator):
+        def touch(actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            if self.moved_at is None and self.world.touches >= self.cfg.perturb_at:
+                self.world.pose, self.world.family = self.truth, self.world_family
+                self.moved_at = self.world.touches
+            return self.world.touch(actions, world_rng)
+
+        return touch
+
+    def __iter__(self) -> Iterator[LoopStep]:
+        for s in self._robot:
+            self.steps.append(s)
+            yield s
+
+    def summary(self) -> dict:
+        """Success rates before the move, after it (until adapted) and after adaptation."""
+        st = self.steps
+        phase = np.array([s.phase for s in st])
+        result = np.array([s.result for s in st])
+        t = np.arange(len(st))
+        moved = self.cfg.perturb_at
+        play = phase == PLAY
+        fired = [s.t for s in st if s.fired and s.t >= moved]
+        adapt_t = t[phase == ADAPT]
+        first_fire = fired[0] if fired else None
+        end_adapt = None
+        if first_fire is not None:
+            after = adapt_t[adapt_t > first_fire]
+            end_adapt = int(after.max()) if len(after) else None
+            # the first adaptation ends where the next play touch starts
+            nxt = t[(t > first_fire) & play]
+            end_adapt = int(nxt[0]) - 1 if len(nxt) else end_adapt
+        before = result[play & (t < moved)]
+        during = result[play & (t >= moved) & (t <= (first_fire if first_fire is not None else t[-1]))]
+        restored = result[play & (t > end_adapt)] if end_adapt is not None else np.array([])
+        correction = st[-1].correction if st else np.zeros(0)
+        names = transforms.FAMILIES[self.cfg.adapt.family]
+        err_px = None
+        if end_adapt is not None:
+            c = np.asarray(correction, float)
+            err_px = float(np.hypot(*(c[-2:] - self.truth[-2:])))
+        false_alarms = [s.t for s in st if s.fired and s.t < moved]
+        return {
+            "success_before": _rate(before),
+            "success_after_perturbation": _rate(during),
+            "success_after_adaptation": _rate(restored),
+            "perturbed_at": moved,
+            "detected_at": first_fire,
+            "detection_delay": None if first_fire is None else int(first_fire - moved + 1),
+            "false_alarms": len(false_alarms),
+            "adaptations": int(sum(1 for s in st if s.fired)),
+            "adapt_touches": int((phase == ADAPT).sum()),
+            "correction": {n: float(v) for n, v in zip(names, correction, strict=True)},
+            "truth": {n: float(v) for n, v in
+                      zip(transforms.FAMILIES[self.world_family], self.truth, strict=True)},
+            "correction_error_px": err_px,
+        }
+
+    def artifact(self) -> Artifact:
+        st = self.steps
+        d = self.keyboard.features.shape[1]
+        arr = {
+            "phase": np.array([s.phase for s in st], dtype=np.int8),
+            "action": np.array([s.action for s in st], float).reshape(-1, 2),
+            "landed": np.array([s.landed for s in st], float).reshape(-1, 2),
+            "perceived": np.array([s.perceived for s in st], float).reshape(-1, d),
+            "result": np.array([s.result for s in st], dtype=np.int8),
+            "score": np.array([s.score for s in st], float),
+            "fired": np.array([s.fired for s in st], dtype=np.uint8),
+            "correction": np.array([s.correction for s in st], float),
+        }
+        summary = self.summary()
+        return Artifact(
+            kind="closed_loop",
+            config={"loop": self.cfg.to_dict(), "keyboard": self.model_art.config["keyboard"]},
+            seed=self.seed,
+            data={"steps": arr, "truth": {"params": self.truth}},
+            attrs=summary,
+            inputs={"model": ref(self.model_art), "scene": ref(self.scene_art)},
+        )
+
+
+def run(cfg: LoopConfig, model_art: Artifact, scene_art: Artifact, *, rng: np.random.Generator,
+        seed: int | None = None) -> Artifact:
+    """Run a whole closed-loop session and return its artifact."""
+    session = LoopSession(cfg, model_art, scene_art, rng=rng, seed=seed)
+    for _ in session:
+        pass
+    return session.artifact()
+
+
+def success_rate_ok(a: float | None, b: float | None, tol: float = 0.05) -> bool:
+    """Whether rate ``b`` restores rate ``a`` within ``tol`` (both known)."""
+    return a is not None and b is not None and not math.isnan(b) and b >= a - tol

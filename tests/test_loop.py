@@ -1,0 +1,113 @@
+"""The closed loop (``kbcli run``): play, detect the move, adapt, resume with corrected actions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kbcli.cli import app
+from kbcli.core import transforms
+from kbcli.core.adapt import AdapterConfig
+from kbcli.core.detect import DetectorConfig
+from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.loop import ADAPT, PLAY, closed_loop
+from kbcli.core.melody import parse_melody
+from kbcli.core.model import ExactModel
+from kbcli.errors import ConfigError
+from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.sim import IdealReacher, SimConfig, World
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages import models, perturb
+from kbcli.stages.run import LoopConfig, LoopSession
+
+KB_ART = keyboard_stage.run(KeyboardConfig())
+MODEL_ART = models.exact_artifact(KB_ART)
+
+
+def _scene(params):
+    return perturb.run(perturb.PerturbConfig(params=params), KB_ART, rng=np.random.default_rng(0))
+
+
+def test_loop_detects_adapts_and_restores_success():
+    s = LoopSession(LoopConfig(steps=450), MODEL_ART, _scene((12.0, -7.0)), rng=np.random.default_rng(3))
+    steps = list(s)
+    a = s.summary()
+    assert a["success_before"] >= 0.97
+    assert a["detected_at"] is not None and 1 <= a["detection_delay"] <= 30
+    assert a["false_alarms"] == 0
+    assert a["success_after_perturbation"] < 0.9
+    assert a["success_after_adaptation"] >= a["success_before"] - 0.05
+    assert a["correction_error_px"] < 1.5
+    phases = np.array([st.phase for st in steps])
+    assert (phases == PLAY).sum() == 450 and 1 <= (phases == ADAPT).sum() <= 40
+
+
+def test_loop_is_deterministic():
+    arts = []
+    for _ in range(2):
+        s = LoopSession(LoopConfig(steps=300), MODEL_ART, _scene((-15.0, 9.0)), rng=np.random.default_rng(11))
+        list(s)
+        arts.append(s.artifact())
+    for key in ("action", "landed", "result", "correction"):
+        np.testing.assert_array_equal(arts[0].data["steps"][key], arts[1].data["steps"][key])
+
+
+def test_robot_side_learns_only_through_touch():
+    """closed_loop is handed a touch callback only: it recovers whatever pose that world has."""
+    kb = Keyboard(KeyboardConfig())
+    model = ExactModel(kb)
+    world = World(keyboard=kb, reacher=IdealReacher(SimConfig()))
+    rng_world = np.random.default_rng(1)
+    truth = np.array([-22.0, 5.5])
+
+    def touch(actions):
+        if world.touches >= 150:
+            world.pose = truth
+        return world.touch(actions, rng_world)
+
+    steps = list(closed_loop(model, parse_melody("A:1 D:1 E:0.5 D:2 A:1", kb), touch, play_steps=300,
+                             detector=DetectorConfig(), adapter=AdapterConfig(), max_adapt_steps=40,
+                             rng=np.random.default_rng(2)))
+    final = steps[-1].correction
+    assert np.hypot(*(final - truth)) < 1.5
+    # corrected actions land on the intended keys: T(a) for the moved keyboard
+    late = [s for s in steps[-50:] if s.phase == PLAY]
+    assert np.mean([s.result for s in late]) <= 0.05
+    assert transforms.check_family("translation") == ("dx", "dy")
+
+
+def test_perturb_before_detector_warmup_is_refused():
+    with pytest.raises(ConfigError, match="warm-up"):
+        LoopConfig(perturb_at=50)
+    with pytest.raises(ConfigError, match="steps"):
+        LoopConfig(steps=0)
+
+
+def test_cli_run_and_plot(runner, tmp_path):
+    write_artifact(KB_ART, tmp_path / "kb.h5")
+    kb = read_artifact(tmp_path / "kb.h5")
+    write_artifact(models.exact_artifact(kb), tmp_path / "m.h5")
+    write_artifact(_scene((8.0, 6.0)), tmp_path / "s.h5")
+    r = runner.invoke(app, ["run", "--model", str(tmp_path / "m.h5"), "--scene", str(tmp_path / "s.h5"),
+                            "--steps", "300", "-o", str(tmp_path / "loop.h5")])
+    assert r.exit_code == 0, r.output
+    assert "after adaptation" in r.output
+    art = read_artifact(tmp_path / "loop.h5", "closed_loop")
+    assert art.inputs["model"]["sha256"] and art.inputs["scene"]["sha256"]
+    r = runner.invoke(app, ["plot", "run", str(tmp_path / "loop.h5"), "-o", str(tmp_path / "loop.png")])
+    assert r.exit_code == 0 and (tmp_path / "loop.png").exists()
+
+
+def test_cli_run_bad_inputs(runner, tmp_path):
+    write_artifact(KB_ART, tmp_path / "kb.h5")
+    write_artifact(_scene((8.0, 6.0)), tmp_path / "s.h5")
+    out = tmp_path / "loop.h5"
+    r = runner.invoke(app, ["run", "--model", str(tmp_path / "kb.h5"), "--scene", str(tmp_path / "s.h5"), "-o", str(out)])
+    assert r.exit_code == 1 and "expected model" in r.output and not out.exists()
+    write_artifact(models.exact_artifact(read_artifact(tmp_path / "kb.h5")), tmp_path / "m.h5")
+    r = runner.invoke(app, ["run", "--model", str(tmp_path / "m.h5"), "--scene", str(tmp_path / "s.h5"),
+                            "--strategy", "psychic", "-o", str(out)])
+    assert r.exit_code == 1 and "psychic" in r.output and not out.exists()
+    r = runner.invoke(app, ["run", "--model", str(tmp_path / "m.h5"), "--scene", str(tmp_path / "s.h5"),
+                            "--perturb-at", "20", "-o", str(out)])
+    assert r.exit_code == 1 and "warm-up" in r.output and not out.exists()
