@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# Reproduce the paper from nothing and time each stage: keyboard -> learn -> evaluate -> report.
+# This is the recipe of `make reproduce`; it prints the wall time of every stage at the end (and
+# writes it to $OUT/timings.txt).
+#
+#   benchmarks/reproduce.sh                  # both modes (ideal, dynamics), full paper scale
+#   MODE=ideal benchmarks/reproduce.sh       # ideal mode only (Sect. IV-A/B)
+#   JOBS=1 benchmarks/reproduce.sh           # experiments in one process (default: 2 local processes)
+#   SCHEDULER=tcp://HOST:8786 benchmarks/reproduce.sh   # ... or on a Dask cluster
+#   EXPERIMENTS=5 benchmarks/reproduce.sh    # a quick look: 5 runs per parametrization
+#
+# An interrupted run continues where it stopped when started again (evaluate --resume).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+KBCLI=${KBCLI:-.venv/bin/kbcli}
+OUT=${OUT:-build}
+REPORT=${REPORT:-report}
+JOBS=${JOBS:-2}
+MODE=${MODE:-}
+EXPERIMENTS=${EXPERIMENTS:-}
+SCHEDULER=${SCHEDULER:-}
+SEED=${SEED:-0}
+mkdir -p "$OUT"
+
+names=()
+times=()
+stage() {
+    local name=$1
+    shift
+    echo "== $name: $*" >&2
+    local t0 t1
+    t0=$(date +%s%N)
+    "$@"
+    t1=$(date +%s%N)
+    names+=("$name")
+    times+=("$(( (t1 - t0) / 1000000 ))")
+}
+
+eval_args=(--config pipelines/paper.toml --model "$OUT/model.h5" -o "$OUT/eval.h5" --resume)
+[[ -n $MODE ]] && eval_args+=(--mode "$MODE")
+[[ -n $EXPERIMENTS ]] && eval_args+=(--experiments "$EXPERIMENTS")
+if [[ -n $SCHEDULER ]]; then eval_args+=(--scheduler "$SCHEDULER"); else eval_args+=(--jobs "$JOBS"); fi
+
+stage keyboard "$KBCLI" keyboard --config pipelines/keyboard.toml -o "$OUT/keyboard.h5"
+stage learn "$KBCLI" learn --keyboard "$OUT/keyboard.h5" -o "$OUT/model.h5" --seed "$SEED"
+stage evaluate "$KBCLI" evaluate "${eval_args[@]}"
+stage report "$KBCLI" report "$OUT/eval.h5" -o "$REPORT"
+
+{
+    printf '%-10s %10s\n' stage "wall s"
+    total=0
+    for i in "${!names[@]}"; do
+        printf '%-10s %10.1f\n' "${names[$i]}" "$(echo "${times[$i]}" | awk '{print $1 / 1000}')"
+        total=$(( total + times[i] ))
+    done
+    printf '%-10s %10.1f\n' total "$(echo "$total" | awk '{print $1 / 1000}')"
+    if [[ -n $SCHEDULER ]]; then where="scheduler $SCHEDULER"; else where="jobs $JOBS"; fi
+    echo "(mode: ${MODE:-ideal+dynamics}; $where; experiments per parametrization: ${EXPERIMENTS:-config})"
+} | tee "$OUT/timings.txt"

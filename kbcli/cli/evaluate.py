@@ -1,0 +1,206 @@
+"""``kbcli evaluate`` (the paper's protocol, Sect. IV-B/C) and ``kbcli bench evaluate``."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from kbcli.cli.app import bench_app, command, err, out, output_path, progress
+from kbcli.errors import ConfigError, KbcliError
+from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.io.config import load_toml
+from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
+from kbcli.stages import evaluate as stage
+
+DEFAULT_CONFIG = Path("pipelines/paper.toml")
+
+
+def _load_config(config: Path, experiments: int | None, mode: str | None) -> stage.EvaluateConfig:
+    cfg = stage.EvaluateConfig.from_dict(dict(load_toml(config, "evaluate")))
+    return cfg.with_overrides(experiments=experiments, mode=mode)
+
+
+def _job(cfg: stage.EvaluateConfig, model_art, experiment: str) -> Job:
+    tasks = stage.plan(cfg)
+    ctx = stage.context(cfg, model_art, experiment)
+    return Job(setup="kbcli.stages.evaluate:setup", run="kbcli.stages.evaluate:run_experiment",
+               context=ctx, context_key=stage.context_key(ctx), tasks=tuple(tasks))
+
+
+def _check_backend(jobs: int, scheduler: str | None) -> None:
+    if jobs < 1:
+        raise ConfigError(f"--jobs must be >= 1, got {jobs}")
+    if scheduler is not None:
+        if jobs != 1:
+            raise ConfigError("--jobs and --scheduler exclude each other (the cluster sets the workers)")
+        check_scheduler_address(scheduler)
+
+
+def _summary(art, elapsed: float, n_run: int, step_ms: np.ndarray) -> None:
+    base = art.attrs["baseline"]
+    thr = art.array("thresholds")
+    j = int(np.argmin(np.abs(thr - 4.0)))  # the threshold nearest 4 px
+    T = art.attrs["max_steps"]
+    table = Table(title="evaluation summary")
+    for col in ("mode", "category", "strategy", f"RMSE at t={T} (px)",
+                f"median obs. to < {thr[j]:g} px", f"p vs {base} (< {thr[j]:g} px)"):
+        table.add_column(col, justify="left" if col in ("mode", "category", "strategy") else "right")
+    for m in art.attrs["modes"]:
+        for c in art.attrs["categories"]:
+            for s in art.attrs["strategies"]:
+                cur = art.data["curves"][m][c][s]
+                med = cur["median_samples"][j]
+                p = "" if s == base else f"{art.data['pvalues'][m][c][s]['pvalue'][j]:.1e}"
+                table.add_row(m, c, s, f"{cur['rmse'][-1]:.2f}",
+                              f">{T}" if np.isnan(med) else f"{med:g}", p)
+    out.print(table)
+    if n_run:
+        med = float(np.median(step_ms)) if len(step_ms) else float("nan")
+        out.print(f"ran {n_run} experiments in {elapsed:.1f} s ({n_run / max(elapsed, 1e-9):.2f}/s); "
+                  f"median {med:.2f} ms per step")
+
+
+@command(name="evaluate")
+def evaluate_cmd(
+    model: Annotated[Path, typer.Option("--model", help="Model artifact (.h5, kind 'model') to adapt with.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Evaluation artifact to write (.h5).")],
+    config: Annotated[Path, typer.Option("--config", help="TOML with an [evaluate] table.")] = DEFAULT_CONFIG,
+    experiments: Annotated[int | None, typer.Option(
+        "--experiments", help="Repetitions per parametrization, strategy and mode (overrides the config).")] = None,
+    mode: Annotated[str | None, typer.Option(
+        "--mode", help="Only this mode: ideal or dynamics (default: the config's modes).")] = None,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Local worker processes (joblib/loky).")] = 1,
+    scheduler: Annotated[str | None, typer.Option(
+        "--scheduler", help="Run on a Dask cluster: address of its scheduler, tcp://HOST:PORT.")] = None,
+    resume: Annotated[bool, typer.Option(
+        "--resume", help="Continue an interrupted run from its checkpoint OUTPUT.ckpt.")] = False,
+    checkpoint_every: Annotated[int, typer.Option(
+        "--checkpoint-every", help="Save finished experiments to OUTPUT.ckpt after this many.")] = 10,
+) -> None:
+    """Run the paper's evaluation protocol: every displacement x strategy x mode, N times each.
+
+    Reads the TOML config and the model artifact. Writes OUTPUT (kind 'evaluation': errors and
+    entropy per step, RMSE curves, observations to thresholds, rank-sum p-values, the experiment
+    table, example posteriors). While running, finished experiments are kept in OUTPUT.ckpt/
+    (removed once OUTPUT is written); --resume continues from there. Prints a progress bar, then a
+    table of final RMSE, median observations and p-values, and the speed.
+    """
+    cfg = _load_config(config, experiments, mode)
+    _check_backend(jobs, scheduler)
+    if checkpoint_every < 1:
+        raise ConfigError(f"--checkpoint-every must be >= 1, got {checkpoint_every}")
+    model_art = read_artifact(model, "model")
+    output_path(output)
+    from kbcli.stages import keyboard as keyboard_stage
+
+    keyboard = keyboard_stage.load(model_art)
+    job = _job(cfg, model_art, stage.EXPERIMENT)
+    tasks = list(job.tasks)
+    fingerprint = {**stage.fingerprint(cfg, model_art, stage.EXPERIMENT),
+                   "source_code": source_digest()}
+    ckpt = Checkpoint(Checkpoint.beside(output), fingerprint, every=checkpoint_every)
+    done = ckpt.load(resume)
+    if done:
+        err.print(f"resuming: {len(done)} of {len(tasks)} experiments already done", markup=False)
+    todo = [t.row for t in tasks if t.row not in done]
+    started = time.perf_counter()
+    fresh: dict[int, dict] = {}
+    try:
+        for i, res in progress(execute(job, todo, jobs=jobs, scheduler=scheduler), len(todo),
+                               "experiments"):
+            ckpt.add(i, res)
+            fresh[i] = res
+    except KeyboardInterrupt:
+        ckpt.flush()
+        err.print(f"kbcli: interrupted; {len(done) + len(fresh)} of {len(tasks)} experiments kept "
+                  f"in {ckpt.folder}: rerun with --resume to continue", markup=False)
+        raise typer.Exit(130) from None
+    finally:
+        ckpt.flush()
+    elapsed = time.perf_counter() - started
+    results = {**done, **fresh}
+    art = stage.assemble(cfg, tasks, results, model_art, keyboard)
+    write_artifact(art, output)
+    ckpt.remove()
+    out.print(f"wrote {output}: {len(tasks)} experiments ({', '.join(cfg.modes)}; "
+              f"{', '.join(cfg.strategies)})")
+    _summary(art, elapsed, len(fresh), stage.timing(fresh))
+
+
+@command(bench_app, name="evaluate")
+def bench_evaluate_cmd(
+    config: Annotated[Path, typer.Option("--config", help="TOML with an [evaluate] table.")] = DEFAULT_CONFIG,
+    model: Annotated[Path | None, typer.Option(
+        "--model", help="Model artifact; default: the exact model of the config's keyboard.")] = None,
+    experiments: Annotated[int, typer.Option(
+        "--experiments", help="Repetitions per parametrization and strategy.")] = 2,
+    mode: Annotated[str, typer.Option("--mode", help="ideal or dynamics.")] = "ideal",
+    workers: Annotated[int, typer.Option("--workers", help="Workers of the parallel backends.")] = 2,
+) -> None:
+    """Benchmark the execution backends on a slice of the protocol.
+
+    Reads the config (and the model, if given; otherwise the exact model of the default 4 x 8
+    keyboard). Writes nothing. Prints experiments per second serially, with WORKERS local processes
+    and through a WORKERS-worker Dask LocalCluster on loopback (start-up included), and whether
+    every backend gave bit-identical results.
+    """
+    cfg = _load_config(config, experiments, mode)
+    if workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {workers}")
+    if model is not None:
+        model_art = read_artifact(model, "model")
+    else:
+        from kbcli.core.keyboard import KeyboardConfig
+        from kbcli.stages import keyboard as keyboard_stage
+        from kbcli.stages.models import exact_artifact
+
+        model_art = exact_artifact(keyboard_stage.run(KeyboardConfig()))
+    job = _job(cfg, model_art, stage.EXPERIMENT)
+    n = len(job.tasks)
+    rows: list[tuple[str, float, float, float, dict]] = []
+
+    def timed(label: str, extra_startup: float = 0.0, **kw) -> None:
+        t0 = time.perf_counter()
+        res: dict = {}
+        first = last = t0
+        for i, r in progress(execute(job, range(n), **kw), n, label):
+            last = time.perf_counter()
+            if not res:
+                first = last
+            res[i] = r
+        steady = (n - 1) / (last - first) if n > 1 and last > first else float("nan")
+        rows.append((label, last - t0 + extra_startup, first - t0 + extra_startup, steady, res))
+
+    timed("serial", jobs=1)
+    timed(f"loky, {workers} processes", jobs=workers)
+    from dask.distributed import LocalCluster
+
+    t0 = time.perf_counter()
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as cluster:
+        timed(f"dask, {workers} workers", time.perf_counter() - t0,
+              scheduler=cluster.scheduler_address)
+
+    ref = rows[0][-1]
+
+    def same(res: dict) -> bool:
+        return all(np.array_equal(res[i][k], ref[i][k]) for i in ref for k in stage.STEP_KEYS)
+
+    table = Table(title=f"kbcli evaluate backends: {n} experiments ({mode}, {cfg.max_steps} steps, "
+                        f"{model_art.config.get('strategy')} model)")
+    for col in ("backend", "wall s", "start-up s", "exp/s", "exp/s after start-up",
+                "same as serial"):
+        table.add_column(col, justify="left" if col == "backend" else "right")
+    for label, secs, startup, steady, res in rows:
+        table.add_row(label, f"{secs:.1f}", f"{startup:.1f}", f"{n / secs:.2f}", f"{steady:.2f}",
+                      "yes" if same(res) else "NO")
+    out.print(table)
+    out.print("start-up: until the first result (process spawn, imports, model raster; for Dask "
+              "also starting the LocalCluster on loopback)")
+    if not all(same(r[-1]) for r in rows):
+        raise KbcliError("the backends gave different results")

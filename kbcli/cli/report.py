@@ -1,0 +1,66 @@
+"""``kbcli report``: figures and README of an evaluation (paper Figs. 5-7, Sect. IV claims)."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from kbcli.cli.app import command, out
+from kbcli.errors import KbcliError
+from kbcli.io.artifact import read_artifact
+from kbcli.stages import report as stage
+
+
+def _write_text(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+@command(name="report")
+def report_cmd(
+    evaluation: Annotated[Path, typer.Argument(help="Evaluation artifact (.h5) from kbcli evaluate.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Report folder to write (created if needed).")] = Path("report"),
+) -> None:
+    """Write the reproduction report of an evaluation.
+
+    Reads EVALUATION (kind 'evaluation'). Writes into the OUTPUT folder: fig5_posterior.png
+    (posterior evolution per strategy), fig6_entropy.png (entropy reduction), fig7_error_MODE.png
+    (error against observations per category) and README.md (tables of observations to each
+    threshold, p-values, RMSE, playing success, and the paper's claims against our measurements).
+    Prints each claim's verdict.
+    """
+    from kbcli.viz import report as viz
+
+    art = read_artifact(evaluation, "evaluation")
+    parent = output.parent if str(output.parent) else Path(".")
+    if output.exists() and not output.is_dir():
+        raise KbcliError(f"{output}: exists and is not a folder")
+    if not parent.is_dir():
+        raise KbcliError(f"{output}: parent folder {parent} does not exist")
+    rep = stage.build(art)
+    output.mkdir(exist_ok=True)
+    for fig in rep.figures:
+        path = output / fig.name
+        if fig.name.startswith("fig5"):
+            viz.plot_posterior(art, path)
+        elif fig.name.startswith("fig6"):
+            viz.plot_entropy(art, path)
+        else:
+            viz.plot_error(art, path, fig.name.removeprefix("fig7_error_").removesuffix(".png"))
+    _write_text(output / "README.md", rep.readme)
+    out.print(f"wrote {output}/: README.md and {len(rep.figures)} figures")
+    for c in rep.claims:
+        out.print(f"  [{c.verdict}] {c.paper} -- {c.measured}", markup=False, soft_wrap=True)

@@ -1,0 +1,448 @@
+"""Run many independent experiments serially, on local processes or on a Dask cluster, with a
+checkpoint that survives interruption.
+
+The paper repeats each adaptation experiment 50 times per displacement (Sect. IV-B); each one is
+independent and seeded by its own child of ``numpy.random.SeedSequence(seed).spawn(n)``, so a result
+depends only on the experiment's index, never on which process ran it or in what order.
+
+A :class:`Job` names two module-level functions by ``"module:function"`` (so loky and Dask pickle a
+reference, not code):
+
+- ``setup(context) -> state``: built once per process and cached (e.g. the model and keyboard);
+- ``run(state, task) -> dict[str, ndarray]``: one experiment.
+
+:func:`execute` yields ``(index, result)`` as experiments finish, with one of three backends:
+serial (in this process), ``jobs=N`` local processes (joblib/loky) or ``scheduler="tcp://HOST:PORT"``
+(an existing ``dask.distributed`` cluster). Workers only compute and return results; the caller alone
+writes files. BLAS/OpenMP pools are limited to one thread while experiments run, in every backend, so
+floating-point results are bit-identical across backends.
+
+:class:`Checkpoint` keeps finished experiments in a folder beside the output (``OUTPUT.ckpt/``): a
+``meta.json`` with the fingerprint of what is being run, and ``part-NNNNNN.h5`` files, each written
+atomically (temporary file, then rename) every few experiments, so a killed run loses at most the
+experiments since the last part. ``resume=True`` loads them and refuses a checkpoint whose fingerprint
+differs, naming the fields that differ.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import json
+import os
+import shutil
+import tempfile
+import time
+import uuid
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from kbcli.errors import ConfigError, KbcliError
+
+CHECKPOINT_FORMAT = 1
+CONNECT_TIMEOUT_S = 5.0
+WORKER_WAIT_S = 30.0
+
+
+@dataclass(frozen=True)
+class Job:
+    """What to run.
+
+    Attributes
+    ----------
+    setup, run : str
+        ``"module:function"`` of the per-process setup and of one experiment.
+    context : object
+        Picklable input of ``setup`` (shared by every experiment).
+    context_key : str
+        Identifies ``context`` (e.g. a sha256) for the per-process cache.
+    tasks : tuple
+        Picklable input of ``run``; ``tasks[i]`` is experiment ``i``.
+    """
+
+    setup: str
+    run: str
+    context: Any
+    context_key: str
+    tasks: tuple
+
+
+# -- the worker side ---------------------------------------------------------------------------
+_STATE: dict[str, Any] = {}
+
+
+def resolve(name: str) -> Any:
+    """The object named ``"package.module:attribute"``."""
+    module, _, attr = name.partition(":")
+    if not module or not attr:
+        raise ConfigError(f"function name {name!r} must look like 'package.module:function'")
+    return getattr(importlib.import_module(module), attr)
+
+
+def _tune_malloc() -> None:
+    """Undo a small ``MALLOC_TRIM_THRESHOLD_`` in this process (Dask's nanny sets 64 kB in its
+    workers). Setting it makes glibc stop adapting its mmap threshold, so every numpy temporary
+    above 128 kB is mmap'ed and unmapped again: the adapt experiment ran 1.9x slower in Dask
+    workers than in a plain process. Restores large thresholds with ``mallopt`` (glibc only;
+    elsewhere, or without the variable, nothing happens)."""
+    if not os.environ.get("MALLOC_TRIM_THRESHOLD_"):
+        return
+    import ctypes
+    import ctypes.util
+
+    with contextlib.suppress(OSError, AttributeError, TypeError):
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        m_trim_threshold, m_mmap_threshold = -1, -3
+        libc.mallopt(m_mmap_threshold, 32 << 20)
+        libc.mallopt(m_trim_threshold, 64 << 20)
+
+
+def _state_for(setup: str, context: Any, key: str) -> Any:
+    token = f"{setup}|{key}"
+    if token not in _STATE:
+        _tune_malloc()
+        _STATE.clear()  # one context at a time per process
+        _STATE[token] = resolve(setup)(context)
+    return _STATE[token]
+
+
+def run_tasks(
+    setup: str, run: str, context: Any, key: str, items: list[tuple[int, Any]]
+) -> list[tuple[int, dict]]:
+    """Run ``items`` (index, task) in this process and return ``[(index, result), ...]``.
+
+    This is what every backend calls (it is module-level, so it pickles by reference).
+    """
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1):
+        state = _state_for(setup, context, key)
+        fn = resolve(run)
+        return [(i, fn(state, task)) for i, task in items]
+
+
+# -- backends ------------------------------------------------------------------------------------
+def check_scheduler_address(address: str) -> str:
+    """Validate ``tcp://HOST:PORT`` (or ``tls://``); raises ConfigError otherwise."""
+    scheme, sep, rest = address.partition("://")
+    host, _, port = rest.rpartition(":")
+    if not sep or scheme not in ("tcp", "tls") or not host or not port.isdigit():
+        raise ConfigError(f"--scheduler must look like tcp://HOST:PORT, got {address!r}")
+    return address
+
+
+def connect(address: str, timeout: float | None = None):
+    """A ``dask.distributed.Client`` on ``address``, or KbcliError within ``timeout`` seconds
+    (default :data:`CONNECT_TIMEOUT_S`)."""
+    check_scheduler_address(address)
+    timeout = CONNECT_TIMEOUT_S if timeout is None else timeout
+    from dask.distributed import Client
+
+    try:
+        return Client(address, timeout=timeout, set_as_default=False)
+    except (OSError, TimeoutError) as exc:
+        raise KbcliError(
+            f"cannot reach the Dask scheduler at {address} within {timeout:g} s "
+            f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})"
+        ) from None
+
+
+def chunks(todo: list[int], workers: int, most: int = 16) -> list[list[int]]:
+    """Split ``todo`` into runs of consecutive experiments, about 8 per worker and at most ``most``
+    long: fewer round trips for short experiments, still enough pieces to balance the load."""
+    size = max(1, min(most, len(todo) // (8 * max(1, workers))))
+    return [todo[i:i + size] for i in range(0, len(todo), size)]
+
+
+def _serial(job: Job, todo: list[int]) -> Iterator[tuple[int, dict]]:
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1):  # entered once: it costs about a millisecond
+        state = _state_for(job.setup, job.context, job.context_key)
+        fn = resolve(job.run)
+        for i in todo:
+            yield i, fn(state, job.tasks[i])
+
+
+def _local(job: Job, todo: list[int], n_jobs: int) -> Iterator[tuple[int, dict]]:
+    from joblib import Parallel, delayed
+
+    par = Parallel(n_jobs=n_jobs, backend="loky", return_as="generator_unordered",
+                   batch_size=1, pre_dispatch="2 * n_jobs")
+    calls = (
+        delayed(run_tasks)(job.setup, job.run, job.context, job.context_key,
+                           [(i, job.tasks[i]) for i in piece])
+        for piece in chunks(todo, n_jobs)
+    )
+    for batch in par(calls):
+        yield from batch
+
+
+def _dask(job: Job, todo: list[int], address: str) -> Iterator[tuple[int, dict]]:
+    from dask.distributed import as_completed
+
+    client = connect(address)
+    futures: list = []
+    try:
+        try:
+            client.wait_for_workers(1, timeout=WORKER_WAIT_S)
+        except (OSError, TimeoutError):
+            raise KbcliError(
+                f"the Dask scheduler at {address} has no workers (waited {WORKER_WAIT_S:g} s); "
+                "start some with: dask worker " + address
+            ) from None
+        ctx = client.scatter(job.context, broadcast=True, hash=False)
+        info = client.scheduler_info().get("workers", {})
+        workers = max(1, sum(int(w.get("nthreads", 1)) for w in info.values()))
+        pieces = chunks(todo, workers)
+        n = len(pieces)
+        futures = client.map(
+            run_tasks,
+            [job.setup] * n,
+            [job.run] * n,
+            [ctx] * n,
+            [job.context_key] * n,
+            [[(i, job.tasks[i]) for i in piece] for piece in pieces],
+            key=[f"kbcli-{job.context_key[:12]}-{piece[0]}-{uuid.uuid4().hex[:8]}"
+                 for piece in pieces],
+            pure=False,
+        )
+        for fut in as_completed(futures, loop=client.loop):
+            try:
+                batch = fut.result()
+            except ModuleNotFoundError as exc:
+                raise KbcliError(
+                    f"a Dask worker could not import {exc.name!r}: install kbcli in the workers' "
+                    "environment"
+                ) from None
+            fut.release()
+            yield from batch
+    finally:
+        with contextlib.suppress(Exception):
+            client.cancel(futures)
+        with contextlib.suppress(Exception):
+            client.close(timeout=5)
+
+
+def execute(
+    job: Job, todo: Iterable[int], *, jobs: int = 1, scheduler: str | None = None
+) -> Iterator[tuple[int, dict]]:
+    """Run experiments ``todo`` (indices into ``job.tasks``), yielding ``(index, result)`` as they
+    finish (in any order).
+
+    Parameters
+    ----------
+    jobs : int
+        1: in this process; N > 1: N local processes (joblib/loky).
+    scheduler : str, optional
+        ``tcp://HOST:PORT`` of a running Dask scheduler (overrides ``jobs``).
+
+    Raises
+    ------
+    ConfigError
+        ``jobs < 1`` or a malformed scheduler address.
+    KbcliError
+        An unreachable scheduler (within :data:`CONNECT_TIMEOUT_S`), or one without workers.
+    """
+    todo = list(todo)
+    if not isinstance(jobs, int) or jobs < 1:
+        raise ConfigError(f"--jobs must be a whole number >= 1, got {jobs!r}")
+    if scheduler is not None:
+        check_scheduler_address(scheduler)
+        if not todo:
+            return iter(())
+        return _dask(job, todo, scheduler)
+    if not todo:
+        return iter(())
+    if jobs == 1:
+        return _serial(job, todo)
+    return _local(job, todo, jobs)
+
+
+# -- checkpoint -----------------------------------------------------------------------------------
+def source_digest(package: str = "kbcli") -> str:
+    """sha256 of the package's Python sources, so a checkpoint is never resumed by other code
+    (results made by two versions would otherwise be mixed in one artifact)."""
+    import hashlib
+
+    root = Path(importlib.import_module(package).__file__).parent
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(str(path.relative_to(root)).encode())
+        h.update(b"\0")
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def _write_tree(group: h5py.Group, data: dict[str, Any]) -> None:
+    for name, value in data.items():
+        if isinstance(value, dict):
+            _write_tree(group.create_group(name), value)
+            continue
+        arr = np.asarray(value)
+        if arr.dtype.kind == "U":
+            group.create_dataset(name, data=arr.astype(object), dtype=h5py.string_dtype("utf-8"))
+        else:
+            group.create_dataset(name, data=arr)
+
+
+def _read_tree(group: h5py.Group) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for name, node in group.items():
+        if isinstance(node, h5py.Group):
+            out[name] = _read_tree(node)
+        elif h5py.check_string_dtype(node.dtype) is not None:
+            out[name] = np.asarray(node.asstr()[()], dtype=str)
+        else:
+            out[name] = node[()]
+    return out
+
+
+def _diff(old: dict, new: dict, prefix: str = "") -> list[str]:
+    keys = sorted(set(old) | set(new))
+    out: list[str] = []
+    for k in keys:
+        a, b = old.get(k), new.get(k)
+        if isinstance(a, dict) and isinstance(b, dict):
+            out += _diff(a, b, f"{prefix}{k}.")
+        elif a != b:
+            out.append(f"{prefix}{k}")
+    return out
+
+
+def _canonical(obj: Any) -> Any:
+    """JSON round trip, so tuples and lists compare equal."""
+    return json.loads(json.dumps(obj, sort_keys=True))
+
+
+class Checkpoint:
+    """Finished experiments of a run, kept in ``folder`` (conventionally ``OUTPUT.ckpt``).
+
+    Parameters
+    ----------
+    folder : Path
+    fingerprint : dict
+        JSON-able description of what is being run (config, inputs, experiment count); a checkpoint
+        is only resumed by a run with the same fingerprint.
+    every : int
+        Write a part after this many new experiments ...
+    seconds : float
+        ... or when the oldest unwritten one is this old, whichever comes first.
+    """
+
+    def __init__(self, folder: str | os.PathLike, fingerprint: dict, *, every: int = 10,
+                 seconds: float = 30.0) -> None:
+        self.folder = Path(folder)
+        self.fingerprint = _canonical(fingerprint)
+        self.every = max(1, int(every))
+        self.seconds = float(seconds)
+        self._pending: dict[int, dict] = {}
+        self._since = time.monotonic()
+        self._parts = 0
+
+    @staticmethod
+    def beside(output: str | os.PathLike) -> Path:
+        """The checkpoint folder of an output file: ``OUTPUT.ckpt``."""
+        output = Path(output)
+        return output.with_name(output.name + ".ckpt")
+
+    def exists(self) -> bool:
+        return (self.folder / "meta.json").is_file()
+
+    def load(self, resume: bool) -> dict[int, dict]:
+        """Finished experiments to keep (empty when starting afresh).
+
+        Raises
+        ------
+        KbcliError
+            A checkpoint exists but ``resume`` is False; or it was made by a different config
+            (the message names the differing fields); or it is unreadable.
+        """
+        if not self.exists():
+            if self.folder.exists() and not self.folder.is_dir():
+                raise KbcliError(f"{self.folder}: exists and is not a checkpoint folder")
+            return {}
+        try:
+            meta = json.loads((self.folder / "meta.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise KbcliError(f"{self.folder}: unreadable checkpoint ({exc}); delete it") from None
+        if not resume:
+            raise KbcliError(
+                f"{self.folder} holds an interrupted run: pass --resume to continue it, or delete it"
+            )
+        if meta.get("format") != CHECKPOINT_FORMAT or "fingerprint" not in meta:
+            raise KbcliError(f"{self.folder}: not a kbcli checkpoint of format {CHECKPOINT_FORMAT}")
+        if meta["fingerprint"] != self.fingerprint:
+            fields = _diff(meta["fingerprint"], self.fingerprint)
+            raise KbcliError(
+                f"{self.folder} was made with a different config ({', '.join(fields)} differ): "
+                "refusing to resume; rerun with the same config or delete the checkpoint"
+            )
+        done: dict[int, dict] = {}
+        for part in sorted(self.folder.glob("part-*.h5")):
+            try:
+                with h5py.File(part, "r") as f:
+                    for name, node in f.items():
+                        done[int(name)] = _read_tree(node)
+            except (OSError, ValueError, KeyError) as exc:
+                raise KbcliError(f"{part}: unreadable checkpoint part ({exc}); delete it") from None
+            self._parts = max(self._parts, int(part.stem.split("-")[1]))
+        for stale in self.folder.glob(".*.tmp"):
+            with contextlib.suppress(OSError):
+                stale.unlink()
+        return done
+
+    def start(self) -> None:
+        """Create the folder and its ``meta.json`` (atomically) if they do not exist yet."""
+        self.folder.mkdir(exist_ok=True)
+        if not self.exists():
+            self._atomic(self.folder / "meta.json", lambda p: Path(p).write_text(
+                json.dumps({"format": CHECKPOINT_FORMAT, "fingerprint": self.fingerprint},
+                           sort_keys=True, indent=1), encoding="utf-8"))
+
+    def add(self, index: int, result: dict) -> None:
+        """Record one finished experiment; writes a part when enough are pending."""
+        if not self._pending:
+            self._since = time.monotonic()
+        self._pending[int(index)] = result
+        if len(self._pending) >= self.every or time.monotonic() - self._since >= self.seconds:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write pending experiments as a new part (atomically)."""
+        if not self._pending:
+            return
+        self.start()
+        self._parts += 1
+
+        def write(tmp: str) -> None:
+            with h5py.File(tmp, "w") as f:
+                for i in sorted(self._pending):
+                    _write_tree(f.create_group(str(i)), self._pending[i])
+
+        self._atomic(self.folder / f"part-{self._parts:06d}.h5", write)
+        self._pending = {}
+
+    def remove(self) -> None:
+        """Delete the checkpoint (after the final output is safely written)."""
+        self._pending = {}
+        if self.folder.is_dir():
+            shutil.rmtree(self.folder)
+
+    def _atomic(self, path: Path, write) -> None:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.close(fd)
+        try:
+            write(tmp)
+            with open(tmp, "rb+") as fh:
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+            raise
