@@ -76,7 +76,7 @@ def adapt_cmd(
     snapshots: Annotated[str, typer.Option(
         "--snapshots", help="Steps at which to store the posterior (0 = prior).")
     ] = "0,1,2,3,5,10,20,40",
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the robot's and world's draws.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the robot's and world's draws.")] = 0,
 ) -> None:
     """Recover the scene's displacement by touching and listening.
 
@@ -112,6 +112,9 @@ def adapt_cmd(
               f"{est} (truth {truth}); final error {a['final_error_px']:.2f} px{angle}; "
               f"below 1 px {'from step ' + str(reach) if reach else 'never'}{stop_txt}; "
               f"{a['median_step_ms']:.1f} ms per step")
+    if not a["truth_inside_prior"]:
+        err.print("kbcli: note: the scene's displacement lies outside the robot's prior "
+                  "(--prior-halfwidth, max_angle, --family): it cannot be recovered exactly", markup=False)
 
 
 @command(plot_app, name="adapt")
@@ -158,7 +161,7 @@ def bench_adapt_cmd(
     category: Annotated[list[str] | None, typer.Option(
         "--category", help="small, medium, large (repeat) [default all three].")] = None,
     max_steps: Annotated[int, typer.Option("--max-steps", "-T", help="Steps per run.")] = 40,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of displacements and runs.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of displacements and runs.")] = 0,
     model_blur: Annotated[float | None, typer.Option(
         "--model-blur", help="learned section: soften the model's map by this many px [default "
         "1].")] = None,

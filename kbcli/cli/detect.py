@@ -86,7 +86,7 @@ def bench_detect_cmd(
     detectors: Annotated[str, typer.Option(
         "--detectors", help="Comma-separated subset of binomial,cusum,bocpd,fhddm,ddm,adwin.")] =
         "binomial,cusum,bocpd,fhddm,ddm,adwin",
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the simulation.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the simulation.")] = 0,
 ) -> None:
     """Benchmark the failure detectors against river's FHDDM, DDM and ADWIN on simulated histories.
 

@@ -21,6 +21,9 @@ DEFAULT_CONFIG = Path("pipelines/paper.toml")
 
 
 def _load_config(config: Path, experiments: int | None, mode: str | None) -> stage.EvaluateConfig:
+    if config == DEFAULT_CONFIG and not config.is_file():
+        raise KbcliError(f"{config}: no such config file here; run from the kbcli checkout or pass "
+                         f"--config FILE")
     cfg = stage.EvaluateConfig.from_dict(dict(load_toml(config, "evaluate")))
     return cfg.with_overrides(experiments=experiments, mode=mode)
 

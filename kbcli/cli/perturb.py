@@ -29,7 +29,7 @@ def perturb_cmd(
     family: Annotated[str | None, typer.Option(
         "--family", help="translation or rigid (rigid draws also turn up to 5 degrees) "
         "[default translation, rigid with --angle].")] = None,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of a --category draw.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of a --category draw.")] = 0,
 ) -> None:
     """Move the keyboard: explicit --dx/--dy [--angle], or a random --category draw.
 

@@ -52,7 +52,7 @@ def play_cmd(
         "--perturb-at", help="Step at which the keyboard moves [default steps/2 with a scene].")] = None,
     mode: Annotated[str, typer.Option("--mode", help="ideal or dynamics reaching.")] = "ideal",
     reach_noise: Annotated[float, typer.Option("--reach-noise", help="Landing scatter of the arm, px.")] = 0.0,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the robot's and the world's randomness.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the robot's and the world's randomness.")] = 0,
     wav: Annotated[Path | None, typer.Option(
         "--wav", help="Also write what was heard as a WAV file (silence where the finger missed).")] = None,
 ) -> None:
@@ -80,12 +80,16 @@ def play_cmd(
         samples = stage.heard_audio(art, session.keyboard.features, sample_rate=SAMPLE_RATE)
     write_artifact(art, output)
     a = art.attrs
+
+    def rate(v: float | None) -> str:
+        return "n/a" if v is None else f"{v:.3f}"
+
     msg = f"wrote {output}: {a['steps']} actions, {a['no_match']} NO_MATCH"
     if a["perturb_at"] is not None:
-        msg += (f"; failure rate {a['failure_rate_before']:.3f} before the move at step "
-                f"{a['perturb_at']}, {a['failure_rate_after']:.3f} after")
+        msg += (f"; failure rate {rate(a['failure_rate_before'])} before the move at step "
+                f"{a['perturb_at']}, {rate(a['failure_rate_after'])} after")
     else:
-        msg += f"; failure rate {a['failure_rate_before']:.3f}"
+        msg += f"; failure rate {rate(a['failure_rate_before'])}"
     out.print(msg)
     if samples is not None:
         write_wav(wav, samples, SAMPLE_RATE)

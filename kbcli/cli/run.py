@@ -39,7 +39,7 @@ def run_cmd(
     n_lt: Annotated[int, typer.Option(help="Detector long-term window N_LT.")] = 100,
     n_st: Annotated[int, typer.Option(help="Detector short-term window N_ST.")] = 10,
     threshold: Annotated[float, typer.Option(help="Detector threshold, in (0, 1).")] = 0.01,
-    seed: Annotated[int, typer.Option(help="Seed of the robot's and the world's randomness.")] = 0,
+    seed: Annotated[int, typer.Option(min=0, help="Seed of the robot's and the world's randomness.")] = 0,
 ) -> None:
     """Play, notice the move, adapt, resume: the closed loop as the robot lives it.
 

@@ -92,7 +92,10 @@ def write_artifact(art: Artifact, path: str | os.PathLike) -> str:
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise ArtifactError(f"{path}: folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    except OSError as exc:
+        raise ArtifactError(f"{path}: cannot write in {folder} ({exc.strerror})") from None
     os.close(fd)
     try:
         fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
@@ -115,9 +118,11 @@ def write_artifact(art: Artifact, path: str | os.PathLike) -> str:
             os.fsync(fh.fileno())
         os.chmod(tmp, 0o644)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and exc.errno is not None:
+            raise ArtifactError(f"{path}: cannot write ({exc.strerror})") from None
         raise
     with contextlib.suppress(OSError):  # make the rename durable
         dfd = os.open(folder, os.O_RDONLY)

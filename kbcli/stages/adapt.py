@@ -215,6 +215,14 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     return out
 
 
+def _inside_prior(cfg: AdaptConfig, truth: np.ndarray, world_family: str) -> bool:
+    """Whether the true pose lies in the robot's prior box (else no estimate can reach it)."""
+    inside = bool(np.all(np.abs(truth[-2:]) <= cfg.prior_halfwidth))
+    angle = float(truth[0]) if world_family == "rigid" else 0.0
+    limit = cfg.max_angle if cfg.family == "rigid" else 0.0
+    return inside and abs(angle) <= limit + 1e-9
+
+
 def steps_below(errors: np.ndarray, threshold: float) -> int | None:
     """First step (1-based) with ``errors < threshold``; None if never."""
     hit = np.flatnonzero(np.asarray(errors) < threshold)
@@ -284,6 +292,7 @@ def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
                   zip(transforms.FAMILIES[world_family], truth, strict=True)},
         "grid_cells": cfg.adapter_config().grid_cells,
         "median_step_ms": float(np.median(res["step_ms"])),
+        "truth_inside_prior": _inside_prior(cfg, truth, world_family),
     }
     timing = {"step_ms": res.pop("step_ms")}
     data = {k: v for k, v in res.items()}
