@@ -144,3 +144,11 @@ def test_standard_tools_read_the_file(tmp_path):
         assert f'ATTRIBUTE "{attr}"' in dump.stdout
     full = subprocess.run(["h5dump", str(tmp_path / "a.h5")], capture_output=True, text=True)
     assert full.returncode == 0 and "4999" in full.stdout  # the gzip-compressed dataset decodes
+
+
+def test_unwritable_folder_is_a_clear_error(tmp_path):
+    # /proc accepts no new files, even for root
+    with pytest.raises(ArtifactError, match="cannot write"):
+        write_artifact(_art(), "/proc/kbcli-test.h5")
+    with pytest.raises(ArtifactError, match="does not exist"):
+        write_artifact(_art(), tmp_path / "missing" / "a.h5")
