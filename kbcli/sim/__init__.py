@@ -76,6 +76,50 @@ def workspace_check(cfg: SimConfig, points: np.ndarray) -> np.ndarray:
     return (r >= abs(l1 - l2)) & (r <= l1 + l2) & np.isfinite(r)
 
 
+def rect_reachable(cfg: SimConfig, rects: np.ndarray) -> np.ndarray:
+    """(n,) bool: whether each axis-aligned rectangle lies wholly inside the arm's workspace.
+
+    Parameters
+    ----------
+    rects : (n, 4) ndarray
+        (xmin, ymin, xmax, ymax) rows. The workspace is an annulus: a rectangle is inside when its
+        farthest corner is within ``l1 + l2`` of the shoulder and its nearest point is at least
+        ``|l1 - l2|`` away.
+    """
+    r = np.asarray(rects, float).reshape(-1, 4)
+    b = np.asarray(cfg.base)
+    l1, l2 = cfg.link_lengths
+    far = np.hypot(np.maximum(np.abs(r[:, 0] - b[0]), np.abs(r[:, 2] - b[0])),
+                   np.maximum(np.abs(r[:, 1] - b[1]), np.abs(r[:, 3] - b[1])))
+    nearest = np.column_stack([np.clip(b[0], r[:, 0], r[:, 2]), np.clip(b[1], r[:, 1], r[:, 3])])
+    near = np.hypot(*(nearest - b).T)
+    return (far <= l1 + l2) & (near >= abs(l1 - l2))
+
+
+def check_keyboard_reachable(cfg: SimConfig, keyboard: Keyboard) -> None:
+    """Raise OutOfReachError unless the keyboard's whole working area is within the arm's reach.
+
+    The message names the keys out of reach (or says that only the margin is).
+    """
+    from kbcli.errors import OutOfReachError
+
+    if rect_reachable(cfg, np.asarray(keyboard.area))[0]:
+        return
+    s = keyboard.config.key_size / 2
+    c = keyboard.key_centres()
+    bad = ~rect_reachable(cfg, np.column_stack([c - s, c + s]))
+    l1, l2 = cfg.link_lengths
+    x0, y0, x1, y1 = keyboard.area
+    where = (f"the working area ({x0:g}, {y0:g})-({x1:g}, {y1:g}) is not all within the arm's "
+             f"reach ({abs(l1 - l2):g} to {l1 + l2:g} px from the shoulder at "
+             f"({cfg.base[0]:g}, {cfg.base[1]:g}))")
+    if bad.any():
+        names = [keyboard.names[k] for k in np.flatnonzero(bad)]
+        shown = ", ".join(names[:12]) + (f" and {len(names) - 12} more" if len(names) > 12 else "")
+        raise OutOfReachError(f"{where}: {len(names)} key(s) out of reach: {shown}")
+    raise OutOfReachError(f"{where}: every key is reachable but part of the margin is not")
+
+
 class IdealReacher:
     """The finger lands on the target (plus optional Gaussian scatter of ``reach_noise`` px)."""
 

@@ -1,0 +1,171 @@
+"""``kbcli learn``, ``kbcli plot model`` and ``kbcli bench learn``."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from kbcli.cli.app import (
+    bench_app,
+    command,
+    interactive,
+    out,
+    output_path,
+    plot_app,
+    progress,
+)
+from kbcli.errors import ConfigError
+from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.sim import SimConfig
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages import learn as stage
+
+
+@command(name="learn")
+def learn_cmd(
+    keyboard: Annotated[Path, typer.Option("--keyboard", help="Keyboard artifact (.h5) to learn.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Model artifact to write (.h5).")],
+    mode: Annotated[str, typer.Option(
+        "--mode", help="ideal (the finger lands on the target) or dynamics (pymunk arm).")
+    ] = "ideal",
+    strategy: Annotated[str, typer.Option(
+        "--strategy", help="active, random (exploration) or exact (the keyboard's own geometry, "
+        "no learning).")] = "active",
+    budget: Annotated[int, typer.Option("--budget", help="Reaches to explore with.")] = 800,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the exploration and arm noise.")] = 0,
+    reach_noise: Annotated[float, typer.Option(
+        "--reach-noise", help="Landing scatter of a reach, px (motor noise in dynamics mode).")
+    ] = 0.0,
+    batch: Annotated[int, typer.Option("--batch", help="Reaches per model refit.")] = 10,
+    explore_radius: Annotated[float, typer.Option(
+        "--explore-radius", help="active: first cover the working area to this radius, px.")
+    ] = 20.0,
+    curve_every: Annotated[int, typer.Option(
+        "--curve-every", help="Reaches between learning-curve points.")] = 50,
+) -> None:
+    """Learn the instrument model by exploring the pad with the simulated arm.
+
+    Reads KEYBOARD (kind 'keyboard'; its whole working area must be within the arm's reach).
+    Writes OUTPUT (kind 'model': the samples, the fitted model, the learning curve and the
+    model's predicted key map). Prints the model's accuracy and boundary error against the
+    simulator's ground truth.
+    """
+    sim = SimConfig(mode=mode, reach_noise=reach_noise)
+    cfg = stage.LearnConfig(strategy=strategy, budget=budget, batch=batch,
+                            explore_radius=explore_radius, curve_every=curve_every, sim=sim)
+    kb_art = read_artifact(keyboard, "keyboard")
+    output_path(output)
+    if cfg.strategy == "exact":
+        art = stage.run(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
+        write_artifact(art, output)
+        out.print(f"wrote {output}: exact model (the keyboard's own geometry, "
+                  f"{stage.check_keyboard(kb_art).n_keys} keys)")
+        return
+    learning = stage.learn(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
+    for _ in progress(learning, len(learning), f"{strategy} exploration ({mode})"):
+        pass
+    art = learning.artifact()
+    write_artifact(art, output)
+    a = art.attrs
+    to99 = a["reaches_to_99"]
+    out.print(
+        f"wrote {output}: {strategy} exploration, {mode} mode, {a['n_reaches']} reaches: "
+        f"{a['n_classes'] - 1} sounds + silence, accuracy {100 * a['accuracy']:.2f} %, "
+        f"boundary error {a['boundary_error_px']:.2f} px, "
+        + (f"99 % after {to99} reaches" if to99 is not None else "99 % not reached")
+    )
+
+
+@command(plot_app, name="model")
+def plot_model_cmd(
+    artifact: Annotated[Path, typer.Argument(help="Model artifact (.h5).")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path(
+        "model.png"),
+) -> None:
+    """Draw a model: the learned map (predicted key, uncertainty, reaches) beside the true layout,
+    and the learning curve. Reads ARTIFACT (kind 'model'); writes a PNG."""
+    from kbcli.stages.models import load_model
+    from kbcli.viz.model import plot_model
+
+    art = read_artifact(artifact, "model")
+    output_path(output)
+    plot_model(art, load_model(art), keyboard_stage.load(art), output)
+    out.print(f"wrote {output}")
+
+
+def _budgets(text: str) -> tuple[int, ...]:
+    try:
+        vals = tuple(int(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise ConfigError(
+            f"--budgets must be whole numbers separated by commas, got {text!r}") from None
+    if not vals or any(v < 1 for v in vals):
+        raise ConfigError(f"--budgets must be whole numbers >= 1, got {text!r}")
+    return vals
+
+
+@command(bench_app, name="learn")
+def bench_learn_cmd(
+    seeds: Annotated[int, typer.Option("--seeds", help="Runs per strategy.")] = 10,
+    budgets: Annotated[str, typer.Option(
+        "--budgets", help="Budgets at which to report the accuracy, comma-separated.")]
+        = "50,100,200,400,800,1600",
+    strategy: Annotated[list[str] | None, typer.Option(
+        "--strategy", help="Strategies to run (repeat) [default active, random].")] = None,
+    mode: Annotated[str, typer.Option("--mode", help="ideal or dynamics.")] = "ideal",
+    reach_noise: Annotated[float, typer.Option("--reach-noise", help="Landing scatter, px.")] = 0.0,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the runs.")] = 0,
+    boundary_budget: Annotated[int, typer.Option(
+        "--boundary-budget", help="Reaches at which the boundary error and the learn wall time "
+        "are measured.")] = 800,
+) -> None:
+    """Sample efficiency and speed of learning the model (issue 3's benchmark).
+
+    Reads and writes nothing. Prints, per strategy over SEEDS runs on the default keyboard: the
+    median accuracy (2 px grid) at each budget, the median reaches until 99 % accuracy, the median
+    boundary error (px) at the boundary budget (800); then the wall time of one `kbcli learn` stage
+    run at that budget and the dynamics simulator's reaches per second.
+    """
+    from kbcli.bench import learn as bench
+
+    cfg = bench.BenchConfig(seeds=seeds, budgets=_budgets(budgets), mode=mode,
+                            reach_noise=reach_noise, seed=seed, boundary_budget=boundary_budget,
+                            strategies=tuple(strategy) if strategy else bench.STRATEGY_ORDER)
+    results = list(progress(bench.runs(cfg), len(cfg.strategies) * cfg.seeds, "learning runs"))
+    rows = bench.summarize(cfg, results)
+    con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
+    t = Table(title=f"learning the model: {seeds} seeds per row, {mode} mode"
+                    + (f", {reach_noise:g} px reach noise" if reach_noise else "")
+                    + "; median accuracy (%) on a 2 px grid", title_justify="left")
+    t.add_column("strategy")
+    for b in cfg.budgets:
+        t.add_column(f"@{b}", justify="right")
+    t.add_column("reaches to 99 %", justify="right")
+    t.add_column(f"boundary err @{cfg.boundary_budget} (px)", justify="right")
+    for r in rows:
+        to99 = r["to99"]
+        txt = f"> {cfg.max_budget}" if math.isinf(to99) else f"{to99:g}"
+        if r["never99"]:
+            txt += f" ({r['never99']} never)"
+        t.add_row(r["strategy"], *[f"{100 * r['accuracy'][b]:.2f}" for b in cfg.budgets], txt,
+                  f"{r['boundary_error']:.2f}")
+    con.print(t)
+    con.print("reaches to 99 %: median over runs of the first curve point (every 50 reaches) at or "
+              "above 99 %; runs that never get there count as more than the largest budget.")
+    by = {r["strategy"]: r["to99"] for r in rows}
+    if "active" in by and "random" in by:
+        a, r = by["active"], by["random"]
+        ratio = ("n/a" if math.isinf(a) else
+                 f"< {a / cfg.max_budget:.2f} (random never reached 99 % within {cfg.max_budget})"
+                 if math.isinf(r) else f"{a / r:.2f}")
+        con.print(f"active / random reaches to 99 %: {ratio}")
+    wall = bench.learn_wall_time(cfg)
+    con.print(f"kbcli learn (active, {mode}, budget {cfg.boundary_budget}, one core): {wall:.1f} s")
+    rate = bench.dynamics_rate()
+    con.print(f"dynamics simulator: {rate:.0f} reaches/s (1000 reaches, one core)")

@@ -1,0 +1,331 @@
+"""Exploration strategies: where to reach next to learn the instrument model (paper ref. [11]).
+
+The robot learns p(sound, action) by touching the pad and listening. A strategy proposes the next
+reach targets from what has been heard so far; :class:`Exploration` runs the loop (propose, touch,
+refit) as an iterator that yields one batch at a time, so a caller can stop early, record a
+learning curve or draw a progress bar without the loop knowing.
+
+Strategies (registry :data:`STRATEGIES`, one signature, see :data:`Strategy`):
+
+``random``
+    Targets uniform over the working area: the baseline.
+
+``active``
+    1. *Cover.* First a hexagonal lattice of spacing ``explore_radius * sqrt(3)`` (randomly shifted
+       and turned, visited in farthest-point order), whose covering radius is ``explore_radius``;
+       then, while some point of the working area is further than ``explore_radius`` from every
+       landing (near the area's border), the furthest such point. A sound region nobody has
+       heard holds an empty disc, so covering to radius r finds every region that contains a disc
+       of radius r (a 50 px key holds one of 25 px), with about area / (2.6 r^2) reaches, about
+       120 on the default pad, fewer and more even than random reaches need.
+    2. *Bisect the widest boundary band.* The model (:mod:`kbcli.core.learned`) places each
+       boundary between two sounds on a straight line that must pass between the samples heard on
+       either side: at each point along it the line lies in a band, between the hulls of those
+       samples, where the model cannot tell which sound an action makes (the paper's confusion
+       factor, Sect. III-E: p(i | a) is neither 0 nor 1 there); the band widens beyond the
+       samples. Sites every 1 px along every boundary piece (and 25 px past its ends) sit in the
+       middle of their band; the next target is the site with the widest band (capped at twice
+       the distance to the nearest landing: a reach already made there said what it could). A
+       batch is chosen greedily: after a pick of width w every site's width is capped at
+       w / 2 + its distance to the pick.
+
+    Why: the misclassified area along a boundary is its band width integrated along it, so the
+    most useful reach is where the band is widest; a reach in the middle of the band lands on one
+    side or the other and halves the band there (bisection), and because one line is fitted to all
+    the samples along an edge (and along edges that continue each other, across keys), a few
+    bisections at the ends of a long edge pin it down everywhere. Random reaches spend most of the
+    budget inside regions whose sound is already known; the active rule reaches 99 % accuracy on
+    the default keyboard in about a quarter of the reaches random needs (``kbcli bench learn``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from kbcli.core.learned import LearnedModel
+from kbcli.errors import ConfigError
+
+#: A strategy: ``(exploration, n, rng) -> (k, 2)`` targets inside ``exploration.area``, usually
+#: k = n; more is a plan the exploration carries out over the next batches. It may read
+#: ``exploration.targets``, ``.landed``, ``.perceived``, ``.cfg`` and ``.model`` (fitted on demand).
+Strategy = Callable[["Exploration", int, np.random.Generator], np.ndarray]
+STRATEGIES: dict[str, Strategy] = {}
+
+
+def register(name: str) -> Callable[[Strategy], Strategy]:
+    """Decorator adding a strategy to :data:`STRATEGIES`."""
+
+    def deco(fn: Strategy) -> Strategy:
+        STRATEGIES[name] = fn
+        return fn
+
+    return deco
+
+
+def get_strategy(name: str) -> Strategy:
+    """The strategy called ``name``; ConfigError listing the valid ones otherwise."""
+    try:
+        return STRATEGIES[name]
+    except KeyError:
+        raise ConfigError(
+            f"unknown exploration strategy {name!r}; valid: {', '.join(sorted(STRATEGIES))}"
+        ) from None
+
+
+@dataclass(frozen=True, kw_only=True)
+class ExploreConfig:
+    """How exploration proceeds.
+
+    Parameters
+    ----------
+    strategy : str
+        A name in :data:`STRATEGIES`.
+    budget : int
+        Number of reaches.
+    batch : int
+        Reaches proposed per model refit.
+    explore_radius : float
+        ``active``: cover the working area until no point is further than this (px) from a reach.
+    n_candidates : int
+        ``active``: uniform candidates from which to spread reaches while no boundary is known.
+    """
+
+    strategy: str = "active"
+    budget: int = 800
+    batch: int = 10
+    explore_radius: float = 20.0
+    n_candidates: int = 4000
+
+    def __post_init__(self) -> None:
+        get_strategy(self.strategy)
+        for name in ("budget", "batch", "n_candidates"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1:
+                raise ConfigError(f"{name} must be a whole number >= 1, got {v!r}")
+        for name in ("explore_radius",):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                raise ConfigError(f"{name} must be a positive number of px, got {v!r}")
+
+    def to_dict(self) -> dict:
+        return {
+            "strategy": self.strategy,
+            "budget": int(self.budget),
+            "batch": int(self.batch),
+            "explore_radius": float(self.explore_radius),
+            "n_candidates": int(self.n_candidates),
+        }
+
+
+def _uniform(area: tuple, n: int, rng: np.random.Generator) -> np.ndarray:
+    x0, y0, x1, y1 = area
+    return rng.uniform((x0, y0), (x1, y1), size=(n, 2))
+
+
+def farthest_points(candidates: np.ndarray, taken: np.ndarray, n: int) -> np.ndarray:
+    """Greedy max-min picks: each time the candidate furthest from ``taken`` and earlier picks.
+
+    Parameters
+    ----------
+    candidates : (m, 2) ndarray
+    taken : (k, 2) ndarray
+    n : int
+
+    Returns
+    -------
+    (min(n, m), 2) ndarray
+    """
+    if len(candidates) == 0:
+        return np.empty((0, 2))
+    if len(taken):
+        d = cKDTree(taken).query(candidates)[0]
+    else:
+        d = np.full(len(candidates), np.inf)
+    picks = []
+    for _ in range(min(n, len(candidates))):  # loop over picks; each is vectorized over candidates
+        i = int(np.argmax(d))
+        picks.append(candidates[i])
+        d = np.minimum(d, np.hypot(*(candidates - candidates[i]).T))
+    return np.array(picks)
+
+
+@register("random")
+def random_strategy(exploration: Exploration, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Uniform targets over the working area (the baseline)."""
+    return _uniform(exploration.area, n, rng)
+
+
+def hex_lattice(area: tuple, spacing: float, rng: np.random.Generator) -> np.ndarray:
+    """(m, 2) points of a hexagonal lattice over ``area``, randomly shifted and rotated.
+
+    Its covering radius is ``spacing / sqrt(3)``: every point of the plane is that close to a node.
+    """
+    x0, y0, x1, y1 = area
+    c = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
+    r = np.hypot(x1 - x0, y1 - y0) / 2 + spacing
+    n = int(np.ceil(r / spacing)) + 1
+    i, j = np.meshgrid(np.arange(-n, n + 1), np.arange(-n, n + 1))
+    p = np.column_stack([(i + 0.5 * j).ravel(), (j * np.sqrt(3) / 2).ravel()]) * spacing
+    a = rng.uniform(0, np.pi / 3)
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    p = p @ rot.T + c + rng.uniform(-spacing / 2, spacing / 2, size=2)
+    inside = (p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1)
+    return p[inside]
+
+
+def _cover_candidates(area: tuple, spacing: float, rng: np.random.Generator) -> np.ndarray:
+    x0, y0, x1, y1 = area
+    xs = np.arange(x0 + spacing / 2, x1, spacing)
+    ys = np.arange(y0 + spacing / 2, y1, spacing)
+    g = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    g = g + rng.uniform(-spacing / 2, spacing / 2, size=g.shape)
+    return np.clip(g, (x0, y0), (x1, y1))
+
+
+@register("active")
+def active_strategy(exploration: Exploration, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Cover the area to ``explore_radius``, then the widest places of the boundary bands."""
+    taken, area, cfg = exploration.landed, exploration.area, exploration.cfg
+    if len(taken) == 0:  # first: a lattice covering the area to explore_radius, spread-out order
+        lattice = hex_lattice(area, cfg.explore_radius * np.sqrt(3), rng)
+        return farthest_points(lattice, np.empty((0, 2)), len(lattice))
+    cover = _cover_candidates(area, cfg.explore_radius / 5, rng)
+    cover = cover[cKDTree(taken).query(cover)[0] > cfg.explore_radius]
+    picks = farthest_points(cover, taken, n)
+    if len(picks):
+        return picks
+    model = exploration.model
+    if model is None or model.n_classes < 2:
+        return farthest_points(_uniform(area, cfg.n_candidates, rng), taken, n)
+    sites = model.boundary_sites(step=1.0, phase=float(rng.uniform()))
+    x0, y0, x1, y1 = area
+    p, w = sites["points"], sites["width"]
+    inside = (p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1)
+    p, w = p[inside], w[inside]
+    # a reach right next to a site already told what it could there: cap by the distance to it
+    w = np.minimum(w, 2 * cKDTree(taken).query(p)[0]) if len(p) and len(taken) else w
+    if len(p) == 0:  # no boundary met yet: keep spreading reaches over the area
+        return farthest_points(_uniform(area, cfg.n_candidates, rng), taken, n)
+    picks = []
+    for _ in range(min(n, len(p))):  # loop over picks; each is vectorized over the sites
+        i = int(np.argmax(w))
+        picks.append(p[i])
+        # the pick will halve the band there; nearby sites gain less the closer they are
+        w = np.minimum(w, w[i] / 2 + np.hypot(*(p - p[i]).T))
+    return np.array(picks)
+
+
+@dataclass
+class ExploreStep:
+    """One batch of reaches, and the exploration it belongs to.
+
+    Attributes
+    ----------
+    n_reaches : int
+        Reaches done so far (this batch included).
+    targets, landed : (k, 2) ndarray
+        This batch's targets and where the finger landed.
+    perceived : (k, D) ndarray
+        What was heard (NaN rows: silence).
+    """
+
+    n_reaches: int
+    targets: np.ndarray
+    landed: np.ndarray
+    perceived: np.ndarray
+    exploration: Exploration
+
+    @property
+    def model(self) -> LearnedModel:
+        """The model fitted to every sample so far (valid until the next step)."""
+        return self.exploration.model
+
+
+Touch = Callable[[np.ndarray, np.random.Generator], tuple[np.ndarray, np.ndarray]]
+
+
+class Exploration:
+    """Learn the instrument by reaching: an iterator over batches (propose, touch, refit).
+
+    The model is refitted lazily: only when a strategy or the caller asks for it.
+
+    Parameters
+    ----------
+    cfg : ExploreConfig
+    touch : callable
+        ``touch(targets (k, 2), rng) -> (landed (k, 2), perceived (k, D))``: the world
+        (:meth:`kbcli.sim.World.touch`).
+    area : tuple of float
+        (xmin, ymin, xmax, ymax) working area in which targets are chosen.
+    match_threshold : float
+        Eq. 2 threshold used to tell sounds apart.
+    rng : numpy.random.Generator
+
+    Yields
+    ------
+    ExploreStep
+        After each batch, until ``cfg.budget`` reaches are done.
+
+    Attributes
+    ----------
+    targets, landed : (n, 2) ndarray
+        Every reach so far.
+    perceived : (n, D) ndarray
+        Every sound heard so far.
+    """
+
+    def __init__(
+        self,
+        cfg: ExploreConfig,
+        touch: Touch,
+        area: tuple[float, float, float, float],
+        match_threshold: float,
+        rng: np.random.Generator,
+    ) -> None:
+        self.cfg = cfg
+        self.touch = touch
+        self.area = tuple(float(v) for v in area)
+        self.match_threshold = match_threshold
+        self.rng = rng
+        self.strategy = get_strategy(cfg.strategy)
+        self.targets = np.empty((0, 2))
+        self.landed = np.empty((0, 2))
+        self.perceived = np.empty((0, 0))
+        self._model: LearnedModel | None = None
+        self._plan = np.empty((0, 2))
+
+    @property
+    def model(self) -> LearnedModel | None:
+        """The model fitted to every sample so far (None before the first reach)."""
+        if len(self.landed) == 0:
+            return None
+        if self._model is None:
+            self._model = LearnedModel(match_threshold=self.match_threshold, area=self.area).fit(
+                self.landed, self.perceived, targets=self.targets
+            )
+        return self._model
+
+    def __iter__(self) -> Iterator[ExploreStep]:
+        return self
+
+    def __next__(self) -> ExploreStep:
+        done = len(self.targets)
+        if done >= self.cfg.budget:
+            raise StopIteration
+        k = min(self.cfg.batch, self.cfg.budget - done)
+        if len(self._plan) == 0:
+            self._plan = np.asarray(self.strategy(self, k, self.rng), float).reshape(-1, 2)
+        t, self._plan = self._plan[:k], self._plan[k:]
+        if len(t) < k:  # a strategy may run short of candidates: top up uniformly
+            t = np.vstack([t, _uniform(self.area, k - len(t), self.rng)])
+        landed, heard = self.touch(t, self.rng)
+        heard = np.asarray(heard, float).reshape(len(t), -1)
+        self.targets = np.vstack([self.targets, t])
+        self.landed = np.vstack([self.landed, landed])
+        self.perceived = heard if done == 0 else np.vstack([self.perceived, heard])
+        self._model = None
+        return ExploreStep(len(self.targets), t, landed, heard, self)

@@ -1,0 +1,247 @@
+"""A planar two-link arm simulated with pymunk: the ``dynamics`` reach mode (paper Sect. IV-C).
+
+The arm lies on the tactile pad, seen from above (no gravity): a shoulder pivot fixed at
+``SimConfig.base``, an upper arm and a forearm of ``SimConfig.link_lengths``, the fingertip at the
+forearm's end. A reach to a target point on the pad:
+
+1. checks the target is inside the annular workspace ``|l1 - l2| <= r <= l1 + l2`` (targets outside
+   raise :class:`~kbcli.errors.OutOfReachError`; they are never clipped);
+2. computes joint targets by analytic inverse kinematics (always the same elbow branch, q2 > 0);
+3. with ``reach_noise > 0``, adds motor set-point noise: a joint offset ``J^-1 e`` with
+   ``e ~ N(0, reach_noise^2 I)`` (J the arm Jacobian at the target), so that the fingertip scatters
+   isotropically by ``reach_noise`` px around the target;
+4. drives both joints with pymunk ``SimpleMotor`` constraints used as servos: every physics step
+   (``DT`` s) the motor rate is set by a proportional controller on the joint-angle error
+   (``rate = KP * error``, clipped to ``MAX_RATE``), the motor torque is bounded by ``MAX_TORQUE``;
+5. steps the physics until the fingertip settles (joint errors and speeds below tolerance, or
+   ``MAX_STEPS``) and returns where the fingertip actually is, read from the simulated bodies.
+
+Each reach starts from the pose the previous one ended in (a real arm does not teleport); the start
+joint angles of the last batch are kept in :attr:`DynamicsReacher.last_start_angles`, and
+:meth:`DynamicsReacher.reset` puts the arm back in a given pose, so a run is reproducible from its
+seed and its first pose. One pymunk ``Space`` is built once and reused for every reach.
+
+pymunk 7 API notes: ``Space.step``, ``Body.angle``/``angular_velocity``, ``Body.local_to_world``
+and ``SimpleMotor.rate``/``max_force`` are used; ``SimpleMotor(a, b, rate)`` keeps
+``a.angular_velocity - b.angular_velocity == rate``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pymunk
+
+from kbcli.errors import OutOfReachError
+from kbcli.sim import SimConfig, workspace_check
+
+DT = 1.0 / 240.0  # physics time step, s
+KP = 40.0  # proportional gain of the servo, 1/s
+MAX_RATE = 8.0  # joint speed limit, rad/s
+MAX_TORQUE = 5e8  # motor torque bound (px^2 * mass / s^2)
+ANGLE_TOL = 2e-5  # joint-angle error at which a joint counts as settled, rad
+SPEED_TOL = 2e-3  # joint speed below which a joint counts as still, rad/s
+MAX_STEPS = 2000  # give up settling after this many steps (8.3 s of simulated time)
+LINK_MASS = (2.0, 1.5)  # upper arm, forearm
+# pivots: share of a joint's drift left after 1 s (pymunk's default is 0.9**60)
+JOINT_ERROR_BIAS = 0.5**240
+
+
+def inverse_kinematics(cfg: SimConfig, targets: np.ndarray) -> np.ndarray:
+    """Joint angles (shoulder q1, elbow q2 > 0) that put the fingertip on each target.
+
+    Parameters
+    ----------
+    targets : (n, 2) ndarray
+        Pad points inside the workspace.
+
+    Returns
+    -------
+    (n, 2) ndarray
+        q1 is the upper arm's angle from the pad's x axis, q2 the forearm's angle relative to it.
+    """
+    p = np.asarray(targets, float).reshape(-1, 2) - np.asarray(cfg.base)
+    l1, l2 = cfg.link_lengths
+    c2 = (np.sum(p * p, axis=1) - l1 * l1 - l2 * l2) / (2 * l1 * l2)
+    q2 = np.arccos(np.clip(c2, -1.0, 1.0))
+    q1 = np.arctan2(p[:, 1], p[:, 0]) - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
+    return np.column_stack([q1, q2])
+
+
+def forward_kinematics(cfg: SimConfig, angles: np.ndarray) -> np.ndarray:
+    """(n, 2) joint angles -> (n, 2) fingertip positions on the pad."""
+    q = np.asarray(angles, float).reshape(-1, 2)
+    l1, l2 = cfg.link_lengths
+    a = q[:, 0] + q[:, 1]
+    return np.asarray(cfg.base) + np.column_stack(
+        [l1 * np.cos(q[:, 0]) + l2 * np.cos(a), l1 * np.sin(q[:, 0]) + l2 * np.sin(a)]
+    )
+
+
+def jacobian(cfg: SimConfig, angles: np.ndarray) -> np.ndarray:
+    """(n, 2, 2) d fingertip / d (q1, q2) at each pose."""
+    q = np.asarray(angles, float).reshape(-1, 2)
+    l1, l2 = cfg.link_lengths
+    a = q[:, 0] + q[:, 1]
+    j = np.empty((len(q), 2, 2))
+    j[:, 0, 0] = -l1 * np.sin(q[:, 0]) - l2 * np.sin(a)
+    j[:, 0, 1] = -l2 * np.sin(a)
+    j[:, 1, 0] = l1 * np.cos(q[:, 0]) + l2 * np.cos(a)
+    j[:, 1, 1] = l2 * np.cos(a)
+    return j
+
+
+def check_reachable(cfg: SimConfig, targets: np.ndarray) -> np.ndarray:
+    """Raise :class:`OutOfReachError` naming the first target outside the workspace."""
+    t = np.asarray(targets, float).reshape(-1, 2)
+    ok = workspace_check(cfg, t)
+    if not ok.all():
+        bad = t[~ok][0]
+        l1, l2 = cfg.link_lengths
+        raise OutOfReachError(
+            f"target ({bad[0]:.1f}, {bad[1]:.1f}) is outside the arm's workspace "
+            f"({abs(l1 - l2):g} to {l1 + l2:g} px from the shoulder at {cfg.base})"
+        )
+    return t
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+class DynamicsReacher:
+    """A pymunk two-link arm driven by servo motors.
+
+    Parameters
+    ----------
+    cfg : SimConfig
+        Geometry (``base``, ``link_lengths``) and ``reach_noise`` (px) of the arm.
+
+    Attributes
+    ----------
+    last_start_angles : (n, 2) ndarray
+        Joint angles (q1, q2) the arm started each reach of the last :meth:`reach` call from.
+    last_steps : (n,) int ndarray
+        Physics steps each reach of the last call took to settle.
+    """
+
+    def __init__(self, cfg: SimConfig) -> None:
+        self.cfg = cfg
+        l1, l2 = cfg.link_lengths
+        self._l1, self._l2 = l1, l2
+        self._base = pymunk.Vec2d(*cfg.base)
+        self.space = space = pymunk.Space()
+        space.gravity = (0.0, 0.0)
+        space.iterations = 10
+        group = pymunk.ShapeFilter(group=1)  # the links never collide with each other
+        self.upper = self._link(l1, LINK_MASS[0], group)
+        self.fore = self._link(l2, LINK_MASS[1], group)
+        shoulder = pymunk.PivotJoint(space.static_body, self.upper, self._base, (-l1 / 2, 0))
+        self._elbow_joint = pymunk.PivotJoint(self.upper, self.fore, (l1 / 2, 0), (-l2 / 2, 0))
+        self.m1 = pymunk.SimpleMotor(space.static_body, self.upper, 0.0)
+        self.m2 = pymunk.SimpleMotor(self.upper, self.fore, 0.0)
+        for m in (self.m1, self.m2):
+            m.max_force = MAX_TORQUE
+        for j in (shoulder, self._elbow_joint):
+            j.error_bias = JOINT_ERROR_BIAS
+        space.add(shoulder, self._elbow_joint, self.m1, self.m2)
+        self.home = inverse_kinematics(cfg, np.array(cfg.base) + (0.0, 0.7 * (l1 + l2)))[0]
+        self.last_start_angles = np.empty((0, 2))
+        self.last_steps = np.empty(0, dtype=np.int64)
+        self.reset(self.home)
+
+    def _link(self, length: float, mass: float, group: pymunk.ShapeFilter) -> pymunk.Body:
+        a, b = (-length / 2, 0.0), (length / 2, 0.0)
+        body = pymunk.Body(mass, pymunk.moment_for_segment(mass, a, b, 4.0))
+        shape = pymunk.Segment(body, a, b, 4.0)
+        shape.filter = group
+        self.space.add(body, shape)
+        return body
+
+    # -- state ----------------------------------------------------------------------------------
+    @property
+    def angles(self) -> np.ndarray:
+        """(2,) current joint angles (q1, q2)."""
+        return np.array([self.upper.angle, self.fore.angle - self.upper.angle])
+
+    def fingertip(self) -> np.ndarray:
+        """(2,) fingertip position on the pad, read from the simulated forearm."""
+        p = self.fore.local_to_world((self._l2 / 2, 0.0))
+        return np.array([p.x, p.y])
+
+    def reset(self, angles: np.ndarray) -> None:
+        """Put the arm at rest in joint angles ``angles`` (q1, q2)."""
+        q1, q2 = (float(v) for v in np.asarray(angles, float).reshape(2))
+        elbow = self._base + pymunk.Vec2d(math.cos(q1), math.sin(q1)) * self._l1
+        self.upper.angle = q1
+        self.upper.position = self._base + pymunk.Vec2d(math.cos(q1), math.sin(q1)) * (self._l1 / 2)
+        self.fore.angle = q1 + q2
+        self.fore.position = elbow + pymunk.Vec2d(math.cos(q1 + q2), math.sin(q1 + q2)) * (
+            self._l2 / 2
+        )
+        for b in (self.upper, self.fore):
+            b.velocity = (0.0, 0.0)
+            b.angular_velocity = 0.0
+        self.m1.rate = self.m2.rate = 0.0
+        self.space.reindex_shapes_for_body(self.upper)
+        self.space.reindex_shapes_for_body(self.fore)
+
+    # -- reaching -------------------------------------------------------------------------------
+    def _drive(self, q1t: float, q2t: float) -> int:
+        """Servo both joints to (q1t, q2t) until settled; return the number of steps."""
+        up, fo, m1, m2, step = self.upper, self.fore, self.m1, self.m2, self.space.step
+        for n in range(1, MAX_STEPS + 1):
+            a1 = up.angle
+            e1 = _wrap(q1t - a1)
+            e2 = _wrap(q2t - (fo.angle - a1))
+            w1 = min(MAX_RATE, max(-MAX_RATE, KP * e1))
+            w2 = min(MAX_RATE, max(-MAX_RATE, KP * e2))
+            # SimpleMotor(a, b) keeps a.w - b.w == rate: static.w - upper.w = -w1, and so on.
+            m1.rate = -w1
+            m2.rate = -w2
+            step(DT)
+            if (
+                abs(e1) < ANGLE_TOL
+                and abs(e2) < ANGLE_TOL
+                and abs(up.angular_velocity) < SPEED_TOL
+                and abs(fo.angular_velocity - up.angular_velocity) < SPEED_TOL
+            ):
+                return n
+        return MAX_STEPS
+
+    def reach(self, targets: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Reach for each target in turn; return where the fingertip ended.
+
+        Parameters
+        ----------
+        targets : (n, 2) ndarray
+            Pad points.
+        rng : numpy.random.Generator
+            Source of the motor noise (unused when ``reach_noise`` is 0).
+
+        Returns
+        -------
+        (n, 2) ndarray
+            Landed fingertip positions.
+
+        Raises
+        ------
+        OutOfReachError
+            If any target is outside the workspace (checked before the arm moves).
+        """
+        t = check_reachable(self.cfg, targets)
+        q = inverse_kinematics(self.cfg, t)
+        if self.cfg.reach_noise > 0 and len(t):
+            e = rng.normal(0.0, self.cfg.reach_noise, size=t.shape)
+            q = q + np.linalg.solve(jacobian(self.cfg, q), e[:, :, None])[:, :, 0]
+        starts = np.empty((len(t), 2))
+        steps = np.empty(len(t), dtype=np.int64)
+        landed = np.empty((len(t), 2))
+        for i in range(len(t)):  # reaches are sequential in time: each starts where the last ended
+            starts[i] = self.angles
+            steps[i] = self._drive(float(q[i, 0]), float(q[i, 1]))
+            landed[i] = self.fingertip()
+        self.last_start_angles = starts
+        self.last_steps = steps
+        return landed

@@ -1,0 +1,244 @@
+"""Stage ``learn``: learn the instrument model M_INST by exploration (paper Sect. III-A, ref. [11]).
+
+The simulated arm (``ideal`` or ``dynamics`` mode, :mod:`kbcli.sim`) reaches for targets chosen by
+an exploration strategy (:mod:`kbcli.core.explore`) on the pad where the keyboard lies at its
+reference pose; the robot hears what its finger played and fits a
+:class:`~kbcli.core.learned.LearnedModel` of p(sound | action). The ground truth (the keyboard) is
+used only to score the model: the learning curve (accuracy on a 2 px grid over the working area
+every ``curve_every`` reaches) and the final accuracy and boundary error on a 1 px grid
+(:mod:`kbcli.core.accuracy`).
+
+``strategy = "exact"`` skips exploration and returns the exact-model artifact
+(:func:`kbcli.stages.models.exact_artifact`), for calibration experiments.
+
+The ``model`` artifact holds ``samples/actions`` (the reach targets), ``samples/landed`` (where the
+finger landed: what the model is fitted on), ``samples/perceived`` (NaN rows: silence) and, in
+``dynamics`` mode, ``samples/start_angles`` (the arm's joint angles before each reach); ``model/...``
+(:meth:`LearnedModel.to_arrays`), ``curve/{reaches,accuracy}`` and ``evaluation/predicted_keys``
+(the key the model predicts in each 1 px cell of the working area, -1 silence, -2 a sound that is
+no key; row i is y, from ``evaluation/origin``). Its attrs hold the final ``accuracy``,
+``boundary_error_px``, ``reaches_to_99`` (first curve point at or above 99 %, or None) and
+``n_classes``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from kbcli.core import accuracy as scoring
+from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
+from kbcli.core.keyboard import Keyboard
+from kbcli.core.model import grid_points
+from kbcli.errors import ArtifactError, ConfigError
+from kbcli.sim import SimConfig, World, check_keyboard_reachable, make_reacher
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages.artifact import Artifact, ref
+from kbcli.stages.models import exact_artifact
+
+CURVE_STEP = 2.0  # px, grid of the learning curve's accuracy
+EVAL_STEP = 1.0  # px, grid of the final accuracy and boundary error
+TARGET_ACCURACY = 0.99
+
+
+def strategies() -> tuple[str, ...]:
+    """Valid ``--strategy`` values: the exploration strategies and ``exact``."""
+    return (*sorted(STRATEGIES), "exact")
+
+
+@dataclass(frozen=True, kw_only=True)
+class LearnConfig:
+    """How the model is learned.
+
+    Parameters
+    ----------
+    strategy : str
+        ``active``, ``random`` (exploration strategies) or ``exact`` (no learning).
+    budget : int
+        Reaches.
+    batch : int
+        Reaches per model refit.
+    explore_radius : float
+        ``active``: cover the working area to this radius (px) before localizing boundaries.
+    curve_every : int
+        Reaches between two points of the learning curve (a point is taken after the batch that
+        reaches each multiple, and at the end).
+    sim : SimConfig
+        The arm and its reach mode.
+    """
+
+    strategy: str = "active"
+    budget: int = 800
+    batch: int = 10
+    explore_radius: float = 20.0
+    curve_every: int = 50
+    sim: SimConfig = field(default_factory=SimConfig)
+
+    def __post_init__(self) -> None:
+        if self.strategy not in strategies():
+            raise ConfigError(
+                f"unknown strategy {self.strategy!r}; valid: {', '.join(strategies())}"
+            )
+        for name in ("budget", "batch", "curve_every"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1:
+                raise ConfigError(f"{name} must be a whole number >= 1, got {v!r}")
+        if not (isinstance(self.explore_radius, (int, float)) and math.isfinite(self.explore_radius)
+                and self.explore_radius > 0):
+            raise ConfigError(f"explore_radius must be > 0 px, got {self.explore_radius!r}")
+        if not isinstance(self.sim, SimConfig):
+            raise ConfigError("sim must be a SimConfig")
+
+    def explore_config(self) -> ExploreConfig:
+        return ExploreConfig(strategy=self.strategy, budget=int(self.budget), batch=int(self.batch),
+                             explore_radius=float(self.explore_radius))
+
+    def to_dict(self) -> dict:
+        return {
+            "strategy": self.strategy,
+            "budget": int(self.budget),
+            "batch": int(self.batch),
+            "explore_radius": float(self.explore_radius),
+            "curve_every": int(self.curve_every),
+            "sim": self.sim.to_dict(),
+        }
+
+
+def check_keyboard(art: Artifact) -> Keyboard:
+    """The keyboard of a keyboard artifact; ArtifactError for any other kind."""
+    if art.kind != "keyboard":
+        where = f"{art.path}: " if art.path else ""
+        raise ArtifactError(f"{where}is a {art.kind} artifact, expected a keyboard artifact")
+    return keyboard_stage.load(art)
+
+
+class Learning:
+    """One learning run as an iterator: each ``next`` does one batch of reaches.
+
+    Iterate it to the end (``len(learning)`` batches), then call :meth:`artifact`.
+    """
+
+    def __init__(self, cfg: LearnConfig, keyboard_art: Artifact, *, rng: np.random.Generator,
+                 seed: int | None = None) -> None:
+        if cfg.strategy == "exact":
+            raise ConfigError("the exact model is not learned: use run() or exact_artifact()")
+        self.cfg = cfg
+        self.keyboard_art = keyboard_art
+        self.keyboard = kb = check_keyboard(keyboard_art)
+        check_keyboard_reachable(cfg.sim, kb)
+        self.seed = seed
+        self.world = World(kb, make_reacher(cfg.sim))
+        self._starts: list[np.ndarray] = []
+        self.exploration = Exploration(
+            cfg.explore_config(), self._touch, kb.area, kb.config.match_threshold, rng
+        )
+        self.curve_reaches: list[int] = []
+        self.curve_accuracy: list[float] = []
+
+    def _touch(self, targets: np.ndarray, rng: np.random.Generator):
+        landed, heard = self.world.touch(targets, rng)
+        starts = getattr(self.world.reacher, "last_start_angles", None)
+        if starts is not None:
+            self._starts.append(np.asarray(starts, float).reshape(-1, 2))
+        return landed, heard
+
+    def __len__(self) -> int:
+        return -(-int(self.cfg.budget) // int(self.cfg.batch))
+
+    def __iter__(self) -> Iterator[int]:
+        return self
+
+    def __next__(self) -> int:
+        step = next(self.exploration)
+        n, every = step.n_reaches, self.cfg.curve_every
+        if n // every > (n - len(step.targets)) // every or n >= self.cfg.budget:
+            self.curve_reaches.append(n)
+            self.curve_accuracy.append(scoring.accuracy(step.model, self.keyboard, CURVE_STEP))
+        return n
+
+    def artifact(self) -> Artifact:
+        """The ``model`` artifact (after the last batch)."""
+        ex = self.exploration
+        if len(ex.targets) < self.cfg.budget:
+            raise RuntimeError("learning is not finished: iterate to the end first")
+        model, kb = ex.model, self.keyboard
+        pred, true = scoring.key_maps(model, kb, EVAL_STEP)
+        acc = scoring.accuracy_from_maps(pred, true)
+        berr = scoring.boundary_error(pred, true, EVAL_STEP)
+        curve_acc = np.asarray(self.curve_accuracy, float)
+        curve_n = np.asarray(self.curve_reaches, np.int64)
+        hit = np.flatnonzero(curve_acc >= TARGET_ACCURACY)
+        samples = {
+            "actions": ex.targets,
+            "landed": ex.landed,
+            "perceived": ex.perceived,
+        }
+        if self._starts:
+            samples["start_angles"] = np.vstack(self._starts)
+        origin, _ = grid_points(kb.area, EVAL_STEP)
+        return Artifact(
+            kind="model",
+            config={**self.cfg.to_dict(), "keyboard": kb.config.to_dict(),
+                    "curve_step": CURVE_STEP, "eval_step": EVAL_STEP},
+            seed=self.seed,
+            data={
+                "samples": samples,
+                "model": model.to_arrays(),
+                "curve": {"reaches": curve_n, "accuracy": curve_acc},
+                "evaluation": {"predicted_keys": pred.astype(np.int16), "origin": origin,
+                               "step": np.float64(EVAL_STEP)},
+            },
+            attrs={
+                "strategy": self.cfg.strategy,
+                "mode": self.cfg.sim.mode,
+                "n_reaches": int(len(ex.targets)),
+                "n_classes": int(model.n_classes),
+                "n_boundary_lines": int(len(model.lines_)),
+                "reach_sd_px": float(model.reach_sd_),
+                "accuracy": acc,
+                "boundary_error_px": berr,
+                "reaches_to_99": int(curve_n[hit[0]]) if len(hit) else None,
+            },
+            inputs={"keyboard": ref(self.keyboard_art)},
+        )
+
+
+def learn(cfg: LearnConfig, keyboard_art: Artifact, *, rng: np.random.Generator,
+          seed: int | None = None) -> Learning:
+    """Start a learning run (checks the inputs: the keyboard artifact and that it is reachable).
+
+    Raises
+    ------
+    ArtifactError
+        If ``keyboard_art`` is not a keyboard artifact.
+    OutOfReachError
+        If the keyboard's working area is not within the arm's reach (names the keys).
+    """
+    return Learning(cfg, keyboard_art, rng=rng, seed=seed)
+
+
+def run(cfg: LearnConfig, keyboard_art: Artifact, *, rng: np.random.Generator,
+        seed: int | None = None) -> Artifact:
+    """Learn a model (or build the exact one) and return its ``model`` artifact.
+
+    Parameters
+    ----------
+    cfg : LearnConfig
+    keyboard_art : Artifact
+        A keyboard artifact.
+    rng : numpy.random.Generator
+        Drives the exploration and the arm's noise.
+    seed : int, optional
+        Recorded in the artifact (``rng`` should be ``default_rng(seed)``).
+    """
+    if cfg.strategy == "exact":
+        kb = check_keyboard(keyboard_art)
+        check_keyboard_reachable(cfg.sim, kb)
+        return exact_artifact(keyboard_art)
+    learning = learn(cfg, keyboard_art, rng=rng, seed=seed)
+    for _ in learning:
+        pass
+    return learning.artifact()

@@ -1,0 +1,103 @@
+"""Figure of a model artifact: the learned map beside the true layout, and the learning curve.
+
+Left: the key the model predicts in each 2 px cell (colours as in the true layout, silence white),
+its uncertainty (the confusion factor 1 - (p1 - p2), Sect. III-E) shaded dark, the fitted boundary
+lines thin, and the explored points (where the finger landed) as dots; cells whose predicted key is
+wrong are marked red. Middle: the true layout. Right: the learning curve (accuracy on a 2 px grid
+against reaches), with the 99 % level dashed. An exact-model artifact shows its map alone.
+"""
+
+from __future__ import annotations
+
+import os
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.colors import ListedColormap
+
+from kbcli.core import accuracy as scoring
+from kbcli.core.keyboard import Keyboard
+from kbcli.core.model import grid_points
+from kbcli.stages.artifact import Artifact
+from kbcli.viz.common import draw_keyboard, save
+
+MAP_STEP = 2.0  # px
+
+
+def _key_colours(kb: Keyboard) -> np.ndarray:
+    """RGBA per key index + 2: -2 (a sound that is no key) grey, -1 (silence) white, keys tab20."""
+    cmap = plt.get_cmap("tab20")
+    keys = [cmap(k % 20) for k in range(kb.n_keys)]
+    return np.vstack([(0.6, 0.6, 0.6, 1.0), (1, 1, 1, 1), *keys])
+
+
+def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> None:
+    """Draw a ``model`` artifact (with its loaded model and keyboard) to a PNG."""
+    learned = art.config.get("strategy") != "exact"
+    x0, y0, x1, y1 = kb.area
+    extent = (x0, x1, y0, y1)
+    _, pts = grid_points(kb.area, MAP_STEP)
+    flat = pts.reshape(-1, 2)
+    proba = model.predict_proba(flat)
+    cls = np.argmax(proba, axis=1)
+    keys = scoring.class_keys(model.class_features_, kb)[cls].reshape(pts.shape[:2])
+    top2 = np.sort(proba, axis=1)[:, -2:] if proba.shape[1] > 1 else np.ones((len(flat), 2))
+    confusion = (1.0 - (top2[:, 1] - top2[:, 0])).reshape(pts.shape[:2])
+    wrong = keys != kb.key_at(flat).reshape(pts.shape[:2])
+    colours = _key_colours(kb)
+
+    ncols = 3 if learned else 2
+    fig, axes = plt.subplots(1, ncols, figsize=(6.2 * ncols, 4.6),
+                             gridspec_kw={"width_ratios": [1.25, 1.25, 1.0][:ncols]})
+    ax = axes[0]
+    ax.imshow(keys + 2, origin="lower", extent=extent, interpolation="nearest",
+              cmap=ListedColormap(colours), vmin=-0.5, vmax=len(colours) - 0.5)
+    shade = np.zeros((*confusion.shape, 4))
+    shade[..., 3] = 0.85 * confusion
+    ax.imshow(shade, origin="lower", extent=extent, interpolation="nearest")
+    red = np.zeros((*wrong.shape, 4))
+    red[wrong] = (0.9, 0.0, 0.0, 0.9)
+    ax.imshow(red, origin="lower", extent=extent, interpolation="nearest")
+    title = "exact model (the keyboard's geometry)"
+    if learned:
+        d = art.data
+        landed = np.asarray(d["samples"]["landed"], float)
+        ax.plot(landed[:, 0], landed[:, 1], ".", color="black", ms=1.6, alpha=0.7)
+        lines = np.asarray(d["model"].get("lines", np.empty((0, 3))), float)
+        t = np.linspace(-1e3, 1e3, 2)
+        for nx, ny, c in lines:
+            xy = np.outer(t, (-ny, nx)) + c * np.array([nx, ny])
+            ax.plot(xy[:, 0], xy[:, 1], color="0.25", lw=0.3, alpha=0.6)
+        a = art.attrs
+        title = (f"learned ({a.get('strategy')}, {a.get('mode')}, {a.get('n_reaches')} reaches): "
+                 f"accuracy {100 * a.get('accuracy', np.nan):.2f} %, "
+                 f"boundary error {a.get('boundary_error_px', np.nan):.2f} px")
+    ax.set_title(title + "\ndark: uncertainty (confusion); red: wrong; dots: reaches",
+                 fontsize=8.5)
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+    ax.set_xlabel("pad x (px)")
+    ax.set_ylabel("pad y (px)")
+
+    ax = axes[1]
+    draw_keyboard(ax, kb)
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+    ax.set_title("true layout", fontsize=9)
+    ax.set_xlabel("pad x (px)")
+
+    if learned:
+        ax = axes[2]
+        n = np.asarray(art.data["curve"]["reaches"])
+        acc = np.asarray(art.data["curve"]["accuracy"], float)
+        ax.plot(n, 100 * acc, "o-", ms=3, color="tab:blue")
+        ax.axhline(99.0, ls="--", color="grey", lw=1)
+        ax.set_xlabel("reaches")
+        ax.set_ylabel("accuracy (%, 2 px grid)")
+        ax.set_ylim(max(0.0, 100 * float(np.min(acc)) - 5) if len(acc) else 0, 100.5)
+        ax.set_title("learning curve", fontsize=9)
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    save(fig, path)

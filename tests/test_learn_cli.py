@@ -1,0 +1,175 @@
+"""``kbcli learn``, ``kbcli plot model``, ``kbcli bench learn``, the stage API and bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kbcli.cli import app
+from kbcli.core.keyboard import KeyboardConfig
+from kbcli.core.learned import LearnedModel
+from kbcli.core.model import ExactModel
+from kbcli.errors import ArtifactError, ConfigError, OutOfReachError
+from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.sim import SimConfig
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages import learn as stage
+from kbcli.stages.models import load_model
+
+
+def _one_line_error(result, *fragments):
+    assert result.exit_code == 1, result.output
+    lines = [ln for ln in result.output.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("kbcli: error:"), result.output
+    for f in fragments:
+        assert f in lines[0], lines[0]
+    assert "Traceback" not in result.output
+
+
+@pytest.fixture
+def files(tmp_path):
+    write_artifact(keyboard_stage.run(KeyboardConfig()), tmp_path / "kb.h5")
+    write_artifact(keyboard_stage.run(KeyboardConfig(rows=2, cols=3)), tmp_path / "small.h5")
+    write_artifact(keyboard_stage.run(KeyboardConfig(origin=(480.0, 250.0))), tmp_path / "far.h5")
+    return tmp_path
+
+
+def test_learn_writes_a_model_artifact_and_plots_it(runner, files):
+    out = files / "m.h5"
+    r = runner.invoke(app, ["learn", "--keyboard", str(files / "small.h5"), "--budget", "150",
+                            "--seed", "2", "--curve-every", "25", "--batch", "5", "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "accuracy" in r.output and "boundary error" in r.output
+    art = read_artifact(out, "model")
+    assert art.config["strategy"] == "active" and art.config["budget"] == 150
+    assert art.config["keyboard"]["cols"] == 3 and art.config["sim"]["mode"] == "ideal"
+    assert art.seed == 2 and art.inputs["keyboard"]["kind"] == "keyboard"
+    d = art.data
+    for name in ("actions", "landed", "perceived"):
+        assert d["samples"][name].shape == (150, 2)
+    np.testing.assert_array_equal(d["curve"]["reaches"], [25, 50, 75, 100, 125, 150])
+    assert d["curve"]["accuracy"].shape == (6,)
+    assert d["evaluation"]["predicted_keys"].shape == (200, 250)
+    a = art.attrs
+    assert a["n_classes"] == 7 and 0.9 < a["accuracy"] <= 1.0 and a["boundary_error_px"] >= 0
+    assert a["accuracy"] == pytest.approx(
+        float(np.mean(d["evaluation"]["predicted_keys"] == _truth(art))))
+    model = load_model(art)
+    assert isinstance(model, LearnedModel) and model.n_classes == 7
+    r = runner.invoke(app, ["plot", "model", str(out), "-o", str(files / "m.png")])
+    assert r.exit_code == 0, r.output
+    assert (files / "m.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def _truth(art):
+    kb = keyboard_stage.load(art)
+    from kbcli.core.model import grid_points
+
+    _, pts = grid_points(kb.area, 1.0)
+    return kb.key_at(pts.reshape(-1, 2)).reshape(pts.shape[:2])
+
+
+def test_learn_is_deterministic(runner, files):
+    for name in ("a.h5", "b.h5"):
+        r = runner.invoke(app, ["learn", "--keyboard", str(files / "small.h5"), "--budget", "40",
+                                "--mode", "dynamics", "--reach-noise", "1",
+                                "-o", str(files / name)])
+        assert r.exit_code == 0, r.output
+    assert (files / "a.h5").read_bytes() == (files / "b.h5").read_bytes()
+    art = read_artifact(files / "a.h5")
+    assert art.data["samples"]["start_angles"].shape == (40, 2)
+    assert art.config["sim"] == {"mode": "dynamics", "base": [400.0, 0.0],
+                                 "link_lengths": [320.0, 280.0], "reach_noise": 1.0}
+
+
+def test_learn_random_strategy(runner, files):
+    r = runner.invoke(app, ["learn", "--keyboard", str(files / "small.h5"), "--strategy", "random",
+                            "--budget", "30", "-o", str(files / "r.h5")])
+    assert r.exit_code == 0, r.output
+    assert read_artifact(files / "r.h5").attrs["strategy"] == "random"
+
+
+def test_exact_strategy_gives_the_exact_model(runner, files):
+    out = files / "exact.h5"
+    r = runner.invoke(app, ["learn", "--keyboard", str(files / "kb.h5"), "--strategy", "exact",
+                            "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    art = read_artifact(out, "model")
+    assert art.config["strategy"] == "exact"
+    assert isinstance(load_model(art), ExactModel)
+    r = runner.invoke(app, ["plot", "model", str(out), "-o", str(files / "e.png")])
+    assert r.exit_code == 0, r.output
+
+
+@pytest.mark.parametrize(
+    "args, fragments",
+    [
+        (["--budget", "0"], ["budget", ">= 1"]),
+        (["--budget", "-5"], ["budget"]),
+        (["--strategy", "greedy"], ["strategy", "active", "random", "exact"]),
+        (["--mode", "teleport"], ["mode", "ideal", "dynamics"]),
+        (["--reach-noise", "-1"], ["reach_noise"]),
+        (["--batch", "0"], ["batch"]),
+        (["--explore-radius", "0"], ["explore_radius"]),
+        (["--curve-every", "0"], ["curve_every"]),
+    ],
+)
+def test_learn_bad_options(runner, files, args, fragments):
+    out = files / "bad.h5"
+    r = runner.invoke(app, ["learn", "--keyboard", str(files / "kb.h5"), "-o", str(out), *args])
+    _one_line_error(r, *fragments)
+    assert not out.exists()
+
+
+def test_learn_refuses_an_unreachable_keyboard_naming_the_keys(runner, files):
+    out = files / "bad.h5"
+    for strategy in ("active", "exact"):
+        r = runner.invoke(app, ["learn", "--keyboard", str(files / "far.h5"), "--strategy",
+                                strategy, "-o", str(out)])
+        _one_line_error(r, "out of reach", "F7")
+        assert not out.exists()
+
+
+def test_learn_refuses_an_artifact_of_the_wrong_kind(runner, files):
+    model = files / "exact.h5"
+    assert runner.invoke(app, ["learn", "--keyboard", str(files / "kb.h5"), "--strategy", "exact",
+                               "-o", str(model)]).exit_code == 0
+    out = files / "bad.h5"
+    r = runner.invoke(app, ["learn", "--keyboard", str(model), "-o", str(out)])
+    _one_line_error(r, "model artifact", "expected keyboard")
+    assert not out.exists()
+    r = runner.invoke(app, ["learn", "--keyboard", str(files / "missing.h5"), "-o", str(out)])
+    _one_line_error(r, "no such file")
+    r = runner.invoke(app, ["learn", "--keyboard", str(files / "kb.h5"), "-o",
+                            str(files / "nofolder" / "m.h5")])
+    _one_line_error(r, "does not exist")
+    r = runner.invoke(app, ["plot", "model", str(files / "kb.h5"), "-o", str(files / "x.png")])
+    _one_line_error(r, "expected model")
+    assert not (files / "x.png").exists()
+
+
+def test_stage_api_refuses_bad_inputs(files):
+    kb_art = read_artifact(files / "kb.h5")
+    exact = stage.run(stage.LearnConfig(strategy="exact"), kb_art, rng=np.random.default_rng(0))
+    with pytest.raises(ArtifactError, match="expected a keyboard"):
+        stage.run(stage.LearnConfig(budget=5), exact, rng=np.random.default_rng(0))
+    with pytest.raises(OutOfReachError):
+        stage.learn(stage.LearnConfig(), read_artifact(files / "far.h5"),
+                    rng=np.random.default_rng(0))
+    with pytest.raises(ConfigError):
+        stage.LearnConfig(sim=SimConfig(mode="dynamics"), budget=True)
+    learning = stage.learn(stage.LearnConfig(budget=20), kb_art, rng=np.random.default_rng(0))
+    assert len(learning) == 2
+    next(learning)
+    with pytest.raises(RuntimeError, match="not finished"):
+        learning.artifact()
+
+
+def test_bench_learn_small(runner):
+    r = runner.invoke(app, ["bench", "learn", "--seeds", "1", "--budgets", "20,40",
+                            "--boundary-budget", "40", "--strategy", "random"])
+    assert r.exit_code == 0, r.output
+    assert "@20" in r.output and "@40" in r.output and "reaches to 99 %" in r.output
+    assert "reaches/s" in r.output and "kbcli learn" in r.output
+    r = runner.invoke(app, ["bench", "learn", "--budgets", "0,x"])
+    _one_line_error(r, "--budgets")
