@@ -20,7 +20,7 @@ help:
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	$(BIN)/python -m pip install --quiet -e ".[dev,bench]"
 	@touch $@
 
 install: $(STAMP)
@@ -60,7 +60,6 @@ reproduce-ideal: $(STAMP)
 
 # Benchmark tables (long: minutes each; not part of the tests).
 bench: $(STAMP)
-	$(BIN)/python -m pip install --quiet -e ".[dev,bench]"
 	$(KBCLI) bench learn
 	$(KBCLI) bench detect
 	$(KBCLI) bench adapt --section exact --section noise --section kde --section rigid
