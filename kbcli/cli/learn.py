@@ -38,7 +38,7 @@ def learn_cmd(
         "--strategy", help="active, random (exploration) or exact (the keyboard's own geometry, "
         "no learning).")] = "active",
     budget: Annotated[int, typer.Option("--budget", help="Reaches to explore with.")] = 800,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the exploration and arm noise.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the exploration and arm noise.")] = 0,
     reach_noise: Annotated[float, typer.Option(
         "--reach-noise", help="Landing scatter of a reach, px (motor noise in dynamics mode).")
     ] = 0.0,
@@ -112,7 +112,7 @@ def _budgets(text: str) -> tuple[int, ...]:
 
 @command(bench_app, name="learn")
 def bench_learn_cmd(
-    seeds: Annotated[int, typer.Option("--seeds", help="Runs per strategy.")] = 10,
+    seeds: Annotated[int, typer.Option("--seeds", min=1, help="Runs per strategy.")] = 10,
     budgets: Annotated[str, typer.Option(
         "--budgets", help="Budgets at which to report the accuracy, comma-separated.")]
         = "50,100,200,400,800,1600",
@@ -120,7 +120,7 @@ def bench_learn_cmd(
         "--strategy", help="Strategies to run (repeat) [default active, random].")] = None,
     mode: Annotated[str, typer.Option("--mode", help="ideal or dynamics.")] = "ideal",
     reach_noise: Annotated[float, typer.Option("--reach-noise", help="Landing scatter, px.")] = 0.0,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the runs.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the runs.")] = 0,
     boundary_budget: Annotated[int, typer.Option(
         "--boundary-budget", help="Reaches at which the boundary error and the learn wall time "
         "are measured.")] = 800,
