@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import os
-import tempfile
 import wave
 from pathlib import Path
 from typing import Annotated
@@ -17,26 +14,17 @@ from kbcli.core.audio import SAMPLE_RATE, to_pcm16
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.io.atomic import atomic_path
 from kbcli.stages import play as stage
 
 
 def write_wav(path: Path, samples: np.ndarray, sample_rate: int) -> None:
     """Write mono 16-bit PCM atomically (temporary file in the same folder, then rename)."""
-    folder = path.parent if str(path.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    os.close(fd)
-    try:
-        with wave.open(tmp, "wb") as w:
-            w.setnchannels(1)
-            w.setsampwidth(2)
-            w.setframerate(sample_rate)
-            w.writeframes(to_pcm16(samples))
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
+    with atomic_path(path) as tmp, wave.open(tmp, "wb") as w:
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(sample_rate)
+        w.writeframes(to_pcm16(samples))
 
 
 @command(name="play")

@@ -16,7 +16,6 @@ import contextlib
 import hashlib
 import json
 import os
-import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -25,6 +24,7 @@ import h5py
 import numpy as np
 
 from kbcli.errors import ArtifactError
+from kbcli.io.atomic import atomic_path
 from kbcli.stages.artifact import SCHEMA_VERSIONS, Artifact
 
 _COMPRESS_ABOVE = 4096  # elements; small datasets stay contiguous
@@ -92,12 +92,7 @@ def write_artifact(art: Artifact, path: str | os.PathLike) -> str:
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise ArtifactError(f"{path}: folder {folder} does not exist")
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    except OSError as exc:
-        raise ArtifactError(f"{path}: cannot write in {folder} ({exc.strerror})") from None
-    os.close(fd)
-    try:
+    with atomic_path(path) as tmp:
         fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
         fapl.set_libver_bounds(h5py.h5f.LIBVER_EARLIEST, h5py.h5f.LIBVER_LATEST)
         fcpl = h5py.h5p.create(h5py.h5p.FILE_CREATE)
@@ -114,16 +109,6 @@ def write_artifact(art: Artifact, path: str | os.PathLike) -> str:
                 f.attrs[f"input_sha256.{role}"] = str(art.inputs[role].get("sha256"))
             f.attrs["attrs"] = _json(art.attrs)
             _write_group(f, art.data)
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException as exc:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        if isinstance(exc, OSError) and exc.errno is not None:
-            raise ArtifactError(f"{path}: cannot write ({exc.strerror})") from None
-        raise
     with contextlib.suppress(OSError):  # make the rename durable
         dfd = os.open(folder, os.O_RDONLY)
         try:

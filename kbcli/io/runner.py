@@ -31,7 +31,6 @@ import importlib
 import json
 import os
 import shutil
-import tempfile
 import time
 import uuid
 from collections.abc import Iterable, Iterator
@@ -43,6 +42,7 @@ import h5py
 import numpy as np
 
 from kbcli.errors import ConfigError, KbcliError
+from kbcli.io.atomic import atomic_path
 
 CHECKPOINT_FORMAT = 1
 CONNECT_TIMEOUT_S = 5.0
@@ -435,14 +435,5 @@ class Checkpoint:
             shutil.rmtree(self.folder)
 
     def _atomic(self, path: Path, write) -> None:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        os.close(fd)
-        try:
+        with atomic_path(path) as tmp:
             write(tmp)
-            with open(tmp, "rb+") as fh:
-                os.fsync(fh.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(tmp)
-            raise
