@@ -43,6 +43,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from kbcli.core import transforms
+from kbcli.core.config import check_known
 from kbcli.core.model import UNKNOWN, ExactModel
 from kbcli.core.posterior import (
     HypothesisGrid,
@@ -210,11 +211,7 @@ class AdapterConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> AdapterConfig:
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ConfigError(f"unknown adapt option(s) {', '.join(unknown)}; "
-                              f"valid: {', '.join(sorted(known))}")
+        check_known(cls, d, "adapt")
         return cls(**d)
 
 

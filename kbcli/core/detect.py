@@ -60,6 +60,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from kbcli.core.config import check_known
 from kbcli.errors import ConfigError
 
 
@@ -135,12 +136,7 @@ class DetectorConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> DetectorConfig:
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ConfigError(
-                f"unknown detector option(s) {', '.join(unknown)}; valid: {', '.join(sorted(known))}"
-            )
+        check_known(cls, d, "detector")
         d = dict(d)
         if "prior" in d:
             d["prior"] = tuple(d["prior"])

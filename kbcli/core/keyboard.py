@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kbcli.core import transforms
+from kbcli.core.config import check_known
 from kbcli.errors import ConfigError
 
 SCALES: dict[str, tuple[int, ...]] = {
@@ -160,12 +161,7 @@ class KeyboardConfig:
     @classmethod
     def from_dict(cls, d: dict) -> KeyboardConfig:
         """Build from a mapping (a TOML table, an artifact's config); unknown keys are rejected."""
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ConfigError(
-                f"unknown keyboard option(s) {', '.join(unknown)}; valid: {', '.join(sorted(known))}"
-            )
+        check_known(cls, d, "keyboard")
         d = dict(d)
         if "origin" in d:
             d["origin"] = tuple(d["origin"])

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from kbcli.core.config import check_known
 from kbcli.core.keyboard import Keyboard
 from kbcli.errors import ConfigError
 
@@ -57,10 +58,7 @@ class SimConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> SimConfig:
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ConfigError(f"unknown sim option(s) {', '.join(unknown)}; valid: {', '.join(sorted(known))}")
+        check_known(cls, d, "sim")
         d = dict(d)
         for k in ("base", "link_lengths"):
             if k in d:

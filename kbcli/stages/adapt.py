@@ -22,6 +22,7 @@ import numpy as np
 
 from kbcli.core import transforms
 from kbcli.core.adapt import POSTERIORS, Adapter, AdapterConfig, adapt, build_table
+from kbcli.core.config import check_known
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.posterior import LikelihoodTable
 from kbcli.errors import ArtifactError, ConfigError, KbcliError
@@ -114,11 +115,7 @@ class AdaptConfig:
     @classmethod
     def from_dict(cls, d: dict) -> AdaptConfig:
         """Build from a mapping (a TOML table, an artifact's config); unknown keys are rejected."""
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ConfigError(f"unknown adapt option(s) {', '.join(unknown)}; "
-                              f"valid: {', '.join(sorted(known))}")
+        check_known(cls, d, "adapt")
         return cls(**d)
 
 

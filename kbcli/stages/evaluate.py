@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from kbcli.core import stats, transforms
+from kbcli.core.config import check_known
 from kbcli.core.keyboard import Keyboard
 from kbcli.errors import ConfigError
 from kbcli.sim import MODES
@@ -278,12 +279,7 @@ class EvaluateConfig:
         """
         if not isinstance(d, dict):
             raise ConfigError("[evaluate] must be a table")
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ConfigError(
-                f"unknown evaluate option(s) {', '.join(unknown)}; valid: {', '.join(sorted(known))}"
-            )
+        check_known(cls, d, "evaluate")
         d = dict(d)
         for k in ("strategies", "modes", "thresholds", "snapshot_steps"):
             if k in d:
