@@ -68,7 +68,8 @@ def test_dynamics_reacher_is_reproducible_and_scatters_by_reach_noise():
     np.testing.assert_array_equal(a, b)
     d = a - targets
     assert abs(np.mean(d)) < 0.3
-    assert 1.6 < np.std(d[:, 0]) < 2.4 and 1.6 < np.std(d[:, 1]) < 2.4
+    sd = np.std(d, axis=0)  # both axes scatter by about the 2 px asked for
+    assert np.all((sd > 1.6) & (sd < 2.4))
 
 
 def test_reset_puts_the_arm_in_a_pose():
