@@ -113,8 +113,10 @@ def test_out_of_reach_refused_and_large_moves_fit():
         perturb.check_reach(KB, "translation", np.array([300.0, 0.0]), SimConfig())
     for params in ([40.0, 40.0], [-40.0, 40.0], [40.0, -40.0], [-40.0, -40.0]):
         perturb.check_reach(KB, "translation", np.array(params), SimConfig())
-    pts = perturb.key_outline(KB)
-    assert pts.shape == (8 * KB.n_keys, 2) and workspace_check(SimConfig(), pts).all()
+    pts, keys = perturb.key_outline(KB)
+    # every key's outline, every 5 px: a 50 px square has 40 points
+    assert pts.shape == (40 * KB.n_keys, 2) and workspace_check(SimConfig(), pts).all()
+    np.testing.assert_array_equal(np.bincount(keys), np.full(KB.n_keys, 40))
 
 
 @pytest.mark.parametrize(

@@ -9,9 +9,12 @@ import typer
 
 from kbcli.cli.app import command, out, output_path, plot_app
 from kbcli.core.keyboard import KeyboardConfig
+from kbcli.core.layouts import LAYOUTS
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml
 from kbcli.stages import keyboard as stage
+
+_LAYOUT_HELP = "; ".join(f"{n}: {lay.summary}" for n, lay in LAYOUTS.items())
 
 
 @command(name="keyboard")
@@ -19,40 +22,69 @@ def keyboard_cmd(
     output: Annotated[Path, typer.Option("-o", "--output", help="Keyboard artifact to write (.h5).")],
     config: Annotated[
         Path | None,
-        typer.Option("--config", help="TOML file with a [keyboard] table (e.g. pipelines/keyboard.toml)."),
+        typer.Option("--config", help="TOML file with a [keyboard] table (e.g. pipelines/keyboard.toml; "
+                     "pipelines/layouts/*.toml for the other layouts, polygons' keys included)."),
     ] = None,
-    rows: Annotated[int | None, typer.Option(help="Rows of keys [default 4].")] = None,
-    cols: Annotated[int | None, typer.Option(help="Columns of keys [default 8].")] = None,
-    key_size: Annotated[float | None, typer.Option(help="Side of a square key, px [default 50].")] = None,
-    origin_x: Annotated[float | None, typer.Option(help="Pad x of the lower-left corner, px [default 200].")] = None,
-    origin_y: Annotated[float | None, typer.Option(help="Pad y of the lower-left corner, px [default 250].")] = None,
+    layout: Annotated[str | None, typer.Option(
+        "--layout", help=f"Layout of the keys [default grid]. {_LAYOUT_HELP}.")] = None,
+    rows: Annotated[int | None, typer.Option(help="Rows of keys: grid, hex, pads [default 4].")] = None,
+    cols: Annotated[int | None, typer.Option(
+        help="Columns of keys: grid, hex, pads [default 8]; white keys: piano [default 12].")] = None,
+    key_size: Annotated[float | None, typer.Option(
+        help="Key size, px: a square's side (grid) [default 50], a hexagon's width across the flats "
+        "(hex) [50], a white key's width (piano) [36], the distance between pad centres (pads) [50]."
+    )] = None,
+    key_height: Annotated[float | None, typer.Option(
+        help="piano: height of the white keys, px [default 160].")] = None,
+    black_width: Annotated[float | None, typer.Option(
+        help="piano: width of the black keys, px [default 20].")] = None,
+    black_height: Annotated[float | None, typer.Option(
+        help="piano: height of the black keys, px [default 100].")] = None,
+    pad_radius: Annotated[float | None, typer.Option(
+        help="pads: radius of a pad, px [default 20].")] = None,
+    origin_x: Annotated[float | None, typer.Option(
+        help="Pad x of the lower-left corner, px [default: the keyboard centred on x = 400; "
+        "grid 200; polygons 0].")] = None,
+    origin_y: Annotated[float | None, typer.Option(
+        help="Pad y of the lower-left corner, px [default: centred on y = 350; grid 250; "
+        "polygons 0].")] = None,
     margin: Annotated[float | None, typer.Option(help="Working band around the keyboard, px [default 50].")] = None,
-    base_note: Annotated[str | None, typer.Option(help="Note of the bottom-left key [default C3].")] = None,
-    scale: Annotated[str | None, typer.Option(help="diatonic, chromatic or pentatonic [default diatonic].")] = None,
+    base_note: Annotated[str | None, typer.Option(help="Note of the first key [default C3].")] = None,
+    scale: Annotated[str | None, typer.Option(
+        help="diatonic, chromatic or pentatonic: grid, pads, polygons [default diatonic].")] = None,
     noise: Annotated[float | None, typer.Option("--noise", help="Std of perception noise on pitch and tempo [default 0].")] = None,
     threshold: Annotated[float | None, typer.Option("--threshold", help="Manhattan match threshold, Eq. 2 [default 1.5].")] = None,
 ) -> None:
-    """Build a virtual keyboard and write its artifact.
+    """Build a virtual keyboard of any layout and write its artifact.
 
-    Reads an optional TOML config; flags override it. Writes OUTPUT (kind 'keyboard') and prints
-    a one-line summary.
+    Reads an optional TOML config; flags override it. Refuses (one line naming the key or option,
+    exit 1, nothing written) an unknown layout, overlapping keys, degenerate polygons, keys that
+    sound alike (Eq. 2) and keys out of the (default) arm's reach. Writes OUTPUT (kind 'keyboard')
+    and prints a one-line summary.
     """
+    from kbcli.sim import SimConfig, check_keyboard_reachable
+    from kbcli.core.keyboard import Keyboard
+
     values = dict(load_toml(config, "keyboard")) if config is not None else {}
     flags = {
-        "rows": rows, "cols": cols, "key_size": key_size, "margin": margin,
-        "base_note": base_note, "scale": scale, "noise_std": noise, "match_threshold": threshold,
+        "layout": layout, "rows": rows, "cols": cols, "key_size": key_size,
+        "key_height": key_height, "black_width": black_width, "black_height": black_height,
+        "pad_radius": pad_radius, "margin": margin, "base_note": base_note, "scale": scale,
+        "noise_std": noise, "match_threshold": threshold,
     }
     values.update({k: v for k, v in flags.items() if v is not None})
     if origin_x is not None or origin_y is not None:
-        ox, oy = values.get("origin", KeyboardConfig().origin)
+        ox, oy = values.get("origin") or KeyboardConfig.from_dict(
+            {k: v for k, v in values.items() if k != "origin"}).origin
         values["origin"] = (ox if origin_x is None else origin_x, oy if origin_y is None else origin_y)
     cfg = KeyboardConfig.from_dict(values)
     output_path(output)
+    check_keyboard_reachable(SimConfig(), Keyboard(cfg))
     art = stage.run(cfg)
     write_artifact(art, output)
     kb = stage.load(art)
-    out.print(f"wrote {output}: {cfg.rows} x {cfg.cols} keys of {cfg.key_size:g} px, "
-              f"{kb.names[0]} to {kb.names[-1]}, working area {tuple(round(v) for v in kb.area)}")
+    out.print(f"wrote {output}: {cfg.layout} layout, {kb.describe()}, working area "
+              f"{tuple(round(v) for v in kb.area)}")
 
 
 @command(plot_app, name="keyboard")
@@ -60,7 +92,8 @@ def plot_keyboard_cmd(
     artifact: Annotated[Path, typer.Argument(help="Keyboard artifact (or any artifact made from one).")],
     output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path("keyboard.png"),
 ) -> None:
-    """Draw the keyboard: keys labelled with note and tempo, the working area dashed. Writes a PNG."""
+    """Draw the keyboard (any layout): keys labelled with note and tempo, the working area dashed.
+    Writes a PNG."""
     from kbcli.viz.keyboard import plot_keyboard
 
     art = read_artifact(artifact, "keyboard")

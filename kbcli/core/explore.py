@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from kbcli.core.learned import LearnedModel
+from kbcli.core.model_classes import DEFAULT_MODEL_CLASS, fit_model, get_model_class
 from kbcli.errors import ConfigError
 
 #: A strategy: ``(exploration, n, rng) -> (k, 2)`` targets inside ``exploration.area``, usually
@@ -92,6 +92,9 @@ class ExploreConfig:
         ``active``: cover the working area until no point is further than this (px) from a reach.
     n_candidates : int
         ``active``: uniform candidates from which to spread reaches while no boundary is known.
+    model_class : str
+        The model fitted to the samples (:data:`kbcli.core.model_classes.MODEL_CLASSES`): the
+        ``active`` strategy bisects its boundary bands, whatever the class.
     """
 
     strategy: str = "active"
@@ -99,9 +102,11 @@ class ExploreConfig:
     batch: int = 10
     explore_radius: float = 20.0
     n_candidates: int = 4000
+    model_class: str = DEFAULT_MODEL_CLASS
 
     def __post_init__(self) -> None:
         get_strategy(self.strategy)
+        get_model_class(self.model_class)
         for name in ("budget", "batch", "n_candidates"):
             v = getattr(self, name)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1:
@@ -118,6 +123,7 @@ class ExploreConfig:
             "batch": int(self.batch),
             "explore_radius": float(self.explore_radius),
             "n_candidates": int(self.n_candidates),
+            "model_class": self.model_class,
         }
 
 
@@ -240,7 +246,7 @@ class ExploreStep:
     exploration: Exploration
 
     @property
-    def model(self) -> LearnedModel:
+    def model(self):
         """The model fitted to every sample so far (valid until the next step)."""
         return self.exploration.model
 
@@ -295,18 +301,19 @@ class Exploration:
         self.targets = np.empty((0, 2))
         self.landed = np.empty((0, 2))
         self.perceived = np.empty((0, 0))
-        self._model: LearnedModel | None = None
+        self._model = None
         self._plan = np.empty((0, 2))
 
     @property
-    def model(self) -> LearnedModel | None:
-        """The model fitted to every sample so far (None before the first reach)."""
+    def model(self):
+        """The model (of ``cfg.model_class``) fitted to every sample so far (None before the
+        first reach)."""
         if len(self.landed) == 0:
             return None
         if self._model is None:
-            self._model = LearnedModel(match_threshold=self.match_threshold, area=self.area).fit(
-                self.landed, self.perceived, targets=self.targets
-            )
+            self._model = fit_model(self.cfg.model_class, self.landed, self.perceived,
+                                    match_threshold=self.match_threshold, area=self.area,
+                                    targets=self.targets)
         return self._model
 
     def __iter__(self) -> Iterator[ExploreStep]:

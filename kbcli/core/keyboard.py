@@ -1,10 +1,16 @@
-"""The instrument: a virtual keyboard of square keys laid on a tactile pad (paper Sect. III-A, Fig. 2).
+"""The instrument: a virtual keyboard laid on a tactile pad (paper Sect. III-A, Fig. 2).
 
-Coordinates are pad pixels, x to the right and y up. At its *reference pose* the keyboard's lower-left
-corner sits at ``origin``; key ``k`` is row ``k // cols`` (row 0 at the bottom), column ``k % cols``.
-Outside the keys is silence (key index ``-1``). Each key plays a sound described by a D-dimensional
-feature vector; here D = 2: pitch (MIDI note number) and tempo (beats per minute). In the paper every
-key changes both. Pitches climb a scale row by row; tempo grows with the column and with the row.
+Coordinates are pad pixels, x to the right and y up. The keys' shapes, pitches and tempi come from a
+*layout* (:mod:`kbcli.core.layouts`: ``grid``, the paper's square keys and the default; ``hex``,
+``piano``, ``pads`` and ``polygons``), placed with the keyboard's lower-left corner at ``origin`` at
+its *reference pose*. Outside the keys is silence (key index ``-1``). Each key plays a sound
+described by a D-dimensional feature vector; here D = 2: pitch (MIDI note number) and tempo (beats
+per minute). In the paper every key changes both; every two keys must sound further apart than the
+matching threshold (Eq. 2), or the robot could not tell them apart.
+
+Everything else reads the geometry through :class:`Keyboard` (``key_at``, ``key_outlines``,
+``key_centres``, ``sample_in_key``, ``key_grid_points``, ``bounds``, ``area``): nothing assumes
+square keys.
 
 A displaced keyboard is described by a transform of the pad (:mod:`kbcli.core.transforms`): the sound
 under finger position ``x`` is the reference sound under ``T^-1(x)``.
@@ -17,23 +23,32 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
 from kbcli.core import transforms
 from kbcli.core.config import check_known
+from kbcli.core.geometry import check_overlaps
+from kbcli.core.layouts import (
+    DEFAULT_CENTRE,
+    LAYOUT_FIELDS,
+    LAYOUTS,
+    SCALES,
+    LayoutGeometry,
+    PolygonKey,
+    get_layout,
+)
 from kbcli.errors import ConfigError
 
-SCALES: dict[str, tuple[int, ...]] = {
-    "diatonic": (0, 2, 4, 5, 7, 9, 11),  # C major
-    "chromatic": tuple(range(12)),
-    "pentatonic": (0, 2, 4, 7, 9),
-}
 NOTE_NAMES = ("C", "C#", "D", "D#", "E", "F", "F#", "G", "G#", "A", "A#", "B")
 _NOTE_RE = re.compile(r"^([A-Ga-g])([#b]?)(-?\d+)?$")
 DEFAULT_OCTAVE = 4
 FEATURE_NAMES = ("pitch", "tempo")
+DEFAULT_SCALE = "diatonic"
+
+__all__ = ["SCALES", "LAYOUTS", "KeyboardConfig", "Keyboard", "PolygonKey", "match",
+           "midi_to_name", "name_to_midi"]
 
 
 def _positive(name: str, value: float) -> None:
@@ -70,38 +85,59 @@ def name_to_midi(name: str) -> int:
 
 @dataclass(frozen=True, kw_only=True)
 class KeyboardConfig:
-    """Geometry and sounds of a keyboard. All lengths in pad pixels.
+    """Layout, geometry and sounds of a keyboard. All lengths in pad pixels.
+
+    Fields left ``None`` take the layout's default (see :mod:`kbcli.core.layouts`); a field the
+    layout does not use must be left out.
 
     Parameters
     ----------
+    layout : str
+        A name in :data:`~kbcli.core.layouts.LAYOUTS`: grid, hex, piano, pads or polygons.
     rows, cols : int
-        Number of key rows and columns.
+        Rows and columns of keys (grid, hex, pads); ``cols`` is the number of white keys (piano).
     key_size : float
-        Side of a square key.
+        Side of a square key (grid), width across a hexagon's flats (hex), width of a white key
+        (piano), distance between pad centres (pads).
+    key_height, black_width, black_height : float
+        piano: height of the white keys, width and height of the black keys.
+    pad_radius : float
+        pads: radius of a pad.
+    keys : tuple of PolygonKey
+        polygons: the keys (vertices, and optional note and tempo).
     origin : tuple of float
-        Lower-left corner of the keyboard at its reference pose.
+        Lower-left corner of the keyboard at its reference pose (default: the keyboard centred on
+        (400, 350), the grid's (200, 250); polygons: (0, 0), so their vertices are pad coordinates).
     margin : float
         Width of the band around the keyboard that belongs to the robot's working area (where it
         explores, where displaced keys can be, and where model accuracy is measured).
     base_note : str
-        Note of key 0 (bottom-left); the next keys climb ``scale`` row by row.
+        Note of key 0 (bottom-left); the next keys climb ``scale`` (grid, pads, polygons), the
+        Wicki-Hayden lattice (hex) or the chromatic scale (piano).
     scale : str
-        One of ``SCALES``.
+        One of ``SCALES`` (grid, pads, polygons; default diatonic).
     tempo_base, tempo_col_step, tempo_row_step : float
-        Tempo of key (r, c) is ``tempo_base + c * tempo_col_step + r * tempo_row_step`` bpm.
+        Tempo of key (r, c) is ``tempo_base + c * tempo_col_step + r * tempo_row_step`` bpm (grid,
+        hex, pads; piano and polygons: see :mod:`kbcli.core.layouts`).
     noise_std : float
         Standard deviation of the Gaussian noise added to perceived features (pitch and tempo units).
     match_threshold : float
         Manhattan distance below which a perceived sound matches a known one (Eq. 2).
     """
 
-    rows: int = 4
-    cols: int = 8
-    key_size: float = 50.0
-    origin: tuple[float, float] = (200.0, 250.0)
+    layout: str = "grid"
+    rows: int | None = None
+    cols: int | None = None
+    key_size: float | None = None
+    key_height: float | None = None
+    black_width: float | None = None
+    black_height: float | None = None
+    pad_radius: float | None = None
+    keys: tuple[PolygonKey, ...] | None = None
+    origin: tuple[float, float] | None = None
     margin: float = 50.0
     base_note: str = "C3"
-    scale: str = "diatonic"
+    scale: str | None = None
     tempo_base: float = 60.0
     tempo_col_step: float = 4.0
     tempo_row_step: float = 30.0
@@ -109,13 +145,24 @@ class KeyboardConfig:
     match_threshold: float = 1.5
 
     def __post_init__(self) -> None:
-        for name in ("rows", "cols"):
-            v = getattr(self, name)
-            if not isinstance(v, int) or isinstance(v, bool) or v < 1:
-                raise ConfigError(f"{name} must be a whole number >= 1, got {v!r}")
-        if self.rows * self.cols > 256:
-            raise ConfigError(f"rows x cols must be at most 256 keys, got {self.rows * self.cols}")
-        _positive("key_size", self.key_size)
+        lay = get_layout(self.layout)
+        for name in LAYOUT_FIELDS:
+            if name not in lay.fields and getattr(self, name) is not None:
+                users = [n for n, v in LAYOUTS.items() if name in v.fields]
+                raise ConfigError(f"{name} does not apply to the {self.layout} layout (it applies "
+                                  f"to: {', '.join(users)})")
+            if name in lay.fields and getattr(self, name) is None:
+                object.__setattr__(self, name, lay.defaults[name])
+        if self.keys is not None:
+            object.__setattr__(self, "keys", tuple(
+                PolygonKey.from_dict(k, i) for i, k in enumerate(self.keys)))
+        if not lay.uses_scale and self.scale is not None:
+            raise ConfigError(f"scale does not apply to the {self.layout} layout (its notes follow "
+                              f"its own lattice)")
+        if lay.uses_scale and self.scale is None:
+            object.__setattr__(self, "scale", DEFAULT_SCALE)
+        if self.scale is not None and self.scale not in SCALES:
+            raise ConfigError(f"unknown scale {self.scale!r}; valid: {', '.join(SCALES)}")
         _positive("match_threshold", self.match_threshold)
         _non_negative("margin", self.margin)
         _non_negative("noise_std", self.noise_std)
@@ -123,49 +170,86 @@ class KeyboardConfig:
             _non_negative(name, getattr(self, name))
         if self.tempo_base <= 0:
             raise ConfigError(f"tempo_base must be > 0 bpm, got {self.tempo_base!r}")
-        if len(self.origin) != 2 or not all(
-            isinstance(v, (int, float)) and math.isfinite(v) for v in self.origin
-        ):
-            raise ConfigError(f"origin must be two finite numbers, got {self.origin!r}")
-        object.__setattr__(self, "origin", (float(self.origin[0]), float(self.origin[1])))
-        if self.scale not in SCALES:
-            raise ConfigError(f"unknown scale {self.scale!r}; valid: {', '.join(SCALES)}")
         name_to_midi(self.base_note)
-        top = self.pitches().max()
+        if self.origin is not None:
+            if len(self.origin) != 2 or not all(
+                isinstance(v, (int, float)) and math.isfinite(v) for v in self.origin
+            ):
+                raise ConfigError(f"origin must be two finite numbers, got {self.origin!r}")
+            object.__setattr__(self, "origin", (float(self.origin[0]), float(self.origin[1])))
+        local = lay.build(self)  # the keys in the keyboard's frame; raises on bad geometry
+        if self.origin is None:
+            if lay.default_origin is not None:
+                origin = lay.default_origin
+            else:
+                x0, y0, x1, y1 = local.bounds
+                origin = (DEFAULT_CENTRE[0] - (x0 + x1) / 2, DEFAULT_CENTRE[1] - (y0 + y1) / 2)
+            object.__setattr__(self, "origin", (float(origin[0]), float(origin[1])))
+        geom = local.moved(self.origin)
+        names = tuple(midi_to_name(p) for p in geom.pitches)
+        top = int(np.max(geom.pitches))
         if top > 127:
             raise ConfigError(f"the highest key would be MIDI {top}, above 127: lower base_note")
+        if lay.checks_overlap:
+            check_overlaps(geom.shapes, names)
+        feats = np.column_stack([geom.pitches.astype(float), geom.tempos.astype(float)])
+        _check_distinct(feats, names, self.match_threshold)
+        object.__setattr__(self, "_geometry", geom)
+
+    @property
+    def geometry(self) -> LayoutGeometry:
+        """The keys on the pad at the reference pose (built and checked by the config)."""
+        return self._geometry  # type: ignore[attr-defined]
 
     def pitches(self) -> np.ndarray:
-        """MIDI pitch of every key, (rows * cols,) int."""
-        steps = SCALES[self.scale]
-        base = name_to_midi(self.base_note)
-        k = np.arange(self.rows * self.cols)
-        return base + 12 * (k // len(steps)) + np.asarray(steps)[k % len(steps)]
+        """MIDI pitch of every key, (K,) int."""
+        return self.geometry.pitches.copy()
 
     def to_dict(self) -> dict:
-        return {
-            "rows": self.rows,
-            "cols": self.cols,
-            "key_size": self.key_size,
-            "origin": list(self.origin),
-            "margin": self.margin,
-            "base_note": self.base_note,
-            "scale": self.scale,
-            "tempo_base": self.tempo_base,
-            "tempo_col_step": self.tempo_col_step,
-            "tempo_row_step": self.tempo_row_step,
-            "noise_std": self.noise_std,
-            "match_threshold": self.match_threshold,
-        }
+        """The config as a plain mapping: the layout's own fields and the common ones."""
+        lay = get_layout(self.layout)
+        d: dict = {"layout": self.layout}
+        for f in fields(self):
+            if f.name == "layout" or (f.name in LAYOUT_FIELDS and f.name not in lay.fields):
+                continue
+            v = getattr(self, f.name)
+            if f.name == "scale" and v is None:
+                continue
+            if f.name == "keys":
+                v = [k.to_dict() for k in v]
+            elif f.name == "origin":
+                v = list(v)
+            d[f.name] = v
+        return d
 
     @classmethod
     def from_dict(cls, d: dict) -> KeyboardConfig:
-        """Build from a mapping (a TOML table, an artifact's config); unknown keys are rejected."""
+        """Build from a mapping (a TOML table, an artifact's config); unknown keys are rejected.
+
+        A mapping without ``layout`` (schema 1 keyboard artifacts) is a grid.
+        """
         check_known(cls, d, "keyboard")
         d = dict(d)
-        if "origin" in d:
+        if "origin" in d and d["origin"] is not None:
             d["origin"] = tuple(d["origin"])
+        if "keys" in d and d["keys"] is not None:
+            if not isinstance(d["keys"], (list, tuple)):
+                raise ConfigError("keys must be a list of tables ([[keyboard.keys]])")
+            d["keys"] = tuple(d["keys"])
         return cls(**d)
+
+
+def _check_distinct(features: np.ndarray, names: tuple[str, ...], threshold: float) -> None:
+    """ConfigError naming two keys whose sounds are within the matching threshold (Eq. 2)."""
+    d = np.abs(features[:, None, :] - features[None, :, :]).sum(axis=-1)
+    d[np.diag_indices(len(d))] = np.inf
+    i, j = np.unravel_index(np.argmin(d), d.shape)
+    if d[i, j] <= threshold:
+        i, j = min(i, j), max(i, j)
+        raise ConfigError(
+            f"keys {i} ({names[i]}, {features[i, 1]:g} bpm) and {j} ({names[j]}, "
+            f"{features[j, 1]:g} bpm) sound alike: their Manhattan distance {d[i, j]:g} is not "
+            f"above match_threshold {threshold:g} (Eq. 2); change their notes or tempi")
 
 
 @dataclass(frozen=True)
@@ -176,7 +260,7 @@ class Keyboard:
     ----------
     features : (K, 2) ndarray
         Pitch and tempo of each key.
-    names : list of str
+    names : tuple of str
         Note name of each key.
     """
 
@@ -185,35 +269,47 @@ class Keyboard:
     names: tuple[str, ...] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        c = self.config
-        k = np.arange(c.rows * c.cols)
-        tempo = c.tempo_base + (k % c.cols) * c.tempo_col_step + (k // c.cols) * c.tempo_row_step
-        feats = np.column_stack([c.pitches().astype(float), tempo.astype(float)])
+        g = self.config.geometry
+        feats = np.column_stack([g.pitches.astype(float), g.tempos.astype(float)])
         feats.setflags(write=False)
         object.__setattr__(self, "features", feats)
-        object.__setattr__(self, "names", tuple(midi_to_name(p) for p in c.pitches()))
+        object.__setattr__(self, "names", tuple(midi_to_name(p) for p in g.pitches))
 
     # -- geometry -------------------------------------------------------------------------------
     @property
+    def layout(self) -> str:
+        return self.config.layout
+
+    @property
+    def shapes(self):
+        """The keys' :class:`~kbcli.core.geometry.KeyShapes` at the reference pose."""
+        return self.config.geometry.shapes
+
+    @property
     def n_keys(self) -> int:
-        return self.config.rows * self.config.cols
+        return self.shapes.n_keys
+
+    @property
+    def pitches(self) -> np.ndarray:
+        """(K,) MIDI note of each key."""
+        return self.config.geometry.pitches
 
     @property
     def size(self) -> np.ndarray:
         """(2,) width and height of the keyboard."""
-        return np.array([self.config.cols, self.config.rows], float) * self.config.key_size
+        x0, y0, x1, y1 = self.bounds
+        return np.array([x1 - x0, y1 - y0], float)
 
     @property
     def centre(self) -> np.ndarray:
         """(2,) centre of the keyboard at its reference pose (the rotation centre of rigid moves)."""
-        return np.asarray(self.config.origin) + self.size / 2
+        x0, y0, x1, y1 = self.bounds
+        return np.array([(x0 + x1) / 2, (y0 + y1) / 2])
 
     @property
     def bounds(self) -> tuple[float, float, float, float]:
         """(xmin, ymin, xmax, ymax) of the keyboard at its reference pose."""
-        x0, y0 = self.config.origin
-        w, h = self.size
-        return (x0, y0, x0 + w, y0 + h)
+        return tuple(float(v) for v in self.config.geometry.bounds)  # type: ignore[return-value]
 
     @property
     def area(self) -> tuple[float, float, float, float]:
@@ -223,15 +319,25 @@ class Keyboard:
         return (x0 - m, y0 - m, x1 + m, y1 + m)
 
     def key_centres(self) -> np.ndarray:
-        """(K, 2) centre of each key at the reference pose."""
-        c = self.config
-        k = np.arange(self.n_keys)
-        return np.column_stack(
-            [
-                c.origin[0] + (k % c.cols + 0.5) * c.key_size,
-                c.origin[1] + (k // c.cols + 0.5) * c.key_size,
-            ]
-        )
+        """(K, 2) a point well inside each key (its centre) at the reference pose."""
+        return self.shapes.label_points()
+
+    def key_outlines(self) -> list[np.ndarray]:
+        """The outline of each key as a counter-clockwise polygon (pads as 64-gons)."""
+        return self.shapes.outlines()
+
+    def sample_in_key(self, key: int, n: int, rng: np.random.Generator) -> np.ndarray:
+        """(n, 2) uniform draws inside ``key`` at the reference pose."""
+        return self.shapes.sample(int(key), int(n), rng)
+
+    def key_grid_points(self, per_side: int) -> tuple[np.ndarray, np.ndarray]:
+        """An even grid of points inside every key: (m, 2) points and (m,) their keys."""
+        return self.shapes.grid_points(int(per_side))
+
+    def key_outline_points(self, spacing: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
+        """Points along every key's outline (vertices and at most ``spacing`` px apart) and their
+        keys."""
+        return self.shapes.outline_points(spacing)
 
     def key_at(
         self, points: np.ndarray, pose: np.ndarray | None = None, family: str = "translation"
@@ -254,14 +360,7 @@ class Keyboard:
         p = np.asarray(points, dtype=float).reshape(-1, 2)
         if pose is not None:
             p = transforms.inverse(family, np.asarray(pose, float), p, self.centre)
-        c = self.config
-        u = (p - np.asarray(c.origin)) / c.key_size
-        col = np.floor(u[:, 0])
-        row = np.floor(u[:, 1])
-        inside = (col >= 0) & (col < c.cols) & (row >= 0) & (row < c.rows)
-        out = np.full(len(p), -1, dtype=np.int64)
-        out[inside] = (row[inside] * c.cols + col[inside]).astype(np.int64)
-        return out
+        return self.shapes.key_at(p)
 
     def sound_of(self, keys: np.ndarray) -> np.ndarray:
         """Features of key indices, (n, 2); NaN rows for silence (-1)."""
@@ -291,13 +390,35 @@ class Keyboard:
         return s
 
     def note_key(self, note: str | int) -> int:
-        """Index of the key that plays ``note`` (a name like 'A', 'F#3' or a MIDI number)."""
+        """Index of the (first) key that plays ``note`` (a name like 'A', 'F#3' or a MIDI number)."""
         midi = note if isinstance(note, (int, np.integer)) else name_to_midi(str(note))
-        hits = np.flatnonzero(self.config.pitches() == midi)
+        hits = np.flatnonzero(self.pitches == midi)
         if len(hits) == 0:
-            lo, hi = self.names[0], self.names[-1]
+            lo, hi = midi_to_name(self.pitches.min()), midi_to_name(self.pitches.max())
             raise ConfigError(f"note {note!r} is not on the keyboard (keys span {lo} to {hi})")
         return int(hits[0])
+
+    def key_label(self, key: int) -> str:
+        """How messages name a key: its note, and its index when another key plays that note."""
+        name = self.names[int(key)]
+        return name if self.names.count(name) == 1 else f"{name} (key {int(key)})"
+
+    def describe(self) -> str:
+        """One line: the layout, its keys and their range."""
+        c = self.config
+        lo, hi = midi_to_name(self.pitches.min()), midi_to_name(self.pitches.max())
+        if c.layout == "grid":
+            what = f"{c.rows} x {c.cols} keys of {c.key_size:g} px"
+        elif c.layout == "hex":
+            what = f"{c.rows} x {c.cols} hexagonal keys {c.key_size:g} px across"
+        elif c.layout == "piano":
+            what = (f"piano of {c.cols} white keys ({c.key_size:g} x {c.key_height:g} px) and "
+                    f"{self.n_keys - c.cols} black keys ({c.black_width:g} x {c.black_height:g} px)")
+        elif c.layout == "pads":
+            what = f"{c.rows} x {c.cols} round pads of radius {c.pad_radius:g} px"
+        else:
+            what = f"{self.n_keys} polygon keys"
+        return f"{what}, {lo} to {hi}"
 
 
 def match(perceived: np.ndarray, known: np.ndarray, threshold: float) -> np.ndarray:

@@ -175,9 +175,7 @@ class ExactModel:
             return out[:n]
         if not 1 <= cls < self.n_classes:
             raise ValueError(f"class {cls} out of range 0..{self.n_classes - 1}")
-        centre = kb.key_centres()[cls - 1]
-        half = kb.config.key_size / 2
-        return rng.uniform(centre - half, centre + half, size=(n, 2))
+        return kb.sample_in_key(cls - 1, n, rng)
 
     def raster(self, step: float = 1.0) -> ProbabilityRaster:
         origin, pts = grid_points(self.area, step)

@@ -94,6 +94,26 @@ def rect_reachable(cfg: SimConfig, rects: np.ndarray) -> np.ndarray:
     return (far <= l1 + l2) & (near >= abs(l1 - l2))
 
 
+def polygons_reachable(cfg: SimConfig, polygons: list[np.ndarray]) -> np.ndarray:
+    """(K,) bool: whether each polygon lies wholly inside the arm's annular workspace.
+
+    The outer limit is a disc (convex): a polygon is within it when all its vertices are. The inner
+    limit is a hole: a polygon clears it when the shoulder is outside the polygon and every edge
+    stays at least ``|l1 - l2|`` from it.
+    """
+    from kbcli.core.geometry import points_in_polygon, segment_distance
+
+    b = np.asarray(cfg.base, float)
+    l1, l2 = cfg.link_lengths
+    out = np.empty(len(polygons), dtype=bool)
+    for k, poly in enumerate(polygons):  # one per key
+        far = np.hypot(*(np.asarray(poly, float) - b).T).max() <= l1 + l2
+        near = (segment_distance(b[None], poly)[0] >= abs(l1 - l2)
+                and not points_in_polygon(b[None], poly)[0])
+        out[k] = far and near
+    return out
+
+
 def check_keyboard_reachable(cfg: SimConfig, keyboard: Keyboard) -> None:
     """Raise OutOfReachError unless the keyboard's whole working area is within the arm's reach.
 
@@ -103,16 +123,14 @@ def check_keyboard_reachable(cfg: SimConfig, keyboard: Keyboard) -> None:
 
     if rect_reachable(cfg, np.asarray(keyboard.area))[0]:
         return
-    s = keyboard.config.key_size / 2
-    c = keyboard.key_centres()
-    bad = ~rect_reachable(cfg, np.column_stack([c - s, c + s]))
+    bad = ~polygons_reachable(cfg, keyboard.key_outlines())
     l1, l2 = cfg.link_lengths
     x0, y0, x1, y1 = keyboard.area
     where = (f"the working area ({x0:g}, {y0:g})-({x1:g}, {y1:g}) is not all within the arm's "
              f"reach ({abs(l1 - l2):g} to {l1 + l2:g} px from the shoulder at "
              f"({cfg.base[0]:g}, {cfg.base[1]:g}))")
     if bad.any():
-        names = [keyboard.names[k] for k in np.flatnonzero(bad)]
+        names = [keyboard.key_label(k) for k in np.flatnonzero(bad)]
         shown = ", ".join(names[:12]) + (f" and {len(names) - 12} more" if len(names) > 12 else "")
         raise OutOfReachError(f"{where}: {len(names)} key(s) out of reach: {shown}")
     raise OutOfReachError(f"{where}: every key is reachable but part of the margin is not")

@@ -509,9 +509,11 @@ def play_success(keyboard: Keyboard, family: str, true_params: np.ndarray, estim
                  per_key: int = 8) -> np.ndarray:
     """Fraction of touches that play the intended key when aiming with an estimated displacement.
 
-    The robot aims at an even ``per_key x per_key`` grid of points inside each key of its reference
-    map, moved by the estimated transform; a touch succeeds when the key under it, on the keyboard at
-    its true pose, is the intended one. Without a displacement and with a perfect estimate it is 1.
+    The robot aims at an even ``per_key x per_key`` grid of points over each key's bounding box,
+    kept inside the key (:meth:`Keyboard.key_grid_points`, any layout), moved by the estimated
+    transform; a touch succeeds when the key under it, on the keyboard at its true pose, is the
+    intended one; every key counts equally. Without a displacement and with a perfect estimate it is
+    1.
 
     Parameters
     ----------
@@ -521,13 +523,9 @@ def play_success(keyboard: Keyboard, family: str, true_params: np.ndarray, estim
     -------
     (n,) ndarray
     """
-    s = keyboard.config.key_size
-    u = (np.arange(per_key) + 0.5) / per_key - 0.5
-    gx, gy = np.meshgrid(u * s, u * s)
-    offs = np.column_stack([gx.ravel(), gy.ravel()])  # (g, 2)
-    centres = keyboard.key_centres()
-    pts = (centres[:, None, :] + offs[None]).reshape(-1, 2)  # (K * g, 2)
-    intended = np.repeat(np.arange(keyboard.n_keys), len(offs))
+    pts, intended = keyboard.key_grid_points(per_key)  # (m, 2) points inside the keys, any layout
+    weight = 1.0 / np.bincount(intended, minlength=keyboard.n_keys)[intended]  # keys count equally
+    weight /= weight.sum()
     est = np.asarray(estimates, float).reshape(-1, len(transforms.FAMILIES[family]))
     true = np.asarray(true_params, float).reshape(est.shape)
     out = np.empty(len(est))
@@ -536,7 +534,7 @@ def play_success(keyboard: Keyboard, family: str, true_params: np.ndarray, estim
         aim = transforms.apply_many(family, est[lo:lo + chunk], pts, keyboard.centre)
         ref_pts = transforms.inverse_many(family, true[lo:lo + chunk], aim, keyboard.centre)
         keys = keyboard.key_at(ref_pts.reshape(-1, 2)).reshape(len(aim), -1)
-        out[lo:lo + chunk] = np.mean(keys == intended[None], axis=1)
+        out[lo:lo + chunk] = (keys == intended[None]) @ weight
     return out
 
 

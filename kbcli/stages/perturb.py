@@ -11,7 +11,7 @@ angle uniform in [-5, 5] degrees about its centre.
 The scene is ground truth: only the simulated world (:class:`kbcli.sim.World`) and the evaluation
 read it, never the robot's side.
 
-A displacement that carries any key (corners and edge midpoints of every key) outside the arm's
+A displacement that carries any key (points every 5 px along every key's outline) outside the arm's
 annular workspace is refused with :class:`~kbcli.errors.OutOfReachError`.
 """
 
@@ -113,20 +113,27 @@ def draw(
     return d
 
 
-def key_outline(kb: Keyboard) -> np.ndarray:
-    """(8 K, 2) corners and edge midpoints of every key at the reference pose."""
-    h = kb.config.key_size / 2
-    offs = np.array([[-h, -h], [0, -h], [h, -h], [h, 0], [h, h], [0, h], [-h, h], [-h, 0]])
-    return (kb.key_centres()[:, None, :] + offs[None]).reshape(-1, 2)
+def key_outline(kb: Keyboard, spacing: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
+    """Points along every key's outline at the reference pose (whatever the layout): its vertices
+    and points at most ``spacing`` px apart.
+
+    Returns
+    -------
+    points : (m, 2) ndarray
+    keys : (m,) int ndarray
+        The key of each point.
+    """
+    return kb.key_outline_points(spacing)
 
 
 def check_reach(kb: Keyboard, family: str, params: np.ndarray, sim: SimConfig) -> None:
     """Raise OutOfReachError if the displaced keyboard has a key outside the arm's workspace."""
-    pts = transforms.apply(family, np.asarray(params, float), key_outline(kb), kb.centre)
+    outline, keys = key_outline(kb)
+    pts = transforms.apply(family, np.asarray(params, float), outline, kb.centre)
     ok = workspace_check(sim, pts)
     if not ok.all():
         i = int(np.flatnonzero(~ok)[0])
-        key = kb.names[i // 8]
+        key = kb.key_label(int(keys[i]))
         x, y = pts[i]
         shown = ", ".join(f"{n}={v:g}" for n, v in zip(transforms.FAMILIES[family], params, strict=True))
         raise OutOfReachError(

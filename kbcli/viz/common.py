@@ -5,8 +5,9 @@ from __future__ import annotations
 import os
 
 import matplotlib.pyplot as plt
+import numpy as np
 from matplotlib.figure import Figure
-from matplotlib.patches import Rectangle
+from matplotlib.patches import Circle, Polygon
 
 from kbcli.core.keyboard import Keyboard
 from kbcli.io.atomic import atomic_path
@@ -23,14 +24,25 @@ def save(fig: Figure, path: str | os.PathLike, dpi: int = 110) -> None:
 
 def draw_keyboard(ax, kb: Keyboard, *, labels: bool = True, alpha: float = 1.0,
                   edge: str = "black", fill: bool = True, offset=(0.0, 0.0)) -> None:
-    """Draw the keys at the reference pose (shifted by ``offset``) on ``ax``."""
+    """Draw the keys at the reference pose (shifted by ``offset``) on ``ax``, whatever the layout
+    (each key's outline polygon; pads as circles)."""
     cmap = plt.get_cmap("tab20")
-    s = kb.config.key_size
-    for k, (cx, cy) in enumerate(kb.key_centres()):
-        x, y = cx - s / 2 + offset[0], cy - s / 2 + offset[1]
-        ax.add_patch(Rectangle((x, y), s, s, facecolor=cmap(k % 20) if fill else "none",
-                               edgecolor=edge, lw=0.8, alpha=alpha))
+    off = np.asarray(offset, float)
+    discs = kb.shapes.discs
+    centres = kb.key_centres() + off
+    box = kb.shapes.boxes
+    small = float(np.median(np.minimum(box[:, 2] - box[:, 0], box[:, 3] - box[:, 1])))
+    fontsize = float(np.clip(small / 7.5, 4.5, 6.5))
+    for k, poly in enumerate(kb.key_outlines()):
+        face = cmap(k % 20) if fill else "none"
+        if discs is not None:
+            patch = Circle(discs[k, :2] + off, discs[k, 2], facecolor=face, edgecolor=edge, lw=0.8,
+                           alpha=alpha)
+        else:
+            patch = Polygon(poly + off, closed=True, facecolor=face, edgecolor=edge, lw=0.8,
+                            alpha=alpha)
+        ax.add_patch(patch)
         if labels:
             pitch, tempo = kb.features[k]
-            ax.text(x + s / 2, y + s / 2, f"{kb.names[k]}\n{tempo:.0f} bpm", ha="center",
-                    va="center", fontsize=6.5)
+            ax.text(*centres[k], f"{kb.names[k]}\n{tempo:.0f}", ha="center", va="center",
+                    fontsize=fontsize)

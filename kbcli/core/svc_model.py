@@ -1,0 +1,369 @@
+"""A general learned model of the instrument on scikit-learn: pairwise RBF support-vector machines.
+
+M_INST = p(sound, action) for keys of any shape (the ``svc`` model class; ``lines``,
+:mod:`kbcli.core.learned`, assumes straight key edges). From the exploration samples alone (where
+the finger landed, what was heard), the model
+
+1. **finds the sound classes** as the ``lines`` model does (:func:`~kbcli.core.learned.
+   discover_classes`: leader clustering of the perceived features with the Eq. 2 threshold; class 0
+   is silence);
+2. **finds the neighbouring sounds**: a Delaunay edge of the samples whose ends were heard as two
+   different sounds i < j crosses their boundary (:func:`~kbcli.core.learned._straddling_edges`);
+3. **fits one scikit-learn** :class:`~sklearn.svm.SVC` **per pair of neighbouring sounds** (an RBF
+   kernel of length scale ``length_scale`` px, a near-hard margin ``C``) on the samples of the two
+   sounds within ``local_radius`` px of their straddling edges. An RBF boundary bends with the keys:
+   straight edges, corners, a pad's circle. Fitting pairs locally keeps each machine small (tens of
+   support vectors), so predicting a raster of the working area stays cheap;
+4. **reads probabilities off the margin**: at an action a whose ``n_neighbors`` nearest samples
+   were heard as several sounds, each pair (i, j) of them with a machine contests a: with f(a) its
+   decision value (+-1 on the margin's support vectors, the nearest samples on either side of the
+   boundary), ``p(a on j's side) = Phi(sqrt(3) f(a))``: the boundary is taken to lie anywhere in the
+   margin, uniformly (standard deviation 1 / sqrt(3) of the half-margin, as the ``lines`` model's
+   band width / sqrt(12)). A candidate's log-score sums its contests (``log_ndtr``); p(sound | a) is
+   their softmax. Where every neighbour was heard as one sound, that sound is certain.
+
+Active exploration (:mod:`kbcli.core.explore`) reads the model's predictive uncertainty through
+:meth:`SVCModel.boundary_sites`: on every straddling edge, the point where the pair's machine puts
+the boundary, and the width of the band the boundary is known to lie in there (the distance to the
+nearest sample of either sound, summed): a reach at the widest site bisects the widest band.
+
+Storage without pickle: :meth:`SVCModel.to_arrays` keeps the samples, the classes and the
+hyper-parameters; :meth:`SVCModel.from_arrays` refits the machines, which is deterministic (libsvm's
+solver has no randomness when probabilities are not asked of it). The estimator follows the
+scikit-learn contract (``fit`` returns ``self``, fitted attributes end in ``_``, predicting before
+fitting raises).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.special import log_ndtr
+from sklearn.exceptions import NotFittedError
+from sklearn.svm import SVC
+
+from kbcli.core.learned import LearnedModel, _straddling_edges, discover_classes
+from kbcli.core.model import SILENCE
+from kbcli.errors import ArtifactError, ConfigError
+
+_CHUNK = 16384  # query points per block
+_SQRT3 = float(np.sqrt(3.0))
+_EDGE_STEPS = 17  # points along a straddling edge where the boundary site is looked for
+
+
+class SVCModel:
+    """p(sound | action) from pairwise RBF SVMs (see the module docstring).
+
+    Parameters
+    ----------
+    match_threshold : float
+        Manhattan distance under which two perceived sounds are the same sound (Eq. 2).
+    area : tuple of float
+        (xmin, ymin, xmax, ymax) working area: the support of p(action) and of :meth:`raster`.
+    length_scale : float
+        Length scale (px) of the RBF kernel: ``exp(-|a - b|^2 / (2 length_scale^2))``.
+    C : float
+        Penalty of margin violations (large: a hard margin; the samples' labels are exact).
+    local_radius : float
+        A pair's machine is fitted on the samples of its two sounds within this many px of one of
+        their straddling edges' ends.
+    n_neighbors : int
+        Samples looked at around an action to find the sounds it could make.
+
+    Attributes
+    ----------
+    class_features_ : (C, D) ndarray
+        Features of each class; row 0 (silence) is NaN.
+    actions_ : (n, 2) ndarray
+        Where the finger landed for each sample.
+    labels_ : (n,) int ndarray
+        Sound class of each sample.
+    pairs_ : (P, 2) int ndarray
+        The neighbouring pairs of classes (lower first) that have a machine.
+    edges_ : (m, 2) int ndarray
+        Straddling edges: sample indices, the lower class's end first.
+    reach_sd_ : float
+        Landing scatter of a reach (px, per-axis rms of landing minus target), for information.
+    """
+
+    def __init__(self, *, match_threshold: float = 1.5,
+                 area: tuple[float, float, float, float] = (150.0, 200.0, 650.0, 500.0),
+                 length_scale: float = 12.0, C: float = 1e3, local_radius: float = 30.0,
+                 n_neighbors: int = 8) -> None:
+        self.match_threshold = match_threshold
+        self.area = area
+        self.length_scale = length_scale
+        self.C = C
+        self.local_radius = local_radius
+        self.n_neighbors = n_neighbors
+
+    # -- parameters -----------------------------------------------------------------------------
+    def _check_params(self) -> None:
+        if not (np.isfinite(self.match_threshold) and self.match_threshold > 0):
+            raise ConfigError(f"match_threshold must be > 0, got {self.match_threshold!r}")
+        x0, y0, x1, y1 = (float(v) for v in self.area)
+        if not (x1 > x0 and y1 > y0):
+            raise ConfigError(
+                f"area must be (xmin, ymin, xmax, ymax) with max > min, got {self.area!r}")
+        for name in ("length_scale", "C", "local_radius"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                raise ConfigError(f"{name} must be a positive number, got {v!r}")
+        if int(self.n_neighbors) < 2:
+            raise ConfigError(f"n_neighbors must be >= 2, got {self.n_neighbors!r}")
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "class_features_"):
+            raise NotFittedError("this SVCModel is not fitted yet: call fit(actions, perceived)")
+
+    @property
+    def n_classes(self) -> int:
+        self._check_fitted()
+        return len(self.class_features_)
+
+    def get_params(self) -> dict:
+        """The hyper-parameters (as scikit-learn estimators report them)."""
+        return {"match_threshold": self.match_threshold, "area": tuple(self.area),
+                "length_scale": self.length_scale, "C": self.C,
+                "local_radius": self.local_radius, "n_neighbors": self.n_neighbors}
+
+    # -- fitting --------------------------------------------------------------------------------
+    def fit(self, actions: np.ndarray, perceived: np.ndarray,
+            targets: np.ndarray | None = None) -> SVCModel:
+        """Learn the sound classes and p(sound | action) from exploration samples.
+
+        Parameters
+        ----------
+        actions : (n, 2) ndarray
+            Where the finger landed (proprioception).
+        perceived : (n, D) ndarray
+            What was heard there (NaN rows: silence).
+        targets : (n, 2) ndarray, optional
+            Where the reaches aimed; gives the landing scatter ``reach_sd_`` (else 0).
+
+        Returns
+        -------
+        self
+        """
+        self._check_params()
+        x = np.asarray(actions, float).reshape(-1, 2)
+        if len(x) < 1:
+            raise ConfigError("fit needs at least one sample")
+        if not np.isfinite(x).all():
+            raise ConfigError("actions must be finite")
+        s = np.asarray(perceived, float).reshape(len(x), -1)
+        features, labels = discover_classes(s, self.match_threshold)
+        reach_sd = 0.0
+        if targets is not None:
+            d = x - np.asarray(targets, float).reshape(-1, 2)
+            reach_sd = float(np.sqrt(np.mean(d * d)))
+        self._set_fitted(features, x, labels, reach_sd)
+        return self
+
+    def _set_fitted(self, features: np.ndarray, actions: np.ndarray, labels: np.ndarray,
+                    reach_sd: float) -> None:
+        self.class_features_ = np.asarray(features, float)
+        self.actions_ = np.asarray(actions, float)
+        self.labels_ = np.asarray(labels, np.int64)
+        self.reach_sd_ = float(reach_sd)
+        self._tree = cKDTree(self.actions_)
+        e = _straddling_edges(self.actions_, self.labels_)
+        self.edges_ = e[np.lexsort((e[:, 1], e[:, 0]))] if len(e) else e
+        nc = len(self.class_features_)
+        code = self.labels_[self.edges_[:, 0]] * nc + self.labels_[self.edges_[:, 1]]
+        self._svms: dict[int, SVC] = {}
+        self._edge_code = code
+        pairs = []
+        for c in np.unique(code):  # one machine per pair of neighbouring sounds
+            i, j = divmod(int(c), nc)
+            ends = np.unique(self.edges_[code == c])
+            near = self._tree.query_ball_point(self.actions_[ends], r=self.local_radius)
+            idx = np.unique(np.concatenate([ends, *[np.asarray(n, np.int64) for n in near]]))
+            idx = idx[np.isin(self.labels_[idx], (i, j))]
+            y = (self.labels_[idx] == j).astype(np.int64)
+            svm = SVC(kernel="rbf", gamma=0.5, C=float(self.C))
+            svm.fit(self.actions_[idx] / self.length_scale, y)
+            self._svms[int(c)] = svm
+            pairs.append((i, j))
+        self.pairs_ = np.array(pairs, np.int64).reshape(-1, 2)
+
+    # -- the pairwise contests ------------------------------------------------------------------
+    def _decision(self, code: int, q: np.ndarray) -> np.ndarray:
+        """(n,) the pair's decision value: > 0 on the higher class's side, +-1 on the margin."""
+        return self._svms[code].decision_function(q / self.length_scale)
+
+    def _slot_scores(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Candidate classes (the distinct classes of the nearest samples) and their log-scores.
+
+        Returns
+        -------
+        cls : (n, k) int ndarray
+        score : (n, k) ndarray
+            Sum of log p(on its side) over the contests with the other candidates; -inf for a
+            repeated class.
+        """
+        n = len(q)
+        k = int(min(self.n_neighbors, len(self.actions_)))
+        _, idx = self._tree.query(q, k=k)
+        cls = self.labels_[np.asarray(idx).reshape(n, k)]
+        first = np.ones((n, k), dtype=bool)
+        for c in range(1, k):  # k columns, each vectorized over the points
+            first[:, c] = ~(cls[:, :c] == cls[:, c:c + 1]).any(axis=1)
+        score = np.where(first, 0.0, -np.inf)
+        near = first.sum(axis=1) >= 2
+        if not near.any() or not self._svms:
+            return cls, score
+        rows_l, sa_l, sb_l = [], [], []
+        for a in range(k):
+            for b in range(a + 1, k):
+                r = np.flatnonzero(near & first[:, a] & first[:, b])
+                rows_l.append(r)
+                sa_l.append(np.full(len(r), a))
+                sb_l.append(np.full(len(r), b))
+        rows, sa, sb = np.concatenate(rows_l), np.concatenate(sa_l), np.concatenate(sb_l)
+        ca, cb = cls[rows, sa], cls[rows, sb]
+        swap = ca > cb
+        slo, shi = np.where(swap, sb, sa), np.where(swap, sa, sb)
+        nc = len(self.class_features_)
+        code = np.minimum(ca, cb) * nc + np.maximum(ca, cb)
+        for c in np.unique(code):
+            if int(c) not in self._svms:
+                continue  # sounds that never met: no boundary between them to judge by
+            sel = np.flatnonzero(code == c)
+            z = _SQRT3 * self._decision(int(c), q[rows[sel]])
+            np.add.at(score, (rows[sel], slo[sel]), log_ndtr(-z))
+            np.add.at(score, (rows[sel], shi[sel]), log_ndtr(z))
+        return cls, score
+
+    def _predict(self, points: np.ndarray, proba: bool) -> np.ndarray:
+        self._check_fitted()
+        q = np.asarray(points, float).reshape(-1, 2)
+        nc = self.n_classes
+        out = np.zeros((len(q), nc)) if proba else np.zeros(len(q), dtype=np.int64)
+        for start in range(0, len(q), _CHUNK):
+            blk = slice(start, start + _CHUNK)
+            cls, score = self._slot_scores(q[blk])
+            if proba:
+                m = score.max(axis=1, keepdims=True)
+                w = np.exp(score - m)
+                w /= w.sum(axis=1, keepdims=True)
+                r = np.repeat(np.arange(len(cls)), cls.shape[1])
+                block = np.zeros((len(cls), nc))
+                np.add.at(block, (r, cls.ravel()), w.ravel())
+                out[blk] = block
+            else:
+                tie = -1e-9 * np.arange(cls.shape[1])  # ties go to the nearer sample's class
+                out[blk] = cls[np.arange(len(cls)), np.argmax(score + tie, axis=1)]
+        return out
+
+    def predict_proba(self, points: np.ndarray) -> np.ndarray:
+        """(n, C) p(sound class | action) at each of (n, 2) ``points``; rows sum to 1."""
+        return self._predict(points, proba=True)
+
+    def predict_class(self, points: np.ndarray) -> np.ndarray:
+        """(n,) most probable sound class at each point."""
+        return self._predict(points, proba=False)
+
+    # shared with the lines model: they only use the fitted attributes both models have
+    confusion = LearnedModel.confusion
+    classify = LearnedModel.classify
+    sample_actions = LearnedModel.sample_actions
+    raster = LearnedModel.raster
+
+    # -- exploration ----------------------------------------------------------------------------
+    def boundary_sites(self, step: float = 1.0, extend: float = 25.0,
+                       phase: float = 0.0) -> dict[str, np.ndarray]:
+        """Where the model places each boundary, and how uncertain it is there.
+
+        One site per straddling edge: the point along the edge where its pair's machine changes
+        sign (the edge's midpoint when it does not), with ``width`` the distance from the site to
+        the nearest sample of either sound, summed: the band the boundary is known to lie in there.
+        (``step``, ``extend`` and ``phase`` are accepted for the ``lines`` model's signature.)
+
+        Returns
+        -------
+        dict with ``points`` (m, 2), ``width`` (m,), ``pair`` (m, 2)
+        """
+        self._check_fitted()
+        e = self.edges_
+        if len(e) == 0:
+            return {"points": np.empty((0, 2)), "width": np.empty(0),
+                    "pair": np.empty((0, 2), dtype=np.int64)}
+        a, b = self.actions_[e[:, 0]], self.actions_[e[:, 1]]
+        t = np.linspace(0.0, 1.0, _EDGE_STEPS)
+        line = a[:, None, :] + t[None, :, None] * (b - a)[:, None, :]  # (m, T, 2)
+        f = np.empty(line.shape[:2])
+        for c in np.unique(self._edge_code):  # one call per pair
+            sel = np.flatnonzero(self._edge_code == c)
+            f[sel] = self._decision(int(c), line[sel].reshape(-1, 2)).reshape(len(sel), -1)
+        cross = (f[:, :-1] < 0) & (f[:, 1:] >= 0)  # from the lower class (< 0) to the higher
+        has = cross.any(axis=1)
+        j = np.argmax(cross, axis=1)
+        r = np.arange(len(e))
+        f0, f1 = f[r, j], f[r, j + 1]
+        frac = np.where(has, (t[j] + (t[j + 1] - t[j]) * f0 / np.where(f0 != f1, f0 - f1, 1.0)),
+                        0.5)
+        pts = a + np.clip(frac, 0.0, 1.0)[:, None] * (b - a)
+        la, lb = self.labels_[e[:, 0]], self.labels_[e[:, 1]]
+        width = self._class_distance(pts, la) + self._class_distance(pts, lb)
+        return {"points": pts, "width": width, "pair": np.column_stack([la, lb])}
+
+    def _class_distance(self, pts: np.ndarray, cls: np.ndarray) -> np.ndarray:
+        """(m,) distance from each point to the nearest sample of its class ``cls``."""
+        out = np.full(len(pts), np.inf)
+        for c in np.unique(cls):  # one tree per class present
+            sel = np.flatnonzero(cls == c)
+            mine = self.actions_[self.labels_ == c]
+            out[sel] = cKDTree(mine).query(pts[sel])[0]
+        return out
+
+    # -- storage --------------------------------------------------------------------------------
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """The fitted model as named arrays: the samples, their classes and the hyper-parameters
+        (:meth:`from_arrays` refits the machines, deterministically)."""
+        self._check_fitted()
+        return {
+            "class_features": self.class_features_.copy(),
+            "actions": self.actions_.copy(),
+            "labels": self.labels_.copy(),
+            "pairs": self.pairs_.copy(),
+            "n_support": np.array([int(self._svms[int(c)].n_support_.sum()) for c in
+                                   self.pairs_[:, 0] * self.n_classes + self.pairs_[:, 1]],
+                                  np.int64),
+            "reach_sd_fitted": np.float64(self.reach_sd_),
+            "match_threshold": np.float64(self.match_threshold),
+            "area": np.asarray(self.area, float),
+            "length_scale": np.float64(self.length_scale),
+            "C": np.float64(self.C),
+            "local_radius": np.float64(self.local_radius),
+            "n_neighbors": np.int64(self.n_neighbors),
+        }
+
+    @classmethod
+    def from_arrays(cls, d: dict) -> SVCModel:
+        """Rebuild a fitted model from :meth:`to_arrays` output (the same predictions: the
+        machines are refitted on the stored samples; nothing is unpickled)."""
+        try:
+            model = cls(
+                match_threshold=float(d["match_threshold"]),
+                area=tuple(float(v) for v in np.asarray(d["area"]).reshape(4)),
+                length_scale=float(d["length_scale"]),
+                C=float(d["C"]),
+                local_radius=float(d["local_radius"]),
+                n_neighbors=int(d["n_neighbors"]),
+            )
+            model._check_params()
+            model._set_fitted(np.asarray(d["class_features"], float),
+                              np.asarray(d["actions"], float).reshape(-1, 2),
+                              np.asarray(d["labels"], np.int64), float(d["reach_sd_fitted"]))
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise ArtifactError(
+                f"not a stored svc model ({type(exc).__name__}: {exc})") from None
+        if "pairs" in d and not np.array_equal(np.asarray(d["pairs"]).reshape(-1, 2),
+                                               model.pairs_):
+            raise ArtifactError("stored svc model: refitting found other pairs of sounds than "
+                                "were stored (a different scikit-learn or scipy?)")
+        return model
+
+
+__all__ = ["SVCModel", "SILENCE"]
