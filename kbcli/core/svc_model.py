@@ -88,7 +88,7 @@ class SVCModel:
 
     def __init__(self, *, match_threshold: float = 1.5,
                  area: tuple[float, float, float, float] = (150.0, 200.0, 650.0, 500.0),
-                 length_scale: float = 12.0, C: float = 1e3, local_radius: float = 30.0,
+                 length_scale: float = 20.0, C: float = 100.0, local_radius: float = 30.0,
                  n_neighbors: int = 8) -> None:
         self.match_threshold = match_threshold
         self.area = area
@@ -172,6 +172,7 @@ class SVCModel:
         nc = len(self.class_features_)
         code = self.labels_[self.edges_[:, 0]] * nc + self.labels_[self.edges_[:, 1]]
         self._svms: dict[int, SVC] = {}
+        self._support: dict[int, tuple[cKDTree, cKDTree, cKDTree]] = {}
         self._edge_code = code
         pairs = []
         for c in np.unique(code):  # one machine per pair of neighbouring sounds
@@ -184,13 +185,29 @@ class SVCModel:
             svm = SVC(kernel="rbf", gamma=0.5, C=float(self.C))
             svm.fit(self.actions_[idx] / self.length_scale, y)
             self._svms[int(c)] = svm
+            self._support[int(c)] = (cKDTree(self.actions_[idx]), cKDTree(self.actions_[idx][y == 0]),
+                                     cKDTree(self.actions_[idx][y == 1]))
             pairs.append((i, j))
         self.pairs_ = np.array(pairs, np.int64).reshape(-1, 2)
 
     # -- the pairwise contests ------------------------------------------------------------------
     def _decision(self, code: int, q: np.ndarray) -> np.ndarray:
-        """(n,) the pair's decision value: > 0 on the higher class's side, +-1 on the margin."""
-        return self._svms[code].decision_function(q / self.length_scale)
+        """(n,) the pair's decision value: > 0 on the higher class's side, +-1 on the margin.
+
+        Far from the samples it was fitted on, a machine only extrapolates its intercept: its
+        decision fades (weight ``exp(-d^2 / (2 length_scale^2))``, d the distance to the nearest
+        of them) into the nearest-sample rule ``(d_lower - d_higher) / length_scale``.
+        """
+        f = self._svms[code].decision_function(q / self.length_scale)
+        both, lo, hi = self._support[code]
+        d = both.query(q)[0]
+        near = d > 0.5 * self.length_scale
+        if near.any():
+            qn = q[near]
+            nn = (lo.query(qn)[0] - hi.query(qn)[0]) / self.length_scale
+            w = np.exp(-0.5 * (d[near] / self.length_scale) ** 2)
+            f[near] = w * f[near] + (1 - w) * nn
+        return f
 
     def _slot_scores(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Candidate classes (the distinct classes of the nearest samples) and their log-scores.
