@@ -1,6 +1,6 @@
 """Benchmark of the adaptation (issue 5; paper Sect. IV-A, IV-B): sample efficiency and speed.
 
-On the default 4 x 8 keyboard of 50 px keys, ``ideal`` mode, ``experiments`` runs per displacement
+On a layout's default keyboard (the 4 x 8 grid of 50 px keys unless told otherwise), ``ideal`` mode, ``experiments`` runs per displacement
 category and strategy, each run ``max_steps`` observations. True displacements come from
 :func:`kbcli.stages.perturb.draw` (the same categories as ``kbcli perturb``: the largest per-axis
 displacement in (0, 10], (10, 20] or (20, 40] px; rigid draws also turn by up to 5 degrees); run
@@ -21,9 +21,13 @@ Sections (``--section``):
   likelihood is blurred by the noise); plus infogain knowing where it landed, for reference;
 - ``rigid``: the rigid family (angles up to 5 degrees);
 - ``kde``: the paper's KDE posterior (Eq. 7) against the likelihood posterior;
-- ``learned``: a learned model (``--model``), with its boundary error beside the final error; its
-  map softened by ``model_blur`` (default: 1 px, the adapter's default for learned models) and, for
-  reference, infogain on the unsoftened map.
+- ``learned``: a learned model (``--model``, any model class), with its boundary error beside the
+  final error; its map softened by ``model_blur`` (default: 1 px, the adapter's default for learned
+  models) and, for reference, infogain on the unsoftened map;
+- ``learned-rigid``: the learned model with the rigid family.
+
+Every section runs on one keyboard: the default keyboard of ``layout`` (grid, hex, piano, pads,
+polygons; ``kbcli bench adapt --layout``), or the learned model's own keyboard.
 
 Measured (seed 0, 50 runs per row, shared 2-core machine; medians to < 1 px for small / medium /
 large): exact model, infogain 6 / 6 / 5 and active 7 / 7 / 6 observations, random 27 / 22 / 23 of 50
@@ -46,12 +50,13 @@ import numpy as np
 from kbcli.core import stats
 from kbcli.core.adapt import build_table
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.layouts import example_config_fields, get_layout
 from kbcli.core.model import ExactModel
 from kbcli.errors import ConfigError
 from kbcli.stages.adapt import AdaptConfig, experiment
 from kbcli.stages.perturb import CATEGORIES, draw
 
-SECTIONS = ("exact", "noise", "rigid", "kde", "learned")
+SECTIONS = ("exact", "noise", "rigid", "kde", "learned", "learned-rigid")
 STRATEGY_ORDER = ("random", "active", "infogain")
 THRESHOLDS = (4.0, 2.0, 1.0, 0.5)
 RMSE_STEPS = (1, 2, 3, 5, 10, 20, 40)
@@ -69,8 +74,10 @@ class BenchConfig:
     categories: tuple[str, ...] = tuple(CATEGORIES)
     noise: float = 2.0
     model_blur: float | None = None
+    layout: str = "grid"
 
     def __post_init__(self) -> None:
+        get_layout(self.layout)
         if not isinstance(self.experiments, int) or self.experiments < 2:
             raise ConfigError(f"experiments must be a whole number >= 2, got {self.experiments!r}")
         if not isinstance(self.max_steps, int) or self.max_steps < 1:
@@ -104,6 +111,7 @@ class Cell:
     seeds: list  # SeedSequence per experiment
     errors: list = field(default_factory=list)
     angle_errors: list = field(default_factory=list)
+    keyboard: Keyboard | None = None  # the world's keyboard (set by plan)
     step_ms: list = field(default_factory=list)
 
 
@@ -113,9 +121,15 @@ def _truths(cfg: BenchConfig, family: str, category: str) -> np.ndarray:
     return draw(category, family, cfg.experiments, rng=np.random.default_rng(ss))
 
 
-def plan(cfg: BenchConfig, learned_model=None) -> list[Cell]:
-    """All batches of the requested sections, in print order."""
-    kb = Keyboard(KeyboardConfig())
+def bench_keyboard(cfg: BenchConfig) -> Keyboard:
+    """The default keyboard of ``cfg.layout`` (polygons: ``pipelines/layouts/polygons.toml``'s)."""
+    return Keyboard(KeyboardConfig(layout=cfg.layout, **example_config_fields(cfg.layout)))
+
+
+def plan(cfg: BenchConfig, learned_model=None, keyboard: Keyboard | None = None) -> list[Cell]:
+    """All batches of the requested sections, in print order, on ``keyboard`` (default: the
+    layout's default keyboard; it must be the keyboard the learned model was learned on)."""
+    kb = bench_keyboard(cfg) if keyboard is None else keyboard
     exact = ExactModel(kb)
     seeds = np.random.SeedSequence(cfg.seed).spawn(cfg.experiments)
     base = AdaptConfig(max_steps=cfg.max_steps)
@@ -155,6 +169,15 @@ def plan(cfg: BenchConfig, learned_model=None) -> list[Cell]:
             if "infogain" in cfg.strategies:
                 add(section, "infogain/unsoftened", replace(base, model_blur=0.0), learned_model,
                     "translation")
+        elif section == "learned-rigid":
+            if learned_model is None:
+                raise ConfigError("section learned-rigid needs a learned model: pass --model "
+                                  "model.h5")
+            soft = replace(base, model_blur=cfg.model_blur, family="rigid")
+            for s in cfg.strategies:
+                add(section, s, replace(soft, strategy=s), learned_model, "rigid")
+    for cell in cells:
+        cell.keyboard = kb
     return cells
 
 
@@ -163,9 +186,9 @@ def run_cells(cells: list[Cell]) -> Iterator[tuple[Cell, int]]:
 
     The model raster is built once per (model, raster settings) and shared.
     """
-    kb = Keyboard(KeyboardConfig())
     tables: dict = {}
     for cell in cells:
+        kb = cell.keyboard if cell.keyboard is not None else Keyboard(KeyboardConfig())
         acfg = cell.cfg.adapter_config()
         key = (id(cell.model), acfg.family, acfg.resolution, acfg.raster_step, acfg.blur,
                acfg.model_blur, acfg.outlier)

@@ -1,14 +1,17 @@
-"""Benchmark of learning the instrument model (issue 3): sample efficiency and speed.
+"""Benchmark of learning the instrument model: sample efficiency and speed, per layout and class.
 
-On the default 4 x 8 keyboard of 50 px keys, each exploration strategy learns the model from
-``seeds`` seeds (``SeedSequence(seed).spawn(seeds)``; run ``i`` uses the same seed for every
+For each layout (its default keyboard, :func:`bench_keyboard`; or a given keyboard), model class
+(:mod:`kbcli.core.model_classes`) and exploration strategy, the model is learned from ``seeds``
+seeds (``SeedSequence(seed).spawn(seeds)``; run ``i`` uses the same seed for every layout, class and
 strategy) up to the largest budget. Every ``resolution`` reaches and at each budget the model is
-scored on a 2 px grid over the working area (accuracy, :mod:`kbcli.core.accuracy`). Reported per
-strategy: the median accuracy at each budget, the median number of reaches until the accuracy first
-reaches 99 % (runs that never do count as more than the largest budget), and the median boundary
-error (px, on a 1 px grid) at ``boundary_budget`` reaches. Speed: the wall time of a whole
-``learn`` stage run at ``boundary_budget`` reaches (the first seed, active strategy) and the
-``dynamics`` simulator's reaches per second on one core.
+scored on a grid of ``eval_step`` px (1 px: the grid of ``kbcli learn``'s final accuracy) over the
+working area (accuracy, :mod:`kbcli.core.accuracy`). Reported per row: the median accuracy at each
+budget, the median reaches until the accuracy first reaches 97 % and 99 % (runs that never do count
+as more than the largest budget), the median boundary error (px, on a 1 px grid) at
+``boundary_budget`` reaches and the median time of one fit on all the samples of the largest budget.
+Speed: the wall time of a whole ``learn`` stage run at ``boundary_budget`` reaches (the first
+seed, active strategy, first layout and class) and the ``dynamics`` simulator's reaches per second on
+one core.
 """
 
 from __future__ import annotations
@@ -22,27 +25,38 @@ import numpy as np
 from kbcli.core import accuracy as scoring
 from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.layouts import LAYOUTS, example_config_fields, get_layout
+from kbcli.core.model_classes import fit_model, get_model_class
 from kbcli.errors import ConfigError
-from kbcli.sim import MODES, SimConfig, World, make_reacher
+from kbcli.sim import MODES, SimConfig, World, check_keyboard_reachable, make_reacher
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import learn as learn_stage
 
-DEFAULT_BUDGETS = (50, 100, 200, 400, 800, 1600)
+DEFAULT_BUDGETS = (200, 400, 800, 1600)
 STRATEGY_ORDER = ("active", "random")
+LEVELS = (0.97, 0.99)
+
+
+def bench_keyboard(layout: str) -> Keyboard:
+    """The default keyboard of a layout (polygons: the fan of ``pipelines/layouts/polygons.toml``)."""
+    return Keyboard(KeyboardConfig(layout=layout, **example_config_fields(layout)))
 
 
 @dataclass(frozen=True, kw_only=True)
 class BenchConfig:
     """Benchmark settings (see the module docstring)."""
 
-    seeds: int = 10
+    seeds: int = 5
     budgets: tuple[int, ...] = DEFAULT_BUDGETS
     strategies: tuple[str, ...] = STRATEGY_ORDER
+    layouts: tuple[str, ...] = ("grid",)
+    model_classes: tuple[str, ...] = ("lines",)
     mode: str = "ideal"
     reach_noise: float = 0.0
     seed: int = 0
     resolution: int = 50
     boundary_budget: int = 800
+    eval_step: float = 1.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.seeds, int) or self.seeds < 1:
@@ -55,15 +69,27 @@ class BenchConfig:
                 raise ConfigError(f"unknown strategy {s!r}; valid: {', '.join(sorted(STRATEGIES))}")
         if not self.strategies:
             raise ConfigError("give at least one strategy")
+        if not self.layouts or not self.model_classes:
+            raise ConfigError("give at least one layout and one model class")
+        for name in self.layouts:
+            get_layout(name)
+        for name in self.model_classes:
+            get_model_class(name)
         SimConfig(mode=self.mode, reach_noise=self.reach_noise)
         if not isinstance(self.resolution, int) or self.resolution < 1:
             raise ConfigError(f"resolution must be a whole number >= 1, got {self.resolution!r}")
         if not isinstance(self.boundary_budget, int) or self.boundary_budget < 1:
             raise ConfigError(f"boundary budget must be >= 1, got {self.boundary_budget!r}")
+        if not (np.isfinite(self.eval_step) and self.eval_step > 0):
+            raise ConfigError(f"eval_step must be > 0 px, got {self.eval_step!r}")
 
     @property
     def max_budget(self) -> int:
         return max(*self.budgets, self.boundary_budget)
+
+    @property
+    def n_runs(self) -> int:
+        return len(self.layouts) * len(self.model_classes) * len(self.strategies) * self.seeds
 
     def sim(self) -> SimConfig:
         return SimConfig(mode=self.mode, reach_noise=self.reach_noise)
@@ -71,13 +97,17 @@ class BenchConfig:
 
 @dataclass
 class RunResult:
-    """One strategy and seed: accuracy at each checkpoint, boundary error at the boundary budget."""
+    """One layout, class, strategy and seed: accuracy at each checkpoint, boundary error at the
+    boundary budget, the time of the last fit."""
 
     strategy: str
     seed_index: int
+    layout: str = "grid"
+    model_class: str = "lines"
     checkpoints: list[int] = field(default_factory=list)
     accuracy: list[float] = field(default_factory=list)
     boundary_error: float = float("nan")
+    fit_seconds: float = float("nan")
 
     def at(self, n: int) -> float:
         return self.accuracy[self.checkpoints.index(n)]
@@ -91,33 +121,42 @@ class RunResult:
 
 
 def one_run(cfg: BenchConfig, strategy: str, seed_index: int, seed: np.random.SeedSequence,
-            kb: Keyboard) -> RunResult:
-    """Learn with one strategy and seed up to the largest budget, scoring along the way."""
+            kb: Keyboard, model_class: str = "lines") -> RunResult:
+    """Learn with one class, strategy and seed up to the largest budget, scoring along the way."""
     rng = np.random.default_rng(seed)
     world = World(kb, make_reacher(cfg.sim()))
-    ex = Exploration(ExploreConfig(strategy=strategy, budget=cfg.max_budget), world.touch, kb.area,
-                     kb.config.match_threshold, rng)
-    res = RunResult(strategy, seed_index)
+    ex = Exploration(ExploreConfig(strategy=strategy, budget=cfg.max_budget,
+                                   model_class=model_class),
+                     world.touch, kb.area, kb.config.match_threshold, rng)
+    res = RunResult(strategy, seed_index, kb.layout, model_class)
     marks = set(cfg.budgets) | {cfg.boundary_budget}
     for step in ex:
         n = step.n_reaches
         crossed = [b for b in marks if n - len(step.targets) < b <= n]
         if n % cfg.resolution == 0 or crossed:
             res.checkpoints.append(n)
-            res.accuracy.append(scoring.accuracy(step.model, kb, learn_stage.CURVE_STEP))
+            res.accuracy.append(scoring.accuracy(step.model, kb, cfg.eval_step))
         if any(b == cfg.boundary_budget for b in crossed):
             pred, true = scoring.key_maps(step.model, kb, learn_stage.EVAL_STEP)
             res.boundary_error = scoring.boundary_error(pred, true, learn_stage.EVAL_STEP)
+    t0 = time.perf_counter()
+    fit_model(model_class, ex.landed, ex.perceived, match_threshold=kb.config.match_threshold,
+              area=kb.area, targets=ex.targets)
+    res.fit_seconds = time.perf_counter() - t0
     return res
 
 
-def runs(cfg: BenchConfig) -> Iterator[RunResult]:
-    """Every (strategy, seed) run, one at a time."""
-    kb = Keyboard(KeyboardConfig())
+def runs(cfg: BenchConfig, keyboard: Keyboard | None = None) -> Iterator[RunResult]:
+    """Every (layout, class, strategy, seed) run, one at a time (``keyboard``: instead of the
+    layouts' default keyboards)."""
     seeds = np.random.SeedSequence(cfg.seed).spawn(cfg.seeds)
-    for strategy in cfg.strategies:
-        for i, s in enumerate(seeds):
-            yield one_run(cfg, strategy, i, s, kb)
+    kbs = [keyboard] if keyboard is not None else [bench_keyboard(name) for name in cfg.layouts]
+    for kb in kbs:
+        check_keyboard_reachable(cfg.sim(), kb)
+        for model_class in cfg.model_classes:
+            for strategy in cfg.strategies:
+                for i, s in enumerate(seeds):
+                    yield one_run(cfg, strategy, i, s, kb, model_class)
 
 
 def nearest_checkpoint(r: RunResult, budget: int) -> float:
@@ -129,29 +168,55 @@ def nearest_checkpoint(r: RunResult, budget: int) -> float:
 
 
 def summarize(cfg: BenchConfig, results: list[RunResult]) -> list[dict]:
-    """Per strategy: median accuracy per budget, median reaches to 99 %, boundary error."""
+    """Per (layout, class, strategy): median accuracy per budget, median reaches to 97 % and 99 %
+    (and how many runs never got there), boundary error, fit time."""
     rows = []
-    for strategy in cfg.strategies:
-        rs = [r for r in results if r.strategy == strategy]
-        if not rs:
-            continue
-        to99 = np.array([r.reaches_to(learn_stage.TARGET_ACCURACY) for r in rs])
+    keys = dict.fromkeys((r.layout, r.model_class, r.strategy) for r in results)
+    for layout, model_class, strategy in keys:
+        rs = [r for r in results
+              if (r.layout, r.model_class, r.strategy) == (layout, model_class, strategy)]
+        to = {lv: np.array([r.reaches_to(lv) for r in rs]) for lv in LEVELS}
         rows.append({
+            "layout": layout,
+            "model_class": model_class,
             "strategy": strategy,
             "runs": len(rs),
             "accuracy": {b: float(np.median([nearest_checkpoint(r, b) for r in rs]))
                          for b in cfg.budgets},
-            "to99": float(np.median(to99)),
-            "never99": int(np.isinf(to99).sum()),
+            "to": {lv: float(np.median(v)) for lv, v in to.items()},
+            "never": {lv: int(np.isinf(v).sum()) for lv, v in to.items()},
+            "to99": float(np.median(to[0.99])),
+            "never99": int(np.isinf(to[0.99]).sum()),
             "boundary_error": float(np.median([r.boundary_error for r in rs])),
+            "fit_seconds": float(np.median([r.fit_seconds for r in rs])),
         })
     return rows
 
 
-def learn_wall_time(cfg: BenchConfig) -> float:
-    """Seconds for one whole ``learn`` stage run at ``boundary_budget`` reaches (active, seed 0)."""
-    kb_art = keyboard_stage.run(KeyboardConfig())
-    lc = learn_stage.LearnConfig(strategy="active", budget=cfg.boundary_budget, sim=cfg.sim())
+def ratios(rows: list[dict], level: float = 0.97) -> list[dict]:
+    """Per (layout, class) with both strategies: active's median reaches to ``level`` over
+    random's (an upper bound when random never got there: ``bound``)."""
+    out = []
+    by = {(r["layout"], r["model_class"], r["strategy"]): r for r in rows}
+    for (layout, model_class, strategy), r in by.items():
+        other = by.get((layout, model_class, "random"))
+        if strategy != "active" or other is None:
+            continue
+        a, b = r["to"][level], other["to"][level]
+        out.append({"layout": layout, "model_class": model_class, "active": a, "random": b,
+                    "ratio": a / b if np.isfinite(a) and np.isfinite(b) else
+                    (float("nan") if not np.isfinite(a) else 0.0),
+                    "bound": bool(np.isfinite(a) and not np.isfinite(b))})
+    return out
+
+
+def learn_wall_time(cfg: BenchConfig, keyboard: Keyboard | None = None) -> float:
+    """Seconds for one whole ``learn`` stage run at ``boundary_budget`` reaches (active, seed 0,
+    the first layout and model class)."""
+    kb = keyboard if keyboard is not None else bench_keyboard(cfg.layouts[0])
+    kb_art = keyboard_stage.run(kb.config)
+    lc = learn_stage.LearnConfig(strategy="active", budget=cfg.boundary_budget, sim=cfg.sim(),
+                                 model_class=cfg.model_classes[0])
     t = time.perf_counter()
     learn_stage.run(lc, kb_art, rng=np.random.default_rng(cfg.seed), seed=cfg.seed)
     return time.perf_counter() - t
@@ -169,5 +234,42 @@ def dynamics_rate(n: int = 1000, seed: int = 0, reach_noise: float = 0.0) -> flo
     return n / (time.perf_counter() - t)
 
 
-__all__ = ["MODES", "BenchConfig", "RunResult", "runs", "summarize", "learn_wall_time",
-           "dynamics_rate"]
+__all__ = ["MODES", "LAYOUTS", "BenchConfig", "RunResult", "runs", "summarize", "ratios",
+           "learn_wall_time", "dynamics_rate", "bench_keyboard"]
+
+
+def _reaches(r: dict, level: float, max_budget: int) -> str:
+    v = r["to"][level]
+    txt = f"> {max_budget}" if np.isinf(v) else f"{v:g}"
+    never = r["never"][level]
+    return txt + (f" ({never} never)" if never else "")
+
+
+def table(cfg: BenchConfig, rows: list[dict]) -> tuple[list[str], list[list[str]]]:
+    """The benchmark table: header and rows of text (printed by ``kbcli bench learn`` and written
+    by ``kbcli bench layouts``)."""
+    head = ["layout", "model class", "strategy", *[f"@{b}" for b in cfg.budgets],
+            "reaches to 97 %", "reaches to 99 %", f"boundary err @{cfg.boundary_budget} (px)",
+            f"fit @{cfg.max_budget} (s)"]
+    body = []
+    for r in rows:
+        body.append([r["layout"], r["model_class"], r["strategy"],
+                     *[f"{100 * r['accuracy'][b]:.2f}" for b in cfg.budgets],
+                     _reaches(r, 0.97, cfg.max_budget), _reaches(r, 0.99, cfg.max_budget),
+                     f"{r['boundary_error']:.2f}", f"{r['fit_seconds']:.2f}"])
+    return head, body
+
+
+def ratio_lines(cfg: BenchConfig, rows: list[dict]) -> list[str]:
+    """One line per (layout, class): active / random reaches to 97 %."""
+    out = []
+    for q in ratios(rows, 0.97):
+        if q["bound"]:
+            txt = (f"< {q['active'] / cfg.max_budget:.2f} (random never reached 97 % within "
+                   f"{cfg.max_budget})")
+        elif np.isnan(q["ratio"]):
+            txt = "n/a (active never reached 97 %)"
+        else:
+            txt = f"{q['ratio']:.2f}"
+        out.append(f"{q['layout']}, {q['model_class']}: active / random reaches to 97 %: {txt}")
+    return out

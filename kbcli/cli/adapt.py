@@ -152,8 +152,8 @@ def bench_adapt_cmd(
     experiments: Annotated[int, typer.Option(
         "--experiments", help="Runs per strategy and displacement category.")] = 50,
     section: Annotated[list[str] | None, typer.Option(
-        "--section", help="exact, noise, rigid, kde or learned (repeat for several) [default: all "
-        "but learned, plus learned when --model is given].")] = None,
+        "--section", help="exact, noise, rigid, kde, learned or learned-rigid (repeat for several) "
+        "[default: exact, noise, rigid and kde, plus learned when --model is given].")] = None,
     model: Annotated[Path | None, typer.Option(
         "--model", help="A learned model artifact for the learned section.")] = None,
     strategy: Annotated[list[str] | None, typer.Option(
@@ -165,10 +165,14 @@ def bench_adapt_cmd(
     model_blur: Annotated[float | None, typer.Option(
         "--model-blur", help="learned section: soften the model's map by this many px [default "
         "1].")] = None,
+    layout: Annotated[str | None, typer.Option(
+        "--layout", help="Keyboard layout of every section: grid, hex, piano, pads, polygons (its "
+        "default keyboard) [default: the model's keyboard with --model, else grid].")] = None,
 ) -> None:
-    """Sample efficiency and speed of the adaptation strategies (issue 5's benchmark).
+    """Sample efficiency and speed of the adaptation strategies (issue 5's benchmark), on any
+    layout.
 
-    Reads MODEL if given. Writes nothing. Prints per section, strategy and category: median
+    Reads MODEL if given (its keyboard is the world's). Writes nothing. Prints per section, strategy and category: median
     observations to an error below 4, 2, 1, 0.5 px (in brackets: runs that never got there within
     T), the RMSE at steps 1, 2, 3, 5, 10, 20, 40, the Wilcoxon rank-sum p-value against random at
     each threshold, and the median milliseconds per step (decision plus update).
@@ -177,18 +181,27 @@ def bench_adapt_cmd(
 
     learned = None
     model_art = None
+    kb = None
     if model is not None:
         model_art = read_artifact(model, "model")
+        from kbcli.stages import keyboard as keyboard_stage
         from kbcli.stages.models import load_model
 
         learned = load_model(model_art)
+        kb = keyboard_stage.load(model_art)
+        if layout is not None and layout != kb.layout:
+            raise ConfigError(f"--layout {layout} but the model {model} was learned on a "
+                              f"{kb.layout} keyboard")
+        layout = kb.layout
     sections = tuple(section) if section else tuple(
-        s for s in bench.SECTIONS if s != "learned" or model is not None)
+        s for s in bench.SECTIONS if s == "learned" and model is not None
+        or not s.startswith("learned"))
     cfg = bench.BenchConfig(
         experiments=experiments, max_steps=max_steps, seed=seed, sections=sections,
         strategies=tuple(strategy) if strategy else bench.STRATEGY_ORDER,
-        categories=tuple(category) if category else tuple(bench.CATEGORIES), model_blur=model_blur)
-    cells = bench.plan(cfg, learned)
+        categories=tuple(category) if category else tuple(bench.CATEGORIES), model_blur=model_blur,
+        layout=layout or "grid")
+    cells = bench.plan(cfg, learned, kb)
     total = sum(len(c.truths) for c in cells)
     for _ in progress(bench.run_cells(cells), total, "adaptation runs"):
         pass
@@ -202,6 +215,9 @@ def bench_adapt_cmd(
         "kde": "the paper's KDE posterior (Eq. 7) against the likelihood posterior",
         "learned": "learned model" + (f" ({model})" if model else "")
                    + (f", map softened by {model_blur:g} px" if model_blur is not None else ""),
+        "learned-rigid": "learned model" + (f" ({model})" if model else "")
+                         + ", rigid family (angles up to 5 deg); a threshold of t px also needs "
+                           "the angle within t/2 deg",
     }
     # tables are wide: never wrap them at a narrow default width when the output is not a terminal
     con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
@@ -210,7 +226,7 @@ def bench_adapt_cmd(
         if not sec_rows:
             continue
         T = sec_rows[0]["T"]
-        t = Table(title=f"{titles[sec]}: {experiments} runs per row, T = {T}",
+        t = Table(title=f"{cfg.layout} layout, {titles[sec]}: {experiments} runs per row, T = {T}",
                   title_justify="left")
         t.add_column("strategy")
         t.add_column("category")
@@ -221,10 +237,10 @@ def bench_adapt_cmd(
                 t.add_column(f"rmse@{s}", justify="right")
         t.add_column("p vs random (<4/2/1/0.5)", justify="right")
         t.add_column("ms/step", justify="right")
-        extra = sec in ("rigid", "learned")
-        if sec == "rigid":
+        extra = sec in ("rigid", "learned", "learned-rigid")
+        if sec in ("rigid", "learned-rigid"):
             t.add_column("final angle rmse", justify="right")
-        if sec == "learned":
+        if sec.startswith("learned"):
             t.add_column("final err / boundary err", justify="right")
         bnd = (model_art.attrs.get("boundary_error_px") if model_art is not None else None)
         for r in sec_rows:
@@ -232,9 +248,9 @@ def bench_adapt_cmd(
             rm = [f"{r['rmse'][s]:.2f}" for s in bench.RMSE_STEPS if s <= T]
             p = " ".join(_fmt_p(v) for v in r["p"]) if r["p"] is not None else ""
             row = [r["label"], r["category"], *cells_txt, *rm, p, f"{r['ms']:.1f}"]
-            if extra and sec == "rigid":
+            if extra and sec in ("rigid", "learned-rigid"):
                 row.append(f"{r['final_angle_rmse']:.2f} deg")
-            if extra and sec == "learned":
+            if extra and sec.startswith("learned"):
                 row.append(f"{r['final_rmse']:.2f} / "
                            + (f"{bnd:.2f} px" if isinstance(bnd, (int, float)) else "n/a"))
             t.add_row(*row)

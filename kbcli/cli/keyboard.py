@@ -62,8 +62,8 @@ def keyboard_cmd(
     sound alike (Eq. 2) and keys out of the (default) arm's reach. Writes OUTPUT (kind 'keyboard')
     and prints a one-line summary.
     """
-    from kbcli.sim import SimConfig, check_keyboard_reachable
     from kbcli.core.keyboard import Keyboard
+    from kbcli.sim import SimConfig, check_keyboard_reachable
 
     values = dict(load_toml(config, "keyboard")) if config is not None else {}
     flags = {

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Annotated
 
@@ -48,6 +47,10 @@ def learn_cmd(
     ] = 20.0,
     curve_every: Annotated[int, typer.Option(
         "--curve-every", help="Reaches between learning-curve points.")] = 50,
+    model_class: Annotated[str, typer.Option(
+        "--model-class", help="lines (straight key edges: the grid and other polygon keys) or svc "
+        "(scikit-learn RBF SVMs per pair of neighbouring sounds: any key shape, pads included).")
+    ] = "lines",
 ) -> None:
     """Learn the instrument model by exploring the pad with the simulated arm.
 
@@ -58,7 +61,8 @@ def learn_cmd(
     """
     sim = SimConfig(mode=mode, reach_noise=reach_noise)
     cfg = stage.LearnConfig(strategy=strategy, budget=budget, batch=batch,
-                            explore_radius=explore_radius, curve_every=curve_every, sim=sim)
+                            explore_radius=explore_radius, curve_every=curve_every, sim=sim,
+                            model_class=model_class)
     kb_art = read_artifact(keyboard, "keyboard")
     output_path(output)
     if cfg.strategy == "exact":
@@ -68,14 +72,15 @@ def learn_cmd(
                   f"{stage.check_keyboard(kb_art).n_keys} keys)")
         return
     learning = stage.learn(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
-    for _ in progress(learning, len(learning), f"{strategy} exploration ({mode})"):
+    for _ in progress(learning, len(learning), f"{strategy} exploration ({mode}, {model_class})"):
         pass
     art = learning.artifact()
     write_artifact(art, output)
     a = art.attrs
     to99 = a["reaches_to_99"]
     out.print(
-        f"wrote {output}: {strategy} exploration, {mode} mode, {a['n_reaches']} reaches: "
+        f"wrote {output}: {a['layout']} layout, {model_class} model, {strategy} exploration, "
+        f"{mode} mode, {a['n_reaches']} reaches: "
         f"{a['n_classes'] - 1} sounds + silence, accuracy {100 * a['accuracy']:.2f} %, "
         f"boundary error {a['boundary_error_px']:.2f} px, "
         + (f"99 % after {to99} reaches" if to99 is not None else "99 % not reached")
@@ -112,60 +117,68 @@ def _budgets(text: str) -> tuple[int, ...]:
 
 @command(bench_app, name="learn")
 def bench_learn_cmd(
-    seeds: Annotated[int, typer.Option("--seeds", min=1, help="Runs per strategy.")] = 10,
+    seeds: Annotated[int, typer.Option("--seeds", min=1, help="Runs per row.")] = 5,
     budgets: Annotated[str, typer.Option(
         "--budgets", help="Budgets at which to report the accuracy, comma-separated.")]
-        = "50,100,200,400,800,1600",
+        = "200,400,800,1600",
     strategy: Annotated[list[str] | None, typer.Option(
         "--strategy", help="Strategies to run (repeat) [default active, random].")] = None,
+    layout: Annotated[list[str] | None, typer.Option(
+        "--layout", help="Layouts to learn, each its default keyboard (repeat): grid, hex, piano, "
+        "pads, polygons [default grid].")] = None,
+    model_class: Annotated[list[str] | None, typer.Option(
+        "--model-class", help="Model classes to fit (repeat): lines, svc [default lines].")] = None,
+    keyboard: Annotated[Path | None, typer.Option(
+        "--keyboard", help="A keyboard artifact to learn instead of the layouts' defaults.")] = None,
     mode: Annotated[str, typer.Option("--mode", help="ideal or dynamics.")] = "ideal",
     reach_noise: Annotated[float, typer.Option("--reach-noise", help="Landing scatter, px.")] = 0.0,
     seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the runs.")] = 0,
     boundary_budget: Annotated[int, typer.Option(
         "--boundary-budget", help="Reaches at which the boundary error and the learn wall time "
         "are measured.")] = 800,
+    eval_step: Annotated[float, typer.Option(
+        "--eval-step", help="Grid (px) on which the accuracy is measured.")] = 1.0,
 ) -> None:
-    """Sample efficiency and speed of learning the model (issue 3's benchmark).
+    """Sample efficiency and speed of learning the model, per layout, model class and strategy.
 
-    Reads and writes nothing. Prints, per strategy over SEEDS runs on the default keyboard: the
-    median accuracy (2 px grid) at each budget, the median reaches until 99 % accuracy, the median
-    boundary error (px) at the boundary budget (800); then the wall time of one `kbcli learn` stage
-    run at that budget and the dynamics simulator's reaches per second.
+    Reads nothing (or --keyboard); writes nothing. Prints, per row over SEEDS runs: the median
+    accuracy (on a grid of --eval-step px over the working area) at each budget, the median reaches
+    until 97 % and 99 % accuracy, the median boundary error (px) at the boundary budget and the
+    median time of one fit at the largest budget; active / random reaches to 97 %; then the wall
+    time of one `kbcli learn` stage run at the boundary budget and the dynamics simulator's
+    reaches per second.
     """
     from kbcli.bench import learn as bench
 
+    kb = None
+    if keyboard is not None:
+        kb = keyboard_stage.load(read_artifact(keyboard, "keyboard"))
+        layout = [kb.layout]
     cfg = bench.BenchConfig(seeds=seeds, budgets=_budgets(budgets), mode=mode,
                             reach_noise=reach_noise, seed=seed, boundary_budget=boundary_budget,
-                            strategies=tuple(strategy) if strategy else bench.STRATEGY_ORDER)
-    results = list(progress(bench.runs(cfg), len(cfg.strategies) * cfg.seeds, "learning runs"))
+                            strategies=tuple(strategy) if strategy else bench.STRATEGY_ORDER,
+                            layouts=tuple(layout) if layout else ("grid",),
+                            model_classes=tuple(model_class) if model_class else ("lines",),
+                            eval_step=eval_step)
+    results = list(progress(bench.runs(cfg, kb), cfg.n_runs, "learning runs"))
     rows = bench.summarize(cfg, results)
-    con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
+    con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
     t = Table(title=f"learning the model: {seeds} seeds per row, {mode} mode"
                     + (f", {reach_noise:g} px reach noise" if reach_noise else "")
-                    + "; median accuracy (%) on a 2 px grid", title_justify="left")
-    t.add_column("strategy")
-    for b in cfg.budgets:
-        t.add_column(f"@{b}", justify="right")
-    t.add_column("reaches to 99 %", justify="right")
-    t.add_column(f"boundary err @{cfg.boundary_budget} (px)", justify="right")
-    for r in rows:
-        to99 = r["to99"]
-        txt = f"> {cfg.max_budget}" if math.isinf(to99) else f"{to99:g}"
-        if r["never99"]:
-            txt += f" ({r['never99']} never)"
-        t.add_row(r["strategy"], *[f"{100 * r['accuracy'][b]:.2f}" for b in cfg.budgets], txt,
-                  f"{r['boundary_error']:.2f}")
+                    + f"; median accuracy (%) on a {eval_step:g} px grid", title_justify="left")
+    head, body = bench.table(cfg, rows)
+    for i, h in enumerate(head):
+        t.add_column(h, justify="left" if i < 3 else "right")
+    for row in body:
+        t.add_row(*row)
     con.print(t)
-    con.print("reaches to 99 %: median over runs of the first curve point (every 50 reaches) at or "
-              "above 99 %; runs that never get there count as more than the largest budget.")
-    by = {r["strategy"]: r["to99"] for r in rows}
-    if "active" in by and "random" in by:
-        a, r = by["active"], by["random"]
-        ratio = ("n/a" if math.isinf(a) else
-                 f"< {a / cfg.max_budget:.2f} (random never reached 99 % within {cfg.max_budget})"
-                 if math.isinf(r) else f"{a / r:.2f}")
-        con.print(f"active / random reaches to 99 %: {ratio}")
-    wall = bench.learn_wall_time(cfg)
-    con.print(f"kbcli learn (active, {mode}, budget {cfg.boundary_budget}, one core): {wall:.1f} s")
+    con.print(f"reaches to 97 % / 99 %: median over runs of the first curve point (every "
+              f"{cfg.resolution} reaches) at or above it; runs that never get there count as more "
+              "than the largest budget.")
+    for line in bench.ratio_lines(cfg, rows):
+        con.print(line)
+    wall = bench.learn_wall_time(cfg, kb)
+    con.print(f"kbcli learn ({cfg.layouts[0]}, {cfg.model_classes[0]}, active, {mode}, budget "
+              f"{cfg.boundary_budget}, one core): {wall:.1f} s")
     rate = bench.dynamics_rate()
     con.print(f"dynamics simulator: {rate:.0f} reaches/s (1000 reaches, one core)")

@@ -18,16 +18,19 @@ Strategies (registry :data:`STRATEGIES`, one signature, see :data:`Strategy`):
        heard holds an empty disc, so covering to radius r finds every region that contains a disc
        of radius r (a 50 px key holds one of 25 px), with about area / (2.6 r^2) reaches, about
        120 on the default pad, fewer and more even than random reaches need.
-    2. *Bisect the widest boundary band.* The model (:mod:`kbcli.core.learned`) places each
-       boundary between two sounds on a straight line that must pass between the samples heard on
-       either side: at each point along it the line lies in a band, between the hulls of those
-       samples, where the model cannot tell which sound an action makes (the paper's confusion
-       factor, Sect. III-E: p(i | a) is neither 0 nor 1 there); the band widens beyond the
-       samples. Sites every 1 px along every boundary piece (and 25 px past its ends) sit in the
-       middle of their band; the next target is the site with the widest band (capped at twice
-       the distance to the nearest landing: a reach already made there said what it could). A
-       batch is chosen greedily: after a pick of width w every site's width is capped at
-       w / 2 + its distance to the pick.
+    2. *Bisect the widest boundary band.* Every model class (:mod:`kbcli.core.model_classes`)
+       reports its predictive uncertainty as ``boundary_sites``: points on the boundaries it
+       predicts between sounds, each with the width (px) of the band the boundary could lie in
+       there, where the model cannot tell which sound an action makes (the paper's confusion
+       factor, Sect. III-E: p(i | a) is neither 0 nor 1 there). ``lines``
+       (:mod:`kbcli.core.learned`) places each boundary on a straight line that must pass between
+       the samples heard on either side, the band between their hulls, with sites every 1 px along
+       every boundary piece (and 25 px past its ends); ``svc`` (:mod:`kbcli.core.svc_model`) puts
+       its sites where its machines change sign, the band between the nearest samples of either
+       sound. The next target is the site with the widest band (capped at twice the distance to
+       the nearest landing: a reach already made there said what it could). A batch is chosen
+       greedily: after a pick of width w every site's width is capped at w / 2 + its distance to
+       the pick.
 
     Why: the misclassified area along a boundary is its band width integrated along it, so the
     most useful reach is where the band is widest; a reach in the middle of the band lands on one

@@ -130,10 +130,6 @@ def check_polygon(vertices: Sequence, what: str) -> np.ndarray:
         v = v[:-1]
     if len(np.unique(v, axis=0)) < 3:
         raise ConfigError(f"{what}: degenerate polygon: fewer than 3 distinct vertices")
-    area = polygon_area(v)
-    if abs(area) < MIN_AREA:
-        raise ConfigError(f"{what}: degenerate polygon: its area is {abs(area):.3g} px^2 "
-                          f"(at least {MIN_AREA:g} needed)")
     a, b = v, np.roll(v, -1, axis=0)
     cross = proper_crossings(a, b, a, b)
     m = len(v)
@@ -142,6 +138,10 @@ def check_polygon(vertices: Sequence, what: str) -> np.ndarray:
     if (~adjacent).any():
         raise ConfigError(f"{what}: degenerate polygon: its edges {int(i[~adjacent][0])} and "
                           f"{int(j[~adjacent][0])} cross (a self-intersecting outline)")
+    area = polygon_area(v)
+    if abs(area) < MIN_AREA:
+        raise ConfigError(f"{what}: degenerate polygon: its area is {abs(area):.3g} px^2 "
+                          f"(at least {MIN_AREA:g} needed)")
     return v if area > 0 else v[::-1].copy()
 
 

@@ -412,7 +412,7 @@ class Keyboard:
         elif c.layout == "hex":
             what = f"{c.rows} x {c.cols} hexagonal keys {c.key_size:g} px across"
         elif c.layout == "piano":
-            what = (f"piano of {c.cols} white keys ({c.key_size:g} x {c.key_height:g} px) and "
+            what = (f"{c.cols} white keys ({c.key_size:g} x {c.key_height:g} px) and "
                     f"{self.n_keys - c.cols} black keys ({c.black_width:g} x {c.black_height:g} px)")
         elif c.layout == "pads":
             what = f"{c.rows} x {c.cols} round pads of radius {c.pad_radius:g} px"

@@ -380,3 +380,35 @@ def _polygons(cfg: KeyboardConfig) -> LayoutGeometry:
     shapes = KeyShapes(polygons=polys)
     return LayoutGeometry(shapes, np.array(pitches, np.int64), np.array(tempos, float),
                           shapes.bounds)
+
+
+def example_polygon_keys() -> tuple[PolygonKey, ...]:
+    """The ``polygons`` example (``pipelines/layouts/polygons.toml``): a fan of two rings of seven
+    turned trapezoids around (400, 250), a square turned by 25 degrees and an irregular pentagon.
+
+    Vertices are pad coordinates rounded to 0.01 px (the fan's rings share their edges exactly).
+    """
+    centre = np.array([400.0, 250.0])
+    keys: list[PolygonKey] = []
+    for r0, r1 in ((90.0, 150.0), (150.0, 210.0)):
+        for a0 in range(160, 20, -20):  # left to right
+            th = np.deg2rad([a0, a0 - 20])
+            u = np.column_stack([np.cos(th), np.sin(th)])
+            v = np.vstack([centre + r0 * u[0], centre + r0 * u[1], centre + r1 * u[1],
+                           centre + r1 * u[0]])
+            keys.append(PolygonKey(tuple((round(float(x), 2), round(float(y), 2)) for x, y in v)))
+    a = np.deg2rad(25.0)
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    square = np.array([[-18.0, -18.0], [18.0, -18.0], [18.0, 18.0], [-18.0, 18.0]]) @ rot.T + (
+        330.0, 245.0)
+    keys.append(PolygonKey(tuple((round(float(x), 2), round(float(y), 2)) for x, y in square),
+                           note="F#5", tempo=140.0))
+    pentagon = ((452.0, 232.0), (490.0, 228.0), (500.0, 250.0), (478.0, 268.0), (455.0, 262.0))
+    keys.append(PolygonKey(pentagon, note=90, tempo=150.0))
+    return tuple(keys)
+
+
+def example_config_fields(name: str) -> dict[str, Any]:
+    """Config fields of the example keyboard of a layout (the polygons' keys; nothing otherwise)."""
+    get_layout(name)
+    return {"keys": example_polygon_keys()} if name == "polygons" else {}

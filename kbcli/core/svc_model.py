@@ -20,12 +20,20 @@ the finger landed, what was heard), the model
    boundary), ``p(a on j's side) = Phi(sqrt(3) f(a))``: the boundary is taken to lie anywhere in the
    margin, uniformly (standard deviation 1 / sqrt(3) of the half-margin, as the ``lines`` model's
    band width / sqrt(12)). A candidate's log-score sums its contests (``log_ndtr``); p(sound | a) is
-   their softmax. Where every neighbour was heard as one sound, that sound is certain.
+   their softmax. Where every neighbour was heard as one sound, that sound is certain. Far from the
+   samples a machine was fitted on (beyond half a length scale) its decision fades into the
+   nearest-sample rule: an RBF machine there only extrapolates its intercept, which would paint
+   blobs of a key into the silence around the keyboard.
 
 Active exploration (:mod:`kbcli.core.explore`) reads the model's predictive uncertainty through
-:meth:`SVCModel.boundary_sites`: on every straddling edge, the point where the pair's machine puts
-the boundary, and the width of the band the boundary is known to lie in there (the distance to the
-nearest sample of either sound, summed): a reach at the widest site bisects the widest band.
+:meth:`SVCModel.boundary_sites`: points on the predicted boundaries (where a pair's machine changes
+sign along its straddling edges, and where the predicted class changes on a 2 px grid), each with
+the width of the band the boundary is known to lie in there (the distance to the nearest sample of
+either sound, summed): a reach at the widest site bisects the widest band.
+
+Defaults (``length_scale`` 25 px, ``C`` 1000) were chosen with ``kbcli bench learn`` on the five
+layouts (a length scale of 8-12 px bends too easily between sparse samples; 30-45 px rounds the
+corners of the keys; a softer margin, ``C`` 10-100, lets the boundary drift between close samples).
 
 Storage without pickle: :meth:`SVCModel.to_arrays` keeps the samples, the classes and the
 hyper-parameters; :meth:`SVCModel.from_arrays` refits the machines, which is deterministic (libsvm's
@@ -49,6 +57,7 @@ from kbcli.errors import ArtifactError, ConfigError
 _CHUNK = 16384  # query points per block
 _SQRT3 = float(np.sqrt(3.0))
 _EDGE_STEPS = 17  # points along a straddling edge where the boundary site is looked for
+SITE_GRID = 2.0  # px, grid on which boundary sites between straddling edges are looked for
 
 
 class SVCModel:
@@ -88,7 +97,7 @@ class SVCModel:
 
     def __init__(self, *, match_threshold: float = 1.5,
                  area: tuple[float, float, float, float] = (150.0, 200.0, 650.0, 500.0),
-                 length_scale: float = 20.0, C: float = 100.0, local_radius: float = 30.0,
+                 length_scale: float = 25.0, C: float = 1e3, local_radius: float = 30.0,
                  n_neighbors: int = 8) -> None:
         self.match_threshold = match_threshold
         self.area = area
@@ -195,8 +204,9 @@ class SVCModel:
         """(n,) the pair's decision value: > 0 on the higher class's side, +-1 on the margin.
 
         Far from the samples it was fitted on, a machine only extrapolates its intercept: its
-        decision fades (weight ``exp(-d^2 / (2 length_scale^2))``, d the distance to the nearest
-        of them) into the nearest-sample rule ``(d_lower - d_higher) / length_scale``.
+        decision fades (weight ``exp(-2 d^2 / length_scale^2)``, d the distance to the nearest of
+        them, beyond half a length scale) into the nearest-sample rule
+        ``(d_lower - d_higher) / length_scale``.
         """
         f = self._svms[code].decision_function(q / self.length_scale)
         both, lo, hi = self._support[code]
@@ -205,7 +215,7 @@ class SVCModel:
         if near.any():
             qn = q[near]
             nn = (lo.query(qn)[0] - hi.query(qn)[0]) / self.length_scale
-            w = np.exp(-0.5 * (d[near] / self.length_scale) ** 2)
+            w = np.exp(-2.0 * (d[near] / self.length_scale) ** 2)
             f[near] = w * f[near] + (1 - w) * nn
         return f
 
@@ -292,10 +302,12 @@ class SVCModel:
                        phase: float = 0.0) -> dict[str, np.ndarray]:
         """Where the model places each boundary, and how uncertain it is there.
 
-        One site per straddling edge: the point along the edge where its pair's machine changes
-        sign (the edge's midpoint when it does not), with ``width`` the distance from the site to
-        the nearest sample of either sound, summed: the band the boundary is known to lie in there.
-        (``step``, ``extend`` and ``phase`` are accepted for the ``lines`` model's signature.)
+        Sites: on every straddling edge, the point where its pair's machine changes sign (the
+        edge's midpoint when it does not); and between those, wherever the predicted class changes
+        between two neighbouring cells of a 2 px grid over the working area (shifted by ``phase``
+        in [0, 1) of a cell). ``width`` is the distance from a site to the nearest sample of either
+        of its two sounds, summed: the band the boundary is known to lie in there. (``step`` and
+        ``extend`` are accepted for the ``lines`` model's signature.)
 
         Returns
         -------
@@ -322,6 +334,20 @@ class SVCModel:
                         0.5)
         pts = a + np.clip(frac, 0.0, 1.0)[:, None] * (b - a)
         la, lb = self.labels_[e[:, 0]], self.labels_[e[:, 1]]
+        # and where the predicted class changes between neighbouring cells of a SITE_GRID px grid
+        # (shifted by ``phase``): the boundary between the straddling edges
+        gs = SITE_GRID
+        x0, y0, x1, y1 = (float(v) for v in self.area)
+        g = np.stack(np.meshgrid(np.arange(x0 + phase * gs, x1, gs),
+                                 np.arange(y0 + phase * gs, y1, gs)), -1)
+        cl = self.predict_class(g.reshape(-1, 2)).reshape(g.shape[:2])
+        iy, ix = np.nonzero(cl[:, 1:] != cl[:, :-1])
+        jy, jx = np.nonzero(cl[1:, :] != cl[:-1, :])
+        pts = np.vstack([pts, (g[iy, ix] + g[iy, ix + 1]) / 2, (g[jy, jx] + g[jy + 1, jx]) / 2])
+        cc = np.vstack([np.column_stack([cl[iy, ix], cl[iy, ix + 1]]),
+                        np.column_stack([cl[jy, jx], cl[jy + 1, jx]])])
+        la = np.r_[la, cc.min(axis=1)]
+        lb = np.r_[lb, cc.max(axis=1)]
         width = self._class_distance(pts, la) + self._class_distance(pts, lb)
         return {"points": pts, "width": width, "pair": np.column_stack([la, lb])}
 

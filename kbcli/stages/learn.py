@@ -2,8 +2,10 @@
 
 The simulated arm (``ideal`` or ``dynamics`` mode, :mod:`kbcli.sim`) reaches for targets chosen by
 an exploration strategy (:mod:`kbcli.core.explore`) on the pad where the keyboard lies at its
-reference pose; the robot hears what its finger played and fits a
-:class:`~kbcli.core.learned.LearnedModel` of p(sound | action). The ground truth (the keyboard) is
+reference pose; the robot hears what its finger played and fits a model of p(sound | action) of the
+chosen class (:mod:`kbcli.core.model_classes`: ``lines``, :class:`~kbcli.core.learned.LearnedModel`,
+the default; ``svc``, :class:`~kbcli.core.svc_model.SVCModel`, for any key shape). The ground truth
+(the keyboard) is
 used only to score the model: the learning curve (accuracy on a 2 px grid over the working area
 every ``curve_every`` reaches) and the final accuracy and boundary error on a 1 px grid
 (:mod:`kbcli.core.accuracy`).
@@ -14,11 +16,14 @@ every ``curve_every`` reaches) and the final accuracy and boundary error on a 1 
 The ``model`` artifact holds ``samples/actions`` (the reach targets), ``samples/landed`` (where the
 finger landed: what the model is fitted on), ``samples/perceived`` (NaN rows: silence) and, in
 ``dynamics`` mode, ``samples/start_angles`` (the arm's joint angles before each reach); ``model/...``
-(:meth:`LearnedModel.to_arrays`), ``curve/{reaches,accuracy}`` and ``evaluation/predicted_keys``
-(the key the model predicts in each 1 px cell of the working area, -1 silence, -2 a sound that is
-no key; row i is y, from ``evaluation/origin``). Its attrs hold the final ``accuracy``,
-``boundary_error_px``, ``reaches_to_99`` (first curve point at or above 99 %, or None) and
-``n_classes``.
+(the class's ``to_arrays``: plain arrays, never a pickle; the config's ``model_class`` says which
+class reads them), ``curve/{reaches,accuracy}`` and ``evaluation/predicted_keys`` (the key the model
+predicts in each 1 px cell of the working area, -1 silence, -2 a sound that is no key; row i is y,
+from ``evaluation/origin``). Its attrs hold the final ``accuracy``, ``boundary_error_px``,
+``reaches_to_97`` and ``reaches_to_99`` (first curve point at or above 97 % / 99 %, or None), the
+``model_class`` and ``n_classes`` (the fit time is measured by ``kbcli bench learn``, not stored:
+identical runs give identical files). Schema 2 (schema 1:
+``lines`` only, no ``model_class``).
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from kbcli.core import accuracy as scoring
 from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.model import grid_points
+from kbcli.core.model_classes import DEFAULT_MODEL_CLASS, MODEL_CLASSES, get_model_class
 from kbcli.errors import ArtifactError, ConfigError
 from kbcli.sim import SimConfig, World, check_keyboard_reachable, make_reacher
 from kbcli.stages import keyboard as keyboard_stage
@@ -42,6 +48,12 @@ from kbcli.stages.models import exact_artifact
 CURVE_STEP = 2.0  # px, grid of the learning curve's accuracy
 EVAL_STEP = 1.0  # px, grid of the final accuracy and boundary error
 TARGET_ACCURACY = 0.99
+LEVELS = (0.97, 0.99)  # accuracies whose first crossing the artifact records
+
+
+def model_classes() -> tuple[str, ...]:
+    """Valid ``--model-class`` values."""
+    return tuple(MODEL_CLASSES)
 
 
 def strategies() -> tuple[str, ...]:
@@ -68,6 +80,8 @@ class LearnConfig:
         reaches each multiple, and at the end).
     sim : SimConfig
         The arm and its reach mode.
+    model_class : str
+        The class of model fitted (``lines`` or ``svc``; :data:`MODEL_CLASSES`).
     """
 
     strategy: str = "active"
@@ -76,8 +90,10 @@ class LearnConfig:
     explore_radius: float = 20.0
     curve_every: int = 50
     sim: SimConfig = field(default_factory=SimConfig)
+    model_class: str = DEFAULT_MODEL_CLASS
 
     def __post_init__(self) -> None:
+        get_model_class(self.model_class)
         if self.strategy not in strategies():
             raise ConfigError(
                 f"unknown strategy {self.strategy!r}; valid: {', '.join(strategies())}"
@@ -94,7 +110,8 @@ class LearnConfig:
 
     def explore_config(self) -> ExploreConfig:
         return ExploreConfig(strategy=self.strategy, budget=int(self.budget), batch=int(self.batch),
-                             explore_radius=float(self.explore_radius))
+                             explore_radius=float(self.explore_radius),
+                             model_class=self.model_class)
 
     def to_dict(self) -> dict:
         return {
@@ -104,6 +121,7 @@ class LearnConfig:
             "explore_radius": float(self.explore_radius),
             "curve_every": int(self.curve_every),
             "sim": self.sim.to_dict(),
+            "model_class": self.model_class,
         }
 
 
@@ -164,13 +182,17 @@ class Learning:
         ex = self.exploration
         if len(ex.targets) < self.cfg.budget:
             raise RuntimeError("learning is not finished: iterate to the end first")
-        model, kb = ex.model, self.keyboard
+        kb = self.keyboard
+        model = ex.model
         pred, true = scoring.key_maps(model, kb, EVAL_STEP)
         acc = scoring.accuracy_from_maps(pred, true)
         berr = scoring.boundary_error(pred, true, EVAL_STEP)
         curve_acc = np.asarray(self.curve_accuracy, float)
         curve_n = np.asarray(self.curve_reaches, np.int64)
-        hit = np.flatnonzero(curve_acc >= TARGET_ACCURACY)
+        first = {}
+        for level in LEVELS:
+            hit = np.flatnonzero(curve_acc >= level)
+            first[level] = int(curve_n[hit[0]]) if len(hit) else None
         samples = {
             "actions": ex.targets,
             "landed": ex.landed,
@@ -193,14 +215,18 @@ class Learning:
             },
             attrs={
                 "strategy": self.cfg.strategy,
+                "model_class": self.cfg.model_class,
+                "layout": kb.layout,
                 "mode": self.cfg.sim.mode,
                 "n_reaches": int(len(ex.targets)),
                 "n_classes": int(model.n_classes),
-                "n_boundary_lines": int(len(model.lines_)),
+                **({"n_boundary_lines": int(len(model.lines_))} if hasattr(model, "lines_")
+                   else {}),
                 "reach_sd_px": float(model.reach_sd_),
                 "accuracy": acc,
                 "boundary_error_px": berr,
-                "reaches_to_99": int(curve_n[hit[0]]) if len(hit) else None,
+                "reaches_to_97": first[0.97],
+                "reaches_to_99": first[0.99],
             },
             inputs={"keyboard": ref(self.keyboard_art)},
         )

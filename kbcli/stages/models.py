@@ -1,7 +1,10 @@
 """Build and load model artifacts (kind ``model``), whatever made them.
 
 A model artifact's config always holds a ``keyboard`` table (the instrument it models) and a
-``strategy``: ``exact`` (the keyboard's own geometry) or the exploration strategy that learned it.
+``strategy``: ``exact`` (the keyboard's own geometry) or the exploration strategy that learned it;
+a learned one also its ``model_class`` (:mod:`kbcli.core.model_classes`; absent in schema 1
+artifacts, which are all ``lines``). The model is rebuilt from plain arrays by its class's
+``from_arrays``: kbcli never unpickles a file.
 """
 
 from __future__ import annotations
@@ -27,6 +30,6 @@ def load_model(art: Artifact):
     kb = keyboard_stage.load(art)
     if art.config["strategy"] == "exact":
         return ExactModel(kb)
-    from kbcli.core.learned import LearnedModel
+    from kbcli.core.model_classes import model_from_arrays
 
-    return LearnedModel.from_arrays(art.data["model"])
+    return model_from_arrays(art.data["model"], art.config.get("model_class"))

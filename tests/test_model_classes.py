@@ -1,0 +1,223 @@
+"""Model classes as a registry (issue 11): every class behind one interface, svc on any layout,
+storage without pickle, learning and adapting on every layout."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+from sklearn.exceptions import NotFittedError
+
+from kbcli.cli import app
+from kbcli.core import accuracy as scoring
+from kbcli.core.adapt import Adapter, AdapterConfig, adapt
+from kbcli.core.explore import Exploration, ExploreConfig
+from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.layouts import example_config_fields
+from kbcli.core.model_classes import (
+    MODEL_CLASSES,
+    fit_model,
+    get_model_class,
+    make_model,
+    model_from_arrays,
+)
+from kbcli.core.svc_model import SVCModel
+from kbcli.errors import ArtifactError, ConfigError
+from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.sim import SimConfig, World, make_reacher
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages import learn as learn_stage
+from kbcli.stages.artifact import Artifact
+from kbcli.stages.models import load_model
+
+PADS = Keyboard(KeyboardConfig(layout="pads", rows=2, cols=3))
+
+
+def _explore(kb: Keyboard, model_class: str, budget: int, strategy: str = "active",
+             seed: int = 0) -> Exploration:
+    ex = Exploration(ExploreConfig(strategy=strategy, budget=budget, model_class=model_class),
+                     World(kb, make_reacher(SimConfig())).touch, kb.area,
+                     kb.config.match_threshold, np.random.default_rng(seed))
+    for _ in ex:
+        pass
+    return ex
+
+
+@pytest.fixture(scope="module")
+def pads_svc():
+    """An svc model of 2 x 3 round pads learned with 300 active reaches."""
+    return _explore(PADS, "svc", 300)
+
+
+# -- the registry -----------------------------------------------------------------------------------
+def test_registry_lists_the_classes_and_refuses_unknown_names():
+    assert list(MODEL_CLASSES) == ["lines", "svc"]
+    with pytest.raises(ConfigError, match="unknown model class 'gp'; valid: lines, svc"):
+        get_model_class("gp")
+    with pytest.raises(ConfigError, match="takes no parameter 'gamma'"):
+        make_model("svc", match_threshold=1.5, area=PADS.area, gamma=3.0)
+    with pytest.raises(ConfigError, match="unknown model class .tree."):
+        ExploreConfig(model_class="tree")
+    with pytest.raises(ConfigError, match="unknown model class"):
+        learn_stage.LearnConfig(model_class="tree")
+
+
+@pytest.mark.parametrize("name", list(MODEL_CLASSES))
+def test_every_class_follows_the_one_interface(name):
+    """fit(actions, perceived) -> self; predicting before fitting raises; the same methods answer
+    the same kinds of questions; to_arrays / from_arrays round-trip exactly."""
+    ex = _explore(PADS, "lines", 120, seed=2)  # any samples will do
+    model = make_model(name, match_threshold=1.5, area=PADS.area)
+    with pytest.raises(NotFittedError):
+        model.predict_proba(np.zeros((1, 2)))
+    assert model.fit(ex.landed, ex.perceived) is model
+    q = np.random.default_rng(1).uniform(PADS.area[:2], PADS.area[2:], size=(500, 2))
+    p = model.predict_proba(q)
+    assert p.shape == (500, model.n_classes) and np.allclose(p.sum(axis=1), 1.0)
+    sure = p.max(axis=1) > 0.5 + 1e-6
+    np.testing.assert_array_equal(model.predict_class(q)[sure], np.argmax(p[sure], axis=1))
+    assert model.classify(model.class_features_[1:2] + 0.1).tolist() == [1]
+    a = model.sample_actions(1, 20, np.random.default_rng(0))
+    assert a.shape == (20, 2)
+    r = model.raster(10.0)
+    assert r.probs.shape[-1] == model.n_classes
+    sites = model.boundary_sites(step=1.0, phase=0.3)
+    assert sites["points"].shape[1] == 2 and len(sites["width"]) == len(sites["points"])
+    assert (sites["width"] >= 0).all()
+    back = model_from_arrays(model.to_arrays(), name)
+    np.testing.assert_array_equal(back.predict_proba(q), p)
+    fitted = fit_model(name, ex.landed, ex.perceived, match_threshold=1.5, area=PADS.area)
+    np.testing.assert_array_equal(fitted.predict_proba(q), p)
+
+
+# -- the svc class ----------------------------------------------------------------------------------
+def test_svc_learns_round_pads(pads_svc):
+    model = pads_svc.model
+    assert isinstance(model, SVCModel) and model.n_classes == PADS.n_keys + 1
+    keys = scoring.class_keys(model.class_features_, PADS)
+    assert sorted(keys[1:]) == list(range(PADS.n_keys))
+    pred, true = scoring.key_maps(model, PADS, 1.0)
+    assert scoring.accuracy_from_maps(pred, true) > 0.97
+    assert scoring.boundary_error(pred, true) < 2.0
+    # the active rule spent its reaches near the pads' circles, not in silence
+    d = PADS.shapes._tree.query(pads_svc.landed)[0] - PADS.config.pad_radius
+    assert np.mean(np.abs(d) < 3) > 0.4
+
+
+def test_svc_probabilities_come_from_the_margin(pads_svc):
+    """On a pad's edge p is near 1/2; deep inside a pad or far in silence it is sure."""
+    model = pads_svc.model
+    cx, cy = PADS.key_centres()[0]
+    r = PADS.config.pad_radius
+    pts = np.array([[cx, cy], [cx + r, cy], [cx + 25.0, cy + 25.0]])  # the last between 4 pads
+    p = model.predict_proba(pts)
+    cls = scoring.class_keys(model.class_features_, PADS)
+    k = int(np.flatnonzero(cls == 0)[0])
+    assert p[0, k] > 0.99 and p[2, 0] > 0.99
+    assert 0.05 < p[1, k] < 0.95  # on the edge: uncertain
+    assert (model.confusion(pts)[[0, 2]] < 0.05).all() and model.confusion(pts)[1] > 0.1
+
+
+def test_svc_storage_has_no_pickle_and_refits_exactly(pads_svc, tmp_path):
+    model = pads_svc.model
+    d = model.to_arrays()
+    for v in d.values():
+        assert np.asarray(v).dtype != object
+    write_artifact(Artifact(kind="model", config={}, data={"model": d}), tmp_path / "m.h5")
+    kinds = []
+    with h5py.File(tmp_path / "m.h5") as f:
+        f.visititems(lambda _, node: kinds.append(node.dtype.kind)
+                     if isinstance(node, h5py.Dataset) else None)
+    assert kinds and set(kinds) <= {"f", "i"}  # numbers only: no opaque (pickled) bytes
+    back = SVCModel.from_arrays(read_artifact(tmp_path / "m.h5").data["model"])
+    q = np.random.default_rng(5).uniform(PADS.area[:2], PADS.area[2:], size=(2000, 2))
+    np.testing.assert_array_equal(back.predict_proba(q), model.predict_proba(q))
+    np.testing.assert_array_equal(back.raster(4.0).probs, model.raster(4.0).probs)
+    with pytest.raises(ArtifactError, match="not a stored svc model"):
+        SVCModel.from_arrays({"actions": np.zeros((2, 2))})
+    with pytest.raises(ConfigError, match="length_scale"):
+        SVCModel(length_scale=0.0).fit(np.zeros((2, 2)), np.full((2, 2), np.nan))
+
+
+def test_svc_exploration_beats_random_on_pads():
+    active = _explore(PADS, "svc", 240, seed=1)
+    random = _explore(PADS, "svc", 240, strategy="random", seed=1)
+    assert scoring.accuracy(active.model, PADS, 2.0) > scoring.accuracy(random.model, PADS, 2.0) \
+        + 0.02
+
+
+# -- learning and adapting on every layout ----------------------------------------------------------
+SMALL = {"hex": {"rows": 2, "cols": 3}, "piano": {"cols": 5}, "pads": {"rows": 2, "cols": 3},
+         "polygons": example_config_fields("polygons")}
+
+
+@pytest.mark.parametrize("layout", list(SMALL))
+def test_learn_stage_and_adaptation_on_every_layout(layout):
+    """Learn an svc model of a (small) keyboard of each layout with the stage, reload it, and let
+    infogain find a rigid move."""
+    kb = Keyboard(KeyboardConfig(layout=layout, **SMALL[layout]))
+    art = learn_stage.run(learn_stage.LearnConfig(budget=500, model_class="svc", curve_every=250),
+                          keyboard_stage.run(kb.config), rng=np.random.default_rng(0), seed=0)
+    assert art.config["model_class"] == "svc" and art.attrs["model_class"] == "svc"
+    assert art.attrs["layout"] == layout and art.attrs["reaches_to_97"] in (None, 250, 500)
+    assert art.attrs["accuracy"] > 0.9
+    model = load_model(art)
+    assert isinstance(model, SVCModel)
+    truth = np.array([2.0, 9.0, -6.0])
+    cfg = AdapterConfig(strategy="infogain", family="rigid", resolution=1.0, prior_halfwidth=15.0,
+                        max_angle=4.0, angle_resolution=1.0, candidates=96, hypotheses=128)
+    adapter = Adapter(model, cfg, rng=np.random.default_rng(1))
+    world = World(kb, make_reacher(SimConfig()), truth, "rigid")
+    rng = np.random.default_rng(2)
+
+    def touch(a):
+        landed, heard = world.touch(a[None], rng)
+        return landed[0], heard[0]
+
+    steps = list(adapt(adapter, touch, 30))
+    est = steps[-1].estimate
+    assert np.hypot(*(est[1:] - truth[1:])) < 3.0 and abs(est[0] - truth[0]) <= 1.5
+
+
+def test_learn_cli_model_class_and_bad_names(runner, tmp_path):
+    kb = tmp_path / "pads.h5"
+    assert runner.invoke(app, ["keyboard", "--layout", "pads", "--rows", "2", "--cols", "3",
+                               "-o", str(kb)]).exit_code == 0
+    out = tmp_path / "m.h5"
+    r = runner.invoke(app, ["learn", "--keyboard", str(kb), "--model-class", "svc", "--budget",
+                            "120", "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "svc model" in " ".join(r.output.split())
+    art = read_artifact(out, "model")
+    assert art.schema_version == 2 and art.config["model_class"] == "svc"
+    assert isinstance(load_model(art), SVCModel)
+    r = runner.invoke(app, ["plot", "model", str(out), "-o", str(tmp_path / "m.png")])
+    assert r.exit_code == 0, r.output
+    bad = tmp_path / "bad.h5"
+    r = runner.invoke(app, ["learn", "--keyboard", str(kb), "--model-class", "forest", "-o",
+                            str(bad)])
+    assert r.exit_code == 1 and "unknown model class 'forest'; valid: lines, svc" in r.output
+    assert not bad.exists()
+
+
+def test_schema_1_model_artifact_still_loads():
+    art = read_artifact("data/default-model.h5", "model")
+    assert art.schema_version == 1 and "model_class" not in art.config
+    model = load_model(art)
+    assert type(model).__name__ == "LearnedModel" and model.n_classes == 33
+
+
+def test_bench_learn_per_layout_and_class(runner):
+    r = runner.invoke(app, ["bench", "learn", "--seeds", "1", "--budgets", "20,40",
+                            "--boundary-budget", "40", "--layout", "pads", "--layout", "hex",
+                            "--model-class", "svc", "--strategy", "active", "--strategy",
+                            "random", "--eval-step", "4"])
+    assert r.exit_code == 0, r.output
+    text = " ".join(r.output.split())
+    for frag in ("pads", "hex", "svc", "reaches to 97 %", "reaches to 99 %", "fit @40 (s)",
+                 "active / random reaches to 97 %", "reaches/s"):
+        assert frag in text, frag
+    r = runner.invoke(app, ["bench", "learn", "--layout", "staggered"])
+    assert r.exit_code == 1 and "unknown layout" in r.output
+    r = runner.invoke(app, ["bench", "learn", "--model-class", "forest"])
+    assert r.exit_code == 1 and "unknown model class" in r.output
