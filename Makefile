@@ -8,13 +8,14 @@ STAMP  := $(VENV)/.kbcli-installed
 OUT    ?= out
 SEED   ?= 0
 
-.PHONY: help install demo test lint data reproduce reproduce-ideal bench clean
+.PHONY: help install demo test lint data reproduce reproduce-ideal reproduce-layouts bench clean
 
 help:
 	@echo "make demo        install, then run the main job on the embedded default model"
 	@echo "make test        install (with the dev extra), then run the test suite"
 	@echo "make data        rebuild data/ (keyboard and default model) from scratch"
 	@echo "make reproduce   learn, evaluate and report the paper's experiments (out/report/)"
+	@echo "make reproduce-layouts  learn and adapt on every layout (out/layouts/report/; hours)"
 	@echo "make bench       print the benchmark tables"
 
 $(STAMP): pyproject.toml
@@ -57,6 +58,11 @@ reproduce: $(STAMP)
 
 reproduce-ideal: $(STAMP)
 	MODE=ideal OUT=$(OUT)/reproduce REPORT=$(OUT)/report benchmarks/reproduce.sh
+
+# Every layout (grid, hex, piano, pads, polygons): the learning and adaptation tables and one figure
+# per layout in $(OUT)/layouts/report/ (pipelines/layouts.toml; hours; interrupted runs continue).
+reproduce-layouts: $(STAMP)
+	$(KBCLI) bench layouts --config pipelines/layouts.toml -o $(OUT)/layouts
 
 # Benchmark tables (long: minutes each; not part of the tests).
 bench: $(STAMP)

@@ -16,18 +16,24 @@ one core.
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
+from kbcli import __version__
 from kbcli.core import accuracy as scoring
 from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.layouts import LAYOUTS, example_config_fields, get_layout
 from kbcli.core.model_classes import fit_model, get_model_class
 from kbcli.errors import ConfigError
+from kbcli.io.atomic import atomic_path
 from kbcli.sim import MODES, SimConfig, World, check_keyboard_reachable, make_reacher
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import learn as learn_stage
@@ -146,17 +152,42 @@ def one_run(cfg: BenchConfig, strategy: str, seed_index: int, seed: np.random.Se
     return res
 
 
-def runs(cfg: BenchConfig, keyboard: Keyboard | None = None) -> Iterator[RunResult]:
+def _cache_file(cache: Path, cfg: BenchConfig, kb: Keyboard, model_class: str, strategy: str,
+                i: int) -> Path:
+    """Where one run's result is kept: named by everything that determines it."""
+    key = json.dumps({"keyboard": kb.config.to_dict(), "class": model_class,
+                      "strategy": strategy, "seed": cfg.seed, "i": i, "budgets": cfg.budgets,
+                      "boundary": cfg.boundary_budget, "mode": cfg.mode,
+                      "noise": cfg.reach_noise, "resolution": cfg.resolution,
+                      "eval_step": cfg.eval_step, "version": __version__}, sort_keys=True)
+    digest = hashlib.sha256(key.encode()).hexdigest()[:16]
+    return cache / f"learn-{kb.layout}-{model_class}-{strategy}-{i}-{digest}.json"
+
+
+def runs(cfg: BenchConfig, keyboard: Keyboard | None = None,
+         cache: str | os.PathLike | None = None) -> Iterator[RunResult]:
     """Every (layout, class, strategy, seed) run, one at a time (``keyboard``: instead of the
-    layouts' default keyboards)."""
+    layouts' default keyboards). With ``cache`` (a folder), a run already done with the same
+    settings is read back instead of run again (runs are deterministic), and each new run is
+    kept there."""
     seeds = np.random.SeedSequence(cfg.seed).spawn(cfg.seeds)
     kbs = [keyboard] if keyboard is not None else [bench_keyboard(name) for name in cfg.layouts]
+    folder = None if cache is None else Path(cache)
     for kb in kbs:
         check_keyboard_reachable(cfg.sim(), kb)
         for model_class in cfg.model_classes:
             for strategy in cfg.strategies:
                 for i, s in enumerate(seeds):
-                    yield one_run(cfg, strategy, i, s, kb, model_class)
+                    path = None if folder is None else _cache_file(folder, cfg, kb, model_class,
+                                                                   strategy, i)
+                    if path is not None and path.is_file():
+                        yield RunResult(**json.loads(path.read_text()))
+                        continue
+                    res = one_run(cfg, strategy, i, s, kb, model_class)
+                    if path is not None:
+                        with atomic_path(path, suffix=".json") as tmp:
+                            Path(tmp).write_text(json.dumps(asdict(res)))
+                    yield res
 
 
 def nearest_checkpoint(r: RunResult, budget: int) -> float:

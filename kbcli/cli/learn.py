@@ -138,6 +138,9 @@ def bench_learn_cmd(
         "are measured.")] = 800,
     eval_step: Annotated[float, typer.Option(
         "--eval-step", help="Grid (px) on which the accuracy is measured.")] = 1.0,
+    cache: Annotated[Path | None, typer.Option(
+        "--cache", help="Folder keeping each run's result: a run already there (same settings) is "
+        "read back, not run again.")] = None,
 ) -> None:
     """Sample efficiency and speed of learning the model, per layout, model class and strategy.
 
@@ -160,7 +163,9 @@ def bench_learn_cmd(
                             layouts=tuple(layout) if layout else ("grid",),
                             model_classes=tuple(model_class) if model_class else ("lines",),
                             eval_step=eval_step)
-    results = list(progress(bench.runs(cfg, kb), cfg.n_runs, "learning runs"))
+    if cache is not None:
+        cache.mkdir(parents=True, exist_ok=True)
+    results = list(progress(bench.runs(cfg, kb, cache), cfg.n_runs, "learning runs"))
     rows = bench.summarize(cfg, results)
     con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
     t = Table(title=f"learning the model: {seeds} seeds per row, {mode} mode"
@@ -182,3 +187,61 @@ def bench_learn_cmd(
               f"{cfg.boundary_budget}, one core): {wall:.1f} s")
     rate = bench.dynamics_rate()
     con.print(f"dynamics simulator: {rate:.0f} reaches/s (1000 reaches, one core)")
+
+
+@command(bench_app, name="layouts")
+def bench_layouts_cmd(
+    config: Annotated[Path, typer.Option(
+        "--config", help="TOML file with a [layouts] table (pipelines/layouts.toml).")] = Path(
+        "pipelines/layouts.toml"),
+    output: Annotated[Path, typer.Option(
+        "-o", "--output", help="Folder to write keyboards/, models/, cache/ and report/ in.")] = Path(
+        "out/layouts"),
+    seeds: Annotated[int | None, typer.Option(
+        "--seeds", min=1, help="Learning runs per layout, class and strategy [default: the "
+        "config's].")] = None,
+    experiments: Annotated[int | None, typer.Option(
+        "--experiments", min=2, help="Adaptation runs per strategy and category, translation "
+        "[default: the config's].")] = None,
+    layout: Annotated[list[str] | None, typer.Option(
+        "--layout", help="Only these layouts (repeat) [default: the config's].")] = None,
+) -> None:
+    """Learning and adaptation on every layout: tables and one figure per layout (issue 11).
+
+    Reads CONFIG (and its keyboards' TOML files). Writes OUTPUT/keyboards/<layout>.h5,
+    OUTPUT/models/<layout>.h5 (the adaptation model), OUTPUT/cache/ (every learning run: a run
+    interrupted continues where it stopped) and OUTPUT/report/: README.md (the learning and
+    adaptation tables, each target of the issue beside the measured figure, the settings),
+    <layout>.png and results.json. Long: hours at the default settings (make reproduce-layouts).
+    """
+    from dataclasses import replace
+
+    from kbcli.bench.layouts import LayoutsConfig, Pipeline
+
+    cfg = LayoutsConfig.from_toml(config)
+    over = {k: v for k, v in (("seeds", seeds), ("experiments", experiments),
+                              ("layouts", tuple(layout) if layout else None)) if v is not None}
+    if over:
+        cfg = replace(cfg, **over)
+    if output.exists() and not output.is_dir():
+        raise ConfigError(f"{output}: exists and is not a folder")
+    output.mkdir(parents=True, exist_ok=True)
+    pipe = Pipeline(cfg, output)
+    pipe.keyboards()
+    for _ in progress(pipe.learn(), pipe.n_learn_runs, "learning runs"):
+        pass
+    for _ in progress(pipe.models(), len(cfg.layouts), "adaptation models"):
+        pass
+    total = pipe.plan_adapt()
+    for _ in progress(pipe.adapt(), total, "adaptation runs"):
+        pass
+    folder = pipe.report()
+    met = [t["met"] for res in pipe.results.values() for t in _targets(cfg, res)]
+    out.print(f"wrote {folder}/README.md, {len(cfg.layouts)} figures and results.json: "
+              f"{sum(met)} of {len(met)} targets met")
+
+
+def _targets(cfg, res):
+    from kbcli.bench.layouts import targets
+
+    return targets(cfg, res)
