@@ -221,3 +221,43 @@ def test_bench_learn_per_layout_and_class(runner):
     assert r.exit_code == 1 and "unknown layout" in r.output
     r = runner.invoke(app, ["bench", "learn", "--model-class", "forest"])
     assert r.exit_code == 1 and "unknown model class" in r.output
+
+
+def test_bench_layouts_pipeline_small(runner, tmp_path):
+    """The layouts pipeline end to end on a small pads keyboard: report, figure, results, resume."""
+    kbs = tmp_path / "kbs"
+    kbs.mkdir()
+    (kbs / "pads.toml").write_text('[keyboard]\nlayout = "pads"\nrows = 2\ncols = 3\n')
+    cfg = tmp_path / "layouts.toml"
+    cfg.write_text(f'[layouts]\nlayouts = ["pads"]\nkeyboards = "{kbs}"\n'
+                   '[layouts.learn]\nmodel_classes = ["svc"]\nstrategies = ["active", "random"]\n'
+                   'seeds = 1\nbudgets = [40, 80]\nboundary_budget = 80\n'
+                   '[layouts.adapt]\nbudget = 80\nexperiments = 2\nstrategies = ["infogain"]\n'
+                   'rigid_experiments = 2\nrigid_strategies = ["infogain"]\nmax_steps = 3\n')
+    out = tmp_path / "out"
+    r = runner.invoke(app, ["bench", "layouts", "--config", str(cfg), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    rep = out / "report"
+    text = (rep / "README.md").read_text()
+    for frag in ("## Targets", "## Learning the model", "## Adapting with a learned model",
+                 "| pads | svc | active |", "rigid", "infogain", "pads.png"):
+        assert frag in text, frag
+    assert (rep / "pads.png").read_bytes()[:4] == b"\x89PNG"
+    import json
+
+    data = json.loads((rep / "results.json").read_text())
+    assert data["layouts"]["pads"]["adapt_model"]["class"] == "svc"
+    assert len(list((out / "cache").glob("learn-pads-svc-*.json"))) == 2
+    assert read_artifact(out / "models" / "pads.h5", "model").attrs["n_reaches"] == 80
+    # a second run reads the learning runs back and gives the same tables
+    r = runner.invoke(app, ["bench", "layouts", "--config", str(cfg), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert (rep / "README.md").read_text().split("## Adapting")[0] == text.split("## Adapting")[0]
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[layouts]\nlayouts = ["pads"]\n[layouts.learn]\nseedz = 3\n')
+    r = runner.invoke(app, ["bench", "layouts", "--config", str(bad), "-o", str(tmp_path / "o2")])
+    assert r.exit_code == 1 and "unknown [layouts.learn] option(s) seedz" in r.output
+    bad.write_text('[layouts]\nlayouts = ["staggered"]\n')
+    r = runner.invoke(app, ["bench", "layouts", "--config", str(bad), "-o", str(tmp_path / "o2")])
+    assert r.exit_code == 1 and "unknown layout 'staggered'" in r.output
+    assert not (tmp_path / "o2").exists()
