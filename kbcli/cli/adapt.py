@@ -13,11 +13,12 @@ from rich.table import Table
 
 from kbcli.cli.app import (
     bench_app,
+    check_io,
     command,
     err,
+    figure_output,
     interactive,
     out,
-    output_path,
     plot_app,
     progress,
 )
@@ -85,6 +86,7 @@ def adapt_cmd(
     the estimate, its error against the scene's true pose, the posterior entropy and the time
     spent; plus posterior snapshots. Prints the final error and the steps to an error below 1 px.
     """
+    check_io({"--model": model, "--scene": scene, "--config": config}, ("--output", output))
     values = dict(load_toml(config, "adapt")) if config is not None else {}
     flags = {"strategy": strategy, "posterior": posterior, "family": family, "mode": mode,
              "reach_noise": reach_noise, "feedback": feedback, "model_blur": model_blur,
@@ -97,7 +99,6 @@ def adapt_cmd(
     cfg = stage.AdaptConfig.from_dict(values)
     steps = _snapshots(snapshots)
     stage.check_inputs(model_art, scene_art)
-    output_path(output)
     art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
                     snapshot_steps=steps)
     write_artifact(art, output)
@@ -129,11 +130,11 @@ def plot_adapt_cmd(
     """
     from kbcli.viz.adapt import plot_adapt
 
+    check_io({"RUN": run}, figure_output(output))
     art = read_artifact(run, "run")
     if "snapshots" not in art.data:
         raise ConfigError(f"{run}: holds no posterior snapshots (rerun kbcli adapt with "
                           f"--snapshots)")
-    output_path(output)
     plot_adapt(art, output)
     out.print(f"wrote {output}")
 

@@ -6,6 +6,7 @@ on stderr and exit 1; usage errors keep Click's exit 2; Ctrl-C exits 130 without
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import sys
@@ -19,6 +20,7 @@ from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
     Progress,
+    SpinnerColumn,
     TextColumn,
     TimeElapsedColumn,
     TimeRemainingColumn,
@@ -26,6 +28,7 @@ from rich.progress import (
 
 from kbcli import __version__
 from kbcli.errors import KbcliError
+from kbcli.io.paths import Output, check_outputs, figure_format, probe_writable
 
 app = typer.Typer(
     name="kbcli",
@@ -47,8 +50,20 @@ bench_app = typer.Typer(
 app.add_typer(plot_app, name="plot")
 app.add_typer(bench_app, name="bench")
 
-out = Console()
-err = Console(stderr=True, highlight=False, soft_wrap=True)
+#: Width of the consoles when the stream is not a terminal (a pipe, a file, a CI log): wide enough
+#: that Rich never wraps a line in the middle of a value (a hash, a path, a number).
+PIPE_WIDTH = 10_000
+
+
+def _console(stderr: bool = False) -> Console:
+    stream = sys.stderr if stderr else sys.stdout
+    tty = stream.isatty()
+    return Console(stderr=stderr, highlight=not stderr, soft_wrap=stderr or not tty,
+                   width=None if tty else PIPE_WIDTH)
+
+
+out = _console()
+err = _console(stderr=True)
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -87,8 +102,20 @@ def interactive() -> bool:
 T = TypeVar("T")
 
 
-def progress(items: Iterable[T], total: int | None, description: str) -> Iterator[T]:
-    """Iterate with a Rich progress bar on a terminal (count, rate, time left); plain otherwise."""
+def progress(items: Iterable[T], total: int | None, description: str, *,
+             advance: Callable[[T], float] | None = None,
+             describe: Callable[[T], str | None] | None = None) -> Iterator[T]:
+    """Iterate with a Rich progress bar on a terminal (count, rate, time left); plain otherwise.
+
+    Parameters
+    ----------
+    total : int, optional
+        Units of work in all (None: a count without a bar end).
+    advance : callable, optional
+        Units of work an item stands for (default 1), e.g. the reaches of a batch.
+    describe : callable, optional
+        A new description after an item (None keeps the current one).
+    """
     if not interactive():
         yield from items
         return
@@ -104,7 +131,22 @@ def progress(items: Iterable[T], total: int | None, description: str) -> Iterato
         task = bar.add_task(description, total=total)
         for item in items:
             yield item
-            bar.advance(task)
+            bar.advance(task, 1 if advance is None else advance(item))
+            if describe is not None and (text := describe(item)) is not None:
+                bar.update(task, description=text)
+
+
+@contextlib.contextmanager
+def busy(description: str) -> Iterator[None]:
+    """A spinner with the elapsed time on a terminal, for work that has no natural count (drawing a
+    figure, writing a report); nothing otherwise."""
+    if not interactive():
+        yield
+        return
+    cols = (SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn())
+    with Progress(*cols, console=err, transient=True) as bar:
+        bar.add_task(description, total=None)
+        yield
 
 
 def output_path(path: Path, force: bool = True) -> Path:
@@ -114,7 +156,53 @@ def output_path(path: Path, force: bool = True) -> Path:
         raise KbcliError(f"{path}: output folder {folder} does not exist")
     if path.is_dir():
         raise KbcliError(f"{path}: is a folder, expected a file name")
+    probe_writable(folder, path)
     return path
+
+
+def output_folder(path: Path) -> Path:
+    """Check a folder output (a report) can be created or filled before any work is done."""
+    parent = path.parent if str(path.parent) else Path(".")
+    if path.exists() and not path.is_dir():
+        raise KbcliError(f"{path}: exists and is not a folder")
+    if not parent.is_dir():
+        raise KbcliError(f"{path}: parent folder {parent} does not exist")
+    probe_writable(path if path.is_dir() else parent, path, folder_output=not path.is_dir())
+    return path
+
+
+def figure_output(path: Path, what: str = "figure") -> Output:
+    """A figure output (``-o x.png``, ``.pdf`` or ``.svg``): the format is the file's suffix."""
+    figure_format(path)  # ConfigError for another suffix
+    return Output(Path(path), what)
+
+
+def check_io(inputs: dict[str, Path | None], *outputs: Output | tuple[str, Path | None]) -> None:
+    """Every check on a command's paths, before any work: each file output's folder exists and is
+    writable, a folder output can be made, and no output is one of the inputs (the same path, a
+    symlink or a hard link to it, or a folder holding it that would be overwritten or removed).
+
+    Parameters
+    ----------
+    inputs : dict
+        What the command reads, by option name (``{"--model": path}``); None entries are skipped.
+    outputs : Output or (what, path)
+        What it writes; a (what, None) pair is skipped.
+    """
+    outs: list[Output] = []
+    for o in outputs:
+        if isinstance(o, tuple):
+            what, p = o
+            if p is None:
+                continue
+            o = Output(Path(p), what)
+        if o.folder:
+            if not o.removes:
+                output_folder(o.path)
+        else:
+            output_path(o.path)
+        outs.append(o)
+    check_outputs(inputs, outs)
 
 
 def version_callback(value: bool) -> None:

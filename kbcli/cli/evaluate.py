@@ -10,10 +10,11 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from kbcli.cli.app import bench_app, command, err, out, output_path, progress
+from kbcli.cli.app import bench_app, check_io, command, err, out, progress
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml
+from kbcli.io.paths import Output
 from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
 from kbcli.stages import evaluate as stage
 
@@ -93,12 +94,13 @@ def evaluate_cmd(
     (removed once OUTPUT is written); --resume continues from there. Prints a progress bar, then a
     table of final RMSE, median observations and p-values, and the speed.
     """
+    check_io({"--model": model, "--config": config}, ("--output", output),
+             Output(Checkpoint.beside(output), "checkpoint folder", folder=True, removes=True))
     cfg = _load_config(config, experiments, mode)
     _check_backend(jobs, scheduler)
     if checkpoint_every < 1:
         raise ConfigError(f"--checkpoint-every must be >= 1, got {checkpoint_every}")
     model_art = read_artifact(model, "model")
-    output_path(output)
     from kbcli.stages import keyboard as keyboard_stage
 
     keyboard = keyboard_stage.load(model_art)
@@ -119,9 +121,17 @@ def evaluate_cmd(
             ckpt.add(i, res)
             fresh[i] = res
     except KeyboardInterrupt:
-        ckpt.flush()
-        err.print(f"kbcli: interrupted; {len(done) + len(fresh)} of {len(tasks)} experiments kept "
-                  f"in {ckpt.folder}: rerun with --resume to continue", markup=False)
+        try:
+            ckpt.flush()
+        except KbcliError:
+            pass
+        kept = len(done) + len(fresh)
+        if kept and ckpt.exists():
+            msg = (f"{kept} of {len(tasks)} experiments kept in {ckpt.folder}: rerun with --resume "
+                   f"to continue")
+        else:
+            msg = f"no experiment of {len(tasks)} had finished; nothing was kept"
+        err.print(f"kbcli: interrupted; {msg}", markup=False)
         raise typer.Exit(130) from None
     finally:
         ckpt.flush()

@@ -13,15 +13,17 @@ from rich.table import Table
 
 from kbcli.cli.app import (
     bench_app,
+    check_io,
     command,
+    figure_output,
     interactive,
     out,
-    output_path,
     plot_app,
     progress,
 )
-from kbcli.errors import ConfigError
+from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.io.schema import MIN_SOUNDS
 from kbcli.sim import SimConfig
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import learn as stage
@@ -37,7 +39,9 @@ def learn_cmd(
     strategy: Annotated[str, typer.Option(
         "--strategy", help="active, random (exploration) or exact (the keyboard's own geometry, "
         "no learning).")] = "active",
-    budget: Annotated[int, typer.Option("--budget", help="Reaches to explore with.")] = 800,
+    budget: Annotated[int, typer.Option(
+        "--budget", help="Reaches to explore with; a run that hears fewer than two distinct sounds "
+        "is refused (nothing written).")] = 800,
     seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the exploration and arm noise.")] = 0,
     reach_noise: Annotated[float, typer.Option(
         "--reach-noise", help="Landing scatter of a reach, px (motor noise in dynamics mode).")
@@ -59,8 +63,8 @@ def learn_cmd(
     sim = SimConfig(mode=mode, reach_noise=reach_noise)
     cfg = stage.LearnConfig(strategy=strategy, budget=budget, batch=batch,
                             explore_radius=explore_radius, curve_every=curve_every, sim=sim)
+    check_io({"--keyboard": keyboard}, ("--output", output))
     kb_art = read_artifact(keyboard, "keyboard")
-    output_path(output)
     if cfg.strategy == "exact":
         art = stage.run(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
         write_artifact(art, output)
@@ -68,11 +72,24 @@ def learn_cmd(
                   f"{stage.check_keyboard(kb_art).n_keys} keys)")
         return
     learning = stage.learn(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
-    for _ in progress(learning, len(learning), f"{strategy} exploration ({mode})"):
+    done = [0]
+
+    def reaches(n: int) -> int:  # each item is a batch; the bar counts reaches
+        step, done[0] = n - done[0], n
+        return step
+
+    for _ in progress(learning, cfg.budget, f"{strategy} exploration ({mode}), reaches",
+                      advance=reaches):
         pass
     art = learning.artifact()
-    write_artifact(art, output)
     a = art.attrs
+    sounds = a["n_classes"] - 1
+    if sounds < MIN_SOUNDS:
+        raise KbcliError(
+            f"learned only {sounds} sound class(es) besides silence in {a['n_reaches']} reaches, "
+            f"fewer than the {MIN_SOUNDS} a model needs to find a moved keyboard; nothing written: "
+            f"raise --budget")
+    write_artifact(art, output)
     to99 = a["reaches_to_99"]
     out.print(
         f"wrote {output}: {strategy} exploration, {mode} mode, {a['n_reaches']} reaches: "
@@ -93,8 +110,8 @@ def plot_model_cmd(
     from kbcli.stages.models import load_model
     from kbcli.viz.model import plot_model
 
+    check_io({"ARTIFACT": artifact}, figure_output(output))
     art = read_artifact(artifact, "model")
-    output_path(output)
     plot_model(art, load_model(art), keyboard_stage.load(art), output)
     out.print(f"wrote {output}")
 

@@ -8,7 +8,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from kbcli.cli.app import command, out, output_path
+from kbcli.cli.app import check_io, command, out
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import perturb as stage
@@ -37,6 +37,7 @@ def perturb_cmd(
     world and the evaluation only); prints the pose. A move that takes any key out of the arm's
     reach is refused (exit 1, nothing written).
     """
+    check_io({"--keyboard": keyboard}, ("--output", output))
     explicit = dx is not None or dy is not None or angle is not None
     if explicit and category is not None:
         raise ConfigError("give either --dx/--dy/--angle or --category, not both")
@@ -53,7 +54,6 @@ def perturb_cmd(
     else:
         cfg = stage.PerturbConfig(family=family, category=category)
     kb_art = read_artifact(keyboard, ("keyboard", "model"))
-    output_path(output)
     art = stage.run(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
     write_artifact(art, output)
     pose = ", ".join(f"{k}={v:.2f}" for k, v in art.attrs["pose"].items())

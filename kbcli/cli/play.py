@@ -9,7 +9,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from kbcli.cli.app import command, out, output_path, plot_app, progress
+from kbcli.cli.app import check_io, command, figure_output, out, plot_app, progress
 from kbcli.core.audio import SAMPLE_RATE, to_pcm16
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
@@ -50,15 +50,11 @@ def play_cmd(
     actions, landing points, heard features, aimed notes, MATCH/NO_MATCH per step) and optionally a
     WAV; prints the failure rates before and after the move.
     """
+    check_io({"--model": model, "--scene": scene}, ("--output", output), ("--wav", wav))
     cfg = stage.PlayConfig(melody=melody, steps=steps, perturb_at=perturb_at, mode=mode,
                            reach_noise=reach_noise)
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene") if scene is not None else None
-    output_path(output)
-    if wav is not None:
-        output_path(wav)
-        if wav.resolve() == output.resolve():
-            raise ConfigError("--wav and --output must be different files")
     session = stage.Session(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed)
     for _ in progress(session, cfg.steps, "playing"):
         pass
@@ -95,10 +91,10 @@ def plot_play_cmd(
     (with --detection) the detector's score and firings. Reads HISTORY; writes a PNG."""
     from kbcli.viz.play import plot_play
 
+    check_io({"HISTORY": history, "--detection": detection}, figure_output(output))
     hist = read_artifact(history, "history")
     det = read_artifact(detection, "detection") if detection is not None else None
     if det is not None and det.inputs.get("history", {}).get("sha256") not in (None, hist.sha256):
         raise ConfigError(f"{detection} was computed on another history than {history}")
-    output_path(output)
     plot_play(hist, output, det)
     out.print(f"wrote {output}")

@@ -8,7 +8,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from kbcli.cli.app import command, out, output_path, plot_app, progress
+from kbcli.cli.app import check_io, command, figure_output, out, plot_app, progress
 from kbcli.core.detect import DetectorConfig
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -47,6 +47,7 @@ def run_cmd(
     robot is not told). Writes OUTPUT (kind 'closed_loop': every touch with its phase, result and
     detector score) and prints the success rate before the move, after it, and after adaptation.
     """
+    check_io({"--model": model, "--scene": scene}, ("--output", output))
     cfg = stage.LoopConfig(
         melody=melody, steps=steps, perturb_at=perturb_at, max_adapt_steps=max_adapt_steps,
         detector=DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold),
@@ -55,7 +56,6 @@ def run_cmd(
     )
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
-    output_path(output)
     session = stage.LoopSession(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed)
     for _ in progress(session, None, "playing"):
         pass
@@ -85,7 +85,7 @@ def plot_run_cmd(
     touches on the keyboard. Writes a PNG."""
     from kbcli.viz.loop import plot_loop
 
+    check_io({"ARTIFACT": artifact}, figure_output(output))
     art = read_artifact(artifact, "closed_loop")
-    output_path(output)
     plot_loop(art.data["steps"], art.attrs, keyboard_stage.load(art), output)
     out.print(f"wrote {output}")

@@ -1,0 +1,441 @@
+"""Structural validation of artifacts on read: per kind and schema version, the datasets, summary
+attributes and config entries that readers rely on, with their dtype kind and shape.
+
+One table, :data:`SCHEMAS`, kind -> schema version -> :class:`Schema`. To extend it when you add a
+dataset, add a :class:`Dataset` line to the kind's current schema; when you bump a kind's version
+(:data:`kbcli.stages.artifact.SCHEMA_VERSIONS`), add a new entry and keep the old ones: a file is
+checked against the schema of the highest version not above its own.
+
+A dataset's ``shape`` names its axes: an int is a fixed length, a string a symbol shared by every
+dataset of the artifact (``"T"``: all per-step arrays have the same length), ``"*"`` any length.
+``index`` says the values index an axis (``index="M"``: every value in ``[0, M)``); ``upto`` allows
+the axis length itself (``0 <= v <= T``). Paths may hold ``{name}`` placeholders expanded over a
+list in the artifact's summary attributes (``{modes}`` over ``attrs["modes"]``).
+
+:func:`validate` raises :class:`~kbcli.errors.ArtifactError` naming the first thing wrong:
+"history.h5: dataset 'target' has 119 rows, expected 120 (as 'result')".
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import re
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from kbcli.errors import ArtifactError
+
+#: dtype kinds: f float, i/u integer, b bool, U text (a string dataset)
+FLOAT, INT, BOOL, TEXT = "f", "iu", "b", "U"
+NUM = "fiu"
+FLAG = "biu"  # 0/1 results stored as bool or small integers
+
+#: Fewest sound classes (besides silence) a learned model must tell apart: ``kbcli learn`` refuses to
+#: write, and every reader refuses to load, a model with fewer (it cannot locate a moved keyboard).
+MIN_SOUNDS = 2
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """A required (or optional) dataset.
+
+    Parameters
+    ----------
+    path : str
+        Slash path in the artifact, possibly with ``{placeholders}``.
+    kinds : str
+        Accepted numpy dtype kinds (``"f"``, ``"iu"``, ``"b"``, ``"U"``).
+    shape : tuple of int or str
+        Axis lengths or symbols; its length is the expected ``ndim``.
+    optional : bool
+        May be absent (checked when present).
+    when : callable, optional
+        ``when(artifact) -> bool``: required only for such artifacts (e.g. learned models).
+    index, upto : str, optional
+        The values are indices into an axis of that symbol (``[0, n)``) or steps (``[0, n]``).
+    finite : bool
+        No NaN or infinite value allowed (float datasets).
+    """
+
+    path: str
+    kinds: str
+    shape: tuple[int | str, ...] = ()
+    optional: bool = False
+    when: Callable[[Any], bool] | None = None
+    index: str | None = None
+    upto: str | None = None
+    finite: bool = False
+
+
+#: summary attribute types: "int", "num", "str", "bool", "list", "strs" (list of str), "dict",
+#: "nums" (list of numbers), "numdict" (dict of numbers); a trailing "?" also allows null.
+_TYPES: dict[str, Callable[[Any], bool]] = {
+    "int": lambda v: isinstance(v, int) and not isinstance(v, bool),
+    "num": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
+    "str": lambda v: isinstance(v, str),
+    "bool": lambda v: isinstance(v, bool),
+    "list": lambda v: isinstance(v, list),
+    "strs": lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v),
+    "nums": lambda v: isinstance(v, list) and all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) for x in v),
+    "dict": lambda v: isinstance(v, dict),
+    "numdict": lambda v: isinstance(v, dict) and all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) for x in v.values()),
+}
+_WORDS = {"int": "a whole number", "num": "a number", "str": "text", "bool": "true or false",
+          "list": "a list", "strs": "a list of names", "nums": "a list of numbers",
+          "dict": "a table", "numdict": "a table of numbers"}
+
+
+@dataclass(frozen=True)
+class Schema:
+    """What one schema version of a kind holds.
+
+    Parameters
+    ----------
+    datasets : tuple of Dataset
+    attrs : dict
+        Required summary attributes (``attrs`` JSON) and their types (see ``_TYPES``).
+    config : dict
+        Required config entries and their types; a dotted key reaches into a table
+        (``"keyboard"``: the config's keyboard table).
+    checks : tuple of callables
+        ``check(artifact) -> str | None``: a message when a rule across entries fails.
+    """
+
+    datasets: tuple[Dataset, ...] = ()
+    attrs: dict[str, str] = field(default_factory=dict)
+    config: dict[str, str] = field(default_factory=dict)
+    checks: tuple[Callable[[Any], str | None], ...] = ()
+
+
+def _learned(art) -> bool:
+    return art.config.get("strategy") != "exact"
+
+
+def _two_sounds(art) -> str | None:
+    """A model must tell at least two sounds apart (besides silence) to be of any use."""
+    if not _learned(art):
+        return None
+    n = int(np.asarray(art.data["model"]["class_features"]).shape[0]) - 1
+    if n < MIN_SOUNDS:
+        return (f"the model knows {n} sound class(es) besides silence, fewer than the "
+                f"{MIN_SOUNDS} needed "
+                f"to find the keyboard: learn it again with a larger --budget")
+    return None
+
+
+def _scene_params(art) -> str | None:
+    from kbcli.core.transforms import FAMILIES
+
+    fam = art.config["family"]
+    if fam not in FAMILIES:
+        return f"config family {fam!r} is not one of {', '.join(FAMILIES)}"
+    p = art.config["params"]
+    if len(p) != len(FAMILIES[fam]) or not all(math.isfinite(v) for v in p):
+        return (f"config params must be {len(FAMILIES[fam])} finite numbers "
+                f"({', '.join(FAMILIES[fam])}) for a {fam} scene, got {p!r}")
+    return None
+
+
+def _eval_lists(art) -> str | None:
+    a = art.attrs
+    for key in ("modes", "categories", "strategies"):
+        if not a[key]:
+            return f"summary attribute {key!r} is empty"
+    if a["baseline"] not in a["strategies"]:
+        return f"baseline {a['baseline']!r} is not among the strategies {a['strategies']}"
+    cats = art.config["categories"]
+    for c in a["categories"]:
+        if not isinstance(cats.get(c), dict) or not _TYPES["num"](cats[c].get("limit")):
+            return f"config categories.{c}.limit is missing or not a number"
+    return None
+
+
+_KEYBOARD_CFG = {"keyboard": "dict"}
+
+SCHEMAS: dict[str, dict[int, Schema]] = {
+    "keyboard": {1: Schema(
+        datasets=(
+            Dataset("features", FLOAT, ("K", 2)),
+            Dataset("names", TEXT, ("K",)),
+            Dataset("key_centres", FLOAT, ("K", 2)),
+        ),
+    )},
+    "model": {1: Schema(
+        config={"strategy": "str", **_KEYBOARD_CFG},
+        datasets=tuple(
+            Dataset(p, k, s, when=_learned, index=ix) for p, k, s, ix in (
+                ("samples/actions", FLOAT, ("N", 2), None),
+                ("samples/landed", FLOAT, ("N", 2), None),
+                ("samples/perceived", FLOAT, ("N", "F"), None),
+                ("curve/reaches", INT, ("C",), None),
+                ("curve/accuracy", FLOAT, ("C",), None),
+                ("model/class_features", FLOAT, ("M", "F"), None),
+                ("model/actions", FLOAT, ("A", 2), None),
+                ("model/labels", INT, ("A",), "M"),
+                ("model/edges", INT, ("E", 2), "A"),
+                ("model/edge_piece", INT, ("E",), None),
+                ("model/piece_pair", INT, ("P", 2), "M"),
+                ("model/piece_line", INT, ("P",), "L"),
+                ("model/piece_sign", FLOAT, ("P",), None),
+                ("model/lines", FLOAT, ("L", 3), None),
+                ("model/area", FLOAT, (4,), None),
+                ("model/merge_angle", FLOAT, (), None),
+                ("model/merge_offset", FLOAT, (), None),
+                ("model/piece_reach", FLOAT, (), None),
+                ("model/reach_sd_fitted", FLOAT, (), None),
+                ("model/match_threshold", FLOAT, (), None),
+                ("model/n_neighbors", INT, (), None),
+                ("model/min_sd", FLOAT, (), None),
+                ("model/max_sd", FLOAT, (), None),
+                ("model/extrapolation", FLOAT, (), None),
+            )
+        ),
+        checks=(_two_sounds,),
+    )},
+    "scene": {1: Schema(
+        config={"family": "str", "params": "nums", **_KEYBOARD_CFG},
+        checks=(_scene_params,),
+    )},
+    "history": {1: Schema(
+        config=_KEYBOARD_CFG,
+        attrs={"perturb_at": "int?", "steps": "int"},
+        datasets=(
+            Dataset("action", FLOAT, ("T", 2)),
+            Dataset("landed", FLOAT, ("T", 2)),
+            Dataset("perceived", FLOAT, ("T", "F")),
+            Dataset("target", INT, ("T",), index="M"),
+            Dataset("cls", INT, ("T",)),
+            Dataset("heard", INT, ("T",)),
+            Dataset("result", FLAG, ("T",)),
+            Dataset("perturbed", FLAG, ("T",)),
+            Dataset("melody/midi", INT, ("M",)),
+            Dataset("melody/durations", FLOAT, ("M",), finite=True),
+            Dataset("melody/keys", INT, ("M",), index="K"),
+        ),
+    )},
+    "detection": {1: Schema(
+        config={"detector": "str", "threshold": "num"},
+        datasets=(
+            Dataset("score", FLOAT, ("T",)),
+            Dataset("fired", FLAG, ("T",)),
+            Dataset("firings", INT, ("F",), index="T"),
+        ),
+    )},
+    "run": {1: Schema(
+        attrs={"steps": "int"},
+        datasets=(
+            Dataset("actions", FLOAT, ("T", 2)),
+            Dataset("landed", FLOAT, ("T", 2)),
+            Dataset("classes", INT, ("T",)),
+            Dataset("errors", FLOAT, ("T",)),
+            Dataset("angle_errors", FLOAT, ("T",), optional=True),
+            Dataset("entropy", FLOAT, ("T",)),
+            Dataset("means", FLOAT, ("T", "P")),
+            Dataset("estimates", FLOAT, ("T", "P")),
+            Dataset("dx", FLOAT, ("X",), finite=True),
+            Dataset("dy", FLOAT, ("Y",), finite=True),
+            Dataset("snapshot_steps", INT, ("S",), optional=True, upto="T"),
+            Dataset("snapshots", NUM, ("S", "Y", "X"), optional=True),
+            Dataset("snapshot_angles", FLOAT, ("S", "A"), optional=True),
+            Dataset("timing/step_ms", FLOAT, ("T",), optional=True),
+        ),
+    )},
+    "closed_loop": {1: Schema(
+        config=_KEYBOARD_CFG,
+        attrs={"perturbed_at": "int", "detected_at": "int?", "detection_delay": "int?",
+               "success_before": "num?", "success_after_perturbation": "num?",
+               "success_after_adaptation": "num?", "truth": "numdict"},
+        datasets=(
+            Dataset("steps/phase", INT, ("T",)),
+            Dataset("steps/result", FLAG, ("T",)),
+            Dataset("steps/score", FLOAT, ("T",)),
+            Dataset("steps/landed", FLOAT, ("T", 2)),
+            Dataset("steps/action", FLOAT, ("T", 2), optional=True),
+        ),
+    )},
+    "evaluation": {1: Schema(
+        attrs={"modes": "strs", "categories": "strs", "strategies": "strs", "baseline": "str",
+               "max_steps": "int"},
+        config={"categories": "dict", "experiments": "int"},
+        datasets=(
+            Dataset("thresholds", FLOAT, ("H",)),
+            Dataset("experiments/params", FLOAT, ("N", "P")),
+            Dataset("experiments/mode", TEXT, ("N",)),
+            Dataset("experiments/category", TEXT, ("N",)),
+            Dataset("experiments/strategy", TEXT, ("N",)),
+            Dataset("experiments/play_adapted", FLOAT, ("N",), optional=True),
+            Dataset("experiments/play_unadapted", FLOAT, ("N",), optional=True),
+            *(Dataset(f"curves/{{modes}}/{{categories}}/{{strategies}}/{k}", FLOAT, s)
+              for k, s in (("rmse", ("T",)), ("q25", ("T",)), ("q75", ("T",)),
+                           ("median_samples", ("H",)), ("reached", ("H",)))),
+            *(Dataset(f"entropy/{{modes}}/{{strategies}}/{k}", FLOAT, ("T",))
+              for k in ("mean", "q25", "q75")),
+            Dataset("pvalues/{modes}/{categories}/{others}/pvalue", FLOAT, ("H",)),
+            Dataset("examples/{modes}/{strategies}/row", INT, (), optional=True, index="N"),
+            Dataset("examples/{modes}/{strategies}/snapshots", NUM, ("*", "*", "*"),
+                    optional=True),
+        ),
+        checks=(_eval_lists,),
+    )},
+}
+
+
+def schema_for(kind: str, version: int) -> Schema | None:
+    """The schema of the highest version of ``kind`` not above ``version`` (None if none)."""
+    versions = [v for v in SCHEMAS.get(kind, {}) if v <= version]
+    return SCHEMAS[kind][max(versions)] if versions else None
+
+
+def _typed(value: Any, spec: str) -> bool:
+    if spec.endswith("?"):
+        return value is None or _TYPES[spec[:-1]](value)
+    return _TYPES[spec](value)
+
+
+def _lookup(tree: dict, dotted: str) -> tuple[bool, Any]:
+    node: Any = tree
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return False, None
+        node = node[part]
+    return True, node
+
+
+def _node(data: dict, path: str) -> tuple[bool, Any]:
+    node: Any = data
+    for part in path.split("/"):
+        if not isinstance(node, dict) or part not in node:
+            return False, None
+        node = node[part]
+    return True, node
+
+
+_PLACEHOLDER = re.compile(r"\{(\w+)\}")
+
+
+def _expand(path: str, art) -> list[str]:
+    names = _PLACEHOLDER.findall(path)
+    if not names:
+        return [path]
+    lists = []
+    for n in names:
+        if n == "others":
+            vals = [s for s in art.attrs.get("strategies", []) if s != art.attrs.get("baseline")]
+        else:
+            vals = art.attrs.get(n, [])
+        lists.append([str(v) for v in vals])
+    out = []
+    for combo in itertools.product(*lists):
+        p = path
+        for n, v in zip(names, combo, strict=True):
+            p = p.replace("{" + n + "}", v, 1)
+        out.append(p)
+    return out
+
+
+def _kind_of(arr: np.ndarray) -> str:
+    k = arr.dtype.kind
+    return "U" if k in "USO" else k
+
+
+def validate(art, where: str = "") -> None:
+    """Check an artifact read from disk against its kind's schema.
+
+    Parameters
+    ----------
+    art : Artifact
+    where : str
+        The file name, for the message.
+
+    Raises
+    ------
+    ArtifactError
+        Naming the first missing or malformed entry.
+    """
+    pre = f"{where}: " if where else ""
+    schema = schema_for(art.kind, int(art.schema_version or 1))
+    if schema is None:
+        return
+
+    def fail(msg: str) -> None:
+        raise ArtifactError(f"{pre}{art.kind} artifact: {msg}")
+
+    for key, spec in schema.config.items():
+        ok, value = _lookup(art.config, key)
+        if not ok:
+            fail(f"config entry {key!r} is missing")
+        if not _typed(value, spec):
+            fail(f"config entry {key!r} must be {_WORDS[spec.rstrip('?')]}, got {value!r:.60}")
+    for key, spec in schema.attrs.items():
+        if key not in art.attrs:
+            fail(f"summary attribute {key!r} is missing")
+        if not _typed(art.attrs[key], spec):
+            fail(f"summary attribute {key!r} must be {_WORDS[spec.rstrip('?')]}"
+                 f"{' or null' if spec.endswith('?') else ''}, got {art.attrs[key]!r:.60}")
+    dims: dict[str, tuple[int, str]] = {}
+    checks: list[tuple[Dataset, str, np.ndarray]] = []
+    for ds in schema.datasets:
+        if ds.when is not None and not ds.when(art):
+            continue
+        for path in _expand(ds.path, art):
+            found, node = _node(art.data, path)
+            if not found:
+                if ds.optional:
+                    continue
+                fail(f"dataset {path!r} is missing")
+            if isinstance(node, dict):
+                fail(f"{path!r} is a group, expected a dataset")
+            arr = np.asarray(node)
+            if _kind_of(arr) not in ds.kinds:
+                want = {"f": "floats", "iu": "integers", "b": "booleans", "U": "text",
+                        "fiu": "numbers", "biu": "0/1 flags"}.get(ds.kinds, ds.kinds)
+                fail(f"dataset {path!r} holds {arr.dtype}, expected {want}")
+            if arr.ndim != len(ds.shape):
+                fail(f"dataset {path!r} has {arr.ndim} dimension(s), expected {len(ds.shape)}")
+            for axis, (n, want) in enumerate(zip(arr.shape, ds.shape, strict=True)):
+                if isinstance(want, int):
+                    if n != want:
+                        fail(f"dataset {path!r} has length {n} along axis {axis}, expected {want}")
+                elif want != "*":
+                    if want in dims and dims[want][0] != n:
+                        fail(f"dataset {path!r} has length {n} along axis {axis}, expected "
+                             f"{dims[want][0]} (as {dims[want][1]!r})")
+                    dims.setdefault(want, (n, path))
+            checks.append((ds, path, arr))
+    for ds, path, arr in checks:
+        if ds.finite and arr.size and not np.all(np.isfinite(arr)):
+            fail(f"dataset {path!r} holds NaN or infinite values")
+        for sym, inclusive in ((ds.index, False), (ds.upto, True)):
+            if sym is None or not arr.size:
+                continue
+            n = dims.get(sym, (None,))[0]
+            if n is None and sym == "K":
+                n = _keys(art)
+            if n is None:
+                continue
+            hi = n if inclusive else n - 1
+            if arr.min() < 0 or arr.max() > hi:
+                fail(f"dataset {path!r} holds values outside [0, {hi}]")
+    for check in schema.checks:
+        try:
+            msg = check(art)
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+            msg = f"inconsistent entries ({type(exc).__name__}: {exc})"
+        if msg:
+            fail(msg)
+
+
+def _keys(art) -> int | None:
+    """Number of keys of the artifact's keyboard (from its config), if it can be built."""
+    try:
+        from kbcli.stages import keyboard as keyboard_stage
+
+        return keyboard_stage.load(art).n_keys
+    except Exception:  # noqa: BLE001 - a broken keyboard config is reported by its own reader
+        return None
