@@ -172,9 +172,9 @@ def output_folder(path: Path) -> Path:
 
 
 def figure_output(path: Path, what: str = "figure") -> Output:
-    """A figure output (``-o x.png``, ``.pdf`` or ``.svg``): the format is the file's suffix."""
-    figure_format(path)  # ConfigError for another suffix
-    return Output(Path(path), what)
+    """A figure output (``-o x.png``, ``.pdf`` or ``.svg``): the format is the file's suffix,
+    checked by :func:`check_io` after the input check."""
+    return Output(Path(path), what, figure=True)
 
 
 def check_io(inputs: dict[str, Path | None], *outputs: Output | tuple[str, Path | None]) -> None:
@@ -196,13 +196,16 @@ def check_io(inputs: dict[str, Path | None], *outputs: Output | tuple[str, Path 
             if p is None:
                 continue
             o = Output(Path(p), what)
+        outs.append(o)
+    check_outputs(inputs, outs)
+    for o in outs:
         if o.folder:
             if not o.removes:
                 output_folder(o.path)
         else:
             output_path(o.path)
-        outs.append(o)
-    check_outputs(inputs, outs)
+        if o.figure:
+            figure_format(o.path)  # ConfigError for a suffix other than .png, .pdf, .svg
 
 
 def version_callback(value: bool) -> None:

@@ -26,6 +26,12 @@ def _load_config(config: Path, experiments: int | None, mode: str | None) -> sta
         raise KbcliError(f"{config}: no such config file here; run from the kbcli checkout or pass "
                          f"--config FILE")
     cfg = stage.EvaluateConfig.from_dict(dict(load_toml(config, "evaluate")))
+    if cfg.family == "rigid":
+        for cat in cfg.categories:
+            for d in cat.displacements:
+                if not -180.0 < float(d[0]) <= 180.0:
+                    raise ConfigError(f"{config}: categories.{cat.name}: angle {d[0]:g} is outside "
+                                      f"(-180, 180] degrees")
     return cfg.with_overrides(experiments=experiments, mode=mode)
 
 

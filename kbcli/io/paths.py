@@ -39,6 +39,8 @@ class Output:
     removes : bool
         The command deletes the folder afterwards (a checkpoint): no input may live inside it.
         A folder that is only filled may hold inputs, as long as it writes none of them.
+    figure : bool
+        A figure: its suffix picks the format (:func:`figure_format`).
     """
 
     path: Path
@@ -46,6 +48,7 @@ class Output:
     folder: bool = False
     files: tuple[str, ...] = field(default_factory=tuple)
     removes: bool = False
+    figure: bool = False
 
 
 def _identity(path: Path) -> tuple[int, int] | None:

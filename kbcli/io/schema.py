@@ -139,6 +139,8 @@ def _scene_params(art) -> str | None:
     if len(p) != len(FAMILIES[fam]) or not all(math.isfinite(v) for v in p):
         return (f"config params must be {len(FAMILIES[fam])} finite numbers "
                 f"({', '.join(FAMILIES[fam])}) for a {fam} scene, got {p!r}")
+    if fam == "rigid" and not -180.0 < p[0] <= 180.0:
+        return f"the scene's angle {p[0]:g} is outside (-180, 180] degrees: make it again with kbcli perturb"
     return None
 
 

@@ -125,7 +125,7 @@ def _errors(est: np.ndarray, truth: np.ndarray, robot_family: str,
     t_err = float(np.hypot(*(est[-2:] - truth[-2:])))
     a_est = float(est[0]) if robot_family == "rigid" else 0.0
     a_true = float(truth[0]) if world_family == "rigid" else 0.0
-    return t_err, abs(a_est - a_true)
+    return t_err, abs(transforms.wrap_degrees(a_est - a_true))
 
 
 def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndarray, *,

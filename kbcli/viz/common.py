@@ -10,13 +10,23 @@ from matplotlib.patches import Rectangle
 
 from kbcli.core.keyboard import Keyboard
 from kbcli.io.atomic import atomic_path
+from kbcli.io.paths import figure_format
 
 
 def save(fig: Figure, path: str | os.PathLike, dpi: int = 110) -> None:
-    """Save atomically (temporary file, then rename) and close the figure."""
+    """Save atomically (temporary file, then rename) and close the figure.
+
+    The format is the suffix of ``path``: ``.png``, ``.pdf`` or ``.svg``
+    (:func:`kbcli.io.paths.figure_format`); the files carry no creation date, so the same figure
+    gives the same bytes.
+    """
+    fmt = figure_format(path)
+    meta = {"png": {"Software": None}, "pdf": {"Creator": None, "Producer": None,
+                                                "CreationDate": None},
+            "svg": {"Date": None, "Creator": None}}[fmt]
     try:
-        with atomic_path(path, suffix=".png") as tmp:
-            fig.savefig(tmp, dpi=dpi, bbox_inches="tight", metadata={"Software": None})
+        with atomic_path(path, suffix="." + fmt) as tmp:
+            fig.savefig(tmp, format=fmt, dpi=dpi, bbox_inches="tight", metadata=meta)
     finally:
         plt.close(fig)
 
