@@ -99,7 +99,8 @@ class Schema:
     ----------
     datasets : tuple of Dataset
     attrs : dict
-        Required summary attributes (``attrs`` JSON) and their types (see ``_TYPES``).
+        Summary attributes (``attrs`` JSON) and their types (see ``_TYPES``); a name ending in
+        ``?`` may be absent (its type is checked when present).
     config : dict
         Required config entries and their types; a dotted key reaches into a table
         (``"keyboard"``: the config's keyboard table).
@@ -111,6 +112,20 @@ class Schema:
     attrs: dict[str, str] = field(default_factory=dict)
     config: dict[str, str] = field(default_factory=dict)
     checks: tuple[Callable[[Any], str | None], ...] = ()
+
+
+def _keyboard(art) -> str | None:
+    """The artifact's keyboard config must build a keyboard (every stage rebuilds it)."""
+    from kbcli.errors import KbcliError
+    from kbcli.stages import keyboard as keyboard_stage
+
+    try:
+        keyboard_stage.load(art)
+    except KbcliError as exc:
+        return f"its keyboard config is invalid ({exc})"
+    except (TypeError, ValueError, KeyError, AttributeError, OverflowError) as exc:
+        return f"its keyboard config is malformed ({type(exc).__name__}: {exc})"
+    return None
 
 
 def _learned(art) -> bool:
@@ -162,6 +177,7 @@ _KEYBOARD_CFG = {"keyboard": "dict"}
 
 SCHEMAS: dict[str, dict[int, Schema]] = {
     "keyboard": {1: Schema(
+        checks=(_keyboard,),
         datasets=(
             Dataset("features", FLOAT, ("K", 2)),
             Dataset("names", TEXT, ("K",)),
@@ -198,15 +214,17 @@ SCHEMAS: dict[str, dict[int, Schema]] = {
                 ("model/extrapolation", FLOAT, (), None),
             )
         ),
-        checks=(_two_sounds,),
+        attrs={"accuracy?": "num?", "boundary_error_px?": "num?", "n_reaches?": "int?"},
+        checks=(_keyboard, _two_sounds),
     )},
     "scene": {1: Schema(
         config={"family": "str", "params": "nums", **_KEYBOARD_CFG},
-        checks=(_scene_params,),
+        checks=(_keyboard, _scene_params),
     )},
     "history": {1: Schema(
         config=_KEYBOARD_CFG,
-        attrs={"perturb_at": "int?", "steps": "int"},
+        attrs={"perturb_at": "int?", "steps": "int", "melody?": "str"},
+        checks=(_keyboard,),
         datasets=(
             Dataset("action", FLOAT, ("T", 2)),
             Dataset("landed", FLOAT, ("T", 2)),
@@ -230,7 +248,8 @@ SCHEMAS: dict[str, dict[int, Schema]] = {
         ),
     )},
     "run": {1: Schema(
-        attrs={"steps": "int"},
+        attrs={"steps": "int", "truth?": "numdict", "family?": "str", "stop_step?": "int?",
+               "final_error_px?": "num?", "estimate?": "numdict"},
         datasets=(
             Dataset("actions", FLOAT, ("T", 2)),
             Dataset("landed", FLOAT, ("T", 2)),
@@ -253,6 +272,7 @@ SCHEMAS: dict[str, dict[int, Schema]] = {
         attrs={"perturbed_at": "int", "detected_at": "int?", "detection_delay": "int?",
                "success_before": "num?", "success_after_perturbation": "num?",
                "success_after_adaptation": "num?", "truth": "numdict"},
+        checks=(_keyboard,),
         datasets=(
             Dataset("steps/phase", INT, ("T",)),
             Dataset("steps/result", FLAG, ("T",)),
@@ -375,6 +395,10 @@ def validate(art, where: str = "") -> None:
         if not _typed(value, spec):
             fail(f"config entry {key!r} must be {_WORDS[spec.rstrip('?')]}, got {value!r:.60}")
     for key, spec in schema.attrs.items():
+        if key.endswith("?"):
+            key = key[:-1]
+            if key not in art.attrs:
+                continue
         if key not in art.attrs:
             fail(f"summary attribute {key!r} is missing")
         if not _typed(art.attrs[key], spec):
