@@ -87,5 +87,5 @@ def plot_run_cmd(
 
     check_io({"ARTIFACT": artifact}, figure_output(output))
     art = read_artifact(artifact, "closed_loop")
-    plot_loop(art.data["steps"], art.attrs, keyboard_stage.load(art), output)
+    plot_loop(art.data["steps"], art.attrs, keyboard_stage.load(art), output, config=art.config)
     out.print(f"wrote {output}")
