@@ -12,7 +12,9 @@ from rich.console import Console
 from rich.table import Table
 
 from kbcli.cli.app import (
+    FIGURE_HELP,
     bench_app,
+    busy,
     check_io,
     command,
     err,
@@ -21,6 +23,7 @@ from kbcli.cli.app import (
     out,
     plot_app,
     progress,
+    ticker,
 )
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -99,8 +102,10 @@ def adapt_cmd(
     cfg = stage.AdaptConfig.from_dict(values)
     steps = _snapshots(snapshots)
     stage.check_inputs(model_art, scene_art)
-    art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
-                    snapshot_steps=steps)
+    what = f"adapting ({cfg.strategy}, {cfg.posterior} posterior), observations"
+    with ticker(cfg.max_steps, what) as tick:
+        art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
+                        snapshot_steps=steps, on_step=tick)
     write_artifact(art, output)
     a = art.attrs
     est = ", ".join(f"{k}={v:.2f}" for k, v in a["estimate"].items())
@@ -121,12 +126,12 @@ def adapt_cmd(
 @command(plot_app, name="adapt")
 def plot_adapt_cmd(
     run: Annotated[Path, typer.Argument(help="Run artifact (kind 'run') from kbcli adapt.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path(
+    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path(
         "adapt.png"),
 ) -> None:
     """Draw the posterior's evolution (the paper's Fig. 5) and the error and entropy curves.
 
-    Reads RUN (kind 'run'); writes a PNG; prints its path.
+    Reads RUN (kind 'run'); writes the figure (PNG, PDF or SVG by the suffix of -o); prints its path.
     """
     from kbcli.viz.adapt import plot_adapt
 
@@ -135,7 +140,8 @@ def plot_adapt_cmd(
     if "snapshots" not in art.data:
         raise ConfigError(f"{run}: holds no posterior snapshots (rerun kbcli adapt with "
                           f"--snapshots)")
-    plot_adapt(art, output)
+    with busy("drawing"):
+        plot_adapt(art, output)
     out.print(f"wrote {output}")
 
 
@@ -167,7 +173,7 @@ def bench_adapt_cmd(
         "--model-blur", help="learned section: soften the model's map by this many px [default "
         "1].")] = None,
 ) -> None:
-    """Sample efficiency and speed of the adaptation strategies (issue 5's benchmark).
+    """Benchmark the adaptation strategies: sample efficiency and speed.
 
     Reads MODEL if given. Writes nothing. Prints per section, strategy and category: median
     observations to an error below 4, 2, 1, 0.5 px (in brackets: runs that never got there within

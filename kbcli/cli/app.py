@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import inspect
 import os
+import re
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -35,16 +37,22 @@ app = typer.Typer(
     help=(
         "Where is my keyboard? A robot arm learns a virtual keyboard, notices when it is moved, "
         "and recovers the displacement with few, well-chosen touches. Each stage reads and writes "
-        "HDF5 artifacts: keyboard -> learn -> perturb -> play -> detect -> adapt -> evaluate -> report."
+        "HDF5 artifacts: keyboard -> learn -> perturb -> play -> detect -> adapt -> evaluate -> "
+        "report. run chains play, detect, adapt and play on (the closed loop); inspect shows any "
+        "artifact; plot draws one; bench prints the benchmarks."
     ),
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,
     rich_markup_mode=None,
 )
-plot_app = typer.Typer(help="Draw an artifact as a PNG figure.", no_args_is_help=True)
+plot_app = typer.Typer(help="Draw an artifact as a figure (PNG, PDF or SVG by the -o suffix).",
+                       no_args_is_help=True)
+
+#: help of every plot command's -o option
+FIGURE_HELP = "Figure to write: .png, .pdf or .svg (the suffix picks the format)."
 bench_app = typer.Typer(
-    help="Benchmarks: print tables of speed and sample-efficiency figures (not tests).",
+    help="Benchmarks: tables of speed and sample efficiency (not tests).",
     no_args_is_help=True,
 )
 app.add_typer(plot_app, name="plot")
@@ -85,10 +93,21 @@ def handle_errors(fn: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+def first_sentence(doc: str | None) -> str:
+    """The first sentence of a docstring, whole (the command list shows it; never cut)."""
+    para = inspect.cleandoc(doc or "").split("\n\n")[0].replace("\n", " ")
+    for m in re.finditer(r"[.!?](?=\s+[A-Z(]|$)", para):
+        if not re.search(r"\b(Fig|Figs|Sect|Eq|Eqs|Alg|e\.g|i\.e|vs|cf)\.$", para[:m.end()]):
+            return para[:m.end()]
+    return para
+
+
 def command(typer_app: typer.Typer = app, **kwargs: Any) -> Callable[[F], F]:
-    """Register a command on ``typer_app`` behind the error boundary."""
+    """Register a command on ``typer_app`` behind the error boundary; its line in the command list
+    (``short_help``) is the docstring's first sentence, whole, unless given."""
 
     def deco(fn: F) -> F:
+        kwargs.setdefault("short_help", first_sentence(fn.__doc__))
         return typer_app.command(**kwargs)(handle_errors(fn))
 
     return deco
@@ -134,6 +153,27 @@ def progress(items: Iterable[T], total: int | None, description: str, *,
             bar.advance(task, 1 if advance is None else advance(item))
             if describe is not None and (text := describe(item)) is not None:
                 bar.update(task, description=text)
+
+
+@contextlib.contextmanager
+def ticker(total: int | None, description: str) -> Iterator[Callable[..., None]]:
+    """A progress bar driven by a callback, for stages that report their steps through one:
+    ``with ticker(T, "adapting") as tick: stage.run(..., on_step=tick)``. Plain when not a
+    terminal (the callback does nothing)."""
+    if not interactive():
+        yield lambda *a, **k: None
+        return
+    cols = (
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("left"),
+        TimeRemainingColumn(),
+    )
+    with Progress(*cols, console=err, transient=True) as bar:
+        task = bar.add_task(description, total=total)
+        yield lambda *a, **k: bar.advance(task)
 
 
 @contextlib.contextmanager

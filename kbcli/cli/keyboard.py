@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from kbcli.cli.app import check_io, command, figure_output, out, plot_app
+from kbcli.cli.app import FIGURE_HELP, busy, check_io, command, figure_output, out, plot_app
 from kbcli.core.keyboard import KeyboardConfig
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml
@@ -58,12 +58,13 @@ def keyboard_cmd(
 @command(plot_app, name="keyboard")
 def plot_keyboard_cmd(
     artifact: Annotated[Path, typer.Argument(help="Keyboard artifact (or any artifact made from one).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path("keyboard.png"),
+    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path("keyboard.png"),
 ) -> None:
-    """Draw the keyboard: keys labelled with note and tempo, the working area dashed. Writes a PNG."""
+    """Draw the keyboard: keys labelled with note and tempo, the working area dashed. Writes the figure (PNG, PDF or SVG by the suffix of -o)."""
     from kbcli.viz.keyboard import plot_keyboard
 
     check_io({"ARTIFACT": artifact}, figure_output(output))
     art = read_artifact(artifact, "keyboard")
-    plot_keyboard(stage.load(art), output)
+    with busy("drawing"):
+        plot_keyboard(stage.load(art), output)
     out.print(f"wrote {output}")

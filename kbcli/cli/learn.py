@@ -12,7 +12,9 @@ from rich.console import Console
 from rich.table import Table
 
 from kbcli.cli.app import (
+    FIGURE_HELP,
     bench_app,
+    busy,
     check_io,
     command,
     figure_output,
@@ -102,17 +104,18 @@ def learn_cmd(
 @command(plot_app, name="model")
 def plot_model_cmd(
     artifact: Annotated[Path, typer.Argument(help="Model artifact (.h5).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path(
+    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path(
         "model.png"),
 ) -> None:
     """Draw a model: the learned map (predicted key, uncertainty, reaches) beside the true layout,
-    and the learning curve. Reads ARTIFACT (kind 'model'); writes a PNG."""
+    and the learning curve. Reads ARTIFACT (kind 'model'); writes the figure (PNG, PDF or SVG by the suffix of -o)."""
     from kbcli.stages.models import load_model
     from kbcli.viz.model import plot_model
 
     check_io({"ARTIFACT": artifact}, figure_output(output))
     art = read_artifact(artifact, "model")
-    plot_model(art, load_model(art), keyboard_stage.load(art), output)
+    with busy("drawing"):
+        plot_model(art, load_model(art), keyboard_stage.load(art), output)
     out.print(f"wrote {output}")
 
 
@@ -142,7 +145,7 @@ def bench_learn_cmd(
         "--boundary-budget", help="Reaches at which the boundary error and the learn wall time "
         "are measured.")] = 800,
 ) -> None:
-    """Sample efficiency and speed of learning the model (issue 3's benchmark).
+    """Benchmark learning the model: sample efficiency and speed.
 
     Reads and writes nothing. Prints, per strategy over SEEDS runs on the default keyboard: the
     median accuracy (2 px grid) at each budget, the median reaches until 99 % accuracy, the median

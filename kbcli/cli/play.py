@@ -9,7 +9,16 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from kbcli.cli.app import check_io, command, figure_output, out, plot_app, progress
+from kbcli.cli.app import (
+    FIGURE_HELP,
+    busy,
+    check_io,
+    command,
+    figure_output,
+    out,
+    plot_app,
+    progress,
+)
 from kbcli.core.audio import SAMPLE_RATE, to_pcm16
 from kbcli.core.melody import DEFAULT_MELODY, MAX_BEATS, MAX_NOTES, parse_melody
 from kbcli.errors import ConfigError
@@ -109,10 +118,10 @@ def plot_play_cmd(
     history: Annotated[Path, typer.Argument(help="History artifact (kbcli play).")],
     detection: Annotated[Path | None, typer.Option(
         "--detection", help="Detection artifact (kbcli detect) to mark where the detector fired.")] = None,
-    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path("play.png"),
+    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path("play.png"),
 ) -> None:
     """Draw a play history: aimed note and result per step, running success rate, the move, and
-    (with --detection) the detector's score and firings. Reads HISTORY; writes a PNG."""
+    (with --detection) the detector's score and firings. Reads HISTORY; writes the figure (PNG, PDF or SVG by the suffix of -o)."""
     from kbcli.viz.play import plot_play
 
     check_io({"HISTORY": history, "--detection": detection}, figure_output(output))
@@ -120,5 +129,6 @@ def plot_play_cmd(
     det = read_artifact(detection, "detection") if detection is not None else None
     if det is not None and det.inputs.get("history", {}).get("sha256") not in (None, hist.sha256):
         raise ConfigError(f"{detection} was computed on another history than {history}")
-    plot_play(hist, output, det)
+    with busy("drawing"):
+        plot_play(hist, output, det)
     out.print(f"wrote {output}")

@@ -16,6 +16,7 @@ chosen steps (``snapshots/log_translation``: the log of the translation marginal
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -131,7 +132,8 @@ def _errors(est: np.ndarray, truth: np.ndarray, robot_family: str,
 def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndarray, *,
                rng: np.random.Generator, world_family: str | None = None,
                table: LikelihoodTable | None = None,
-               snapshot_steps: tuple[int, ...] = ()) -> dict[str, np.ndarray]:
+               snapshot_steps: tuple[int, ...] = (),
+               on_step: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
     """One adaptation against a world whose keyboard sits at ``true_params``.
 
     Parameters
@@ -148,6 +150,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         A prebuilt :func:`kbcli.core.adapt.build_table` for ``model`` (rasterise once, reuse).
     snapshot_steps : tuple of int
         Steps (0: the prior) at which to keep the posterior.
+    on_step : callable, optional
+        Called with the step number after each observation (a progress bar).
 
     Returns
     -------
@@ -199,6 +203,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
             rec[k].append(v)
         if st.t in snaps:
             snapshot(st.t)
+        if on_step is not None:
+            on_step(st.t)
     out = {k: np.asarray(v) for k, v in rec.items()}
     out["classes"] = out["classes"].astype(np.int64)
     out["stop"] = out["stop"].astype(bool)
@@ -245,7 +251,8 @@ def check_inputs(model_artifact: Artifact, scene_artifact: Artifact) -> None:
 
 def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
         rng: np.random.Generator, seed: int | None = None,
-        snapshot_steps: tuple[int, ...] = DEFAULT_SNAPSHOTS, model=None) -> Artifact:
+        snapshot_steps: tuple[int, ...] = DEFAULT_SNAPSHOTS, model=None,
+        on_step: Callable[[int], None] | None = None) -> Artifact:
     """Adapt to a scene with a model: the ``run`` artifact.
 
     Parameters
@@ -254,6 +261,8 @@ def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
         Recorded in the artifact (``rng`` should be ``default_rng(seed)``).
     model : SoundModel, optional
         The already loaded model of ``model_artifact`` (saves loading it again).
+    on_step : callable, optional
+        Called with the step number after each observation (a progress bar).
 
     Raises
     ------
@@ -266,7 +275,7 @@ def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
     world_family = scene_artifact.config["family"]
     truth = np.asarray(scene_artifact.config["params"], float)
     res = experiment(cfg, model, kb, truth, rng=rng, world_family=world_family,
-                     snapshot_steps=snapshot_steps)
+                     snapshot_steps=snapshot_steps, on_step=on_step)
     names = transforms.FAMILIES[cfg.family]
     errors = res["errors"]
     angle_ok = res["angle_errors"] < 0.5
