@@ -83,7 +83,7 @@ def parse_melody(text: str, keyboard: Keyboard) -> Melody:
         else:
             dur = 1.0
         if not (math.isfinite(dur) and 0 < dur <= MAX_BEATS):
-            raise ConfigError(f"melody token {tok!r}: duration must be in (0, {MAX_BEATS:g}] beats, "
+            raise ConfigError(f"melody token {tok!r}: duration must be > 0 and at most {MAX_BEATS:g} beats, "
                               f"got {beats!r}")
         m = name_to_midi(name)  # ConfigError naming an unknown note
         k = keyboard.note_key(name)  # ConfigError naming a note that is not on the keyboard
