@@ -56,6 +56,10 @@ class LoopStep:
         Whether the detector fired on this result.
     correction : (P,) ndarray
         The transform the robot applies to its actions after this step.
+    estimate : (P,) ndarray or None
+        During adaptation: the adapter's current estimate (its belief of where the keyboard is).
+    posterior : Posterior or None
+        During adaptation: the adapter's posterior after this touch.
     """
 
     t: int
@@ -67,6 +71,8 @@ class LoopStep:
     score: float
     fired: bool
     correction: np.ndarray
+    estimate: np.ndarray | None = None
+    posterior: object | None = None
 
 
 def closed_loop(
@@ -142,6 +148,7 @@ def closed_loop(
                 correction = np.asarray(s.estimate, float).copy()
             yield LoopStep(t=t, phase=ADAPT, action=s.action, landed=s.landed,
                            perceived=s.perceived, result=-1, score=float("nan"), fired=False,
-                           correction=correction.copy())
+                           correction=correction.copy(), estimate=s.estimate,
+                           posterior=ad.posterior)
             t += 1
         det.reset()
