@@ -130,6 +130,8 @@ def plot_adapt_cmd(
     from kbcli.viz.adapt import plot_adapt
 
     art = read_artifact(run, "run")
+    if len(art.data.get("errors", ())) == 0:
+        raise ConfigError(f"{run}: holds no touches (a session that ended before the first one)")
     if "snapshots" not in art.data:
         raise ConfigError(f"{run}: holds no posterior snapshots (rerun kbcli adapt with "
                           f"--snapshots)")
