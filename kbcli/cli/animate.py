@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from kbcli.cli.app import command, out, output_path
+from kbcli.cli.app import bench_app, command, err, interactive, out, output_path
 
 
 @command(name="animate")
@@ -47,3 +47,44 @@ def animate_cmd(
         raise KbcliError(f"{output}: is the input artifact; write the animation elsewhere")
     n = animate(art, output, fps=fps, max_frames=max_frames, dpi=dpi)
     out.print(f"wrote {output}: {n} frames at {fps:g} per second")
+
+
+@command(bench_app, name="animate")
+def bench_animate_cmd(
+    model: Annotated[Path, typer.Option("--model", help="Model artifact the runs adapt with.")]
+    = Path("data/default-model.h5"),
+    repeats: Annotated[int, typer.Option("--repeats", min=1, help="Renders per run (the "
+                                         "median is reported).")] = 3,
+    touches: Annotated[int, typer.Option("--touches", min=1, help="Touches of the "
+                                         "adaptation.")] = 40,
+    loop: Annotated[bool, typer.Option("--loop/--no-loop", help="Also render a 600-touch "
+                                       "closed loop.")] = True,
+) -> None:
+    """Seconds to render an adaptation of 40 touches (dynamics mode, the posterior at every step)
+    and a closed loop to a GIF (target: 15 s or less on one core).
+
+    Reads MODEL. Writes nothing (renders into a temporary folder). Prints per run the frames, the
+    median CPU seconds and wall seconds of the rendering, and the GIF's size.
+    """
+    from rich.console import Console
+    from rich.table import Table
+
+    from kbcli.bench import animate as bench
+    from kbcli.io.artifact import read_artifact
+
+    cfg = bench.BenchConfig(repeats=repeats, touches=touches, loop=loop)
+    runs = bench.make_runs(cfg, read_artifact(model, "model"))
+    t = Table(title=f"kbcli animate: median of {repeats} renders to GIF (target: a "
+                    f"40-touch run in {bench.TARGET_S:g} s or less on one core)",
+              title_justify="left")
+    for col in ("run", "frames", "CPU s", "wall s", "s per frame (CPU)", "GIF MB"):
+        t.add_column(col, justify="left" if col == "run" else "right")
+    for name, art in runs.items():
+        m = bench.measure(art, repeats)
+        t.add_row(name, str(m["frames"]), f"{m['cpu_s']:.2f}", f"{m['wall_s']:.2f}",
+                  f"{m['cpu_s'] / m['frames']:.3f}", f"{m['mb']:.1f}")
+    # a wide table is never wrapped at a narrow default width when the output is not a terminal
+    con = out if interactive() else Console(width=max(out.width, 120), highlight=False)
+    con.print(t)
+    err.print("CPU s: process time of the rendering (one thread); wall s includes waiting for "
+              "a shared machine; neither includes kbcli's start-up (~2 s)", markup=False)
