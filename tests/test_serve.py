@@ -206,13 +206,18 @@ def test_serve_over_pipes_bad_lines_and_end_of_input(model_file, tmp_path):
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary left
 
 
-def test_serve_survives_a_broken_pipe(model_file, tmp_path):
-    out = tmp_path / "session.h5"
+def _one_touch(model_file, out):
+    """A serve process that has recorded one touch."""
     proc = _serve(model_file, out)
     hello = json.loads(proc.stdout.readline())
-    touch = _robot()
-    felt, heard = touch(hello["action"])
-    _send(proc, {"heard": heard, "felt": felt})
+    felt, heard = _robot()(hello["action"])
+    assert _send(proc, {"heard": heard, "felt": felt})["step"] == 1
+    return proc
+
+
+def test_serve_survives_a_broken_pipe(model_file, tmp_path):
+    out = tmp_path / "session.h5"
+    proc = _one_touch(model_file, out)
     proc.stdout.close()  # the robot stops listening, then sends one more touch
     proc.stdin.write((json.dumps({"heard": None}) + "\n").encode())
     proc.stdin.flush()
@@ -222,14 +227,11 @@ def test_serve_survives_a_broken_pipe(model_file, tmp_path):
     assert read_artifact(out, "run").attrs["steps"] == 2
 
 
-def test_serve_interrupted_keeps_the_touches(model_file, tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_serve_interrupted_keeps_the_touches(model_file, tmp_path, sig):
     out = tmp_path / "session.h5"
-    proc = _serve(model_file, out)
-    hello = json.loads(proc.stdout.readline())
-    touch = _robot()
-    felt, heard = touch(hello["action"])
-    _send(proc, {"heard": heard, "felt": felt})
-    proc.send_signal(signal.SIGINT)
+    proc = _one_touch(model_file, out)
+    proc.send_signal(sig)
     assert proc.wait(timeout=60) == 130
     assert "Traceback" not in proc.stderr.read().decode()
     art = read_artifact(out, "run")
@@ -261,6 +263,30 @@ def test_serve_on_a_unix_socket(model_file, tmp_path):
     assert proc.wait(timeout=60) == 0
     assert not sock_path.exists()  # the socket is removed at the end
     assert read_artifact(out, "run").attrs["ended"] == "end"
+
+
+def test_serve_on_a_tcp_port(model_file, tmp_path):
+    out = tmp_path / "session.h5"
+    proc = _serve(model_file, out, "--port", "0", "--max-steps", "2", "--no-stop")
+    line = proc.stderr.readline().decode()
+    assert "listening on tcp:127.0.0.1:" in line, line
+    port = int(line.strip().rsplit(":", 1)[1])
+    with socket.create_connection(("127.0.0.1", port), timeout=60) as sock:
+        rfile, wfile = sock.makefile("rb"), sock.makefile("wb")
+        msg = json.loads(rfile.readline())
+        touch = _robot()
+        for _ in range(2):
+            felt, heard = touch(msg["action"])
+            wfile.write((json.dumps({"heard": heard, "felt": felt}) + "\n").encode())
+            wfile.flush()
+            msg = json.loads(rfile.readline())
+        assert msg["done"] is True and msg["action"] is None
+        rfile.close()
+        wfile.close()
+    assert proc.wait(timeout=60) == 0  # the robot closed the connection
+    art = read_artifact(out, "run")
+    assert art.attrs["steps"] == 2 and art.attrs["ended"] == "eof"
+    assert art.config["serve"]["transport"] == "tcp"
 
 
 def test_serve_bad_input_one_line(model_file, tmp_path, runner):

@@ -322,13 +322,23 @@ class _Animator:
                 "(true pose unknown)"),
             Line2D([], [], color="black", ls="--", label="robot's belief"),
         ]
+        dot = {"marker": "o", "ls": "none", "ms": 5, "mec": "white"}
+        if rep.kind == "closed_loop":
+            handles += [Line2D([], [], mfc="forestgreen", label="touch: MATCH", **dot),
+                        Line2D([], [], mfc="crimson", label="touch: NO_MATCH", **dot),
+                        Line2D([], [], mfc="darkorange", label="adaptation touch", **dot)]
+        else:
+            handles += [Line2D([], [], mfc="black", label="touch: heard a sound", **dot),
+                        Line2D([], [], **{**dot, "mfc": "white", "mec": "black"},
+                               label="touch: silence")]
         self.arm_line = None
         if rep.arm is not None:
             self.arm_line, = ax.plot([], [], "-o", color="tab:gray", lw=5, ms=6, mfc="0.3",
                                      mec="0.3", solid_capstyle="round", alpha=0.85, zorder=5,
                                      label=rep.arm_note)
             handles.append(self.arm_line)
-        ax.legend(handles=handles, loc="upper left", fontsize=7.5, framealpha=0.85)
+        ax.legend(handles=handles, loc="upper left", fontsize=7, framealpha=0.85, ncol=2,
+                  columnspacing=1.0, handlelength=1.8)
         x0, y0, x1, y1 = kb.area
         lo = np.array([x0, y0], float)
         hi = np.array([x1, y1], float)
@@ -338,7 +348,7 @@ class _Animator:
             hi = np.maximum(hi, pts.max(axis=0))
         pad = 0.04 * (hi - lo).max()
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
-        ax.set_ylim(lo[1] - pad, hi[1] + 3.5 * pad)  # room for the legend
+        ax.set_ylim(lo[1] - pad, hi[1] + 4.5 * pad)  # room for the legend
         ax.set_aspect("equal")
         ax.set_xlabel("pad x (px)")
         ax.set_ylabel("pad y (px)")
