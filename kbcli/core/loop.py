@@ -58,8 +58,9 @@ class LoopStep:
         The transform the robot applies to its actions after this step.
     estimate : (P,) ndarray or None
         During adaptation: the adapter's current estimate (its belief of where the keyboard is).
-    posterior : Posterior or None
-        During adaptation: the adapter's posterior after this touch.
+    marginal : (dx (n,), dy (m,), log p (m, n) float32) or None
+        During adaptation: the log of the adapter's posterior over the translation after this
+        touch (the angle summed out), on the grid axes ``dx``, ``dy``.
     """
 
     t: int
@@ -72,7 +73,7 @@ class LoopStep:
     fired: bool
     correction: np.ndarray
     estimate: np.ndarray | None = None
-    posterior: object | None = None
+    marginal: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
 def closed_loop(
@@ -149,6 +150,13 @@ def closed_loop(
             yield LoopStep(t=t, phase=ADAPT, action=s.action, landed=s.landed,
                            perceived=s.perceived, result=-1, score=float("nan"), fired=False,
                            correction=correction.copy(), estimate=s.estimate,
-                           posterior=ad.posterior)
+                           marginal=_log_marginal(ad))
             t += 1
         det.reset()
+
+
+def _log_marginal(ad: Adapter) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(dx, dy, log translation marginal as float32) of an adapter's posterior."""
+    with np.errstate(divide="ignore"):
+        logp = np.log(ad.posterior.translation_marginal()).astype(np.float32)
+    return ad.grid.dx, ad.grid.dy, logp

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -123,7 +123,7 @@ class LoopSession:
         self.joint_angles: list[np.ndarray] = []
         #: (touch, log translation marginal) after each adaptation touch
         self.posteriors: list[tuple[int, np.ndarray]] = []
-        self._grid = None
+        self._axes: tuple[np.ndarray, np.ndarray] | None = None
 
     def _touch(self, world_rng: np.random.Generator):
         def touch(actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -140,13 +140,10 @@ class LoopSession:
 
     def __iter__(self) -> Iterator[LoopStep]:
         for s in self._robot:
-            if s.posterior is not None:
-                post = s.posterior
-                self._grid = post.grid
-                with np.errstate(divide="ignore"):
-                    logp = np.log(post.translation_marginal()).astype(np.float32)
+            if s.marginal is not None:
+                dx, dy, logp = s.marginal
+                self._axes = (dx, dy)
                 self.posteriors.append((s.t, logp))
-                s = replace(s, posterior=None)  # keep only the marginal: the grid is large
             self.steps.append(s)
             yield s
 
@@ -214,11 +211,11 @@ class LoopSession:
             arr["joint_angles"] = np.array(self.joint_angles, float)
         data = {"steps": arr, "truth": {"params": self.truth}}
         if self.posteriors:
-            g = self._grid
+            dx, dy = self._axes
             data["posterior"] = {
                 "touch": np.array([t for t, _ in self.posteriors], np.int64),
                 "log_translation": np.stack([p for _, p in self.posteriors]),
-                "dx": g.dx, "dy": g.dy,
+                "dx": dx, "dy": dy,
             }
         summary = self.summary()
         sim = self.cfg.adapt.sim_config()
