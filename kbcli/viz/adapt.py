@@ -6,7 +6,9 @@ the angle summed out for the rigid family) at the stored snapshot steps, the tru
 marked with a cross and the estimate (posterior mean) with a circle; the last panel zooms in on the
 estimate, wide enough to keep the truth in view. Bottom: the translation error (px, log scale)
 with the 1 px level, the angle error (degrees, rigid runs, on its own axis) and the entropy (nats)
-against the observations, the stopping rule marked. One legend names every mark.
+against the observations, the stopping rule marked. One legend names every mark. A session with a
+robot in another process (``kbcli serve``) has no ground truth: no cross, and the error panel shows
+the robot's own confidence instead (the posterior mass near the estimate).
 """
 
 from __future__ import annotations
@@ -50,14 +52,14 @@ def plot_adapt(run: Artifact, path: str | os.PathLike) -> None:
     entropy = np.asarray(d["entropy"], float)
     truth = a.get("truth") or {}
     tx, ty = float(truth.get("dx", np.nan)), float(truth.get("dy", np.nan))
-    has_truth = bool(np.isfinite(tx) and np.isfinite(ty))
+    has_truth = bool(np.isfinite(tx) and np.isfinite(ty)) and bool(np.isfinite(errors).any())
     means = np.asarray(d["means"], float)
     rigid = a.get("family") == "rigid" or a.get("world_family") == "rigid"
     stop = a.get("stop_step")
     pick = np.arange(len(steps)) if snaps is not None else np.arange(0)
     if len(pick) > MAX_PANELS:
         pick = np.unique(np.rint(np.linspace(0, len(steps) - 1, MAX_PANELS)).astype(int))
-    n = max(len(pick), 3 if rigid else 2)
+    n = max(len(pick), 3 if rigid and has_truth else 2)
     fig = plt.figure(figsize=(2.7 * n + 1.2, 6.9))
     gs = fig.add_gridspec(2, n + 1, height_ratios=[1.15, 1.0], width_ratios=[1] * n + [0.07])
     dx, dy = np.asarray(d["dx"], float), np.asarray(d["dy"], float)
@@ -102,18 +104,26 @@ def plot_adapt(run: Artifact, path: str | os.PathLike) -> None:
 
     t = np.arange(1, len(errors) + 1)
     T = len(errors)
-    cols = [(0, n // 3 if rigid else n // 2), (n // 3, 2 * n // 3), (2 * n // 3 if rigid else n // 2,
-                                                                      n)]
+    three = rigid and has_truth
+    cols = [(0, n // 3 if three else n // 2), (n // 3, 2 * n // 3),
+            (2 * n // 3 if three else n // 2, n)]
     ax = fig.add_subplot(gs[1, cols[0][0]:cols[0][1]])
-    ax.semilogy(t, np.maximum(errors, 1e-3), "-o", ms=3, color="tab:blue")
-    ax.axhline(1.0, color="0.5", ls="--", lw=0.8)
+    if has_truth:
+        ax.semilogy(t, np.maximum(errors, 1e-3), "-o", ms=3, color="tab:blue")
+        ax.axhline(1.0, color="0.5", ls="--", lw=0.8)
+        ax.set_ylabel("translation error (px)")
+        ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+        ax.yaxis.set_major_formatter(FuncFormatter(_plain))
+        ax.yaxis.set_minor_formatter(FuncFormatter(lambda v, _p: ""))
+    else:  # a real robot: no ground truth, show the robot's own confidence
+        ax.plot(t, np.asarray(d.get("mass", np.full_like(errors, np.nan)), float), "-o", ms=3,
+                color="tab:green")
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_ylabel("posterior mass near the estimate")
+        ax.set_title("ground truth unknown (external robot): no error", fontsize=8)
     ax.set_xlabel("observations")
-    ax.set_ylabel("translation error (px)")
-    ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
-    ax.yaxis.set_major_formatter(FuncFormatter(_plain))
-    ax.yaxis.set_minor_formatter(FuncFormatter(lambda v, _p: ""))
     axes = [ax]
-    if rigid:
+    if rigid and has_truth:
         ang = np.asarray(d.get("angle_errors", np.full(T, np.nan)), float)
         ax_a = fig.add_subplot(gs[1, cols[1][0]:cols[1][1]])
         ax_a.plot(t, ang, "-s", ms=3, color="tab:orange")
@@ -137,18 +147,26 @@ def plot_adapt(run: Artifact, path: str | os.PathLike) -> None:
     if has_truth:
         handles.insert(0, Line2D([], [], ls="", marker="x", color="cyan", mew=2,
                                  label="true displacement"))
-    handles.append(Line2D([], [], color="0.5", ls="--", lw=0.8, label="1 px"))
+    if has_truth:
+        handles.append(Line2D([], [], color="0.5", ls="--", lw=0.8, label="1 px"))
     if stop:
         handles.append(Line2D([], [], color="tab:green", ls=":", lw=1.0,
                               label=f"stopping rule met (t = {stop})"))
     fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0.965),
                ncol=len(handles), fontsize=8, frameon=False)
-    final = a.get("final_error_px", np.nan)
-    final = np.nan if final is None else final
-    angle = (f", angle error {a.get('final_angle_error_deg', np.nan):.2f} deg"
-             if rigid and isinstance(a.get("final_angle_error_deg"), (int, float)) else "")
-    fig.suptitle(f"adaptation: {a.get('strategy')} strategy, {a.get('posterior')} posterior, "
-                 f"{a.get('family')} family, {T} observation{'s' if T != 1 else ''}; final error "
-                 f"{final:.2f} px{angle}", fontsize=10, y=0.995)
+    if has_truth:
+        final = a.get("final_error_px", np.nan)
+        final = np.nan if final is None else final
+        angle = (f", angle error {a.get('final_angle_error_deg', np.nan):.2f} deg"
+                 if rigid and isinstance(a.get("final_angle_error_deg"), (int, float)) else "")
+        result = f"final error {final:.2f} px{angle}"
+    else:
+        est = a.get("estimate") or {}
+        result = "estimate " + ", ".join(f"{k} {v:+.2f}" for k, v in est.items()) + \
+            " (truth unknown)"
+    source = " (external robot)" if a.get("source") == "external" else ""
+    fig.suptitle(f"adaptation{source}: {a.get('strategy')} strategy, {a.get('posterior')} "
+                 f"posterior, {a.get('family')} family, {T} observation{'s' if T != 1 else ''}; "
+                 f"{result}", fontsize=10, y=0.995)
     fig.tight_layout(rect=(0, 0, 1, 0.945))
     save(fig, path)
