@@ -36,7 +36,9 @@ def test_help_speaks_of_the_tool_and_cuts_no_sentence(runner, path):
     r = runner.invoke(app, [*path, "--help"], env={"COLUMNS": "80"})
     assert r.exit_code == 0, r.output
     assert not re.search(r"\bissue\s*#?\d", r.output, re.I), r.output  # no tracker references
-    assert "..." not in r.output.replace("[ARGS]...", ""), r.output  # nothing cut short
+    cut = [ln for ln in r.output.splitlines()
+           if re.search(r"[\w,;]\.\.\.$", ln.rstrip()) and "[ARGS]..." not in ln]
+    assert not cut, cut  # nothing cut short (click ends a shortened text with "...")
 
 
 def test_root_help_lists_every_stage(runner):

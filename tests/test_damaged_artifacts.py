@@ -47,8 +47,11 @@ COMMANDS: dict[str, list[list[str]]] = {
     "history": [["detect", "{path}", "-o", "{tmp}/d.h5"],
                 ["plot", "play", "{path}", "-o", "{tmp}/p.png"]],
     "detection": [["plot", "play", H, "--detection", "{path}", "-o", "{tmp}/p.png"]],
-    "run": [["plot", "adapt", "{path}", "-o", "{tmp}/a.png"]],
-    "closed_loop": [["plot", "run", "{path}", "-o", "{tmp}/r.png"]],
+    "run": [["plot", "adapt", "{path}", "-o", "{tmp}/a.png"],
+            ["animate", "{path}", "--max-frames", "2", "--dpi", "40", "-o", "{tmp}/a.gif"]],
+    "closed_loop": [["plot", "run", "{path}", "-o", "{tmp}/r.png"],
+                    ["animate", "{path}", "--max-frames", "2", "--dpi", "40", "-o",
+                     "{tmp}/r.gif"]],
     "evaluation": [["report", "{path}", "-o", "{tmp}/rep"]],
 }
 

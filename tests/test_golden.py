@@ -50,8 +50,10 @@ READERS: dict[str, list[list[str]]] = {
                 ["plot", "play", "{path}", "-o", "{tmp}/p.png"]],
     "detection": [["plot", "play", str(GOLDEN / "history.h5"), "--detection", "{path}", "-o",
                    "{tmp}/p.png"]],
-    "run": [["plot", "adapt", "{path}", "-o", "{tmp}/a.png"]],
-    "closed_loop": [["plot", "run", "{path}", "-o", "{tmp}/r.png"]],
+    "run": [["plot", "adapt", "{path}", "-o", "{tmp}/a.png"],
+            ["animate", "{path}", "--max-frames", "3", "--dpi", "40", "-o", "{tmp}/a.gif"]],
+    "closed_loop": [["plot", "run", "{path}", "-o", "{tmp}/r.png"],
+                    ["animate", "{path}", "--max-frames", "3", "--dpi", "40", "-o", "{tmp}/r.gif"]],
     "evaluation": [["report", "{path}", "-o", "{tmp}/rep"]],
 }
 

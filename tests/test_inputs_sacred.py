@@ -45,6 +45,9 @@ CASES: dict[str, tuple[list[str], list[str], list[str]]] = {
     "evaluate": (["evaluate", "--model", "{model}", "--config", "{toml_golden}", "-o", "{out}"],
                  ["model", "toml_golden"], ["out"]),
     "report": (["report", "{evaluation}", "-o", "{folder}"], ["evaluation"], ["folder"]),
+    "animate": (["animate", "{run}", "-o", "{gif}"], ["run"], ["gif"]),
+    "serve": (["serve", "--model", "{model}", "--config", "{toml_serve}", "-o", "{out}",
+               "--socket", "{sock}"], ["model", "toml_serve"], ["out", "sock"]),
 }
 #: commands that write nothing
 READ_ONLY = {"inspect"}
@@ -59,6 +62,8 @@ def _inputs(tmp: Path) -> dict[str, Path]:
     shutil.copy(PIPELINES / "keyboard.toml", files["toml_kb"])
     files["toml_golden"] = tmp / "golden.toml"
     shutil.copy(PIPELINES / "golden.toml", files["toml_golden"])
+    files["toml_serve"] = tmp / "serve.toml"
+    files["toml_serve"].write_text("[serve]\nmax_steps = 3\n")
     return files
 
 
@@ -69,7 +74,8 @@ def _snapshot(tmp: Path) -> dict[str, bytes]:
 
 def _defaults(tmp: Path) -> dict[str, str]:
     return {"out": str(tmp / "new.h5"), "fig": str(tmp / "new.png"), "wav": str(tmp / "new.wav"),
-            "folder": str(tmp / "newreport")}
+            "folder": str(tmp / "newreport"), "gif": str(tmp / "new.gif"),
+            "sock": str(tmp / "new.sock")}
 
 
 def _cases():

@@ -107,7 +107,7 @@ def command(typer_app: typer.Typer = app, **kwargs: Any) -> Callable[[F], F]:
     (``short_help``) is the docstring's first sentence, whole, unless given."""
 
     def deco(fn: F) -> F:
-        kwargs.setdefault("short_help", first_sentence(fn.__doc__))
+        kwargs.setdefault("short_help", first_sentence(kwargs.get("help") or fn.__doc__))
         return typer_app.command(**kwargs)(handle_errors(fn))
 
     return deco

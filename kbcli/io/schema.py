@@ -102,8 +102,8 @@ class Schema:
         Summary attributes (``attrs`` JSON) and their types (see ``_TYPES``); a name ending in
         ``?`` may be absent (its type is checked when present).
     config : dict
-        Required config entries and their types; a dotted key reaches into a table
-        (``"keyboard"``: the config's keyboard table).
+        Config entries and their types; a dotted key reaches into a table (``"loop.adapt"``), a
+        key ending in ``?`` may be absent.
     checks : tuple of callables
         ``check(artifact) -> str | None``: a message when a rule across entries fails.
     """
@@ -171,6 +171,42 @@ def _eval_lists(art) -> str | None:
         if not isinstance(cats.get(c), dict) or not _TYPES["num"](cats[c].get("limit")):
             return f"config categories.{c}.limit is missing or not a number"
     return None
+
+
+def _truth_keys(art) -> str | None:
+    """A ground truth names every parameter of the world's transform family."""
+    from kbcli.core.transforms import FAMILIES
+
+    truth = art.attrs.get("truth")
+    if not truth:
+        return None
+    fam = art.attrs.get("world_family") or art.attrs.get("family") or "translation"
+    if art.kind == "closed_loop":
+        fam = "rigid" if "angle" in truth else "translation"
+    if fam not in FAMILIES:
+        return f"summary attribute world_family {fam!r} is not one of {', '.join(FAMILIES)}"
+    missing = [k for k in FAMILIES[fam] if k not in truth]
+    if missing:
+        return f"summary attribute 'truth' lacks {', '.join(missing)} of a {fam} move"
+    return None
+
+
+def _arm(art) -> str | None:
+    """The arm's geometry, when recorded: a base point and two link lengths."""
+    geo = art.attrs.get("arm")
+    if geo is None:
+        return None
+    for key in ("base", "link_lengths"):
+        v = geo.get(key)
+        if not (_TYPES["nums"](v) and len(v) == 2 and all(math.isfinite(x) for x in v)):
+            return f"summary attribute arm.{key} must be two finite numbers, got {v!r:.40}"
+    if min(geo["link_lengths"]) <= 0:
+        return "summary attribute arm.link_lengths must be > 0"
+    return None
+
+
+def _has_posterior(art) -> bool:
+    return "posterior" in art.data
 
 
 _KEYBOARD_CFG = {"keyboard": "dict"}
@@ -248,8 +284,8 @@ SCHEMAS: dict[str, dict[int, Schema]] = {
         ),
     )},
     "run": {1: Schema(
-        attrs={"steps": "int", "truth?": "numdict", "family?": "str", "stop_step?": "int?",
-               "final_error_px?": "num?", "estimate?": "numdict"},
+        attrs={"steps": "int", "truth?": "numdict?", "family?": "str", "stop_step?": "int?",
+               "final_error_px?": "num?", "estimate?": "numdict?"},
         datasets=(
             Dataset("actions", FLOAT, ("T", 2)),
             Dataset("landed", FLOAT, ("T", 2)),
@@ -265,20 +301,26 @@ SCHEMAS: dict[str, dict[int, Schema]] = {
             Dataset("snapshots", NUM, ("S", "Y", "X"), optional=True),
             Dataset("snapshot_angles", FLOAT, ("S", "A"), optional=True),
             Dataset("timing/step_ms", FLOAT, ("T",), optional=True),
+            Dataset("perceived", FLOAT, ("T", "F"), optional=True),
+            Dataset("mass", FLOAT, ("T",), optional=True),
         ),
+        config={"adapt?": "dict", "keyboard?": "dict"},
+        checks=(_truth_keys, _arm),
     )},
     "closed_loop": {1: Schema(
-        config=_KEYBOARD_CFG,
         attrs={"perturbed_at": "int", "detected_at": "int?", "detection_delay": "int?",
                "success_before": "num?", "success_after_perturbation": "num?",
-               "success_after_adaptation": "num?", "truth": "numdict"},
-        checks=(_keyboard,),
+               "success_after_adaptation": "num?", "truth": "numdict", "correction?": "numdict?"},
+        config={**_KEYBOARD_CFG, "loop?": "dict", "loop.adapt?": "dict", "loop.detector?": "dict"},
+        checks=(_keyboard, _truth_keys, _arm),
         datasets=(
             Dataset("steps/phase", INT, ("T",)),
             Dataset("steps/result", FLAG, ("T",)),
             Dataset("steps/score", FLOAT, ("T",)),
             Dataset("steps/landed", FLOAT, ("T", 2)),
             Dataset("steps/action", FLOAT, ("T", 2), optional=True),
+            Dataset("steps/perceived", FLOAT, ("T", "F")),
+            Dataset("steps/correction", FLOAT, ("T", "E")),
         ),
     )},
     "evaluation": {1: Schema(
@@ -306,6 +348,29 @@ SCHEMAS: dict[str, dict[int, Schema]] = {
         checks=(_eval_lists,),
     )},
 }
+
+
+def _extend(base: Schema, *datasets: Dataset, **attrs: str) -> Schema:
+    """A later version of a schema: ``base`` plus datasets and summary attributes."""
+    return Schema(datasets=(*base.datasets, *datasets), attrs={**base.attrs, **attrs},
+                  config=base.config, checks=base.checks)
+
+
+# run 2: joint angles (dynamics mode), the arm and mode; sessions of kbcli serve have no truth
+SCHEMAS["run"][2] = _extend(
+    SCHEMAS["run"][1], Dataset("joint_angles", FLOAT, ("T", 2), optional=True),
+    **{"mode?": "str?", "arm?": "dict?", "source?": "str?"})
+# closed_loop 2: joint angles and the estimate per touch, the posterior after each adaptation touch
+SCHEMAS["closed_loop"][2] = _extend(
+    SCHEMAS["closed_loop"][1],
+    Dataset("steps/joint_angles", FLOAT, ("T", 2), optional=True),
+    Dataset("steps/estimate", FLOAT, ("T", "E"), optional=True),
+    *(Dataset(p, k, s, when=_has_posterior, index=ix, finite=f) for p, k, s, ix, f in (
+        ("posterior/dx", FLOAT, ("PX",), None, True),
+        ("posterior/dy", FLOAT, ("PY",), None, True),
+        ("posterior/log_translation", NUM, ("PT", "PY", "PX"), None, False),
+        ("posterior/touch", INT, ("PT",), "T", False))),
+    **{"mode?": "str?", "arm?": "dict?", "source?": "str?"})
 
 
 def schema_for(kind: str, version: int) -> Schema | None:
@@ -389,7 +454,11 @@ def validate(art, where: str = "") -> None:
         raise ArtifactError(f"{pre}{art.kind} artifact: {msg}")
 
     for key, spec in schema.config.items():
+        optional = key.endswith("?")
+        key = key.rstrip("?")
         ok, value = _lookup(art.config, key)
+        if not ok and optional:
+            continue
         if not ok:
             fail(f"config entry {key!r} is missing")
         if not _typed(value, spec):
