@@ -171,8 +171,14 @@ def plot_loop(steps: dict, attrs: dict, kb: Keyboard, path: str | os.PathLike, w
         shown.append(pts[np.isfinite(pts).all(axis=1)])
         ax3.plot(pts[:, 0], pts[:, 1], "-", color="0.2", lw=0.6, alpha=0.6)
         ax3.plot(pts[:, 0], pts[:, 1], "o", color="black", ms=4)
+        groups: dict[tuple[int, int], list[int]] = {}  # touches within 3 px share one label
         for k, (x, y) in enumerate(pts, 1):
-            ax3.annotate(str(k), (x, y), fontsize=9, xytext=(4, 4), textcoords="offset points",
+            if np.isfinite(x) and np.isfinite(y):
+                groups.setdefault((int(round(x / 3)), int(round(y / 3))), []).append(k)
+        for ks in groups.values():
+            x, y = pts[ks[0] - 1]
+            ax3.annotate(",".join(map(str, ks)), (x, y), fontsize=9, xytext=(4, 4),
+                         textcoords="offset points",
                          bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none",
                                "alpha": 0.8})
         handles.append(Line2D([], [], color="black", marker="o", ms=4, lw=0.6,
