@@ -121,6 +121,18 @@ def interactive() -> bool:
 T = TypeVar("T")
 
 
+def _bar_columns() -> tuple:
+    """The columns of a progress bar: description, bar, count, elapsed, time left."""
+    return (
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("left"),
+        TimeRemainingColumn(),
+    )
+
+
 def progress(items: Iterable[T], total: int | None, description: str, *,
              advance: Callable[[T], float] | None = None,
              describe: Callable[[T], str | None] | None = None) -> Iterator[T]:
@@ -138,14 +150,7 @@ def progress(items: Iterable[T], total: int | None, description: str, *,
     if not interactive():
         yield from items
         return
-    cols = (
-        TextColumn("[progress.description]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TextColumn("left"),
-        TimeRemainingColumn(),
-    )
+    cols = _bar_columns()
     with Progress(*cols, console=err, transient=True) as bar:
         task = bar.add_task(description, total=total)
         for item in items:
@@ -163,14 +168,7 @@ def ticker(total: int | None, description: str) -> Iterator[Callable[..., None]]
     if not interactive():
         yield lambda *a, **k: None
         return
-    cols = (
-        TextColumn("[progress.description]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TextColumn("left"),
-        TimeRemainingColumn(),
-    )
+    cols = _bar_columns()
     with Progress(*cols, console=err, transient=True) as bar:
         task = bar.add_task(description, total=total)
         yield lambda *a, **k: bar.advance(task)

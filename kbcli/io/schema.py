@@ -385,9 +385,10 @@ def _typed(value: Any, spec: str) -> bool:
     return _TYPES[spec](value)
 
 
-def _lookup(tree: dict, dotted: str) -> tuple[bool, Any]:
+def _lookup(tree: dict, dotted: str, sep: str = ".") -> tuple[bool, Any]:
+    """(found, value) of a ``sep``-separated path in nested dicts."""
     node: Any = tree
-    for part in dotted.split("."):
+    for part in dotted.split(sep):
         if not isinstance(node, dict) or part not in node:
             return False, None
         node = node[part]
@@ -395,12 +396,7 @@ def _lookup(tree: dict, dotted: str) -> tuple[bool, Any]:
 
 
 def _node(data: dict, path: str) -> tuple[bool, Any]:
-    node: Any = data
-    for part in path.split("/"):
-        if not isinstance(node, dict) or part not in node:
-            return False, None
-        node = node[part]
-    return True, node
+    return _lookup(data, path, "/")
 
 
 _PLACEHOLDER = re.compile(r"\{(\w+)\}")
