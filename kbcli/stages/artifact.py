@@ -21,9 +21,9 @@ SCHEMA_VERSIONS: dict[str, int] = {
     "scene": 1,
     "history": 1,
     "detection": 1,
-    "run": 1,
-    "closed_loop": 1,
-    "evaluation": 1,
+    "run": 2,  # 2: the adapt config holds the robot's options under "robot"
+    "closed_loop": 2,  # 2: likewise (config "adapt")
+    "evaluation": 2,  # 2: named methods, measured playing success, tie-corrected tests
 }
 
 
