@@ -198,7 +198,9 @@ def expected_failure_rate(
 
 def replay(model, melody: Melody, touch: Touch, *, rng: np.random.Generator, n_notes: int = 200,
            correction: np.ndarray | None = None, family: str = "translation",
-           centre: np.ndarray | None = None, chunk: int = 32) -> np.ndarray:
+           centre: np.ndarray | None = None, chunk: int = 32,
+           sampler: Callable[[int, int, np.random.Generator], np.ndarray] | None = None
+           ) -> np.ndarray:
     """Play ``n_notes`` touches of Algorithm 1 and return their history (vectorised).
 
     The same rules as :func:`play` (sample an action for the aimed note, touch, match the heard
@@ -222,6 +224,11 @@ def replay(model, melody: Melody, touch: Touch, *, rng: np.random.Generator, n_n
         Transform family of ``correction``.
     centre : (2,) ndarray, optional
         Rotation centre of the family (default: the centre of the model's working area).
+    sampler : callable, optional
+        ``sampler(cls, n, rng) -> (n, 2)`` draws from p(action | sound) (Algorithm 1, line 10);
+        default ``model.sample_actions``. A pool of draws made once per class, resampled (e.g.
+        :meth:`kbcli.core.posterior.ActionSamples.draw`), saves the model's rejection sampling in
+        repeated replays.
 
     Returns
     -------
@@ -239,10 +246,11 @@ def replay(model, melody: Melody, touch: Touch, *, rng: np.random.Generator, n_n
         x0, y0, x1, y1 = model.area
         centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
     corr = None if correction is None else np.asarray(correction, float)
+    draw = model.sample_actions if sampler is None else sampler
     queues: dict[int, list] = {}  # class -> [ok (k,) bool, next index]
 
     def outcomes(cls: int) -> np.ndarray:
-        a = np.asarray(model.sample_actions(cls, chunk, rng), float).reshape(-1, 2)
+        a = np.asarray(draw(cls, chunk, rng), float).reshape(-1, 2)
         if corr is not None:
             a = transforms.apply(family, corr, a, centre)
         _, heard = touch(a)

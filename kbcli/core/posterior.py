@@ -560,6 +560,12 @@ class ActionSamples:
     def __len__(self) -> int:
         return len(self._cache)
 
+    def draw(self, cls: int, n: int, rng: np.random.Generator) -> np.ndarray:
+        """(n, 2) actions resampled (with replacement) from class ``cls``'s samples: draws from
+        the empirical p(action | sound) of N model samples, without calling the model again."""
+        s, _ = self.get(cls)
+        return s[rng.integers(len(s), size=int(n))]
+
 
 @functools.lru_cache(maxsize=64)
 def _kernel_fft(sig: float, pad: int, size: int) -> np.ndarray:

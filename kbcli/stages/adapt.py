@@ -183,12 +183,14 @@ class PlayCheck:
 
 
 def play_success(model, keyboard: Keyboard, sim: SimConfig, family: str, truth: np.ndarray,
-                 estimate: np.ndarray | None, check: PlayCheck, *,
-                 rng: np.random.Generator) -> dict[str, float]:
+                 estimate: np.ndarray | None, check: PlayCheck, *, rng: np.random.Generator,
+                 pool: ActionSamples | None = None) -> dict[str, float]:
     """Success rates (MATCH share) of ``check.notes`` touches of Algorithm 1 with the model's
     actions and the arm of ``sim``: ``before`` (keyboard at its reference pose), ``unadapted``
     (at ``truth``, no correction) and ``adapted`` (at ``truth``, actions corrected by
-    ``estimate``); NaN for what was not measured."""
+    ``estimate``); NaN for what was not measured. ``pool``: per-class draws of p(action | sound)
+    to resample instead of calling ``model.sample_actions`` (see :func:`kbcli.core.play.replay`).
+    """
     melody = parse_melody(check.melody, keyboard)
     n = len(transforms.FAMILIES[family])
     out = {"before": math.nan, "unadapted": math.nan, "adapted": math.nan}
@@ -204,7 +206,7 @@ def play_success(model, keyboard: Keyboard, sim: SimConfig, family: str, truth: 
             return world.touch(actions, r)
 
         hist = replay(model, melody, touch, rng=r, n_notes=check.notes, correction=corr,
-                      family=family)
+                      family=family, sampler=None if pool is None else pool.draw)
         out[name] = float(np.mean(hist == MATCH))
     return out
 
@@ -222,7 +224,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
                rng: np.random.Generator, world_family: str | None = None,
                table: LikelihoodTable | None = None,
                snapshot_steps: tuple[int, ...] = (), samples: ActionSamples | None = None,
-               play: PlayCheck | None = None) -> dict[str, np.ndarray]:
+               play: PlayCheck | None = None,
+               play_pool: ActionSamples | None = None) -> dict[str, np.ndarray]:
     """One adaptation against a world whose keyboard sits at ``true_params``.
 
     Parameters
@@ -245,6 +248,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     play : PlayCheck, optional
         Also measure the playing success (adds ``play_before``, ``play_unadapted``,
         ``play_adapted``, each a float, NaN when not measured), from a third child of ``rng``.
+    play_pool : ActionSamples, optional
+        Per-class draws of p(action | sound) the replays resample (default: the model samples).
 
     Returns
     -------
@@ -311,7 +316,7 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         if world_family != cfg.robot.family:  # correct in the world's parameters
             final = _as_family(final, cfg.robot.family, world_family)
         res = play_success(model, keyboard, cfg.sim_config(), world_family, truth, final, play,
-                           rng=rng.spawn(1)[0])
+                           rng=rng.spawn(1)[0], pool=play_pool)
         out.update({f"play_{k}": np.float64(v) for k, v in res.items()})
     return out
 
