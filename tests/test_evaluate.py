@@ -279,8 +279,9 @@ def test_paper_config_parses_and_plans():
     # kbcli is the adapter's defaults: what they are, it is
     assert ours.robot == AdapterConfig(strategy="infogain")
     tasks = stage.plan(cfg.with_overrides(experiments=2))
-    # ideal: paper 2 + kbcli 3 + ablation 2 strategies; dynamics: paper 2 + kbcli 3
-    assert len(tasks) == 2 * 12 * (7 + 5)
+    # ideal: paper 2 + kbcli 3 strategies (+ the ablation's 2 on the 4 large displacements);
+    # dynamics: paper 2 + kbcli 3
+    assert len(tasks) == 2 * (12 * (5 + 5) + 4 * 2)
     resolved = stage.resolved_methods(cfg)
     assert resolved["paper"]["options"]["ideal"]["active"]["robot"]["kde_samples"] == 10000
     assert resolved["paper-likelihood"]["modes"] == ["ideal"]

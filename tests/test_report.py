@@ -119,7 +119,7 @@ def test_underpowered_rather_than_differs():
     assert _verdicts(_evaluation(weak, min_p=0.02))["large"] == "underpowered"
     assert _verdicts(_evaluation(weak))["small"] == "differs"  # enough runs: a real difference
     text = stage.build(_evaluation(weak, min_p=2 / 924)).readme
-    assert "no p below 2.2e-03 is attainable" in text
+    assert "the smallest exact p-value of these sample sizes is 2.2e-03" in text
 
 
 def test_uninformative_thresholds_are_not_counted():

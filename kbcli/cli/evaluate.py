@@ -58,18 +58,18 @@ def _summary(art, elapsed: float, n_run: int, step_ms: np.ndarray) -> None:
                 "playing success after"):
         table.add_column(col, justify="left" if col in ("mode", "method", "category", "strategy")
                          else "right")
+    from kbcli.stages.report import ordered
+
     for m in art.attrs["modes"]:
-        for x, by_cat in art.data["curves"][m].items():
-            for c, by_s in by_cat.items():
-                for s, cur in by_s.items():
-                    med = cur["median_samples"][j]
-                    p = "" if s == base else f"{art.data['pvalues'][m][x][c][s]['pvalue'][j]:.1e}"
-                    sel = ((exp["mode"] == m) & (exp["method"] == x) & (exp["category"] == c)
-                           & (exp["strategy"] == s))
-                    play = exp["play_adapted"][sel]
-                    ptxt = "" if np.isnan(play).all() else f"{100 * np.nanmedian(play):.1f} %"
-                    table.add_row(m, x, c, s, f"{cur['rmse'][-1]:.2f}",
-                                  f">{T}" if np.isnan(med) else f"{med:g}", p, ptxt)
+        for x, c, s, cur in ordered(art, "curves", m):
+            med = cur["median_samples"][j]
+            p = "" if s == base else f"{art.data['pvalues'][m][x][c][s]['pvalue'][j]:.1e}"
+            sel = ((exp["mode"] == m) & (exp["method"] == x) & (exp["category"] == c)
+                   & (exp["strategy"] == s))
+            play = exp["play_adapted"][sel]
+            ptxt = "" if np.isnan(play).all() else f"{100 * np.nanmedian(play):.1f} %"
+            table.add_row(m, x, c, s, f"{cur['rmse'][-1]:.2f}",
+                          f">{T}" if np.isnan(med) else f"{med:g}", p, ptxt)
     out.print(table)
     if n_run:
         med = float(np.median(step_ms)) if len(step_ms) else float("nan")

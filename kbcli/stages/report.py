@@ -170,6 +170,21 @@ def _short(art: Artifact, method: str) -> str:
     return ", ".join(parts) + f"; {' / '.join(_methods(art)[method]['strategies'])}"
 
 
+def ordered(art: Artifact, key: str, mode: str):
+    """``(method, category, strategy, value)`` of ``art.data[key][mode]`` (``curves`` or
+    ``pvalues``) in the config's order of methods, categories and strategies (an artifact read
+    back from HDF5 lists its groups alphabetically)."""
+    tree = art.data[key].get(mode, {})
+    for x, info in _methods(art).items():
+        for c in art.attrs["categories"]:
+            by_s = tree.get(x, {}).get(c)
+            if by_s is None:
+                continue
+            for s in info["strategies"]:
+                if s in by_s:
+                    yield x, c, s, by_s[s]
+
+
 def _cell(art: Artifact, mode: str, method: str, category: str):
     cur = art.data["curves"].get(mode, {}).get(method, {}).get(category)
     pv = art.data["pvalues"].get(mode, {}).get(method, {}).get(category)
@@ -213,8 +228,8 @@ def _significance(art: Artifact, mode: str, method: str, category: str, strategy
     if bad:
         parts.append("not at " + ", ".join(bad))
     if weak:
-        parts.append(f"not at {', '.join(weak)}, where no p below {_fmt_p(min_p)} is attainable "
-                     f"with these runs")
+        parts.append(f"not at {', '.join(weak)}: too few runs to show p < {bound:g} (the "
+                     f"smallest exact p-value of these sample sizes is {_fmt_p(min_p)})")
     if skipped:
         parts.append("uninformative (neither reaches it in half the runs): " + ", ".join(skipped))
     if not ok and not bad and not weak:
@@ -244,8 +259,9 @@ def _not_significant(art: Artifact, mode: str, method: str, category: str,
     if sig:
         return f"significantly faster (p < {NOT_SIGNIFICANT:g}) at " + ", ".join(sig), "differs"
     if float(pv.get("min_pvalue", 0.0)) >= NOT_SIGNIFICANT:
-        return (f"no threshold with p < {NOT_SIGNIFICANT:g}, but none is attainable with these "
-                "runs", "underpowered")
+        return (f"no threshold with p < {NOT_SIGNIFICANT:g}, but too few runs to show one (the "
+                f"smallest exact p-value of these sample sizes is {_fmt_p(float(pv['min_pvalue']))})",
+                "underpowered")
     return f"no threshold with p < {NOT_SIGNIFICANT:g} in its favour", "agrees"
 
 
@@ -477,12 +493,10 @@ def _threshold_table(art: Artifact, mode: str) -> list[str]:
     thr = art.array("thresholds")
     head = ("| method | category | strategy | " + " | ".join(f"< {t:g} px" for t in thr) + " |")
     lines = [head, "|" + "---|" * (len(thr) + 3)]
-    for x, by_c in art.data["curves"][mode].items():
-        for c, by_s in by_c.items():
-            for s, cur in by_s.items():
-                cells = [f"{_fmt_med(m)} ({100 * r:.0f} %)" for m, r in
-                         zip(cur["median_samples"], cur["reached"], strict=True)]
-                lines.append(f"| {x} | {c} | {s} | " + " | ".join(cells) + " |")
+    for x, c, s, cur in ordered(art, "curves", mode):
+        cells = [f"{_fmt_med(m)} ({100 * r:.0f} %)" for m, r in
+                 zip(cur["median_samples"], cur["reached"], strict=True)]
+        lines.append(f"| {x} | {c} | {s} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -492,17 +506,14 @@ def _pvalue_table(art: Artifact, mode: str) -> list[str]:
     head = ("| method | category | test | smallest attainable p | "
             + " | ".join(f"< {t:g} px" for t in thr) + " |")
     lines = [head, "|" + "---|" * (len(thr) + 4)]
-    for x, by_c in art.data["pvalues"][mode].items():
-        for c, by_s in by_c.items():
-            for s, pv in by_s.items():
-                cells = []
-                for p, stat in zip(pv["pvalue"], pv["statistic"], strict=True):
-                    sign = "" if p >= 0.05 else (" (faster)" if stat < 0 else " (slower)")
-                    cells.append(_fmt_p(p) + sign)
-                mp = float(pv.get("min_pvalue", np.nan))
-                mp_txt = "< 1e-300" if mp == 0 else _fmt_p(mp)
-                lines.append(f"| {x} | {c} | {s} vs {base} | {mp_txt} | " + " | ".join(cells)
-                             + " |")
+    for x, c, s, pv in ordered(art, "pvalues", mode):
+        cells = []
+        for p, stat in zip(pv["pvalue"], pv["statistic"], strict=True):
+            sign = "" if p >= 0.05 else (" (faster)" if stat < 0 else " (slower)")
+            cells.append(_fmt_p(p) + sign)
+        mp = float(pv.get("min_pvalue", np.nan))
+        mp_txt = "< 1e-300" if mp == 0 else _fmt_p(mp)
+        lines.append(f"| {x} | {c} | {s} vs {base} | {mp_txt} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -511,12 +522,10 @@ def _rmse_table(art: Artifact, mode: str) -> list[str]:
     steps = [t for t in RMSE_STEPS if t <= T] or [T]
     head = "| method | category | strategy | " + " | ".join(f"t={t}" for t in steps) + " |"
     lines = [head, "|" + "---|" * (len(steps) + 3)]
-    for x, by_c in art.data["curves"][mode].items():
-        for c, by_s in by_c.items():
-            for s, cur in by_s.items():
-                r = cur["rmse"]
-                lines.append(f"| {x} | {c} | {s} | " + " | ".join(f"{r[t - 1]:.2f}" for t in steps)
-                             + " |")
+    for x, c, s, cur in ordered(art, "curves", mode):
+        r = cur["rmse"]
+        lines.append(f"| {x} | {c} | {s} | " + " | ".join(f"{r[t - 1]:.2f}" for t in steps)
+                     + " |")
     return lines
 
 
@@ -532,8 +541,8 @@ def _play_table(art: Artifact) -> list[str]:
     lines = ["| mode | method | category | before the displacement | after it, not adapted | "
              "after adaptation, per strategy |", "|---|---|---|---|---|---|"]
     for m in art.attrs["modes"]:
-        for x in art.data["curves"].get(m, {}):
-            for c in art.data["curves"][m][x]:
+        for x in [x for x in _methods(art) if x in art.data["curves"].get(m, {})]:
+            for c in [c for c in art.attrs["categories"] if c in art.data["curves"][m][x]]:
                 sel = (exp["mode"] == m) & (exp["method"] == x) & (exp["category"] == c)
                 after = "; ".join(f"{s} {_iqr(_play(art, sel & (exp['strategy'] == s), 'play_adapted'))}"
                                   for s in _methods(art)[x]["strategies"])
@@ -563,7 +572,8 @@ def _ablation_table(art: Artifact, mode: str, category: str = "large") -> list[s
             if sfx and f"rmse{sfx}" not in cur[base]:
                 continue
             label = x if not sfx else f"{x} (same runs)"
-            for s, c in cur.items():
+            for s in [s for s in _methods(art)[x]["strategies"] if s in cur]:
+                c = cur[s]
                 rm = c["rmse" if not sfx else f"rmse{sfx}"][-1]
                 meds = [f"{_fmt_med(c[f'median_samples{sfx}'][j])} "
                         f"({100 * c[f'reached{sfx}'][j]:.0f} %)" for j in js]

@@ -53,8 +53,10 @@ def _snapshot_arrays(ex: dict) -> tuple[np.ndarray, np.ndarray, tuple[float, flo
 def _rows(art: Artifact, mode: str, key: str = "curves") -> list[tuple[str, str]]:
     """(method, strategy) pairs present in ``mode``, in method order."""
     out = []
-    for x, by in art.data[key].get(mode, {}).items():
-        strategies = art.attrs["methods"][x]["strategies"] if "methods" in art.attrs else list(by)
+    tree = art.data[key].get(mode, {})
+    for x in [x for x in art.attrs["methods"] if x in tree]:
+        by = tree[x]
+        strategies = art.attrs["methods"][x]["strategies"]
         if key == "curves":
             present = {s for by_s in by.values() for s in by_s}
         else:
@@ -151,7 +153,7 @@ def plot_error(art: Artifact, path: str | os.PathLike, mode: str) -> None:
 
     art = upgrade(art)
     cats = art.attrs["categories"]
-    meths = list(art.data["curves"][mode])
+    meths = [x for x in art.attrs["methods"] if x in art.data["curves"][mode]]
     fig, axes = plt.subplots(len(meths), len(cats), figsize=(4.2 * len(cats), 3.0 * len(meths)),
                              squeeze=False, sharey=True, sharex=True)
     for r, x in enumerate(meths):
@@ -160,7 +162,8 @@ def plot_error(art: Artifact, path: str | os.PathLike, mode: str) -> None:
             if by_s is None:
                 ax.text(0.5, 0.5, "not run", ha="center", va="center", transform=ax.transAxes)
             else:
-                for i, (s, cur) in enumerate(by_s.items()):
+                order = [s for s in art.attrs["methods"][x]["strategies"] if s in by_s]
+                for i, (s, cur) in enumerate((s, by_s[s]) for s in order):
                     t = np.arange(1, len(cur["rmse"]) + 1)
                     floor = 1e-2
                     ax.plot(t, np.maximum(cur["rmse"], floor), color=_colour(s, i), label=s)
