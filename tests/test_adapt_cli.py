@@ -166,6 +166,16 @@ def test_bench_adapt_small(runner):
     _one_line_error(r, "learned model")
 
 
+def test_bench_adapt_kde_prints_the_step_speed(runner, files):
+    """The kde section times a KDE step on a model (here the exact one, few touches)."""
+    r = runner.invoke(app, ["bench", "adapt", "--section", "kde", "--experiments", "2", "-T", "3",
+                            "--strategy", "random", "--category", "small", "--kde-steps", "5",
+                            "--model", str(files / "model.h5")])
+    assert r.exit_code == 0, r.output
+    assert "median ms/step" in r.output and "kde (Algorithm 2" in r.output
+    assert "random/kde" in r.output and "paired" in r.output
+
+
 def test_experiment_in_dynamics_mode():
     kb = Keyboard(KeyboardConfig())
     cfg = stage.AdaptConfig.flat(max_steps=3, prior_halfwidth=10.0, mode="dynamics", reach_noise=0.5)

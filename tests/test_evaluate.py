@@ -517,6 +517,20 @@ def test_cli_bad_input(runner, tmp_path, model_path, fake, monkeypatch, extra, f
     assert not out.exists() and not Checkpoint.beside(out).exists()
 
 
+def test_cli_defaults_to_the_embedded_model(runner, tmp_path, fake, monkeypatch):
+    """Without --model, evaluate adapts with data/default-model.h5 (as the README says)."""
+    from pathlib import Path
+
+    conf = write_config(tmp_path / "e.toml", experiments=1)
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])
+    out = tmp_path / "e.h5"
+    r = runner.invoke(app, ["evaluate", "--config", str(conf), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    art = read_artifact(out, "evaluation")
+    assert art.inputs["model"]["file"] == "default-model.h5"
+    assert art.inputs["model"]["sha256"] == sha256_file(Path("data/default-model.h5"))
+
+
 def test_cli_bad_config_file(runner, tmp_path, model_path):
     conf = tmp_path / "bad.toml"
     conf.write_text("[evaluate]\nstrategies = ['random', 'psychic']\n")
