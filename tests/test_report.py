@@ -61,6 +61,7 @@ def _evaluation(pvalues: dict, stats_sign: float = -1.0, reached: float = 1.0,
             "kbcli": {"posterior": "likelihood", "estimator": "mean"}}
     attrs = {"modes": list(modes), "categories": cats, "strategies": strategies,
              "baseline": "random", "max_steps": T, "model_strategy": "exact", "judged": "paper",
+             "method_order": methods,
              "play_notes": 200, "melody": "A:1",
              "methods": {x: {"strategies": strategies, "description": f"{x} method",
                              "modes": list(modes), "categories": cats,
@@ -236,4 +237,5 @@ def test_report_reads_back_written_artifact(tmp_path):
     write_artifact(_evaluation(PAPER_LIKE), path)
     rep = stage.build(read_artifact(path, "evaluation"))
     assert "sha256" in rep.readme and rep.claims[0].verdict == "agrees"
+    assert "| option | `paper` | `kbcli` |" in rep.readme  # the config's order survives HDF5
     assert [c.verdict for c in rep.claims] == [c.verdict for c in stage.claims(_evaluation(PAPER_LIKE))]

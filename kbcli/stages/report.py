@@ -139,6 +139,7 @@ def upgrade(art: Artifact) -> Artifact:
         "options": {m: {s: {"robot": dict(art.config.get("adapt", {}))} for s in attrs["strategies"]}
                     for m in attrs["modes"]}}}
     attrs["judged"] = name
+    attrs["method_order"] = [name]
     attrs.setdefault("play_notes", 0)
     return Artifact(kind=art.kind, config=art.config, seed=art.seed, data=data, attrs=attrs,
                     inputs=art.inputs, schema_version=art.schema_version,
@@ -146,8 +147,21 @@ def upgrade(art: Artifact) -> Artifact:
 
 
 # -- reading the artifact -------------------------------------------------------------------------
+def method_names(art: Artifact) -> list[str]:
+    """The methods in the config's order (``attrs["method_order"]``; artifacts without it, whose
+    attributes were stored with sorted keys: the judged method first)."""
+    names = list(art.attrs["methods"])
+    order = art.attrs.get("method_order")
+    if order:
+        return [x for x in order if x in names]
+    judged = art.attrs.get("judged")
+    return ([judged] if judged in names else []) + [x for x in names if x != judged]
+
+
 def _methods(art: Artifact) -> dict:
-    return art.attrs["methods"]
+    """Method name -> its resolved options, in :func:`method_names` order."""
+    info = art.attrs["methods"]
+    return {x: info[x] for x in method_names(art)}
 
 
 def _robot(art: Artifact, method: str) -> dict:

@@ -53,8 +53,10 @@ def _snapshot_arrays(ex: dict) -> tuple[np.ndarray, np.ndarray, tuple[float, flo
 def _rows(art: Artifact, mode: str, key: str = "curves") -> list[tuple[str, str]]:
     """(method, strategy) pairs present in ``mode``, in method order."""
     out = []
+    from kbcli.stages.report import method_names
+
     tree = art.data[key].get(mode, {})
-    for x in [x for x in art.attrs["methods"] if x in tree]:
+    for x in [x for x in method_names(art) if x in tree]:
         by = tree[x]
         strategies = art.attrs["methods"][x]["strategies"]
         if key == "curves":
@@ -118,7 +120,9 @@ def plot_posterior(art: Artifact, path: str | os.PathLike, mode: str | None = No
 
 
 def _style(art: Artifact, x: str, s: str, i: int) -> dict:
-    meths = list(art.attrs.get("methods", {x: None}))
+    from kbcli.stages.report import method_names
+
+    meths = method_names(art)
     j = meths.index(x) if x in meths else 0
     return {"color": _colour(s, i), "ls": LINESTYLES[j % len(LINESTYLES)]}
 
@@ -153,7 +157,9 @@ def plot_error(art: Artifact, path: str | os.PathLike, mode: str) -> None:
 
     art = upgrade(art)
     cats = art.attrs["categories"]
-    meths = [x for x in art.attrs["methods"] if x in art.data["curves"][mode]]
+    from kbcli.stages.report import method_names
+
+    meths = [x for x in method_names(art) if x in art.data["curves"][mode]]
     fig, axes = plt.subplots(len(meths), len(cats), figsize=(4.2 * len(cats), 3.0 * len(meths)),
                              squeeze=False, sharey=True, sharex=True)
     for r, x in enumerate(meths):
