@@ -12,6 +12,15 @@ near the estimate, whether the stopping rule held, and the robot's time (``timin
 only dataset that is not reproducible bit for bit, being wall-clock); plus posterior snapshots at
 chosen steps (``snapshots/log_translation``: the log of the translation marginal; and, rigid family,
 ``snapshots/angle``: the angle marginal).
+
+The stage's config, :class:`AdaptConfig`, holds the robot's :class:`~kbcli.core.adapt.AdapterConfig`
+by composition (``AdaptConfig(robot=AdapterConfig(...), mode=..., reach_noise=...)``) beside the
+simulated arm's and the loop's options; run artifacts of schema 2 store it nested
+(``config["adapt"]["robot"]``), and the flat layout of schema 1 is still read.
+
+:func:`play_success` measures the playing success around an adaptation by replaying the melody
+with Algorithm 1 (:func:`kbcli.core.play.replay`): before the displacement, after it without
+adaptation, and after it with the final estimate as the correction (``experiment(play=...)``).
 """
 
 from __future__ import annotations

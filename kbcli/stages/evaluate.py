@@ -7,7 +7,9 @@ A **method** is a named table of adapt options plus the strategies it compares
 - ``paper``: the paper's own method: the product of KDEs of Eq. 7-8 with Algorithm 2's sampling
   (``posterior = "kde"``), the maximum-likelihood hypothesis as the estimate (``estimator = "ml"``),
   the model as learned (``model_blur = 0``), strategies ``random`` (the baseline) and ``active``
-  (Sect. III-E);
+  (Sect. III-E; its candidates' confusion and simulated updates use the model's
+  ``p(sound | action)``, see :mod:`kbcli.core.strategies`, while the posterior it reads and the
+  one that is updated are the KDE product);
 - ``kbcli``: our best choice: whatever :class:`kbcli.core.adapt.AdapterConfig`'s defaults are (the
   likelihood posterior and the posterior mean today), strategies random, active and infogain. Its
   TOML table names only the strategies, so changing kbcli's defaults changes what ``kbcli`` means;
