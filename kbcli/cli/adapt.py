@@ -147,6 +147,14 @@ def _fmt_p(p: float) -> str:
     return "1" if p >= 0.9995 else f"{p:.0e}" if p < 1e-3 else f"{p:.3f}"
 
 
+def _loadavg() -> str:
+    try:
+        with open("/proc/loadavg") as f:
+            return f" (load average {' '.join(f.read().split()[:3])})"
+    except OSError:
+        return ""
+
+
 def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: int) -> None:
     """Print the KDE step's speed on the learned model (the issue's target: <= 5 ms per step)."""
     from kbcli.stages.models import default_model_path, load_model
@@ -158,12 +166,18 @@ def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: 
     k, lk = r["kde_ms"], r["likelihood_ms"]
     t = Table(title=f"one adaptation step on {model_path} ({r['grid_cells']:,} grid cells, "
                     f"{steps} touches, one process)", title_justify="left")
-    for col in ("posterior", "median ms/step", "p10", "p90", "vs likelihood"):
+    for col in ("posterior", "median ms/step", "p10", "p90", "median CPU ms/step",
+                "vs likelihood (CPU)"):
         t.add_column(col, justify="left" if col == "posterior" else "right")
-    for name, ms in (("kde (Algorithm 2: binning + FFT, Eq. 8 product)", k), ("likelihood", lk)):
+    rows = (("kde (Algorithm 2: binning + FFT, Eq. 8 product)", k, r["kde_cpu_ms"]),
+            ("likelihood", lk, r["likelihood_cpu_ms"]))
+    for name, ms, cpu in rows:
         t.add_row(name, f"{np.median(ms):.2f}", f"{np.percentile(ms, 10):.2f}",
-                  f"{np.percentile(ms, 90):.2f}", f"{np.median(ms) / np.median(lk):.1f}x")
+                  f"{np.percentile(ms, 90):.2f}", f"{np.median(cpu):.2f}",
+                  f"{np.median(cpu) / np.median(r['likelihood_cpu_ms']):.1f}x")
     out.print(t)
+    load = _loadavg()
+    out.print(f"wall time per step on a shared machine{load}; CPU time: this process only")
     out.print(f"drawing one class's {10000} samples of p(action | sound) once: median "
               f"{r['sample_ms']:.0f} ms over the {r['classes']} classes heard (not per touch)")
 
