@@ -209,10 +209,17 @@ def test_action_samples_are_drawn_once_per_class_in_any_order():
 
 
 def test_kde_term_rigid_runs_every_angle():
+    """Each angle slice is its own KDE; the angle-0 slice is the translation family's KDE of the
+    same samples, and a turned slice differs from it."""
     g = grid("rigid", half=10)
     a = np.array([262.0, 281.0])
-    logk, _ = kde_term(g, MODEL, a, 1, np.random.default_rng(4), n_samples=2000, eps=1e-3)
+    samples = ActionSamples(MODEL, 2000, 4)
+    logk, _ = kde_term(g, MODEL, a, 1, n_samples=2000, eps=1e-3, samples=samples)
     assert logk.shape == g.shape and np.isfinite(logk).all()
+    flat, _ = kde_term(grid(half=10), MODEL, a, 1, n_samples=2000, eps=1e-3, samples=samples)
+    zero = int(np.flatnonzero(g.angles == 0)[0])
+    np.testing.assert_allclose(logk[zero], flat, atol=1e-9)
+    assert np.max(np.abs(logk[0] - flat)) > 0.1
 
 
 # -- the posterior -------------------------------------------------------------------------------
