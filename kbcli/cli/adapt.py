@@ -160,7 +160,8 @@ def _loadavg() -> str:
         return ""
 
 
-def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: int) -> None:
+def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: int,
+                     con: Console) -> None:
     """Print the KDE step's speed on the learned model (the issue's target: <= 5 ms per step)."""
     from kbcli.stages.models import default_model_path, load_model
 
@@ -180,10 +181,10 @@ def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: 
         t.add_row(name, f"{np.median(ms):.2f}", f"{np.percentile(ms, 10):.2f}",
                   f"{np.percentile(ms, 90):.2f}", f"{np.median(cpu):.2f}",
                   f"{np.median(cpu) / np.median(r['likelihood_cpu_ms']):.1f}x")
-    out.print(t)
+    con.print(t)
     load = _loadavg()
-    out.print(f"wall time per step on a shared machine{load}; CPU time: this process only")
-    out.print(f"drawing one class's {10000} samples of p(action | sound) once: median "
+    con.print(f"wall time per step on a shared machine{load}; CPU time: this process only")
+    con.print(f"drawing one class's {10000} samples of p(action | sound) once: median "
               f"{r['sample_ms']:.0f} ms over the {r['classes']} classes heard (not per touch)")
 
 
@@ -234,7 +235,8 @@ def bench_adapt_cmd(
         strategies=tuple(strategy) if strategy else bench.STRATEGY_ORDER,
         categories=tuple(category) if category else tuple(bench.CATEGORIES), model_blur=model_blur)
     if "kde" in sections:
-        _kde_speed_table(bench, model, learned, kde_steps, seed)
+        wide = out if interactive() else Console(width=max(out.width, 200), highlight=False)
+        _kde_speed_table(bench, model, learned, kde_steps, seed, wide)
     cells = bench.plan(cfg, learned)
     total = sum(len(c.truths) for c in cells)
     for _ in progress(bench.run_cells(cells), total, "adaptation runs"):
