@@ -30,17 +30,19 @@ def report_cmd(
     """Write the reproduction report of an evaluation.
 
     Reads EVALUATION (kind 'evaluation'). Writes into the OUTPUT folder: fig5_posterior.png
-    (posterior evolution per strategy), fig6_entropy.png (entropy reduction), fig7_error_MODE.png
-    (error against observations per category) and README.md (tables of observations to each
-    threshold, p-values, RMSE, playing success, and the paper's claims against our measurements);
-    --format pdf or svg writes the figures in that format instead. Prints each claim's verdict.
+    (posterior evolution per method and strategy, px axes), fig6_entropy.png (entropy reduction),
+    fig7_error_MODE.png (error against observations per category and method) and README.md (every
+    resolved option of every method, the paper's claims judged on the paper's method with ours
+    beside it, the large-displacement ablation, tables of observations to each threshold,
+    p-values with the smallest attainable one, RMSE and measured playing success); --format pdf or
+    svg writes the figures in that format instead. Prints each claim's verdict.
     """
     from kbcli.viz import report as viz
 
     if fmt not in FIGURE_FORMATS:
         raise ConfigError(f"--format must be one of {', '.join(FIGURE_FORMATS)}, got {fmt!r}")
     check_io({"EVALUATION": evaluation}, Output(output, "report folder", folder=True))
-    art = read_artifact(evaluation, "evaluation")
+    art = stage.upgrade(read_artifact(evaluation, "evaluation"))
     rep = stage.build(art)
     names = {f.name: str(Path(f.name).with_suffix("." + fmt)) for f in rep.figures}
     check_io({"EVALUATION": evaluation},
@@ -63,4 +65,5 @@ def report_cmd(
     _write_text(output / "README.md", readme)
     out.print(f"wrote {output}/: README.md and {len(rep.figures)} figures ({fmt})")
     for c in rep.claims:
-        out.print(f"  [{c.verdict}] {c.paper} -- {c.measured}", markup=False, soft_wrap=True)
+        out.print(f"  [{c.verdict}] {c.paper} -- {c.method}: {c.measured}", markup=False,
+                  soft_wrap=True)
