@@ -373,6 +373,43 @@ SCHEMAS["closed_loop"][2] = _extend(
     **{"mode?": "str?", "arm?": "dict?", "source?": "str?"})
 
 
+def _eval_methods(art) -> str | None:
+    methods = art.attrs["methods"]
+    for m in _methods(art):
+        own = methods.get(m)
+        if not isinstance(own, dict):
+            return f"summary attribute methods.{m} is missing or not a table"
+        for key in ("modes", "categories", "strategies"):
+            if key in own and not _TYPES["strs"](own[key]):
+                return f"summary attribute methods.{m}.{key} must be a list of names"
+    return None
+
+
+# evaluation 2: named methods (each with its own modes, categories and strategies), measured
+# playing success, tie-corrected tests
+SCHEMAS["evaluation"][2] = Schema(
+    attrs={**SCHEMAS["evaluation"][1].attrs, "methods": "dict", "method_order?": "strs"},
+    config=SCHEMAS["evaluation"][1].config,
+    datasets=(
+        *(d for d in SCHEMAS["evaluation"][1].datasets if "{" not in d.path),
+        Dataset("experiments/method", TEXT, ("N",)),
+        *(Dataset(f"curves/{{modes}}/{{method}}/{{categories}}/{{strategies}}/{k}", FLOAT, s)
+          for k, s in (("rmse", ("T",)), ("q25", ("T",)), ("q75", ("T",)),
+                       ("median_samples", ("H",)), ("reached", ("H",)))),
+        *(Dataset(f"entropy/{{modes}}/{{method}}/{{strategies}}/{k}", FLOAT, ("T",))
+          for k in ("mean", "q25", "q75")),
+        Dataset("pvalues/{modes}/{method}/{categories}/{others}/pvalue", FLOAT, ("H",)),
+        Dataset("examples/{modes}/{method}/{strategies}/row", INT, (), optional=True, index="N"),
+        Dataset("examples/{modes}/{method}/{strategies}/snapshots", NUM, ("*", "*", "*"),
+                optional=True),
+    ),
+    checks=(_eval_lists, _eval_methods),
+)
+# run 3, closed_loop 3: the adapt config nests the robot's options under "robot"
+SCHEMAS["run"][3] = SCHEMAS["run"][2]
+SCHEMAS["closed_loop"][3] = SCHEMAS["closed_loop"][2]
+
+
 def schema_for(kind: str, version: int) -> Schema | None:
     """The schema of the highest version of ``kind`` not above ``version`` (None if none)."""
     versions = [v for v in SCHEMAS.get(kind, {}) if v <= version]
@@ -402,7 +439,23 @@ def _node(data: dict, path: str) -> tuple[bool, Any]:
 _PLACEHOLDER = re.compile(r"\{(\w+)\}")
 
 
+def _methods(art) -> list[str]:
+    a = art.attrs
+    order = a.get("method_order")
+    return [str(m) for m in (order if isinstance(order, list) else a.get("methods") or [])]
+
+
 def _expand(path: str, art) -> list[str]:
+    """Every path a ``{placeholder}`` path stands for. ``{method}`` runs over the evaluation's
+    methods, and the lists after it (modes, categories, strategies) are that method's own."""
+    if "{method}" in path:
+        out = []
+        for m in _methods(art):
+            own = (art.attrs.get("methods") or {}).get(m)
+            sub = dict(art.attrs, **(own if isinstance(own, dict) else {}))
+            view = type("View", (), {"attrs": sub})()
+            out += _expand(path.replace("{method}", m), view)
+        return out
     names = _PLACEHOLDER.findall(path)
     if not names:
         return [path]
@@ -412,7 +465,7 @@ def _expand(path: str, art) -> list[str]:
             vals = [s for s in art.attrs.get("strategies", []) if s != art.attrs.get("baseline")]
         else:
             vals = art.attrs.get(n, [])
-        lists.append([str(v) for v in vals])
+        lists.append([str(v) for v in vals] if isinstance(vals, list) else [])
     out = []
     for combo in itertools.product(*lists):
         p = path
