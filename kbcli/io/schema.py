@@ -335,12 +335,16 @@ SCHEMAS: dict[str, dict[int, Schema]] = {
             Dataset("experiments/strategy", TEXT, ("N",)),
             Dataset("experiments/play_adapted", FLOAT, ("N",), optional=True),
             Dataset("experiments/play_unadapted", FLOAT, ("N",), optional=True),
+            Dataset("experiments/play_before", FLOAT, ("N",), optional=True),
             *(Dataset(f"curves/{{modes}}/{{categories}}/{{strategies}}/{k}", FLOAT, s)
               for k, s in (("rmse", ("T",)), ("q25", ("T",)), ("q75", ("T",)),
                            ("median_samples", ("H",)), ("reached", ("H",)))),
+            Dataset("curves/{modes}/{categories}/{strategies}/samples_to_threshold", NUM,
+                    ("*", "H")),
             *(Dataset(f"entropy/{{modes}}/{{strategies}}/{k}", FLOAT, ("T",))
               for k in ("mean", "q25", "q75")),
             Dataset("pvalues/{modes}/{categories}/{others}/pvalue", FLOAT, ("H",)),
+            Dataset("pvalues/{modes}/{categories}/{others}/statistic", FLOAT, ("H",)),
             Dataset("examples/{modes}/{strategies}/row", INT, (), optional=True, index="N"),
             Dataset("examples/{modes}/{strategies}/snapshots", NUM, ("*", "*", "*"),
                     optional=True),
@@ -380,8 +384,10 @@ def _eval_methods(art) -> str | None:
         if not isinstance(own, dict):
             return f"summary attribute methods.{m} is missing or not a table"
         for key in ("modes", "categories", "strategies"):
-            if key in own and not _TYPES["strs"](own[key]):
+            if not _TYPES["strs"](own.get(key)):
                 return f"summary attribute methods.{m}.{key} must be a list of names"
+        if not isinstance(own.get("options"), dict):
+            return f"summary attribute methods.{m}.options must be a table"
     return None
 
 
@@ -396,9 +402,14 @@ SCHEMAS["evaluation"][2] = Schema(
         *(Dataset(f"curves/{{modes}}/{{method}}/{{categories}}/{{strategies}}/{k}", FLOAT, s)
           for k, s in (("rmse", ("T",)), ("q25", ("T",)), ("q75", ("T",)),
                        ("median_samples", ("H",)), ("reached", ("H",)))),
+        Dataset("curves/{modes}/{method}/{categories}/{strategies}/samples_to_threshold", NUM,
+                ("*", "H")),
         *(Dataset(f"entropy/{{modes}}/{{method}}/{{strategies}}/{k}", FLOAT, ("T",))
           for k in ("mean", "q25", "q75")),
         Dataset("pvalues/{modes}/{method}/{categories}/{others}/pvalue", FLOAT, ("H",)),
+        Dataset("pvalues/{modes}/{method}/{categories}/{others}/statistic", FLOAT, ("H",)),
+        Dataset("pvalues/{modes}/{method}/{categories}/{others}/min_pvalue", FLOAT, (),
+                optional=True),
         Dataset("examples/{modes}/{method}/{strategies}/row", INT, (), optional=True, index="N"),
         Dataset("examples/{modes}/{method}/{strategies}/snapshots", NUM, ("*", "*", "*"),
                 optional=True),
