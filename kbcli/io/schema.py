@@ -403,7 +403,7 @@ SCHEMAS["evaluation"][2] = Schema(
           for k, s in (("rmse", ("T",)), ("q25", ("T",)), ("q75", ("T",)),
                        ("median_samples", ("H",)), ("reached", ("H",)))),
         Dataset("curves/{modes}/{method}/{categories}/{strategies}/samples_to_threshold", NUM,
-                ("*", "H")),
+                ("*", "H"), optional=True),
         *(Dataset(f"entropy/{{modes}}/{{method}}/{{strategies}}/{k}", FLOAT, ("T",))
           for k in ("mean", "q25", "q75")),
         Dataset("pvalues/{modes}/{method}/{categories}/{others}/pvalue", FLOAT, ("H",)),
