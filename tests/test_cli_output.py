@@ -45,7 +45,7 @@ def test_root_help_lists_every_stage(runner):
     r = runner.invoke(app, ["--help"])
     text = " ".join(r.output.split())
     for stage in ("keyboard", "learn", "perturb", "play", "detect", "adapt", "run", "evaluate",
-                  "report", "inspect", "plot", "bench"):
+                  "report", "inspect", "plot", "bench", "serve", "animate"):
         assert re.search(rf"\b{stage}\b", text.split("Options:")[0]), stage  # in the description
         assert re.search(rf"^\s+{stage}\s", r.output, re.M), stage  # and in the command list
 

@@ -38,8 +38,9 @@ app = typer.Typer(
         "Where is my keyboard? A robot arm learns a virtual keyboard, notices when it is moved, "
         "and recovers the displacement with few, well-chosen touches. Each stage reads and writes "
         "HDF5 artifacts: keyboard -> learn -> perturb -> play -> detect -> adapt -> evaluate -> "
-        "report. run chains play, detect, adapt and play on (the closed loop); inspect shows any "
-        "artifact; plot draws one; bench prints the benchmarks."
+        "report. run chains play, detect, adapt and play on (the closed loop); serve adapts with "
+        "a robot in another process; animate replays a run; inspect shows any artifact; plot "
+        "draws one; bench prints the benchmarks."
     ),
     no_args_is_help=True,
     pretty_exceptions_enable=False,
