@@ -286,7 +286,7 @@ def test_keyboard_cli_every_layout_and_bad_input(runner, tmp_path):
 
 
 def test_schema_1_grid_keyboard_still_loads(tmp_path):
-    art = read_artifact("data/keyboard.h5", "keyboard")
+    art = read_artifact("data/schema/v1/keyboard.h5", "keyboard")
     assert art.schema_version == 1 and "layout" not in art.config
     assert keyboard_stage.load(art).config == KeyboardConfig()
     write_artifact(keyboard_stage.run(KeyboardConfig()), tmp_path / "kb.h5")

@@ -201,7 +201,7 @@ def test_learn_cli_model_class_and_bad_names(runner, tmp_path):
 
 
 def test_schema_1_model_artifact_still_loads():
-    art = read_artifact("data/default-model.h5", "model")
+    art = read_artifact("data/schema/v1/model.h5", "model")
     assert art.schema_version == 1 and "model_class" not in art.config
     model = load_model(art)
     assert type(model).__name__ == "LearnedModel" and model.n_classes == 33

@@ -12,14 +12,18 @@ from rich.console import Console
 from rich.table import Table
 
 from kbcli.cli.app import (
+    FIGURE_HELP,
     bench_app,
+    busy,
+    check_io,
     command,
     err,
+    figure_output,
     interactive,
     out,
-    output_path,
     plot_app,
     progress,
+    ticker,
 )
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -27,7 +31,9 @@ from kbcli.io.config import load_toml
 from kbcli.stages import adapt as stage
 
 
-def _snapshots(text: str) -> tuple[int, ...]:
+def _snapshots(text: str, max_steps: int) -> tuple[int, ...]:
+    if text.strip().lower() == "all":
+        return tuple(range(max_steps + 1))
     try:
         steps = tuple(int(v) for v in text.split(",") if v.strip())
     except ValueError:
@@ -74,7 +80,8 @@ def adapt_cmd(
         "--stop/--no-stop", help="End at the stopping rule (mass within 1 px >= 0.95) instead of "
         "always taking T steps [default --no-stop].")] = None,
     snapshots: Annotated[str, typer.Option(
-        "--snapshots", help="Steps at which to store the posterior (0 = prior).")
+        "--snapshots", help="Steps at which to store the posterior (0 = prior), or 'all' (every "
+        "step: kbcli animate then shows each one).")
     ] = "0,1,2,3,5,10,20,40",
     seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the robot's and world's draws.")] = 0,
 ) -> None:
@@ -85,6 +92,7 @@ def adapt_cmd(
     the estimate, its error against the scene's true pose, the posterior entropy and the time
     spent; plus posterior snapshots. Prints the final error and the steps to an error below 1 px.
     """
+    check_io({"--model": model, "--scene": scene, "--config": config}, ("--output", output))
     values = dict(load_toml(config, "adapt")) if config is not None else {}
     flags = {"strategy": strategy, "posterior": posterior, "family": family, "mode": mode,
              "reach_noise": reach_noise, "feedback": feedback, "model_blur": model_blur,
@@ -95,11 +103,12 @@ def adapt_cmd(
     scene_art = read_artifact(scene, "scene")
     values.setdefault("family", scene_art.config.get("family", "translation"))
     cfg = stage.AdaptConfig.from_dict(values)
-    steps = _snapshots(snapshots)
+    steps = _snapshots(snapshots, cfg.max_steps)
     stage.check_inputs(model_art, scene_art)
-    output_path(output)
-    art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
-                    snapshot_steps=steps)
+    what = f"adapting ({cfg.strategy}, {cfg.posterior} posterior), observations"
+    with ticker(cfg.max_steps, what) as tick:
+        art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
+                        snapshot_steps=steps, on_step=tick)
     write_artifact(art, output)
     a = art.attrs
     est = ", ".join(f"{k}={v:.2f}" for k, v in a["estimate"].items())
@@ -120,21 +129,24 @@ def adapt_cmd(
 @command(plot_app, name="adapt")
 def plot_adapt_cmd(
     run: Annotated[Path, typer.Argument(help="Run artifact (kind 'run') from kbcli adapt.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path(
+    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path(
         "adapt.png"),
 ) -> None:
     """Draw the posterior's evolution (the paper's Fig. 5) and the error and entropy curves.
 
-    Reads RUN (kind 'run'); writes a PNG; prints its path.
+    Reads RUN (kind 'run'); writes the figure (PNG, PDF or SVG by the suffix of -o); prints its path.
     """
     from kbcli.viz.adapt import plot_adapt
 
+    check_io({"RUN": run}, figure_output(output))
     art = read_artifact(run, "run")
+    if len(art.data.get("errors", ())) == 0:
+        raise ConfigError(f"{run}: holds no touches (a session that ended before the first one)")
     if "snapshots" not in art.data:
         raise ConfigError(f"{run}: holds no posterior snapshots (rerun kbcli adapt with "
                           f"--snapshots)")
-    output_path(output)
-    plot_adapt(art, output)
+    with busy("drawing"):
+        plot_adapt(art, output)
     out.print(f"wrote {output}")
 
 
@@ -145,6 +157,42 @@ def _fmt_med(v: float, never: int) -> str:
 
 def _fmt_p(p: float) -> str:
     return "1" if p >= 0.9995 else f"{p:.0e}" if p < 1e-3 else f"{p:.3f}"
+
+
+def _loadavg() -> str:
+    try:
+        with open("/proc/loadavg") as f:
+            return f" (load average {' '.join(f.read().split()[:3])})"
+    except OSError:
+        return ""
+
+
+def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: int,
+                     con: Console) -> None:
+    """Print the KDE step's speed on the learned model (the issue's target: <= 5 ms per step)."""
+    from kbcli.stages.models import default_model_path, load_model
+
+    if learned is None:
+        model_path = default_model_path()
+        learned = load_model(read_artifact(model_path, "model"))
+    r = bench.kde_speed(learned, steps=steps, seed=seed)
+    k, lk = r["kde_ms"], r["likelihood_ms"]
+    t = Table(title=f"one adaptation step on {model_path} ({r['grid_cells']:,} grid cells, "
+                    f"{steps} touches, one process)", title_justify="left")
+    for col in ("posterior", "median ms/step", "p10", "p90", "median CPU ms/step",
+                "vs likelihood (CPU)"):
+        t.add_column(col, justify="left" if col == "posterior" else "right")
+    rows = (("kde (Algorithm 2: binning + FFT, Eq. 8 product)", k, r["kde_cpu_ms"]),
+            ("likelihood", lk, r["likelihood_cpu_ms"]))
+    for name, ms, cpu in rows:
+        t.add_row(name, f"{np.median(ms):.2f}", f"{np.percentile(ms, 10):.2f}",
+                  f"{np.percentile(ms, 90):.2f}", f"{np.median(cpu):.2f}",
+                  f"{np.median(cpu) / np.median(r['likelihood_cpu_ms']):.1f}x")
+    con.print(t)
+    load = _loadavg()
+    con.print(f"wall time per step on a shared machine{load}; CPU time: this process only")
+    con.print(f"drawing one class's {10000} samples of p(action | sound) once: median "
+              f"{r['sample_ms']:.0f} ms over the {r['classes']} classes heard (not per touch)")
 
 
 @command(bench_app, name="adapt")
@@ -168,14 +216,18 @@ def bench_adapt_cmd(
     layout: Annotated[str | None, typer.Option(
         "--layout", help="Keyboard layout of every section: grid, hex, piano, pads, polygons (its "
         "default keyboard) [default: the model's keyboard with --model, else grid].")] = None,
+    kde_steps: Annotated[int, typer.Option(
+        "--kde-steps", min=1, help="kde section: touches timed for the KDE step's speed (on --model, "
+        "default data/default-model.h5).")] = 200,
 ) -> None:
-    """Sample efficiency and speed of the adaptation strategies (issue 5's benchmark), on any
-    layout.
+    """Benchmark the adaptation strategies: sample efficiency and speed, on any layout.
 
     Reads MODEL if given (its keyboard is the world's). Writes nothing. Prints per section, strategy and category: median
     observations to an error below 4, 2, 1, 0.5 px (in brackets: runs that never got there within
     T), the RMSE at steps 1, 2, 3, 5, 10, 20, 40, the Wilcoxon rank-sum p-value against random at
-    each threshold, and the median milliseconds per step (decision plus update).
+    each threshold, and the median milliseconds per step (decision plus update). The kde section
+    also times one KDE step (Algorithm 2 + the product, samples drawn once per class) against a
+    likelihood step on the learned model (--model, default data/default-model.h5), in ms per step.
     """
     from kbcli.bench import adapt as bench
 
@@ -201,6 +253,9 @@ def bench_adapt_cmd(
         strategies=tuple(strategy) if strategy else bench.STRATEGY_ORDER,
         categories=tuple(category) if category else tuple(bench.CATEGORIES), model_blur=model_blur,
         layout=layout or "grid")
+    if "kde" in sections:
+        wide = out if interactive() else Console(width=max(out.width, 200), highlight=False)
+        _kde_speed_table(bench, model, learned, kde_steps, seed, wide)
     cells = bench.plan(cfg, learned, kb)
     total = sum(len(c.truths) for c in cells)
     for _ in progress(bench.run_cells(cells), total, "adaptation runs"):
@@ -235,7 +290,7 @@ def bench_adapt_cmd(
         for s in bench.RMSE_STEPS:
             if s <= T:
                 t.add_column(f"rmse@{s}", justify="right")
-        t.add_column("p vs random (<4/2/1/0.5)", justify="right")
+        t.add_column("p vs random, paired (<4/2/1/0.5)", justify="right")
         t.add_column("ms/step", justify="right")
         extra = sec in ("rigid", "learned", "learned-rigid")
         if sec in ("rigid", "learned-rigid"):
@@ -256,5 +311,7 @@ def bench_adapt_cmd(
             t.add_row(*row)
         con.print(t)
     err.print("medians: observations until the error first drops below the threshold; (k): runs "
-              "that never got there within T; rmse in px over all runs; p: Wilcoxon rank-sum of "
-              "the observation counts against random", markup=False)
+              "that never got there within T; rmse in px over all runs; p: Wilcoxon signed-rank "
+              "test of the observation counts against random on the paired runs (same "
+              f"displacement and seed; the smallest p {experiments} pairs can give is "
+              f"{2.0 ** (1 - experiments):.0e})", markup=False)

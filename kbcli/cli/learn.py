@@ -11,16 +11,20 @@ from rich.console import Console
 from rich.table import Table
 
 from kbcli.cli.app import (
+    FIGURE_HELP,
     bench_app,
+    busy,
+    check_io,
     command,
+    figure_output,
     interactive,
     out,
-    output_path,
     plot_app,
     progress,
 )
-from kbcli.errors import ConfigError
+from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.io.schema import MIN_SOUNDS
 from kbcli.sim import SimConfig
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import learn as stage
@@ -36,7 +40,9 @@ def learn_cmd(
     strategy: Annotated[str, typer.Option(
         "--strategy", help="active, random (exploration) or exact (the keyboard's own geometry, "
         "no learning).")] = "active",
-    budget: Annotated[int, typer.Option("--budget", help="Reaches to explore with.")] = 800,
+    budget: Annotated[int, typer.Option(
+        "--budget", help="Reaches to explore with; a run that hears fewer than two distinct sounds "
+        "is refused (nothing written).")] = 800,
     seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the exploration and arm noise.")] = 0,
     reach_noise: Annotated[float, typer.Option(
         "--reach-noise", help="Landing scatter of a reach, px (motor noise in dynamics mode).")
@@ -63,8 +69,8 @@ def learn_cmd(
     cfg = stage.LearnConfig(strategy=strategy, budget=budget, batch=batch,
                             explore_radius=explore_radius, curve_every=curve_every, sim=sim,
                             model_class=model_class)
+    check_io({"--keyboard": keyboard}, ("--output", output))
     kb_art = read_artifact(keyboard, "keyboard")
-    output_path(output)
     if cfg.strategy == "exact":
         art = stage.run(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
         write_artifact(art, output)
@@ -72,11 +78,24 @@ def learn_cmd(
                   f"{stage.check_keyboard(kb_art).n_keys} keys)")
         return
     learning = stage.learn(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
-    for _ in progress(learning, len(learning), f"{strategy} exploration ({mode}, {model_class})"):
+    done = [0]
+
+    def reaches(n: int) -> int:  # each item is a batch; the bar counts reaches
+        step, done[0] = n - done[0], n
+        return step
+
+    for _ in progress(learning, cfg.budget, f"{strategy} exploration ({mode}, {model_class}), "
+                      "reaches", advance=reaches):
         pass
     art = learning.artifact()
-    write_artifact(art, output)
     a = art.attrs
+    sounds = a["n_classes"] - 1
+    if sounds < MIN_SOUNDS:
+        raise KbcliError(
+            f"learned only {sounds} sound class(es) besides silence in {a['n_reaches']} reaches, "
+            f"fewer than the {MIN_SOUNDS} a model needs to find a moved keyboard; nothing written: "
+            f"raise --budget")
+    write_artifact(art, output)
     to99 = a["reaches_to_99"]
     out.print(
         f"wrote {output}: {a['layout']} layout, {model_class} model, {strategy} exploration, "
@@ -90,17 +109,18 @@ def learn_cmd(
 @command(plot_app, name="model")
 def plot_model_cmd(
     artifact: Annotated[Path, typer.Argument(help="Model artifact (.h5).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path(
+    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path(
         "model.png"),
 ) -> None:
     """Draw a model: the learned map (predicted key, uncertainty, reaches) beside the true layout,
-    and the learning curve. Reads ARTIFACT (kind 'model'); writes a PNG."""
+    and the learning curve. Reads ARTIFACT (kind 'model'); writes the figure (PNG, PDF or SVG by the suffix of -o)."""
     from kbcli.stages.models import load_model
     from kbcli.viz.model import plot_model
 
+    check_io({"ARTIFACT": artifact}, figure_output(output))
     art = read_artifact(artifact, "model")
-    output_path(output)
-    plot_model(art, load_model(art), keyboard_stage.load(art), output)
+    with busy("drawing"):
+        plot_model(art, load_model(art), keyboard_stage.load(art), output)
     out.print(f"wrote {output}")
 
 
@@ -142,7 +162,8 @@ def bench_learn_cmd(
         "--cache", help="Folder keeping each run's result: a run already there (same settings) is "
         "read back, not run again.")] = None,
 ) -> None:
-    """Sample efficiency and speed of learning the model, per layout, model class and strategy.
+    """Benchmark learning the model: sample efficiency and speed, per layout, model class and
+    strategy.
 
     Reads nothing (or --keyboard); writes nothing. Prints, per row over SEEDS runs: the median
     accuracy (on a grid of --eval-step px over the working area) at each budget, the median reaches

@@ -7,10 +7,11 @@ from typing import Annotated
 
 import typer
 
-from kbcli.cli.app import command, out
-from kbcli.errors import KbcliError
+from kbcli.cli.app import busy, check_io, command, out
+from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact
 from kbcli.io.atomic import atomic_path
+from kbcli.io.paths import FIGURE_FORMATS, Output
 from kbcli.stages import report as stage
 
 
@@ -23,34 +24,46 @@ def _write_text(path: Path, text: str) -> None:
 def report_cmd(
     evaluation: Annotated[Path, typer.Argument(help="Evaluation artifact (.h5) from kbcli evaluate.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Report folder to write (created if needed).")] = Path("report"),
+    fmt: Annotated[str, typer.Option(
+        "--format", help=f"Figure format: {', '.join(FIGURE_FORMATS)}.")] = "png",
 ) -> None:
     """Write the reproduction report of an evaluation.
 
     Reads EVALUATION (kind 'evaluation'). Writes into the OUTPUT folder: fig5_posterior.png
-    (posterior evolution per strategy), fig6_entropy.png (entropy reduction), fig7_error_MODE.png
-    (error against observations per category) and README.md (tables of observations to each
-    threshold, p-values, RMSE, playing success, and the paper's claims against our measurements).
-    Prints each claim's verdict.
+    (posterior evolution per method and strategy, px axes), fig6_entropy.png (entropy reduction),
+    fig7_error_MODE.png (error against observations per category and method) and README.md (every
+    resolved option of every method, the paper's claims judged on the paper's method with ours
+    beside it, the large-displacement ablation, tables of observations to each threshold,
+    p-values with the smallest attainable one, RMSE and measured playing success); --format pdf or
+    svg writes the figures in that format instead. Prints each claim's verdict.
     """
     from kbcli.viz import report as viz
 
-    art = read_artifact(evaluation, "evaluation")
-    parent = output.parent if str(output.parent) else Path(".")
-    if output.exists() and not output.is_dir():
-        raise KbcliError(f"{output}: exists and is not a folder")
-    if not parent.is_dir():
-        raise KbcliError(f"{output}: parent folder {parent} does not exist")
+    if fmt not in FIGURE_FORMATS:
+        raise ConfigError(f"--format must be one of {', '.join(FIGURE_FORMATS)}, got {fmt!r}")
+    check_io({"EVALUATION": evaluation}, Output(output, "report folder", folder=True))
+    art = stage.upgrade(read_artifact(evaluation, "evaluation"))
     rep = stage.build(art)
-    output.mkdir(exist_ok=True)
-    for fig in rep.figures:
-        path = output / fig.name
-        if fig.name.startswith("fig5"):
-            viz.plot_posterior(art, path)
-        elif fig.name.startswith("fig6"):
-            viz.plot_entropy(art, path)
-        else:
-            viz.plot_error(art, path, fig.name.removeprefix("fig7_error_").removesuffix(".png"))
-    _write_text(output / "README.md", rep.readme)
-    out.print(f"wrote {output}/: README.md and {len(rep.figures)} figures")
+    names = {f.name: str(Path(f.name).with_suffix("." + fmt)) for f in rep.figures}
+    check_io({"EVALUATION": evaluation},
+             Output(output, "report folder", folder=True, files=("README.md", *names.values())))
+    try:
+        output.mkdir(exist_ok=True)
+    except OSError as exc:
+        raise KbcliError(f"{output}: cannot create the report folder ({exc.strerror})") from None
+    readme = rep.readme
+    with busy("drawing the report's figures"):
+        for fig in rep.figures:
+            path = output / names[fig.name]
+            readme = readme.replace(f"]({fig.name})", f"]({names[fig.name]})")
+            if fig.name.startswith("fig5"):
+                viz.plot_posterior(art, path)
+            elif fig.name.startswith("fig6"):
+                viz.plot_entropy(art, path)
+            else:
+                viz.plot_error(art, path, fig.name.removeprefix("fig7_error_").removesuffix(".png"))
+    _write_text(output / "README.md", readme)
+    out.print(f"wrote {output}/: README.md and {len(rep.figures)} figures ({fmt})")
     for c in rep.claims:
-        out.print(f"  [{c.verdict}] {c.paper} -- {c.measured}", markup=False, soft_wrap=True)
+        out.print(f"  [{c.verdict}] {c.paper} -- {c.method}: {c.measured}", markup=False,
+                  soft_wrap=True)

@@ -124,6 +124,8 @@ class DynamicsReacher:
         Joint angles (q1, q2) the arm started each reach of the last :meth:`reach` call from.
     last_steps : (n,) int ndarray
         Physics steps each reach of the last call took to settle.
+    last_end_angles : (n, 2) ndarray
+        Joint angles each reach of the last call ended in (the pose at the touch).
     """
 
     def __init__(self, cfg: SimConfig) -> None:
@@ -149,6 +151,7 @@ class DynamicsReacher:
         self.home = inverse_kinematics(cfg, np.array(cfg.base) + (0.0, 0.7 * (l1 + l2)))[0]
         self.last_start_angles = np.empty((0, 2))
         self.last_steps = np.empty(0, dtype=np.int64)
+        self.last_end_angles = np.empty((0, 2))
         self.reset(self.home)
 
     def _link(self, length: float, mass: float, group: pymunk.ShapeFilter) -> pymunk.Body:
@@ -238,10 +241,13 @@ class DynamicsReacher:
         starts = np.empty((len(t), 2))
         steps = np.empty(len(t), dtype=np.int64)
         landed = np.empty((len(t), 2))
+        ends = np.empty((len(t), 2))
         for i in range(len(t)):  # reaches are sequential in time: each starts where the last ended
             starts[i] = self.angles
             steps[i] = self._drive(float(q[i, 0]), float(q[i, 1]))
             landed[i] = self.fingertip()
+            ends[i] = self.angles
         self.last_start_angles = starts
         self.last_steps = steps
+        self.last_end_angles = ends
         return landed

@@ -10,21 +10,46 @@ the estimates (posterior mean and maximum-likelihood cell), the error against th
 degrees for rotations), the entropy (nats), the probability of the most probable cell, the mass
 near the estimate, whether the stopping rule held, and the robot's time (``timing/step_ms``: the
 only dataset that is not reproducible bit for bit, being wall-clock); plus posterior snapshots at
-chosen steps (``snapshots/log_translation``: the log of the translation marginal; and, rigid family,
-``snapshots/angle``: the angle marginal).
+chosen steps (``snapshots``: the log of the translation marginal; and, rigid family,
+``snapshot_angles``: the angle marginal). Schema 2 adds ``joint_angles``, the simulated arm's pose
+after each touch in dynamics mode, and the arm's geometry and the mode in the attributes.
+
+:class:`Recorder` and :func:`run_attrs` build the same artifact for a session with a robot in
+another process (``kbcli serve``, :mod:`kbcli.stages.serve`): there the truth is unknown and the
+errors are NaN (their summaries None).
+
+The stage's config, :class:`AdaptConfig`, holds the robot's :class:`~kbcli.core.adapt.AdapterConfig`
+by composition (``AdaptConfig(robot=AdapterConfig(...), mode=..., reach_noise=...)``) beside the
+simulated arm's and the loop's options; run artifacts of schema 2 store it nested
+(``config["adapt"]["robot"]``), and the flat layout of schema 1 is still read.
+
+:func:`play_success` measures the playing success around an adaptation by replaying the melody
+with Algorithm 1 (:func:`kbcli.core.play.replay`): before the displacement, after it without
+adaptation, and after it with the final estimate as the correction (``experiment(play=...)``).
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from kbcli.core import transforms
-from kbcli.core.adapt import POSTERIORS, Adapter, AdapterConfig, adapt, build_table
-from kbcli.core.config import check_known
+from kbcli.core.adapt import (
+    POSTERIORS,
+    Adapter,
+    AdapterConfig,
+    Step,
+    adapt,
+    build_samples,
+    build_table,
+)
 from kbcli.core.keyboard import Keyboard
-from kbcli.core.posterior import LikelihoodTable
+from kbcli.core.melody import DEFAULT_MELODY, parse_melody
+from kbcli.core.play import MATCH, replay
+from kbcli.core.posterior import ActionSamples, LikelihoodTable
 from kbcli.errors import ArtifactError, ConfigError, KbcliError
 from kbcli.sim import MODES, SimConfig, World, make_reacher
 from kbcli.stages import keyboard as keyboard_stage
@@ -35,59 +60,68 @@ FEEDBACKS = ("landed", "aim")
 DEFAULT_SNAPSHOTS = (0, 1, 2, 3, 5, 10, 20, 40)
 
 
-@dataclass(frozen=True, kw_only=True)
+#: The world-side and loop options of :class:`AdaptConfig` (everything else is the robot's).
+LOOP_FIELDS = ("mode", "reach_noise", "feedback", "max_steps", "stop")
+
+
+@dataclass(frozen=True, kw_only=True, init=False)
 class AdaptConfig:
-    """One adaptation: the robot's settings (see :class:`kbcli.core.adapt.AdapterConfig`, whose
-    fields are repeated here) plus the simulated arm's and the loop's.
+    """One adaptation: the robot's settings (``robot``, a :class:`kbcli.core.adapt.AdapterConfig`)
+    plus the simulated arm's and the loop's.
 
     Parameters
     ----------
+    robot : AdapterConfig
+        How the robot adapts: strategy, posterior, estimator, grid, ... (its defaults are kbcli's
+        best choice).
     mode : str
         ``ideal`` or ``dynamics`` (:class:`kbcli.sim.SimConfig`).
     reach_noise : float
         Landing scatter of the arm, px.
     feedback : str
         ``landed``: the robot observes where its finger landed (proprioception); ``aim``: only where
-        it aimed, and blurs its likelihood by ``reach_noise``.
-    model_blur : float or None
-        Extra softening of the model's map, px (see :class:`kbcli.core.adapt.AdapterConfig`;
-        None: 1 px for a learned model, 0 for the exact one).
+        it aimed, and blurs its likelihood by ``reach_noise`` (``robot.blur`` is then set to it).
     max_steps : int
         T, observations at most.
     stop : bool
         End at the stopping rule (else always run T steps and record when the rule fired).
+
+    Notes
+    -----
+    The robot's options read through as attributes (``cfg.strategy`` is ``cfg.robot.strategy``), and
+    :meth:`from_dict` also takes the flat layout of schema-1 artifacts and older TOML files (robot
+    options beside ``mode``): the layout before the robot's config was held by composition.
     """
 
-    strategy: str = "infogain"
-    posterior: str = "likelihood"
-    family: str = "translation"
+    robot: AdapterConfig = field(default_factory=AdapterConfig)
     mode: str = "ideal"
     reach_noise: float = 0.0
     feedback: str = "landed"
-    model_blur: float | None = None
     max_steps: int = 40
     stop: bool = False
-    resolution: float = 0.5
-    prior_halfwidth: float = 45.0
-    max_angle: float = 5.0
-    angle_resolution: float = 0.25
-    outlier: float = 1e-3
-    cell_average: bool = True
-    raster_step: float | None = None
-    candidates: int = 256
-    hypotheses: int = 512
-    active_keep: int = 8
-    active_hypotheses: int = 2048
-    kde_samples: int = 10000
-    kde_bandwidth: float | None = None
-    estimator: str = "mean"
-    stop_ml: float | None = None
-    stop_mass: float = 0.95
-    stop_radius: float = 1.0
-    stop_angle: float = 0.5
-    max_memory_mb: float = 2048.0
+
+    def __init__(self, *, robot: AdapterConfig | None = None, mode: str = "ideal",
+                 reach_noise: float = 0.0, feedback: str = "landed", max_steps: int = 40,
+                 stop: bool = False, **robot_options) -> None:
+        # robot options given flat (``AdaptConfig(strategy="random")``, the layout before the
+        # composition) still work: they override ``robot``'s
+        unknown = sorted(set(robot_options) - set(AdapterConfig.__dataclass_fields__))
+        if unknown:
+            raise ConfigError(f"unknown adapt option(s) {', '.join(unknown)}")
+        if robot is None:
+            robot = AdapterConfig(**robot_options)
+        elif robot_options:
+            if not isinstance(robot, AdapterConfig):
+                raise ConfigError(f"robot must be an AdapterConfig, got {type(robot).__name__}")
+            robot = replace(robot, **robot_options)
+        for k, v in (("robot", robot), ("mode", mode), ("reach_noise", reach_noise),
+                     ("feedback", feedback), ("max_steps", max_steps), ("stop", stop)):
+            object.__setattr__(self, k, v)
+        self.__post_init__()
 
     def __post_init__(self) -> None:
+        if not isinstance(self.robot, AdapterConfig):
+            raise ConfigError(f"robot must be an AdapterConfig, got {type(self.robot).__name__}")
         if self.mode not in MODES:
             raise ConfigError(f"unknown mode {self.mode!r}; valid: {', '.join(MODES)}")
         if self.feedback not in FEEDBACKS:
@@ -100,23 +134,116 @@ class AdaptConfig:
         self.sim_config()
         self.adapter_config()
 
+    def __getattr__(self, name: str):
+        # the robot's options read through (``cfg.strategy``); only called for missing attributes
+        if name != "robot" and not name.startswith("__") and name in AdapterConfig.__dataclass_fields__:
+            return getattr(self.robot, name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    @classmethod
+    def flat(cls, **options) -> AdaptConfig:
+        """Build from one flat set of options (robot and loop options mixed), as flags give them."""
+        return cls.from_dict(options)
+
+    def with_robot(self, **changes) -> AdaptConfig:
+        """A copy with some robot options changed."""
+        return replace(self, robot=replace(self.robot, **changes))
+
     def sim_config(self) -> SimConfig:
         return SimConfig(mode=self.mode, reach_noise=self.reach_noise)
 
     def adapter_config(self) -> AdapterConfig:
         """The robot-side config (``blur`` is the reach noise under ``aim`` feedback)."""
-        d = {k: v for k, v in asdict(self).items() if k in AdapterConfig.__dataclass_fields__}
-        d["blur"] = float(self.reach_noise) if self.feedback == "aim" else 0.0
-        return AdapterConfig(**d)
+        if self.feedback == "aim":
+            return replace(self.robot, blur=float(self.reach_noise))
+        return self.robot
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """Every resolved option, the robot's nested under ``robot``."""
+        d = {k: getattr(self, k) for k in LOOP_FIELDS}
+        return {"robot": self.robot.to_dict(), **d}
 
     @classmethod
     def from_dict(cls, d: dict) -> AdaptConfig:
-        """Build from a mapping (a TOML table, an artifact's config); unknown keys are rejected."""
-        check_known(cls, d, "adapt")
-        return cls(**d)
+        """Build from a mapping (a TOML table, an artifact's config); unknown keys are rejected.
+
+        Takes the nested layout (``robot = {...}`` beside the loop options) and the flat one of
+        schema-1 artifacts (robot options at the top level); a robot option given at the top level
+        overrides the same option in the ``robot`` table (as a command-line flag overrides a TOML
+        file).
+        """
+        if not isinstance(d, dict):
+            raise ConfigError("the adapt options must be a table")
+        robot_keys = set(AdapterConfig.__dataclass_fields__)
+        flat = {k: v for k, v in d.items() if k in robot_keys}
+        rest = {k: v for k, v in d.items() if k not in robot_keys}
+        known = set(cls.__dataclass_fields__) | robot_keys
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ConfigError(f"unknown adapt option(s) {', '.join(unknown)}; valid: "
+                              f"{', '.join(sorted(known))}")
+        robot = rest.pop("robot", None)
+        if isinstance(robot, AdapterConfig):
+            robot = robot.to_dict()
+        if robot is None:
+            robot = {}
+        if not isinstance(robot, dict):
+            raise ConfigError("robot must be a table of adapter options")
+        robot_cfg = AdapterConfig.from_dict({**robot, **flat})
+        return cls(robot=robot_cfg, **rest)
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlayCheck:
+    """Playing success measured by replaying the melody (Algorithm 1) around an adaptation.
+
+    Parameters
+    ----------
+    melody : str
+        Notes ``NOTE:BEATS`` (:mod:`kbcli.core.melody`).
+    notes : int
+        Touches per replay.
+    reference : bool
+        Also replay before the displacement and after it without adaptation (else only after
+        adaptation, with the final estimate).
+    """
+
+    melody: str = DEFAULT_MELODY
+    notes: int = 200
+    reference: bool = True
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.notes, int) or isinstance(self.notes, bool) or self.notes < 1:
+            raise ConfigError(f"play notes must be a whole number >= 1, got {self.notes!r}")
+
+
+def play_success(model, keyboard: Keyboard, sim: SimConfig, family: str, truth: np.ndarray,
+                 estimate: np.ndarray | None, check: PlayCheck, *, rng: np.random.Generator,
+                 pool: ActionSamples | None = None) -> dict[str, float]:
+    """Success rates (MATCH share) of ``check.notes`` touches of Algorithm 1 with the model's
+    actions and the arm of ``sim``: ``before`` (keyboard at its reference pose), ``unadapted``
+    (at ``truth``, no correction) and ``adapted`` (at ``truth``, actions corrected by
+    ``estimate``); NaN for what was not measured. ``pool``: per-class draws of p(action | sound)
+    to resample instead of calling ``model.sample_actions`` (see :func:`kbcli.core.play.replay`).
+    """
+    melody = parse_melody(check.melody, keyboard)
+    n = len(transforms.FAMILIES[family])
+    out = {"before": math.nan, "unadapted": math.nan, "adapted": math.nan}
+    runs = []
+    if check.reference:
+        runs += [("before", np.zeros(n), None), ("unadapted", truth, None)]
+    if estimate is not None:
+        runs.append(("adapted", truth, np.asarray(estimate, float)))
+    for (name, pose, corr), r in zip(runs, rng.spawn(len(runs)), strict=True):
+        world = World(keyboard, make_reacher(sim), np.asarray(pose, float), family)
+
+        def touch(actions: np.ndarray, world=world, r=r) -> tuple[np.ndarray, np.ndarray]:
+            return world.touch(actions, r)
+
+        hist = replay(model, melody, touch, rng=r, n_notes=check.notes, correction=corr,
+                      family=family, sampler=None if pool is None else pool.draw)
+        out[name] = float(np.mean(hist == MATCH))
+    return out
 
 
 def _errors(est: np.ndarray, truth: np.ndarray, robot_family: str,
@@ -125,13 +252,101 @@ def _errors(est: np.ndarray, truth: np.ndarray, robot_family: str,
     t_err = float(np.hypot(*(est[-2:] - truth[-2:])))
     a_est = float(est[0]) if robot_family == "rigid" else 0.0
     a_true = float(truth[0]) if world_family == "rigid" else 0.0
-    return t_err, abs(a_est - a_true)
+    return t_err, abs(transforms.wrap_degrees(a_est - a_true))
+
+
+#: Per-step records of a ``run`` artifact, in the order :meth:`Recorder.add` takes them.
+RECORDS = ("actions", "landed", "perceived", "classes", "estimates", "means", "errors", "ml_errors",
+           "angle_errors", "entropy", "ml_prob", "mass", "stop", "step_ms")
+
+
+class Recorder:
+    """The per-step records and posterior snapshots of one adaptation: what a ``run`` artifact
+    holds, whoever touched (the simulated world in :func:`experiment`, or a robot in another
+    process through ``kbcli serve``, :mod:`kbcli.stages.serve`).
+
+    Parameters
+    ----------
+    adapter : Adapter
+        The robot's adapter (read after each step).
+    snapshot_steps : iterable of int
+        Steps (0: the prior) at which to keep the posterior.
+    """
+
+    def __init__(self, adapter: Adapter, snapshot_steps=()) -> None:
+        self.adapter = adapter
+        self.snaps = {int(s) for s in snapshot_steps if int(s) >= 0}
+        self.rec: dict[str, list] = {k: [] for k in RECORDS}
+        self.joint_angles: list[np.ndarray] = []
+        self.snap_t: list[int] = []
+        self.snap_log: list[np.ndarray] = []
+        self.snap_ang: list[np.ndarray] = []
+        if 0 in self.snaps:
+            self.snapshot(0)
+
+    def __len__(self) -> int:
+        return len(self.rec["actions"])
+
+    def snapshot(self, t: int) -> None:
+        """Keep the current posterior as the one after step ``t``."""
+        post = self.adapter.posterior
+        self.snap_t.append(t)
+        with np.errstate(divide="ignore"):
+            self.snap_log.append(np.log(post.translation_marginal()).astype(np.float32))
+        pa = post.marginals()[0]
+        self.snap_ang.append(np.ones(1) if pa is None else pa)
+
+    def add(self, st: Step, errors: tuple[float, float, float] = (np.nan, np.nan, np.nan),
+            joint_angles: np.ndarray | None = None) -> None:
+        """Record one step; ``errors`` = (px error of the estimate, of the ML cell, angle error
+        in degrees) against the truth (NaN when it is unknown, as for a real robot)."""
+        err, ml_err, aerr = errors
+        for k, v in zip(RECORDS, (st.action, st.landed, st.perceived, st.cls, st.ml, st.mean, err,
+                                  ml_err, aerr, st.entropy, st.ml_prob, st.mass, st.stop, st.ms),
+                        strict=True):
+            self.rec[k].append(v)
+        if joint_angles is not None:
+            self.joint_angles.append(np.asarray(joint_angles, float).reshape(2))
+        if st.t in self.snaps:
+            self.snapshot(st.t)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The records as arrays (see :func:`experiment`'s Returns)."""
+        g = self.adapter.grid
+        d = int(np.shape(self.adapter.model.class_features_)[1])
+        out = {k: np.asarray(v) for k, v in self.rec.items()}
+        for k, width in (("actions", 2), ("landed", 2), ("perceived", d),
+                         ("estimates", g.n_params), ("means", g.n_params)):
+            out[k] = np.asarray(out[k], float).reshape(-1, width)
+        for k in ("errors", "ml_errors", "angle_errors", "entropy", "ml_prob", "mass", "step_ms"):
+            out[k] = np.asarray(out[k], float)
+        out["classes"] = out["classes"].astype(np.int64)
+        out["stop"] = out["stop"].astype(bool)
+        if self.joint_angles and len(self.joint_angles) == len(self):
+            out["joint_angles"] = np.stack(self.joint_angles)
+        out.update(dx=g.dx, dy=g.dy, angles=g.angles,
+                   snapshot_steps=np.asarray(self.snap_t, np.int64))
+        if self.snap_t:
+            out["snapshots"] = np.stack(self.snap_log)
+            out["snapshot_angles"] = np.stack(self.snap_ang)
+        if self.adapter.cfg.posterior == "kde":
+            out["bandwidths"] = np.asarray(self.adapter.bandwidths, float)
+        return out
+
+
+def end_angles(reacher) -> np.ndarray | None:
+    """(n, 2) joint angles the reacher ended its last reaches in (dynamics mode), else None."""
+    ang = getattr(reacher, "last_end_angles", None)
+    return None if ang is None else np.asarray(ang, float).reshape(-1, 2)
 
 
 def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndarray, *,
                rng: np.random.Generator, world_family: str | None = None,
                table: LikelihoodTable | None = None,
-               snapshot_steps: tuple[int, ...] = ()) -> dict[str, np.ndarray]:
+               snapshot_steps: tuple[int, ...] = (), samples: ActionSamples | None = None,
+               play: PlayCheck | None = None,
+               play_pool: ActionSamples | None = None,
+               on_step: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
     """One adaptation against a world whose keyboard sits at ``true_params``.
 
     Parameters
@@ -141,82 +356,87 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     keyboard : Keyboard
         The instrument (world side).
     true_params : (P,) ndarray
-        The true displacement in ``world_family`` parameters (default: ``cfg.family``).
+        The true displacement in ``world_family`` parameters (default: ``cfg.robot.family``).
     rng : numpy.random.Generator
         Split into the robot's and the world's generators.
     table : LikelihoodTable, optional
         A prebuilt :func:`kbcli.core.adapt.build_table` for ``model`` (rasterise once, reuse).
     snapshot_steps : tuple of int
         Steps (0: the prior) at which to keep the posterior.
+    samples : ActionSamples, optional
+        The ``kde`` posterior's per-class samples (:func:`kbcli.core.adapt.build_samples`), shared
+        across experiments; default: drawn per run.
+    play : PlayCheck, optional
+        Also measure the playing success (adds ``play_before``, ``play_unadapted``,
+        ``play_adapted``, each a float, NaN when not measured), from a third child of ``rng``.
+    play_pool : ActionSamples, optional
+        Per-class draws of p(action | sound) the replays resample (default: the model samples).
+    on_step : callable, optional
+        Called with the step number after each observation (a progress bar).
 
     Returns
     -------
     dict of ndarrays, per step t = 1..T (T = ``max_steps``, fewer when ``cfg.stop`` ends early)
         ``actions`` (T, 2), ``landed`` (T, 2), ``perceived`` (T, D), ``classes`` (T,),
         ``estimates`` (T, P) maximum-likelihood cell, ``means`` (T, P) posterior mean,
-        ``errors`` (T,) px error of the estimate (``cfg.estimator``) vs truth, ``ml_errors`` (T,),
+        ``errors`` (T,) px error of the estimate (``cfg.robot.estimator``) vs truth, ``ml_errors`` (T,),
         ``angle_errors`` (T,) deg, ``entropy`` (T,) nats, ``ml_prob`` (T,), ``mass`` (T,),
-        ``stop`` (T,) bool, ``step_ms`` (T,); ``snapshot_steps`` (S,), ``snapshots`` (S, ny, nx)
+        ``stop`` (T,) bool, ``step_ms`` (T,); ``joint_angles`` (T, 2) the arm's pose after each
+        touch (dynamics mode); ``snapshot_steps`` (S,), ``snapshots`` (S, ny, nx)
         log translation marginals, ``snapshot_angles`` (S, A) angle marginals (rigid); ``dx``,
         ``dy``, ``angles`` grid axes.
     """
-    world_family = cfg.family if world_family is None else world_family
+    world_family = cfg.robot.family if world_family is None else world_family
     truth = np.asarray(true_params, float)
     robot_rng, world_rng = rng.spawn(2)
     acfg = cfg.adapter_config()
-    adapter = Adapter(model, acfg, rng=robot_rng, table=table)
+    adapter = Adapter(model, acfg, rng=robot_rng, table=table, samples=samples)
     world = World(keyboard, make_reacher(cfg.sim_config()), truth, world_family)
+    poses: list[np.ndarray] = []
 
     def touch(action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         landed, heard = world.touch(action[None, :], world_rng)
+        ang = end_angles(world.reacher)
+        if ang is not None and len(ang):
+            poses.append(ang[-1])
         return landed[0], heard[0]
 
-    snaps = sorted(set(int(s) for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps))
-    snap_t, snap_log, snap_ang = [], [], []
-
-    def snapshot(t: int) -> None:
-        post = adapter.posterior
-        snap_t.append(t)
-        with np.errstate(divide="ignore"):
-            snap_log.append(np.log(post.translation_marginal()).astype(np.float32))
-        pa = post.marginals()[0]
-        snap_ang.append(np.ones(1) if pa is None else pa)
-
-    if 0 in snaps:
-        snapshot(0)
-    rec: dict[str, list] = {k: [] for k in ("actions", "landed", "perceived", "classes", "estimates",
-                                            "means", "errors", "ml_errors", "angle_errors",
-                                            "entropy", "ml_prob", "mass", "stop", "step_ms")}
+    snaps = [s for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps]
+    rec = Recorder(adapter, snaps)
     for st in adapt(adapter, touch, cfg.max_steps, use_landed=cfg.feedback == "landed",
                     stop=cfg.stop):
-        err, aerr = _errors(st.estimate, truth, cfg.family, world_family)
-        ml_err, _ = _errors(st.ml, truth, cfg.family, world_family)
-        for k, v in (("actions", st.action), ("landed", st.landed), ("perceived", st.perceived),
-                     ("classes", st.cls), ("estimates", st.ml), ("means", st.mean),
-                     ("errors", err), ("ml_errors", ml_err), ("angle_errors", aerr),
-                     ("entropy", st.entropy), ("ml_prob", st.ml_prob), ("mass", st.mass),
-                     ("stop", st.stop), ("step_ms", st.ms)):
-            rec[k].append(v)
-        if st.t in snaps:
-            snapshot(st.t)
-    out = {k: np.asarray(v) for k, v in rec.items()}
-    out["classes"] = out["classes"].astype(np.int64)
-    out["stop"] = out["stop"].astype(bool)
-    g = adapter.grid
-    out.update(dx=g.dx, dy=g.dy, angles=g.angles, snapshot_steps=np.asarray(snap_t, np.int64))
-    if snap_t:
-        out["snapshots"] = np.stack(snap_log)
-        out["snapshot_angles"] = np.stack(snap_ang)
-    if cfg.posterior == "kde":
-        out["bandwidths"] = np.asarray(adapter.bandwidths, float)
+        err, aerr = _errors(st.estimate, truth, cfg.robot.family, world_family)
+        ml_err, _ = _errors(st.ml, truth, cfg.robot.family, world_family)
+        rec.add(st, (err, ml_err, aerr), poses[-1] if poses else None)
+        if on_step is not None:
+            on_step(st.t)
+    out = rec.arrays()
+    if play is not None:
+        final = out["means"][-1] if cfg.robot.estimator == "mean" else out["estimates"][-1]
+        if world_family != cfg.robot.family:  # correct in the world's parameters
+            final = _as_family(final, cfg.robot.family, world_family)
+        res = play_success(model, keyboard, cfg.sim_config(), world_family, truth, final, play,
+                           rng=rng.spawn(1)[0], pool=play_pool)
+        out.update({f"play_{k}": np.float64(v) for k, v in res.items()})
     return out
+
+
+def _as_family(est: np.ndarray, family: str, world_family: str) -> np.ndarray:
+    """An estimate in ``family`` parameters as ``world_family`` parameters (angle 0 added or
+    dropped)."""
+    est = np.asarray(est, float)
+    if family == world_family:
+        return est
+    if world_family == "rigid":
+        return np.concatenate([[0.0], est[-2:]])
+    return est[-2:]
 
 
 def _inside_prior(cfg: AdaptConfig, truth: np.ndarray, world_family: str) -> bool:
     """Whether the true pose lies in the robot's prior box (else no estimate can reach it)."""
-    inside = bool(np.all(np.abs(truth[-2:]) <= cfg.prior_halfwidth))
+    inside = bool(np.all(np.abs(truth[-2:]) <= cfg.robot.prior_halfwidth))
     angle = float(truth[0]) if world_family == "rigid" else 0.0
-    limit = cfg.max_angle if cfg.family == "rigid" else 0.0
+    limit = cfg.robot.max_angle if cfg.robot.family == "rigid" else 0.0
     return inside and abs(angle) <= limit + 1e-9
 
 
@@ -245,7 +465,8 @@ def check_inputs(model_artifact: Artifact, scene_artifact: Artifact) -> None:
 
 def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
         rng: np.random.Generator, seed: int | None = None,
-        snapshot_steps: tuple[int, ...] = DEFAULT_SNAPSHOTS, model=None) -> Artifact:
+        snapshot_steps: tuple[int, ...] = DEFAULT_SNAPSHOTS, model=None,
+        on_step: Callable[[int], None] | None = None) -> Artifact:
     """Adapt to a scene with a model: the ``run`` artifact.
 
     Parameters
@@ -254,6 +475,8 @@ def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
         Recorded in the artifact (``rng`` should be ``default_rng(seed)``).
     model : SoundModel, optional
         The already loaded model of ``model_artifact`` (saves loading it again).
+    on_step : callable, optional
+        Called with the step number after each observation (a progress bar).
 
     Raises
     ------
@@ -266,43 +489,69 @@ def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
     world_family = scene_artifact.config["family"]
     truth = np.asarray(scene_artifact.config["params"], float)
     res = experiment(cfg, model, kb, truth, rng=rng, world_family=world_family,
-                     snapshot_steps=snapshot_steps)
-    names = transforms.FAMILIES[cfg.family]
-    errors = res["errors"]
-    angle_ok = res["angle_errors"] < 0.5
-    reach1 = steps_below(np.where(angle_ok, errors, np.inf), 1.0)
-    stop_at = np.flatnonzero(res["stop"])
-    final = res["means"][-1] if cfg.estimator == "mean" else res["estimates"][-1]
-    attrs = {
-        "strategy": cfg.strategy,
-        "posterior": cfg.posterior,
-        "family": cfg.family,
-        "world_family": world_family,
-        "steps": int(len(errors)),
-        "final_error_px": float(errors[-1]),
-        "final_angle_error_deg": float(res["angle_errors"][-1]),
-        "steps_to_1px": reach1,
-        "stop_step": int(stop_at[0] + 1) if len(stop_at) else None,
-        "final_entropy": float(res["entropy"][-1]),
-        "estimate": {n: float(v) for n, v in zip(names, final, strict=True)},
-        "truth": {n: float(v) for n, v in
-                  zip(transforms.FAMILIES[world_family], truth, strict=True)},
-        "grid_cells": cfg.adapter_config().grid_cells,
-        "median_step_ms": float(np.median(res["step_ms"])),
-        "truth_inside_prior": _inside_prior(cfg, truth, world_family),
-    }
-    timing = {"step_ms": res.pop("step_ms")}
-    data = {k: v for k, v in res.items()}
-    data["timing"] = timing
+                     snapshot_steps=snapshot_steps, on_step=on_step)
+    attrs = run_attrs(res, cfg.adapter_config(), truth=truth, world_family=world_family)
+    attrs["truth_inside_prior"] = _inside_prior(cfg, truth, world_family)
+    sim = cfg.sim_config()
+    attrs["mode"] = cfg.mode
+    attrs["arm"] = {"base": list(sim.base), "link_lengths": list(sim.link_lengths)}
     return Artifact(
         kind="run",
         config={"adapt": cfg.to_dict(), "keyboard": model_artifact.config["keyboard"],
                 "snapshot_steps": [int(s) for s in snapshot_steps]},
         seed=seed,
-        data=data,
+        data=run_data(res),
         attrs=attrs,
         inputs={"model": ref(model_artifact), "scene": ref(scene_artifact)},
     )
+
+
+def run_attrs(res: dict[str, np.ndarray], acfg: AdapterConfig, *, truth: np.ndarray | None = None,
+              world_family: str | None = None) -> dict:
+    """The summary of a ``run`` artifact from its records (:meth:`Recorder.arrays`).
+
+    Without a ``truth`` (a real robot, ``kbcli serve``) the errors are unknown: ``truth``,
+    ``final_error_px``, ``final_angle_error_deg`` and ``steps_to_1px`` are None. A run of no step
+    has no estimate.
+    """
+    names = transforms.FAMILIES[acfg.family]
+    errors = np.asarray(res["errors"], float)
+    n = int(len(errors))
+    known = truth is not None and n > 0
+    reach1 = None
+    if known:
+        angle_ok = res["angle_errors"] < 0.5
+        reach1 = steps_below(np.where(angle_ok, errors, np.inf), 1.0)
+    stop_at = np.flatnonzero(res["stop"])
+    final = None
+    if n:
+        final = res["means"][-1] if acfg.estimator == "mean" else res["estimates"][-1]
+    wf = world_family or acfg.family
+    return {
+        "strategy": acfg.strategy,
+        "posterior": acfg.posterior,
+        "family": acfg.family,
+        "world_family": wf if truth is not None else None,
+        "steps": n,
+        "final_error_px": float(errors[-1]) if known else None,
+        "final_angle_error_deg": float(res["angle_errors"][-1]) if known else None,
+        "steps_to_1px": reach1,
+        "stop_step": int(stop_at[0] + 1) if len(stop_at) else None,
+        "final_entropy": float(res["entropy"][-1]) if n else None,
+        "estimate": None if final is None else
+        {k: float(v) for k, v in zip(names, final, strict=True)},
+        "truth": None if truth is None else
+        {k: float(v) for k, v in zip(transforms.FAMILIES[wf], truth, strict=True)},
+        "grid_cells": acfg.grid_cells,
+        "median_step_ms": float(np.median(res["step_ms"])) if n else None,
+    }
+
+
+def run_data(res: dict[str, np.ndarray]) -> dict:
+    """The datasets of a ``run`` artifact: the records, with the wall-clock times in ``timing/``."""
+    data = {k: v for k, v in res.items() if k != "step_ms"}
+    data["timing"] = {"step_ms": res["step_ms"]}
+    return data
 
 
 def build_shared_table(cfg: AdaptConfig, model) -> LikelihoodTable:
@@ -310,5 +559,15 @@ def build_shared_table(cfg: AdaptConfig, model) -> LikelihoodTable:
     return build_table(model, cfg.adapter_config())
 
 
-__all__ = ["AdaptConfig", "experiment", "run", "check_inputs", "steps_below", "build_shared_table",
-           "POSTERIORS", "FEEDBACKS", "DEFAULT_SNAPSHOTS"]
+def build_shared_samples(cfg: AdaptConfig, model, seed) -> ActionSamples | None:
+    """The ``kde`` posterior's per-class samples for ``cfg`` (None for other posteriors), drawn
+    from ``seed`` once per class, to share across many :func:`experiment` calls."""
+    if cfg.robot.posterior != "kde":
+        return None
+    return build_samples(model, cfg.adapter_config(), seed)
+
+
+__all__ = ["AdaptConfig", "PlayCheck", "play_success", "experiment", "run", "check_inputs",
+           "steps_below", "build_shared_table", "build_shared_samples", "LOOP_FIELDS",
+           "Recorder", "run_attrs", "run_data", "RECORDS", "POSTERIORS", "FEEDBACKS",
+           "DEFAULT_SNAPSHOTS"]
