@@ -254,7 +254,7 @@ class Pipeline:
 
     def adapt(self) -> Iterator[tuple[str, int]]:
         for name, res in self.results.items():
-            for cell, i in adapt_bench.run_cells(res.cells):
+            for _cell, i in adapt_bench.run_cells(res.cells):
                 yield name, i
             res.adapt_rows = adapt_bench.summarize(res.cells)
 

@@ -227,12 +227,12 @@ def bench_layouts_cmd(
     layout: Annotated[list[str] | None, typer.Option(
         "--layout", help="Only these layouts (repeat) [default: the config's].")] = None,
 ) -> None:
-    """Learning and adaptation on every layout: tables and one figure per layout (issue 11).
+    """Learning and adaptation on every layout: tables and one figure per layout.
 
     Reads CONFIG (and its keyboards' TOML files). Writes OUTPUT/keyboards/<layout>.h5,
     OUTPUT/models/<layout>.h5 (the adaptation model), OUTPUT/cache/ (every learning run: a run
     interrupted continues where it stopped) and OUTPUT/report/: README.md (the learning and
-    adaptation tables, each target of the issue beside the measured figure, the settings),
+    adaptation tables, each target beside the measured figure, the settings),
     <layout>.png and results.json. Long: hours at the default settings (make reproduce-layouts).
     """
     from dataclasses import replace

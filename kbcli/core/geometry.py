@@ -245,7 +245,7 @@ class KeyShapes:
 
     def grid_points(self, per_side: int) -> tuple[np.ndarray, np.ndarray]:
         """An even grid of points inside every key: ``per_side`` x ``per_side`` cell centres over
-        each key's bounding box, kept where the key is.
+        each key's bounding box, kept where the key is (and off its edges).
 
         Returns
         -------
@@ -259,6 +259,7 @@ class KeyShapes:
         for k, (x0, y0, x1, y1) in enumerate(self.boxes):
             p = np.array([x0, y0]) + unit * np.array([x1 - x0, y1 - y0])
             p = p[self.key_at(p) == k]
+            p = p[segment_distance(p, self.polygons[k]) > 1e-6]  # off the edges: no ties
             pts.append(p)
             keys.append(np.full(len(p), k, dtype=np.int64))
         return np.vstack(pts), np.concatenate(keys)

@@ -46,7 +46,7 @@ from kbcli.core.adapt import (
     build_samples,
     build_table,
 )
-from kbcli.core.keyboard import Keyboard
+from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.melody import DEFAULT_MELODY, parse_melody
 from kbcli.core.play import MATCH, replay
 from kbcli.core.posterior import ActionSamples, LikelihoodTable
@@ -446,6 +446,16 @@ def steps_below(errors: np.ndarray, threshold: float) -> int | None:
     return int(hit[0] + 1) if len(hit) else None
 
 
+def _resolved(kb: dict | None) -> dict | None:
+    """A keyboard table with every default filled in (schema 1 tables lack ``layout``)."""
+    if kb is None:
+        return None
+    try:
+        return KeyboardConfig.from_dict(kb).to_dict()
+    except KbcliError:
+        return kb
+
+
 def check_inputs(model_artifact: Artifact, scene_artifact: Artifact) -> None:
     """Refuse artifacts of the wrong kind and a scene whose keyboard is not the model's."""
     if model_artifact.kind != "model":
@@ -454,7 +464,7 @@ def check_inputs(model_artifact: Artifact, scene_artifact: Artifact) -> None:
     if scene_artifact.kind != "scene":
         raise ArtifactError(f"{scene_artifact.path or 'scene'}: is a {scene_artifact.kind} "
                             f"artifact, expected scene")
-    km, ks = model_artifact.config.get("keyboard"), scene_artifact.config.get("keyboard")
+    km, ks = (_resolved(a.config.get("keyboard")) for a in (model_artifact, scene_artifact))
     if km != ks:
         diff = sorted(k for k in set(km or {}) | set(ks or {})
                       if (km or {}).get(k) != (ks or {}).get(k))
