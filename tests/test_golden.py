@@ -34,8 +34,7 @@ KINDS = tuple(SCHEMA_VERSIONS)
 MAGIC = {"png": b"\x89PNG", "pdf": b"%PDF", "svg": b"<?xml"}
 
 #: the readers of each kind: CLI invocations with {path}, {dir} (its folder) and {tmp} placeholders
-#: (read-only stages,
-#: plots, and stages that read the kind to make something else from it).
+#: (read-only stages, plots, and stages that read the kind to make something else from it).
 READERS: dict[str, list[list[str]]] = {
     "keyboard": [["plot", "keyboard", "{path}", "-o", "{tmp}/k.png"],
                  ["perturb", "--keyboard", "{path}", "--dx", "3", "-o", "{tmp}/s.h5"],

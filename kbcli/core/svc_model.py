@@ -54,7 +54,6 @@ from kbcli.core.learned import LearnedModel, _straddling_edges, discover_classes
 from kbcli.core.model import SILENCE
 from kbcli.errors import ArtifactError, ConfigError
 
-_CHUNK = 16384  # query points per block
 _SQRT3 = float(np.sqrt(3.0))
 _EDGE_STEPS = 17  # points along a straddling edge where the boundary site is looked for
 SITE_GRID = 2.0  # px, grid on which boundary sites between straddling edges are looked for
@@ -219,69 +218,28 @@ class SVCModel:
             f[near] = w * f[near] + (1 - w) * nn
         return f
 
-    def _slot_scores(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Candidate classes (the distinct classes of the nearest samples) and their log-scores.
+    def _pair_logp(self, code: int, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """log p(on the lower / higher class's side) of a pair's boundary at each point: the
+        boundary anywhere in the margin, ``log Phi(-+sqrt(3) f)``."""
+        z = _SQRT3 * self._decision(code, q)
+        return log_ndtr(-z), log_ndtr(z)
 
-        Returns
-        -------
-        cls : (n, k) int ndarray
-        score : (n, k) ndarray
-            Sum of log p(on its side) over the contests with the other candidates; -inf for a
-            repeated class.
-        """
-        n = len(q)
-        k = int(min(self.n_neighbors, len(self.actions_)))
-        _, idx = self._tree.query(q, k=k)
-        cls = self.labels_[np.asarray(idx).reshape(n, k)]
-        first = np.ones((n, k), dtype=bool)
-        for c in range(1, k):  # k columns, each vectorized over the points
-            first[:, c] = ~(cls[:, :c] == cls[:, c:c + 1]).any(axis=1)
-        score = np.where(first, 0.0, -np.inf)
-        near = first.sum(axis=1) >= 2
-        if not near.any() or not self._svms:
-            return cls, score
-        rows_l, sa_l, sb_l = [], [], []
-        for a in range(k):
-            for b in range(a + 1, k):
-                r = np.flatnonzero(near & first[:, a] & first[:, b])
-                rows_l.append(r)
-                sa_l.append(np.full(len(r), a))
-                sb_l.append(np.full(len(r), b))
-        rows, sa, sb = np.concatenate(rows_l), np.concatenate(sa_l), np.concatenate(sb_l)
-        ca, cb = cls[rows, sa], cls[rows, sb]
-        swap = ca > cb
-        slo, shi = np.where(swap, sb, sa), np.where(swap, sa, sb)
-        nc = len(self.class_features_)
-        code = np.minimum(ca, cb) * nc + np.maximum(ca, cb)
-        for c in np.unique(code):
-            if int(c) not in self._svms:
-                continue  # sounds that never met: no boundary between them to judge by
-            sel = np.flatnonzero(code == c)
-            z = _SQRT3 * self._decision(int(c), q[rows[sel]])
-            np.add.at(score, (rows[sel], slo[sel]), log_ndtr(-z))
-            np.add.at(score, (rows[sel], shi[sel]), log_ndtr(z))
-        return cls, score
+    @property
+    def piece_pair_(self) -> np.ndarray:
+        """(P, 2) the pairs of sounds with a boundary (the ``lines`` model's name for them)."""
+        return self.pairs_
 
-    def _predict(self, points: np.ndarray, proba: bool) -> np.ndarray:
-        self._check_fitted()
-        q = np.asarray(points, float).reshape(-1, 2)
-        nc = self.n_classes
-        out = np.zeros((len(q), nc)) if proba else np.zeros(len(q), dtype=np.int64)
-        for start in range(0, len(q), _CHUNK):
-            blk = slice(start, start + _CHUNK)
-            cls, score = self._slot_scores(q[blk])
-            if proba:
-                m = score.max(axis=1, keepdims=True)
-                w = np.exp(score - m)
-                w /= w.sum(axis=1, keepdims=True)
-                r = np.repeat(np.arange(len(cls)), cls.shape[1])
-                block = np.zeros((len(cls), nc))
-                np.add.at(block, (r, cls.ravel()), w.ravel())
-                out[blk] = block
-            else:
-                tie = -1e-9 * np.arange(cls.shape[1])  # ties go to the nearer sample's class
-                out[blk] = cls[np.arange(len(cls)), np.argmax(score + tie, axis=1)]
-        return out
+    @property
+    def _pair_pieces(self) -> dict[int, SVC]:
+        """Pair code (``lower * C + higher``) -> its machine: the pairs that contest a point."""
+        return self._svms
+
+    # shared with the lines model, which combines its pairwise contests the same way: the
+    # candidates are the classes of the n_neighbors nearest samples, each candidate's log-score
+    # the sum of its contests (``_pair_logp``), p(sound | action) their softmax; they only read
+    # the fitted attributes and hooks both models have
+    _slot_scores = LearnedModel._slot_scores
+    _predict = LearnedModel._predict
 
     def predict_proba(self, points: np.ndarray) -> np.ndarray:
         """(n, C) p(sound class | action) at each of (n, 2) ``points``; rows sum to 1."""
@@ -290,8 +248,6 @@ class SVCModel:
     def predict_class(self, points: np.ndarray) -> np.ndarray:
         """(n,) most probable sound class at each point."""
         return self._predict(points, proba=False)
-
-    # shared with the lines model: they only use the fitted attributes both models have
     confusion = LearnedModel.confusion
     classify = LearnedModel.classify
     sample_actions = LearnedModel.sample_actions

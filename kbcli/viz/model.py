@@ -82,7 +82,8 @@ def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> N
             handles.append(Line2D([], [], color="0.25", lw=0.6,
                                   label=f"fitted boundaries ({len(lines)})"))
         a = art.attrs
-        title = (f"learned model: {a.get('strategy')} exploration, {a.get('mode')} mode, "
+        title = (f"learned {art.config.get('model_class', 'lines')} model: {a.get('strategy')} "
+                 f"exploration, {a.get('mode')} mode, "
                  f"{a.get('n_reaches')} reaches\naccuracy {100 * a.get('accuracy', np.nan):.2f} %, "
                  f"boundary error {a.get('boundary_error_px', np.nan):.2f} px")
     else:
@@ -105,7 +106,7 @@ def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> N
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
-    ax.set_title(f"true layout: {kb.n_keys} keys (note, tempo)", fontsize=9)
+    ax.set_title(f"true layout ({kb.layout}): {kb.n_keys} keys (note, tempo)", fontsize=9)
     ax.set_xlabel("pad x (px)")
 
     if learned:
