@@ -248,6 +248,7 @@ def test_bench_layouts_pipeline_small(runner, tmp_path):
     data = json.loads((rep / "results.json").read_text())
     assert data["layouts"]["pads"]["adapt_model"]["class"] == "svc"
     assert len(list((out / "cache").glob("learn-pads-svc-*.json"))) == 2
+    assert len(list((out / "cache").glob("adapt-pads-*.json"))) == 1
     assert read_artifact(out / "models" / "pads.h5", "model").attrs["n_reaches"] == 80
     # a second run reads the learning runs back and gives the same tables
     r = runner.invoke(app, ["bench", "layouts", "--config", str(cfg), "-o", str(out)])
