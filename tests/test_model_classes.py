@@ -262,3 +262,26 @@ def test_bench_layouts_pipeline_small(runner, tmp_path):
     r = runner.invoke(app, ["bench", "layouts", "--config", str(bad), "-o", str(tmp_path / "o2")])
     assert r.exit_code == 1 and "unknown layout 'staggered'" in r.output
     assert not (tmp_path / "o2").exists()
+
+
+@pytest.mark.parametrize("family", ["translation", "rigid"])
+@pytest.mark.parametrize("strategy", ["random", "active", "infogain"])
+def test_every_strategy_adapts_with_an_svc_model(pads_svc, strategy, family):
+    """Every adaptation strategy takes an svc model (any class behind the one interface) in both
+    families: the posterior concentrates and the estimate moves towards the truth."""
+    truth = np.array([6.0, -4.0]) if family == "translation" else np.array([1.0, 6.0, -4.0])
+    cfg = AdapterConfig(strategy=strategy, family=family, resolution=1.0, prior_halfwidth=10.0,
+                        max_angle=2.0, angle_resolution=1.0, candidates=64, hypotheses=64,
+                        active_hypotheses=256)
+    adapter = Adapter(pads_svc.model, cfg, rng=np.random.default_rng(3))
+    world = World(PADS, make_reacher(SimConfig()), truth, family)
+    rng = np.random.default_rng(4)
+
+    def touch(a):
+        landed, heard = world.touch(a[None], rng)
+        return landed[0], heard[0]
+
+    steps = list(adapt(adapter, touch, 15))
+    prior_entropy = np.log(adapter.grid.size)
+    assert steps[-1].entropy < prior_entropy - 1.0
+    assert np.hypot(*(steps[-1].estimate[-2:] - truth[-2:])) < np.hypot(*truth[-2:])
