@@ -373,7 +373,7 @@ def targets(cfg: LayoutsConfig, res: LayoutResult) -> list[dict]:
             lines = [r for r in active if r["model_class"] == "lines"]
             if lines:
                 v = lines[0]["accuracy"][b800]
-                out.append({"target": "grid, lines: accuracy >= 99 % at 800 reaches",
+                out.append({"target": "lines: accuracy >= 99 % at 800 reaches",
                             "measured": f"{100 * v:.2f} %", "met": v >= TARGET_GRID_LINES})
     if res.cells:
         med, never = _pooled_median(res.adapt_rows, res.cells, "infogain", "learned", TARGET_PX)

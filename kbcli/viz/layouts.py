@@ -14,7 +14,7 @@ from matplotlib.ticker import FixedLocator, NullFormatter, ScalarFormatter
 from kbcli.core import accuracy as scoring
 from kbcli.core.model import grid_points
 from kbcli.stages.artifact import Artifact
-from kbcli.viz.common import draw_keyboard, save
+from kbcli.viz.common import draw_keyboard, key_colours, save
 
 MAP_STEP = 2.0  # px
 _STRATEGY_COLOURS = {"random": "tab:grey", "active": "tab:orange", "infogain": "tab:blue"}
@@ -22,8 +22,9 @@ _CLASS_COLOURS = {"lines": "tab:green", "svc": "tab:purple"}
 
 
 def _key_colours(n_keys: int) -> np.ndarray:
-    cmap = plt.get_cmap("tab20")
-    return np.vstack([(0.6, 0.6, 0.6, 1.0), (1, 1, 1, 1), *[cmap(k % 20) for k in range(n_keys)]])
+    """RGBA per key index + 2: -2 (a sound that is no key) grey, -1 (silence) white, then the keys
+    in the colours :func:`draw_keyboard` gives them."""
+    return np.vstack([(0.6, 0.6, 0.6, 1.0), (1, 1, 1, 1), key_colours(n_keys)])
 
 
 def plot_layout(res, model_art: Artifact, cfg, path: str | os.PathLike) -> None:
