@@ -23,7 +23,7 @@ from kbcli.cli.app import (
 )
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.io.config import load_toml
+from kbcli.io.config import load_arm, load_toml
 from kbcli.stages import adapt as stage
 
 
@@ -60,6 +60,9 @@ def adapt_cmd(
     feedback: Annotated[str | None, typer.Option(
         "--feedback", help="landed (the robot feels where it landed) or aim [default landed].")
     ] = None,
+    arm: Annotated[str | None, typer.Option("--arm", help="Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains "
+        "and joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
+        "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields) [default ideal].")] = None,
     model_blur: Annotated[float | None, typer.Option(
         "--model-blur", help="Soften the model's map by this many px, for a model whose "
         "boundaries are less certain than it says [default: 1 for a learned model, 0 for the "
@@ -91,6 +94,8 @@ def adapt_cmd(
              "max_steps": max_steps,
              "resolution": resolution, "prior_halfwidth": prior_halfwidth, "stop": stop}
     values.update({k: v for k, v in flags.items() if v is not None})
+    if arm is not None:
+        values["arm"] = load_arm(arm)
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
     values.setdefault("family", scene_art.config.get("family", "translation"))

@@ -22,6 +22,7 @@ from kbcli.cli.app import (
 )
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.io.config import load_arm
 from kbcli.sim import SimConfig
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import learn as stage
@@ -42,6 +43,9 @@ def learn_cmd(
     reach_noise: Annotated[float, typer.Option(
         "--reach-noise", help="Landing scatter of a reach, px (motor noise in dynamics mode).")
     ] = 0.0,
+    arm: Annotated[str, typer.Option("--arm", help="Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains "
+        "and joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
+        "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields).")] = "ideal",
     batch: Annotated[int, typer.Option("--batch", help="Reaches per model refit.")] = 10,
     explore_radius: Annotated[float, typer.Option(
         "--explore-radius", help="active: first cover the working area to this radius, px.")
@@ -56,7 +60,7 @@ def learn_cmd(
     model's predicted key map). Prints the model's accuracy and boundary error against the
     simulator's ground truth.
     """
-    sim = SimConfig(mode=mode, reach_noise=reach_noise)
+    sim = SimConfig(mode=mode, reach_noise=reach_noise, arm=load_arm(arm))
     cfg = stage.LearnConfig(strategy=strategy, budget=budget, batch=batch,
                             explore_radius=explore_radius, curve_every=curve_every, sim=sim)
     kb_art = read_artifact(keyboard, "keyboard")
@@ -169,3 +173,30 @@ def bench_learn_cmd(
     con.print(f"kbcli learn (active, {mode}, budget {cfg.boundary_budget}, one core): {wall:.1f} s")
     rate = bench.dynamics_rate()
     con.print(f"dynamics simulator: {rate:.0f} reaches/s (1000 reaches, one core)")
+
+
+@command(bench_app, name="arm")
+def bench_arm_cmd(
+    reaches: Annotated[int, typer.Option("--reaches", min=1, help="Reaches per preset and mode.")] = 500,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the targets and the noise.")] = 0,
+) -> None:
+    """How each arm preset errs: landing error and felt-minus-true error.
+
+    Reads nothing; writes nothing. For each preset (ideal, servo, realistic) and mode, reaches
+    REACHES targets uniform over the default keyboard's working area in turn and prints the median
+    and 95th percentile of |landed - target| (tracking), |felt - landed| (proprioception) and
+    |contact - landed| (the finger's contact disc), and the simulated reaches per second.
+    """
+    from kbcli.bench import arm as bench
+
+    rows = bench.run(reaches=reaches, seed=seed)
+    t = Table(title=f"arm presets: {reaches} reaches each over the default working area, px "
+                    "(median / 95th percentile)", title_justify="left")
+    for col in ("preset", "mode", "|landed - target|", "|felt - landed|", "|contact - landed|",
+                "reaches/s"):
+        t.add_column(col, justify="left" if col in ("preset", "mode") else "right")
+    for r in rows:
+        t.add_row(r.preset, r.mode, *(f"{m:.2f} / {p:.2f}" for m, p in (r.landing, r.felt, r.contact)),
+                  f"{r.reaches_per_s:,.0f}")
+    con = out if interactive() else Console(width=max(out.width, 140), highlight=False)
+    con.print(t)

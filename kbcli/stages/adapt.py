@@ -27,6 +27,7 @@ from kbcli.core.keyboard import Keyboard
 from kbcli.core.posterior import LikelihoodTable
 from kbcli.errors import ArtifactError, ConfigError, KbcliError
 from kbcli.sim import MODES, SimConfig, World, make_reacher
+from kbcli.sim.arms import PRESETS, ArmConfig, arm_config
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages.artifact import Artifact, ref
 from kbcli.stages.models import load_model
@@ -49,6 +50,9 @@ class AdaptConfig:
     feedback : str
         ``landed``: the robot observes where its finger landed (proprioception); ``aim``: only where
         it aimed, and blurs its likelihood by ``reach_noise``.
+    arm : ArmConfig
+        How the simulated arm errs (:mod:`kbcli.sim.arms`; a preset name or a table is accepted):
+        its landing error, its finger and how well it feels where it landed.
     model_blur : float or None
         Extra softening of the model's map, px (see :class:`kbcli.core.adapt.AdapterConfig`;
         None: 1 px for a learned model, 0 for the exact one).
@@ -64,6 +68,7 @@ class AdaptConfig:
     mode: str = "ideal"
     reach_noise: float = 0.0
     feedback: str = "landed"
+    arm: ArmConfig = PRESETS["ideal"]
     model_blur: float | None = None
     max_steps: int = 40
     stop: bool = False
@@ -97,11 +102,12 @@ class AdaptConfig:
             raise ConfigError(f"max_steps must be a whole number >= 1, got {self.max_steps!r}")
         if not isinstance(self.stop, bool):
             raise ConfigError(f"stop must be true or false, got {self.stop!r}")
+        object.__setattr__(self, "arm", arm_config(self.arm))
         self.sim_config()
         self.adapter_config()
 
     def sim_config(self) -> SimConfig:
-        return SimConfig(mode=self.mode, reach_noise=self.reach_noise)
+        return SimConfig(mode=self.mode, reach_noise=self.reach_noise, arm=self.arm)
 
     def adapter_config(self) -> AdapterConfig:
         """The robot-side config (``blur`` is the reach noise under ``aim`` feedback)."""
@@ -110,7 +116,9 @@ class AdaptConfig:
         return AdapterConfig(**d)
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        d = asdict(self)
+        d["arm"] = self.arm.to_dict()
+        return d
 
     @classmethod
     def from_dict(cls, d: dict) -> AdaptConfig:
@@ -152,7 +160,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     Returns
     -------
     dict of ndarrays, per step t = 1..T (T = ``max_steps``, fewer when ``cfg.stop`` ends early)
-        ``actions`` (T, 2), ``landed`` (T, 2), ``perceived`` (T, D), ``classes`` (T,),
+        ``actions`` (T, 2), ``landed`` (T, 2) where the robot felt it landed, ``true_landed``
+        (T, 2) where it did (world side), ``perceived`` (T, D), ``classes`` (T,),
         ``estimates`` (T, P) maximum-likelihood cell, ``means`` (T, P) posterior mean,
         ``errors`` (T,) px error of the estimate (``cfg.estimator``) vs truth, ``ml_errors`` (T,),
         ``angle_errors`` (T,) deg, ``entropy`` (T,) nats, ``ml_prob`` (T,), ``mass`` (T,),
@@ -167,9 +176,12 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     adapter = Adapter(model, acfg, rng=robot_rng, table=table)
     world = World(keyboard, make_reacher(cfg.sim_config()), truth, world_family)
 
+    true_landed: list[np.ndarray] = []
+
     def touch(action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        landed, heard = world.touch(action[None, :], world_rng)
-        return landed[0], heard[0]
+        felt, heard = world.touch(action[None, :], world_rng)
+        true_landed.append(world.last_landed[0])
+        return felt[0], heard[0]
 
     snaps = sorted(set(int(s) for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps))
     snap_t, snap_log, snap_ang = [], [], []
@@ -200,6 +212,7 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         if st.t in snaps:
             snapshot(st.t)
     out = {k: np.asarray(v) for k, v in rec.items()}
+    out["true_landed"] = np.asarray(true_landed, float).reshape(-1, 2)
     out["classes"] = out["classes"].astype(np.int64)
     out["stop"] = out["stop"].astype(bool)
     g = adapter.grid

@@ -43,7 +43,7 @@ EXPERIMENT = "kbcli.stages.adapt:experiment"
 #: Strategies known when the adapt stage cannot be imported to ask it.
 DEFAULT_STRATEGIES = ("random", "active", "infogain")
 #: Adapt options the protocol sets per experiment (not in ``[evaluate.adapt]``).
-PER_EXPERIMENT = ("strategy", "mode", "max_steps", "family", "reach_noise")
+PER_EXPERIMENT = ("strategy", "mode", "max_steps", "family", "reach_noise", "arm")
 #: What an example run keeps beyond its per-step arrays (Fig. 5).
 EXAMPLE_KEYS = ("snapshots", "snapshot_steps", "snapshot_angles", "dx", "dy", "angles")
 #: Per-step outputs of an experiment kept for every run, each (T, ...).
@@ -152,6 +152,9 @@ class EvaluateConfig:
     reach_noise : mapping
         Landing scatter of the arm (px) in each mode: ``ideal`` lands exactly (0, the paper's
         idealised problem); ``dynamics`` adds motor noise to the simulated arm.
+    arm : mapping
+        Arm of each mode: a preset name (``ideal``, ``servo``, ``realistic``) or a table
+        (:mod:`kbcli.sim.arms`); missing modes get ``ideal``.
     categories : tuple of Category
         Displacement categories, in order.
     adapt : mapping
@@ -170,6 +173,7 @@ class EvaluateConfig:
     example: str = "small"
     snapshot_steps: tuple[int, ...] = (1, 2, 3, 5, 10, 20)
     reach_noise: Any = field(default_factory=lambda: {"ideal": 0.0, "dynamics": 2.0})
+    arm: Any = field(default_factory=lambda: {"ideal": "ideal", "dynamics": "ideal"})
     categories: tuple[Category, ...] = field(default_factory=_paper_categories)
     adapt: Any = field(default_factory=dict)
 
@@ -233,13 +237,23 @@ class EvaluateConfig:
                 raise ConfigError(f"reach_noise.{m} must be >= 0 px, got {v!r}")
         object.__setattr__(self, "reach_noise", MappingProxyType(
             {m: float(noise.get(m, 0.0)) for m in MODES}))
+        if not isinstance(self.arm, (dict, MappingProxyType)):
+            raise ConfigError("arm must be a table of mode = preset name (or table)")
+        from kbcli.sim.arms import arm_config
+
+        arms = dict(self.arm)
+        for m in arms:
+            if m not in MODES:
+                raise ConfigError(f"arm: unknown mode {m!r}; valid: {', '.join(MODES)}")
+        object.__setattr__(self, "arm", MappingProxyType(
+            {m: arm_config(arms.get(m)).to_dict() for m in MODES}))
         if not isinstance(self.adapt, (dict, MappingProxyType)):
             raise ConfigError("adapt must be a table of adapt-stage options")
         fixed = sorted(set(self.adapt) & set(PER_EXPERIMENT))
         if fixed:
             raise ConfigError(
                 f"adapt.{fixed[0]} is set per experiment by the protocol: use strategies, modes, "
-                "max_steps, family and reach_noise in [evaluate] instead"
+                "max_steps, family, reach_noise and arm in [evaluate] instead"
             )
         object.__setattr__(self, "adapt", MappingProxyType(dict(self.adapt)))
         for s in self.strategies:  # let the adapt stage check its own options
@@ -266,6 +280,7 @@ class EvaluateConfig:
             "example": self.example,
             "snapshot_steps": list(self.snapshot_steps),
             "reach_noise": dict(self.reach_noise),
+            "arm": {m: dict(v) for m, v in self.arm.items()},
             "categories": {c.name: c.to_dict() for c in self.categories},
             "adapt": dict(self.adapt),
         }
@@ -346,7 +361,8 @@ def adapt_config(cfg: EvaluateConfig, strategy: str, mode: str):
     if adapt is None:
         return None
     values = {**cfg.adapt, "strategy": strategy, "mode": mode, "max_steps": cfg.max_steps,
-              "family": cfg.family, "reach_noise": cfg.reach_noise[mode]}
+              "family": cfg.family, "reach_noise": cfg.reach_noise[mode],
+              "arm": dict(cfg.arm[mode])}
     return adapt.AdaptConfig.from_dict(values)
 
 
