@@ -102,9 +102,11 @@ def write_config(path, **kw):
     cats = body.pop("categories")
     body.pop("adapt")
     noise = body.pop("reach_noise")
+    arms = body.pop("arm")
     for k, v in body.items():
         lines.append(f"{k} = {json.dumps(v)}")
     lines += ["[evaluate.reach_noise]"] + [f"{m} = {v}" for m, v in noise.items()]
+    lines += ["[evaluate.arm]"] + [f'{m} = "{a["preset"]}"' for m, a in arms.items()]
     for name, c in cats.items():
         lines += [f"[evaluate.categories.{name}]", f"limit = {c['limit']}",
                   f"displacements = {json.dumps(c['displacements'])}"]
