@@ -219,6 +219,37 @@ class IdealReacher:
         return t
 
 
+def keys_heard_when_felt(cfg: SimConfig, keyboard: Keyboard, felt: np.ndarray, samples: int,
+                         rng: np.random.Generator) -> np.ndarray:
+    """Ground truth of p(key | where the robot *feels* it touched), by Monte Carlo.
+
+    For a robot that feels its fingertip at ``felt`` (n, 2), the finger truly is at the forward
+    kinematics of the encoder readings minus their bias and noise, and the pad hears it anywhere in
+    the finger's contact disc: draw ``samples`` such touches per point (the keyboard at its
+    reference pose). What a model of p(sound | action) should predict, where the action is the felt
+    position (the robot never knows better). For an arm that senses exactly, every draw is the key
+    under ``felt`` and no random number is used.
+
+    Returns
+    -------
+    (n, samples) int ndarray
+        Key index of each draw, -1 for silence.
+    """
+    f = np.asarray(felt, float).reshape(-1, 2)
+    n = len(f)
+    if cfg.arm.senses_exactly:
+        return np.repeat(keyboard.key_at(f)[:, None], samples, axis=1)
+    arm = cfg.arm
+    q = inverse_kinematics(cfg, f)[:, None, :] - np.asarray(arm.proprio_bias)
+    if arm.proprio_noise > 0:
+        q = q + rng.normal(0.0, arm.proprio_noise, size=(n, samples, 2))
+    else:
+        q = np.broadcast_to(q, (n, samples, 2))
+    landed = forward_kinematics(cfg, q.reshape(-1, 2))
+    contact = contact_points(cfg, landed, rng)
+    return keyboard.key_at(contact).reshape(n, samples)
+
+
 def make_reacher(cfg: SimConfig):
     """The reacher for ``cfg.mode``."""
     if cfg.mode == "ideal":

@@ -25,6 +25,7 @@ from kbcli.core.adapt import POSTERIORS, Adapter, AdapterConfig, adapt, build_ta
 from kbcli.core.config import check_known
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.posterior import LikelihoodTable
+from kbcli.core.robust import DEFAULT_BLURS, DEFAULT_OUTLIERS
 from kbcli.errors import ArtifactError, ConfigError, KbcliError
 from kbcli.sim import MODES, SimConfig, World, make_reacher
 from kbcli.sim.arms import PRESETS, ArmConfig, arm_config
@@ -69,6 +70,9 @@ class AdaptConfig:
     reach_noise: float = 0.0
     feedback: str = "landed"
     arm: ArmConfig = PRESETS["ideal"]
+    robust: bool = True
+    robust_blurs: tuple[float, ...] = DEFAULT_BLURS
+    robust_outliers: tuple[float, ...] = DEFAULT_OUTLIERS
     model_blur: float | None = None
     max_steps: int = 40
     stop: bool = False
@@ -103,6 +107,10 @@ class AdaptConfig:
         if not isinstance(self.stop, bool):
             raise ConfigError(f"stop must be true or false, got {self.stop!r}")
         object.__setattr__(self, "arm", arm_config(self.arm))
+        for name in ("robust_blurs", "robust_outliers"):
+            v = getattr(self, name)
+            if isinstance(v, list):
+                object.__setattr__(self, name, tuple(v))
         self.sim_config()
         self.adapter_config()
 
@@ -118,6 +126,8 @@ class AdaptConfig:
     def to_dict(self) -> dict:
         d = asdict(self)
         d["arm"] = self.arm.to_dict()
+        d["robust_blurs"] = list(self.robust_blurs)
+        d["robust_outliers"] = list(self.robust_outliers)
         return d
 
     @classmethod
