@@ -41,8 +41,9 @@ demo: $(STAMP)
 	$(KBCLI) run --model data/default-model.h5 --scene $(OUT)/demo/scene.h5 --mode dynamics \
 	    --steps 600 --perturb-at 200 --seed $(SEED) -o $(OUT)/demo/run.h5
 	$(KBCLI) plot run $(OUT)/demo/run.h5 -o $(OUT)/demo/run.png
+	$(KBCLI) animate $(OUT)/demo/run.h5 -o $(OUT)/demo/run.gif
 	$(KBCLI) inspect $(OUT)/demo/run.h5
-	@echo "figures: $(OUT)/demo/keyboard.png $(OUT)/demo/model.png $(OUT)/demo/run.png"
+	@echo "figures: $(OUT)/demo/keyboard.png $(OUT)/demo/model.png $(OUT)/demo/run.png $(OUT)/demo/run.gif"
 
 # data/ holds only what the demo and the tests need; this rebuilds it from scratch.
 data: $(STAMP)

@@ -15,3 +15,8 @@ class ArtifactError(KbcliError):
 
 class OutOfReachError(KbcliError):
     """A target outside the arm's workspace (never silently clipped)."""
+
+
+class ObservationError(KbcliError, ValueError):
+    """An observation the adaptation cannot use (non-numeric features, an action outside the
+    working area); nothing is updated."""

@@ -27,7 +27,9 @@ from kbcli.io.config import load_arm, load_toml
 from kbcli.stages import adapt as stage
 
 
-def _snapshots(text: str) -> tuple[int, ...]:
+def _snapshots(text: str, max_steps: int) -> tuple[int, ...]:
+    if text.strip().lower() == "all":
+        return tuple(range(max_steps + 1))
     try:
         steps = tuple(int(v) for v in text.split(",") if v.strip())
     except ValueError:
@@ -77,7 +79,8 @@ def adapt_cmd(
         "--stop/--no-stop", help="End at the stopping rule (mass within 1 px >= 0.95) instead of "
         "always taking T steps [default --no-stop].")] = None,
     snapshots: Annotated[str, typer.Option(
-        "--snapshots", help="Steps at which to store the posterior (0 = prior).")
+        "--snapshots", help="Steps at which to store the posterior (0 = prior), or 'all' (every "
+        "step: kbcli animate then shows each one).")
     ] = "0,1,2,3,5,10,20,40",
     seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the robot's and world's draws.")] = 0,
 ) -> None:
@@ -100,7 +103,7 @@ def adapt_cmd(
     scene_art = read_artifact(scene, "scene")
     values.setdefault("family", scene_art.config.get("family", "translation"))
     cfg = stage.AdaptConfig.from_dict(values)
-    steps = _snapshots(snapshots)
+    steps = _snapshots(snapshots, cfg.max_steps)
     stage.check_inputs(model_art, scene_art)
     output_path(output)
     art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
@@ -135,6 +138,8 @@ def plot_adapt_cmd(
     from kbcli.viz.adapt import plot_adapt
 
     art = read_artifact(run, "run")
+    if len(art.data.get("errors", ())) == 0:
+        raise ConfigError(f"{run}: holds no touches (a session that ended before the first one)")
     if "snapshots" not in art.data:
         raise ConfigError(f"{run}: holds no posterior snapshots (rerun kbcli adapt with "
                           f"--snapshots)")

@@ -7,16 +7,20 @@ multiplied by the observation's term (Eq. 7 ``kde`` or the ``likelihood``, Eq. 8
 :mod:`kbcli.core.posterior`) -> estimates (maximum-likelihood cell and posterior mean), entropy and
 the stopping rules are read off.
 
-:class:`Adapter` is the robot's side: it never sees the true pose. A closed loop drives it with
-``propose() -> action``, ``observe(landed, perceived)``, ``estimate()``, ``entropy()``,
-``should_stop()``; :func:`adapt` wraps the same calls into an iterator of :class:`Step` records.
+:class:`Adapter` is the robot's side: it never sees the true pose. It is driven by an ask/tell
+loop (the public API, ``from kbcli import Adapter``): ``suggest() -> action``,
+``observe(action, heard, felt_position=None)``, then ``estimate()``, ``posterior``, ``entropy()``,
+``done()``. :func:`adapt` wraps the same calls into an iterator of :class:`Step` records (the
+``adapt``, ``run`` and ``evaluate`` stages), and ``kbcli serve`` drives them from another process.
+``propose`` and ``should_stop`` are the older names of ``suggest`` and of the stopping rule.
 
 Choices
 -------
 - An *unknown* sound (class -1: heard something that matches no known sound) carries no usable
   information about the pose and is skipped (the posterior is unchanged); silence is an observation.
-- The robot uses the landed finger position (proprioception) as the action of the observation.
-  When it only knows its aim, set ``blur`` to the reach noise: the model raster is blurred by it.
+- The robot uses the landed finger position it *feels* (proprioception, ``felt_position``) as the
+  point of the observation; ``action`` is where it aimed. When it only knows its aim (no
+  ``felt_position``), set ``blur`` to the reach noise: the model raster is blurred by it.
 - The model is not trusted blindly (``robust = True``, the default with the likelihood
   posterior): its boundary blur and an outlier rate are unknowns marginalised online on a small
   grid (:mod:`kbcli.core.robust`), so a poor model's wrong edges widen the posterior instead of
@@ -64,7 +68,7 @@ from kbcli.core.robust import (
     robust_terms,
 )
 from kbcli.core.strategies import STRATEGIES, Context, get_strategy
-from kbcli.errors import ConfigError
+from kbcli.errors import ConfigError, ObservationError
 
 POSTERIORS = ("likelihood", "kde")
 #: Default softening (px) of a learned model's map (``AdapterConfig.model_blur``).
@@ -329,11 +333,32 @@ class Adapter:
         keyboard's centre at its reference pose).
     table : LikelihoodTable, optional
         A prebuilt :func:`build_table` (saves rasterising the model again).
+    max_steps : int, optional
+        A touch budget: :meth:`done` holds once this many touches were observed (None: only the
+        stopping rule ends the adaptation).
+
+    Examples
+    --------
+    The ask/tell loop, with a touch of the bundled simulator (see :meth:`from_model` for a model
+    file)::
+
+        adapter = Adapter.from_model("data/default-model.h5", strategy="infogain", seed=0)
+        while not adapter.done():
+            action = adapter.suggest()
+            felt, heard = robot_touch(action)   # your robot: where it felt it landed, what it heard
+            adapter.observe(action, heard, felt_position=felt)
+        print(adapter.estimate(), adapter.entropy())
     """
 
     def __init__(self, model, cfg: AdapterConfig, *, rng: np.random.Generator,
                  area: tuple[float, float, float, float] | None = None,
-                 centre: np.ndarray | None = None, table: LikelihoodTable | None = None) -> None:
+                 centre: np.ndarray | None = None, table: LikelihoodTable | None = None,
+                 max_steps: int | None = None) -> None:
+        if max_steps is not None:
+            _int("max_steps", max_steps)
+        self.max_steps = max_steps
+        #: touches observed so far (unknown sounds included; ``posterior.n_obs`` counts updates)
+        self.touches = 0
         self.model = model
         self.cfg = cfg
         self.rng = rng
@@ -354,6 +379,50 @@ class Adapter:
         self._corners: np.ndarray | None = None
         self.bandwidths: list[float] = []
 
+    @classmethod
+    def from_model(cls, model, *, strategy: str = "infogain", family: str = "translation",
+                   seed: int | None = None, rng: np.random.Generator | None = None,
+                   config: AdapterConfig | None = None, max_steps: int | None = None,
+                   **options) -> Adapter:
+        """An adapter for a model: a model artifact file (``.h5``, kind ``model``), a loaded
+        :class:`~kbcli.stages.artifact.Artifact`, or a model object.
+
+        Parameters
+        ----------
+        model : str, path, Artifact or SoundModel
+            A file is read with :mod:`kbcli.io` (imported only then: the core needs no h5py).
+        strategy, family : str
+            See :class:`AdapterConfig`.
+        seed : int, optional
+            Seed of the robot's generator (``numpy.random.default_rng(seed)``); or pass ``rng``.
+        config : AdapterConfig, optional
+            A whole config (then ``strategy``, ``family`` and ``options`` must not be given).
+        max_steps : int, optional
+            Touch budget after which :meth:`done` holds.
+        **options
+            Any other :class:`AdapterConfig` field (``posterior``, ``resolution``, ``stop_mass``...).
+
+        Raises
+        ------
+        ArtifactError
+            A missing or unreadable file, or an artifact that is not a model.
+        ConfigError
+            An unknown or invalid option.
+        """
+        if config is None:
+            config = AdapterConfig.from_dict({"strategy": strategy, "family": family, **options})
+        elif options:
+            raise ConfigError(f"give either config or options, not both ({', '.join(options)})")
+        if rng is None:
+            rng = np.random.default_rng(seed)
+        elif seed is not None:
+            raise ConfigError("give either seed or rng, not both")
+        if not hasattr(model, "classify"):  # a path or an artifact: the I/O layer loads it
+            from kbcli.api import load_model
+
+            model = load_model(model)
+        return cls(model, config, rng=rng, max_steps=max_steps)
+
     # -- deciding ----------------------------------------------------------------------------------
     def planning_table(self) -> LikelihoodTable:
         """The map the strategies plan with: the model's, or with the robust posterior, blurred by
@@ -370,29 +439,76 @@ class Adapter:
         return Context(self.posterior, self.planning_table(), self.area, self._edges,
                        self._corners, self.cfg)
 
-    def propose(self) -> np.ndarray:
+    def suggest(self) -> np.ndarray:
         """(2,) the next action (pad px) chosen by the strategy."""
         return np.asarray(self._strategy(self.context(), self.rng), float)
 
+    def propose(self) -> np.ndarray:
+        """The older name of :meth:`suggest`."""
+        return self.suggest()
+
     # -- observing ---------------------------------------------------------------------------------
-    def observe(self, action: np.ndarray, perceived: np.ndarray) -> int:
-        """Classify a perceived sound (``model.classify``) and update the posterior with it.
+    def observe(self, action: np.ndarray, heard: np.ndarray | None,
+                felt_position: np.ndarray | None = None) -> int:
+        """Classify a heard sound (``model.classify``) and update the posterior with it.
 
         Parameters
         ----------
-        action : (2,) ndarray
-            Where the finger landed (or was aimed, see ``blur``).
-        perceived : (D,) ndarray
-            The heard features (NaN for silence).
+        action : (2,) array_like
+            Where the robot aimed (pad px, inside the working area).
+        heard : (D,) array_like or None
+            The heard features; None (or all NaN) for silence.
+        felt_position : (2,) array_like, optional
+            Where the robot felt its finger land (proprioception): the point the posterior is
+            updated at. None: the aim is used (set ``AdapterConfig.blur`` to the reach noise).
 
         Returns
         -------
         int
             The class (0 silence, -1 unknown: skipped).
+
+        Raises
+        ------
+        ObservationError
+            Non-numeric or wrongly sized input, an action outside the working area; the posterior
+            is left unchanged.
         """
-        cls = int(self.model.classify(np.asarray(perceived, float).reshape(1, -1))[0])
-        self.observe_class(action, cls)
+        a = self.check_action(action, "action")
+        point = a if felt_position is None else _point(felt_position, "felt_position")
+        h = self.check_heard(heard)
+        cls = int(self.model.classify(h.reshape(1, -1))[0])
+        self.observe_class(point, cls)
+        self.touches += 1
         return cls
+
+    def check_action(self, action, name: str = "action") -> np.ndarray:
+        """``action`` as a (2,) array inside the working area; raises :class:`ObservationError`."""
+        a = _point(action, name)
+        x0, y0, x1, y1 = self.area
+        tol = 1e-9 * max(1.0, abs(x1 - x0), abs(y1 - y0))
+        if not (x0 - tol <= a[0] <= x1 + tol and y0 - tol <= a[1] <= y1 + tol):
+            raise ObservationError(f"{name} ({a[0]:g}, {a[1]:g}) is outside the working area "
+                                   f"({x0:g}, {y0:g})-({x1:g}, {y1:g})")
+        return a
+
+    def check_heard(self, heard) -> np.ndarray:
+        """``heard`` as a (D,) float array (all NaN: silence); raises :class:`ObservationError`."""
+        d = int(np.shape(self.model.class_features_)[1])
+        if heard is None:
+            return np.full(d, np.nan)
+        try:
+            h = np.asarray(heard, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ObservationError(f"heard features must be {d} numbers or null (silence), got "
+                                   f"{heard!r}") from None
+        if h.shape != (d,):
+            raise ObservationError(f"heard features must be {d} numbers (or null for silence), "
+                                   f"got {h.size}")
+        nan = np.isnan(h)
+        if (nan.any() and not nan.all()) or np.isinf(h).any():
+            raise ObservationError(f"heard features must be all finite (or all missing for "
+                                   f"silence), got {h.tolist()}")
+        return h
 
     def observe_class(self, action: np.ndarray, cls: int) -> None:
         """Update the posterior with an already classified observation (Eq. 8)."""
@@ -441,6 +557,12 @@ class Adapter:
             return True
         return self.mass_near_estimate() >= self.cfg.stop_mass
 
+    def done(self) -> bool:
+        """Whether to stop touching: the stopping rule (:meth:`should_stop`) holds, or the
+        ``max_steps`` budget is used up."""
+        return (self.max_steps is not None and self.touches >= self.max_steps) or \
+            self.should_stop()
+
 
 @dataclass(frozen=True)
 class Step:
@@ -462,6 +584,18 @@ class Step:
 
 
 Touch = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def _point(v, name: str) -> np.ndarray:
+    """``v`` as a finite (2,) float array; raises :class:`ObservationError`."""
+    try:
+        p = np.asarray(v, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ObservationError(f"{name} must be two numbers (x, y in pad px), got {v!r}") from None
+    if p.shape != (2,) or not np.isfinite(p).all():
+        raise ObservationError(f"{name} must be two finite numbers (x, y in pad px), got "
+                               f"{np.asarray(v).tolist() if p.size < 8 else f'{p.size} values'}")
+    return p
 
 
 def adapt(adapter: Adapter, touch: Touch, max_steps: int, *, use_landed: bool = True,
@@ -486,25 +620,35 @@ def adapt(adapter: Adapter, touch: Touch, max_steps: int, *, use_landed: bool = 
     """
     for t in range(1, max_steps + 1):
         t0 = time.perf_counter()
-        action = adapter.propose()
+        action = adapter.suggest()
         t1 = time.perf_counter()
         landed, perceived = touch(action)
         landed = np.asarray(landed, float).reshape(2)
         perceived = np.asarray(perceived, float).reshape(-1)
         t2 = time.perf_counter()
-        cls = adapter.observe(landed if use_landed else action, perceived)
-        post = adapter.posterior
-        ml, mean = post.ml(), post.mean()
-        t3 = time.perf_counter()
-        done = adapter.should_stop()
-        yield Step(t=t, action=action, landed=landed, perceived=perceived, cls=cls, ml=ml,
-                   mean=mean, estimate=mean if adapter.cfg.estimator == "mean" else ml,
-                   entropy=post.entropy(), ml_prob=post.ml_prob(),
-                   mass=adapter.mass_near_estimate(), stop=done,
-                   ms=1e3 * ((t1 - t0) + (t3 - t2)))
-        if stop and done:
+        cls = adapter.observe(action, perceived, felt_position=landed if use_landed else None)
+        st = step_record(adapter, t, action, landed, perceived, cls, t0=t2, extra_ms=1e3 * (t1 - t0))
+        yield st
+        if stop and st.stop:
             return
 
 
-__all__ = ["AdapterConfig", "Adapter", "Estimate", "Step", "adapt", "build_table", "STRATEGIES",
-           "POSTERIORS"]
+def step_record(adapter: Adapter, t: int, action: np.ndarray, landed: np.ndarray,
+                perceived: np.ndarray, cls: int, *, t0: float, extra_ms: float = 0.0) -> Step:
+    """The :class:`Step` record of the adapter's state after its ``t``-th observation.
+
+    ``ms`` is the time from ``t0`` (``time.perf_counter()`` when the observation started) to the
+    estimates being read, plus ``extra_ms`` (the decision's time).
+    """
+    post = adapter.posterior
+    ml, mean = post.ml(), post.mean()
+    ms = 1e3 * (time.perf_counter() - t0) + extra_ms
+    return Step(t=t, action=np.asarray(action, float), landed=np.asarray(landed, float),
+                perceived=np.asarray(perceived, float), cls=int(cls), ml=ml, mean=mean,
+                estimate=mean if adapter.cfg.estimator == "mean" else ml,
+                entropy=post.entropy(), ml_prob=post.ml_prob(),
+                mass=adapter.mass_near_estimate(), stop=adapter.should_stop(), ms=ms)
+
+
+__all__ = ["AdapterConfig", "Adapter", "Estimate", "Step", "adapt", "step_record", "build_table",
+           "STRATEGIES", "POSTERIORS"]

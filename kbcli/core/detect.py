@@ -354,29 +354,57 @@ def bocpd(cfg: DetectorConfig, n_streams: int) -> Bank:
 
 
 # -- the two forms ------------------------------------------------------------------------------------
+#: The result values :meth:`Detector.update` takes, by name (the play history's H values).
+RESULTS = {"MATCH": 0, "NO_MATCH": 1}
+
+
 class Detector:
-    """A detector on one stream, fed one result at a time.
+    """A detector on one stream, fed one result at a time (the public ``kbcli.Detector``).
+
+    Parameters
+    ----------
+    cfg : DetectorConfig, optional
+        The whole config; or give its fields as keywords (``detector="cusum", threshold=0.01``).
 
     Examples
     --------
-    >>> det = Detector(DetectorConfig(detector="binomial"))
-    >>> fired = [det.update(x) for x in [0] * 110 + [1, 1, 1]]
+    >>> det = Detector(detector="binomial")   # the paper's, N_LT 100, N_ST 10, threshold 0.01
+    >>> fired = [det.update(x) for x in ["MATCH"] * 110 + ["NO_MATCH"] * 3]
     >>> fired.index(True)  # the second failure in a row after 110 successes
     111
     """
 
-    def __init__(self, cfg: DetectorConfig) -> None:
+    def __init__(self, cfg: DetectorConfig | None = None, **options) -> None:
+        if cfg is None:
+            cfg = DetectorConfig.from_dict(options)
+        elif options:
+            raise ConfigError(f"give either cfg or options, not both ({', '.join(options)})")
         self.cfg = cfg
         self._bank = make_bank(cfg, 1)
         self.score = 1.0
         self.steps = 0
 
-    def update(self, x: int | bool) -> bool:
-        """Add one result (1 / True = failure); return whether the detector fires now.
+    def update(self, result: int | bool | str) -> bool:
+        """Add the result of one action; return whether the detector fires now.
+
+        Parameters
+        ----------
+        result : int, bool or str
+            The play history's value H: ``0`` / ``"MATCH"`` for a success, ``1`` / ``"NO_MATCH"``
+            for a failure (a bool counts True as a failure: ``update(failed)``).
 
         After firing it resets itself, so the next firing needs a new warm-up of ``n_lt + n_st``.
         """
-        self.score = float(self._bank.step(np.array([1 if x else 0]))[0])
+        if isinstance(result, str):
+            try:
+                result = RESULTS[result.upper()]
+            except KeyError:
+                raise ConfigError(f"unknown result {result!r}; valid: MATCH, NO_MATCH, 0, 1") \
+                    from None
+        elif not (isinstance(result, (bool, np.bool_)) or result in (0, 1)):
+            raise ConfigError(f"a result is 0 (MATCH) or 1 (NO_MATCH), got {result!r}")
+        x = 1 if result else 0
+        self.score = float(self._bank.step(np.array([x]))[0])
         self.steps += 1
         fired = self.score < self.cfg.threshold
         if fired:

@@ -51,6 +51,15 @@ def midi_to_name(midi: int) -> str:
     return f"{NOTE_NAMES[int(midi) % 12]}{int(midi) // 12 - 1}"
 
 
+def sound_name(features) -> str:
+    """A heard sound in words: ``"A4 96 bpm"`` (the pitch's nearest note), ``"silence"`` (NaN)."""
+    f = np.asarray(features, float).reshape(-1)
+    if f.size == 0 or np.isnan(f).all():
+        return "silence"
+    text = midi_to_name(int(np.rint(f[0])))
+    return f"{text} {f[1]:.0f} bpm" if f.size > 1 and np.isfinite(f[1]) else text
+
+
 def name_to_midi(name: str) -> int:
     """Scientific pitch name -> MIDI number ('C4' -> 60, 'A' -> 69 with the default octave 4).
 

@@ -56,6 +56,11 @@ class LoopStep:
         Whether the detector fired on this result.
     correction : (P,) ndarray
         The transform the robot applies to its actions after this step.
+    estimate : (P,) ndarray or None
+        During adaptation: the adapter's current estimate (its belief of where the keyboard is).
+    marginal : (dx (n,), dy (m,), log p (m, n) float32) or None
+        During adaptation: the log of the adapter's posterior over the translation after this
+        touch (the angle summed out), on the grid axes ``dx``, ``dy``.
     """
 
     t: int
@@ -67,6 +72,8 @@ class LoopStep:
     score: float
     fired: bool
     correction: np.ndarray
+    estimate: np.ndarray | None = None
+    marginal: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
 def closed_loop(
@@ -142,6 +149,14 @@ def closed_loop(
                 correction = np.asarray(s.estimate, float).copy()
             yield LoopStep(t=t, phase=ADAPT, action=s.action, landed=s.landed,
                            perceived=s.perceived, result=-1, score=float("nan"), fired=False,
-                           correction=correction.copy())
+                           correction=correction.copy(), estimate=s.estimate,
+                           marginal=_log_marginal(ad))
             t += 1
         det.reset()
+
+
+def _log_marginal(ad: Adapter) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(dx, dy, log translation marginal as float32) of an adapter's posterior."""
+    with np.errstate(divide="ignore"):
+        logp = np.log(ad.posterior.translation_marginal()).astype(np.float32)
+    return ad.grid.dx, ad.grid.dy, logp

@@ -119,6 +119,8 @@ class DynamicsReacher:
     last_felt : (n, 2) ndarray
         Where the robot felt its fingertip at the end of each reach (the true fingertip for an arm
         with exact proprioception).
+    last_end_angles : (n, 2) ndarray
+        Joint angles each reach of the last call ended in (the pose at the touch).
     """
 
     def __init__(self, cfg: SimConfig) -> None:
@@ -149,6 +151,7 @@ class DynamicsReacher:
         self.last_steps = np.empty(0, dtype=np.int64)
         self.last_angles = np.empty((0, 2))
         self.last_felt = np.empty((0, 2))
+        self.last_end_angles = np.empty((0, 2))
         self.reset(self.home)
 
     def _link(self, length: float, mass: float, group: pymunk.ShapeFilter) -> pymunk.Body:
@@ -284,4 +287,5 @@ class DynamicsReacher:
             self.last_felt = felt_positions(self.cfg, ends, rng)
         else:
             self.last_felt = landed.copy()
+        self.last_end_angles = ends
         return landed

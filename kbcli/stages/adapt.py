@@ -10,8 +10,13 @@ the estimates (posterior mean and maximum-likelihood cell), the error against th
 degrees for rotations), the entropy (nats), the probability of the most probable cell, the mass
 near the estimate, whether the stopping rule held, and the robot's time (``timing/step_ms``: the
 only dataset that is not reproducible bit for bit, being wall-clock); plus posterior snapshots at
-chosen steps (``snapshots/log_translation``: the log of the translation marginal; and, rigid family,
-``snapshots/angle``: the angle marginal).
+chosen steps (``snapshots``: the log of the translation marginal; and, rigid family,
+``snapshot_angles``: the angle marginal). Schema 2 adds ``joint_angles``, the simulated arm's pose
+after each touch in dynamics mode, and the arm's geometry and the mode in the attributes.
+
+:class:`Recorder` and :func:`run_attrs` build the same artifact for a session with a robot in
+another process (``kbcli serve``, :mod:`kbcli.stages.serve`): there the truth is unknown and the
+errors are NaN (their summaries None).
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from kbcli.core import transforms
-from kbcli.core.adapt import POSTERIORS, Adapter, AdapterConfig, adapt, build_table
+from kbcli.core.adapt import POSTERIORS, Adapter, AdapterConfig, Step, adapt, build_table
 from kbcli.core.config import check_known
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.posterior import LikelihoodTable
@@ -146,6 +151,98 @@ def _errors(est: np.ndarray, truth: np.ndarray, robot_family: str,
     return t_err, abs(a_est - a_true)
 
 
+#: Per-step records of a ``run`` artifact, in the order :meth:`Recorder.add` takes them.
+RECORDS = ("actions", "landed", "perceived", "classes", "estimates", "means", "errors", "ml_errors",
+           "angle_errors", "entropy", "ml_prob", "mass", "stop", "step_ms")
+
+
+class Recorder:
+    """The per-step records and posterior snapshots of one adaptation: what a ``run`` artifact
+    holds, whoever touched (the simulated world in :func:`experiment`, or a robot in another
+    process through ``kbcli serve``, :mod:`kbcli.stages.serve`).
+
+    Parameters
+    ----------
+    adapter : Adapter
+        The robot's adapter (read after each step).
+    snapshot_steps : iterable of int
+        Steps (0: the prior) at which to keep the posterior.
+    """
+
+    def __init__(self, adapter: Adapter, snapshot_steps=()) -> None:
+        self.adapter = adapter
+        self.snaps = {int(s) for s in snapshot_steps if int(s) >= 0}
+        self.rec: dict[str, list] = {k: [] for k in RECORDS}
+        self.joint_angles: list[np.ndarray] = []
+        self.model_error: list[tuple[float, float]] = []
+        self.snap_t: list[int] = []
+        self.snap_log: list[np.ndarray] = []
+        self.snap_ang: list[np.ndarray] = []
+        if 0 in self.snaps:
+            self.snapshot(0)
+
+    def __len__(self) -> int:
+        return len(self.rec["actions"])
+
+    def snapshot(self, t: int) -> None:
+        """Keep the current posterior as the one after step ``t``."""
+        post = self.adapter.posterior
+        self.snap_t.append(t)
+        with np.errstate(divide="ignore"):
+            self.snap_log.append(np.log(post.translation_marginal()).astype(np.float32))
+        pa = post.marginals()[0]
+        self.snap_ang.append(np.ones(1) if pa is None else pa)
+
+    def add(self, st: Step, errors: tuple[float, float, float] = (np.nan, np.nan, np.nan),
+            joint_angles: np.ndarray | None = None) -> None:
+        """Record one step; ``errors`` = (px error of the estimate, of the ML cell, angle error
+        in degrees) against the truth (NaN when it is unknown, as for a real robot)."""
+        err, ml_err, aerr = errors
+        for k, v in zip(RECORDS, (st.action, st.landed, st.perceived, st.cls, st.ml, st.mean, err,
+                                  ml_err, aerr, st.entropy, st.ml_prob, st.mass, st.stop, st.ms),
+                        strict=True):
+            self.rec[k].append(v)
+        if joint_angles is not None:
+            self.joint_angles.append(np.asarray(joint_angles, float).reshape(2))
+        robust = getattr(self.adapter, "robust", None)
+        if robust is not None:
+            self.model_error.append((robust.blur_mean(), robust.outlier_mean()))
+        if st.t in self.snaps:
+            self.snapshot(st.t)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The records as arrays (see :func:`experiment`'s Returns)."""
+        g = self.adapter.grid
+        d = int(np.shape(self.adapter.model.class_features_)[1])
+        out = {k: np.asarray(v) for k, v in self.rec.items()}
+        for k, width in (("actions", 2), ("landed", 2), ("perceived", d),
+                         ("estimates", g.n_params), ("means", g.n_params)):
+            out[k] = np.asarray(out[k], float).reshape(-1, width)
+        for k in ("errors", "ml_errors", "angle_errors", "entropy", "ml_prob", "mass", "step_ms"):
+            out[k] = np.asarray(out[k], float)
+        out["classes"] = out["classes"].astype(np.int64)
+        out["stop"] = out["stop"].astype(bool)
+        if self.joint_angles and len(self.joint_angles) == len(self):
+            out["joint_angles"] = np.stack(self.joint_angles)
+        if self.model_error and len(self.model_error) == len(self):
+            me = np.asarray(self.model_error, float)
+            out["blur_mean"], out["outlier_mean"] = me[:, 0], me[:, 1]
+        out.update(dx=g.dx, dy=g.dy, angles=g.angles,
+                   snapshot_steps=np.asarray(self.snap_t, np.int64))
+        if self.snap_t:
+            out["snapshots"] = np.stack(self.snap_log)
+            out["snapshot_angles"] = np.stack(self.snap_ang)
+        if self.adapter.cfg.posterior == "kde":
+            out["bandwidths"] = np.asarray(self.adapter.bandwidths, float)
+        return out
+
+
+def end_angles(reacher) -> np.ndarray | None:
+    """(n, 2) joint angles the reacher ended its last reaches in (dynamics mode), else None."""
+    ang = getattr(reacher, "last_end_angles", None)
+    return None if ang is None else np.asarray(ang, float).reshape(-1, 2)
+
+
 def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndarray, *,
                rng: np.random.Generator, world_family: str | None = None,
                table: LikelihoodTable | None = None,
@@ -175,7 +272,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         ``estimates`` (T, P) maximum-likelihood cell, ``means`` (T, P) posterior mean,
         ``errors`` (T,) px error of the estimate (``cfg.estimator``) vs truth, ``ml_errors`` (T,),
         ``angle_errors`` (T,) deg, ``entropy`` (T,) nats, ``ml_prob`` (T,), ``mass`` (T,),
-        ``stop`` (T,) bool, ``step_ms`` (T,); ``snapshot_steps`` (S,), ``snapshots`` (S, ny, nx)
+        ``stop`` (T,) bool, ``step_ms`` (T,); ``joint_angles`` (T, 2) the arm's pose after each
+        touch (dynamics mode); ``snapshot_steps`` (S,), ``snapshots`` (S, ny, nx)
         log translation marginals, ``snapshot_angles`` (S, A) angle marginals (rigid); ``dx``,
         ``dy``, ``angles`` grid axes.
     """
@@ -185,53 +283,27 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     acfg = cfg.adapter_config()
     adapter = Adapter(model, acfg, rng=robot_rng, table=table)
     world = World(keyboard, make_reacher(cfg.sim_config()), truth, world_family)
+    poses: list[np.ndarray] = []
 
     true_landed: list[np.ndarray] = []
 
     def touch(action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         felt, heard = world.touch(action[None, :], world_rng)
         true_landed.append(world.last_landed[0])
+        ang = end_angles(world.reacher)
+        if ang is not None and len(ang):
+            poses.append(ang[-1])
         return felt[0], heard[0]
 
-    snaps = sorted(set(int(s) for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps))
-    snap_t, snap_log, snap_ang = [], [], []
-
-    def snapshot(t: int) -> None:
-        post = adapter.posterior
-        snap_t.append(t)
-        with np.errstate(divide="ignore"):
-            snap_log.append(np.log(post.translation_marginal()).astype(np.float32))
-        pa = post.marginals()[0]
-        snap_ang.append(np.ones(1) if pa is None else pa)
-
-    if 0 in snaps:
-        snapshot(0)
-    rec: dict[str, list] = {k: [] for k in ("actions", "landed", "perceived", "classes", "estimates",
-                                            "means", "errors", "ml_errors", "angle_errors",
-                                            "entropy", "ml_prob", "mass", "stop", "step_ms")}
+    snaps = [s for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps]
+    rec = Recorder(adapter, snaps)
     for st in adapt(adapter, touch, cfg.max_steps, use_landed=cfg.feedback == "landed",
                     stop=cfg.stop):
         err, aerr = _errors(st.estimate, truth, cfg.family, world_family)
         ml_err, _ = _errors(st.ml, truth, cfg.family, world_family)
-        for k, v in (("actions", st.action), ("landed", st.landed), ("perceived", st.perceived),
-                     ("classes", st.cls), ("estimates", st.ml), ("means", st.mean),
-                     ("errors", err), ("ml_errors", ml_err), ("angle_errors", aerr),
-                     ("entropy", st.entropy), ("ml_prob", st.ml_prob), ("mass", st.mass),
-                     ("stop", st.stop), ("step_ms", st.ms)):
-            rec[k].append(v)
-        if st.t in snaps:
-            snapshot(st.t)
-    out = {k: np.asarray(v) for k, v in rec.items()}
+        rec.add(st, (err, ml_err, aerr), poses[-1] if poses else None)
+    out = rec.arrays()
     out["true_landed"] = np.asarray(true_landed, float).reshape(-1, 2)
-    out["classes"] = out["classes"].astype(np.int64)
-    out["stop"] = out["stop"].astype(bool)
-    g = adapter.grid
-    out.update(dx=g.dx, dy=g.dy, angles=g.angles, snapshot_steps=np.asarray(snap_t, np.int64))
-    if snap_t:
-        out["snapshots"] = np.stack(snap_log)
-        out["snapshot_angles"] = np.stack(snap_ang)
-    if cfg.posterior == "kde":
-        out["bandwidths"] = np.asarray(adapter.bandwidths, float)
     return out
 
 
@@ -290,42 +362,68 @@ def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
     truth = np.asarray(scene_artifact.config["params"], float)
     res = experiment(cfg, model, kb, truth, rng=rng, world_family=world_family,
                      snapshot_steps=snapshot_steps)
-    names = transforms.FAMILIES[cfg.family]
-    errors = res["errors"]
-    angle_ok = res["angle_errors"] < 0.5
-    reach1 = steps_below(np.where(angle_ok, errors, np.inf), 1.0)
-    stop_at = np.flatnonzero(res["stop"])
-    final = res["means"][-1] if cfg.estimator == "mean" else res["estimates"][-1]
-    attrs = {
-        "strategy": cfg.strategy,
-        "posterior": cfg.posterior,
-        "family": cfg.family,
-        "world_family": world_family,
-        "steps": int(len(errors)),
-        "final_error_px": float(errors[-1]),
-        "final_angle_error_deg": float(res["angle_errors"][-1]),
-        "steps_to_1px": reach1,
-        "stop_step": int(stop_at[0] + 1) if len(stop_at) else None,
-        "final_entropy": float(res["entropy"][-1]),
-        "estimate": {n: float(v) for n, v in zip(names, final, strict=True)},
-        "truth": {n: float(v) for n, v in
-                  zip(transforms.FAMILIES[world_family], truth, strict=True)},
-        "grid_cells": cfg.adapter_config().grid_cells,
-        "median_step_ms": float(np.median(res["step_ms"])),
-        "truth_inside_prior": _inside_prior(cfg, truth, world_family),
-    }
-    timing = {"step_ms": res.pop("step_ms")}
-    data = {k: v for k, v in res.items()}
-    data["timing"] = timing
+    attrs = run_attrs(res, cfg.adapter_config(), truth=truth, world_family=world_family)
+    attrs["truth_inside_prior"] = _inside_prior(cfg, truth, world_family)
+    sim = cfg.sim_config()
+    attrs["mode"] = cfg.mode
+    attrs["arm"] = {"base": list(sim.base), "link_lengths": list(sim.link_lengths)}
     return Artifact(
         kind="run",
         config={"adapt": cfg.to_dict(), "keyboard": model_artifact.config["keyboard"],
                 "snapshot_steps": [int(s) for s in snapshot_steps]},
         seed=seed,
-        data=data,
+        data=run_data(res),
         attrs=attrs,
         inputs={"model": ref(model_artifact), "scene": ref(scene_artifact)},
     )
+
+
+def run_attrs(res: dict[str, np.ndarray], acfg: AdapterConfig, *, truth: np.ndarray | None = None,
+              world_family: str | None = None) -> dict:
+    """The summary of a ``run`` artifact from its records (:meth:`Recorder.arrays`).
+
+    Without a ``truth`` (a real robot, ``kbcli serve``) the errors are unknown: ``truth``,
+    ``final_error_px``, ``final_angle_error_deg`` and ``steps_to_1px`` are None. A run of no step
+    has no estimate.
+    """
+    names = transforms.FAMILIES[acfg.family]
+    errors = np.asarray(res["errors"], float)
+    n = int(len(errors))
+    known = truth is not None and n > 0
+    reach1 = None
+    if known:
+        angle_ok = res["angle_errors"] < 0.5
+        reach1 = steps_below(np.where(angle_ok, errors, np.inf), 1.0)
+    stop_at = np.flatnonzero(res["stop"])
+    final = None
+    if n:
+        final = res["means"][-1] if acfg.estimator == "mean" else res["estimates"][-1]
+    wf = world_family or acfg.family
+    return {
+        "strategy": acfg.strategy,
+        "posterior": acfg.posterior,
+        "family": acfg.family,
+        "world_family": wf if truth is not None else None,
+        "steps": n,
+        "final_error_px": float(errors[-1]) if known else None,
+        "final_angle_error_deg": float(res["angle_errors"][-1]) if known else None,
+        "steps_to_1px": reach1,
+        "stop_step": int(stop_at[0] + 1) if len(stop_at) else None,
+        "final_entropy": float(res["entropy"][-1]) if n else None,
+        "estimate": None if final is None else
+        {k: float(v) for k, v in zip(names, final, strict=True)},
+        "truth": None if truth is None else
+        {k: float(v) for k, v in zip(transforms.FAMILIES[wf], truth, strict=True)},
+        "grid_cells": acfg.grid_cells,
+        "median_step_ms": float(np.median(res["step_ms"])) if n else None,
+    }
+
+
+def run_data(res: dict[str, np.ndarray]) -> dict:
+    """The datasets of a ``run`` artifact: the records, with the wall-clock times in ``timing/``."""
+    data = {k: v for k, v in res.items() if k != "step_ms"}
+    data["timing"] = {"step_ms": res["step_ms"]}
+    return data
 
 
 def build_shared_table(cfg: AdaptConfig, model) -> LikelihoodTable:
@@ -334,4 +432,5 @@ def build_shared_table(cfg: AdaptConfig, model) -> LikelihoodTable:
 
 
 __all__ = ["AdaptConfig", "experiment", "run", "check_inputs", "steps_below", "build_shared_table",
-           "POSTERIORS", "FEEDBACKS", "DEFAULT_SNAPSHOTS"]
+           "Recorder", "run_attrs", "run_data", "RECORDS", "POSTERIORS", "FEEDBACKS",
+           "DEFAULT_SNAPSHOTS"]

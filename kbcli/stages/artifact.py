@@ -21,8 +21,8 @@ SCHEMA_VERSIONS: dict[str, int] = {
     "scene": 1,
     "history": 1,
     "detection": 1,
-    "run": 1,
-    "closed_loop": 1,
+    "run": 2,  # 2: joint_angles (dynamics mode), attrs arm and mode; serve sessions (no truth)
+    "closed_loop": 2,  # 2: steps/joint_angles, steps/estimate, the adaptation posteriors
     "evaluation": 1,
 }
 

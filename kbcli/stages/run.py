@@ -4,7 +4,11 @@ The world (:class:`~kbcli.sim.World`) starts with the keyboard at its reference 
 the scene's pose after ``perturb_at`` touches, without telling the robot. The robot's side,
 :func:`kbcli.core.loop.closed_loop`, only gets the world's ``touch``. The ``closed_loop`` artifact
 records every touch (phase, action, landed point, heard features, MATCH/NO_MATCH, detector score,
-the correction in force) and summarises the success rate of playing before the perturbation, after
+the correction in force; schema 2 adds the arm's joint angles after each touch in dynamics mode
+``steps/joint_angles``, the adapter's estimate during adaptation ``steps/estimate`` (NaN while
+playing), and its posterior after each adaptation touch ``posterior/log_translation`` (the log of
+the translation marginal on the ``posterior/dx``, ``posterior/dy`` grid, at touches
+``posterior/touch``)) and summarises the success rate of playing before the perturbation, after
 it (until the robot adapted) and after adaptation.
 """
 
@@ -25,7 +29,7 @@ from kbcli.errors import ConfigError
 from kbcli.sim import World, make_reacher
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import perturb as perturb_stage
-from kbcli.stages.adapt import AdaptConfig, check_inputs
+from kbcli.stages.adapt import AdaptConfig, check_inputs, end_angles
 from kbcli.stages.artifact import Artifact, ref
 from kbcli.stages.models import load_model
 
@@ -115,18 +119,31 @@ class LoopSession:
         )
         self.steps: list[LoopStep] = []
         self.moved_at: int | None = None
+        #: the arm's joint angles after each touch (dynamics mode)
+        self.joint_angles: list[np.ndarray] = []
+        #: (touch, log translation marginal) after each adaptation touch
+        self.posteriors: list[tuple[int, np.ndarray]] = []
+        self._axes: tuple[np.ndarray, np.ndarray] | None = None
 
     def _touch(self, world_rng: np.random.Generator):
         def touch(actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             if self.moved_at is None and self.world.touches >= self.cfg.perturb_at:
                 self.world.pose, self.world.family = self.truth, self.world_family
                 self.moved_at = self.world.touches
-            return self.world.touch(actions, world_rng)
+            landed, heard = self.world.touch(actions, world_rng)
+            ang = end_angles(self.world.reacher)
+            if ang is not None and len(ang) == len(landed):
+                self.joint_angles.extend(ang)
+            return landed, heard
 
         return touch
 
     def __iter__(self) -> Iterator[LoopStep]:
         for s in self._robot:
+            if s.marginal is not None:
+                dx, dy, logp = s.marginal
+                self._axes = (dx, dy)
+                self.posteriors.append((s.t, logp))
             self.steps.append(s)
             yield s
 
@@ -187,12 +204,28 @@ class LoopSession:
             "fired": np.array([s.fired for s in st], dtype=np.uint8),
             "correction": np.array([s.correction for s in st], float),
         }
+        n_params = arr["correction"].shape[1] if arr["correction"].ndim == 2 else 0
+        arr["estimate"] = np.array([np.full(n_params, np.nan) if s.estimate is None else s.estimate
+                                    for s in st], float).reshape(len(st), n_params)
+        if len(self.joint_angles) == len(st) and st:
+            arr["joint_angles"] = np.array(self.joint_angles, float)
+        data = {"steps": arr, "truth": {"params": self.truth}}
+        if self.posteriors:
+            dx, dy = self._axes
+            data["posterior"] = {
+                "touch": np.array([t for t, _ in self.posteriors], np.int64),
+                "log_translation": np.stack([p for _, p in self.posteriors]),
+                "dx": dx, "dy": dy,
+            }
         summary = self.summary()
+        sim = self.cfg.adapt.sim_config()
+        summary["arm"] = {"base": list(sim.base), "link_lengths": list(sim.link_lengths)}
+        summary["mode"] = self.cfg.adapt.mode
         return Artifact(
             kind="closed_loop",
             config={"loop": self.cfg.to_dict(), "keyboard": self.model_art.config["keyboard"]},
             seed=self.seed,
-            data={"steps": arr, "truth": {"params": self.truth}},
+            data=data,
             attrs=summary,
             inputs={"model": ref(self.model_art), "scene": ref(self.scene_art)},
         )

@@ -1,0 +1,75 @@
+"""Benchmark of ``kbcli animate`` (issue 13): seconds to render a 40-touch adaptation.
+
+The target: a 40-touch run renders in 15 s or less on one core. The benchmark makes the run it
+renders: the embedded default model (or a given one) adapting to a (12, -7) px move in ``dynamics``
+mode (so the arm is drawn from recorded joint angles) for 40 touches, with the posterior stored at
+every step (``--snapshots all``: the worst case, the posterior panel changes in every frame); and a
+600-touch closed loop for the second row. Each is rendered ``repeats`` times to a GIF in a temporary
+folder; reported: frames, the median process CPU time (one core: matplotlib and Pillow draw and
+encode in one thread) and the median wall time of the rendering, which excludes the ~2 s of
+``kbcli`` start-up (time ``kbcli animate`` itself for that).
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from kbcli.errors import ConfigError
+from kbcli.stages import adapt as adapt_stage
+from kbcli.stages import perturb as perturb_stage
+from kbcli.stages import run as run_stage
+from kbcli.stages.artifact import Artifact
+
+TARGET_S = 15.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class BenchConfig:
+    """Benchmark settings (see the module docstring)."""
+
+    repeats: int = 3
+    touches: int = 40
+    loop: bool = True
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("repeats", "touches"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or v < 1:
+                raise ConfigError(f"{name} must be a whole number >= 1, got {v!r}")
+
+
+def make_runs(cfg: BenchConfig, model_art: Artifact) -> dict[str, Artifact]:
+    """The artifacts to render: an adaptation of ``cfg.touches`` touches (and a closed loop)."""
+    scene = perturb_stage.run(perturb_stage.PerturbConfig(params=(12.0, -7.0)), model_art,
+                              rng=np.random.default_rng(cfg.seed))
+    acfg = adapt_stage.AdaptConfig(mode="dynamics", max_steps=cfg.touches)
+    runs = {f"adaptation, {cfg.touches} touches": adapt_stage.run(
+        acfg, model_art, scene, rng=np.random.default_rng(cfg.seed), seed=cfg.seed,
+        snapshot_steps=tuple(range(cfg.touches + 1)))}
+    if cfg.loop:
+        lcfg = run_stage.LoopConfig(adapt=adapt_stage.AdaptConfig(mode="dynamics", stop=True))
+        runs["closed loop, 600 play touches"] = run_stage.run(
+            lcfg, model_art, scene, rng=np.random.default_rng(cfg.seed), seed=cfg.seed)
+    return runs
+
+
+def measure(art: Artifact, repeats: int) -> dict:
+    """Render ``art`` ``repeats`` times; frames, median CPU and wall seconds."""
+    from kbcli.viz.animate import animate
+
+    cpu, wall, frames = [], [], 0
+    with tempfile.TemporaryDirectory() as d:
+        for i in range(repeats):
+            c0, w0 = time.process_time(), time.perf_counter()
+            frames = animate(art, Path(d) / f"r{i}.gif")
+            cpu.append(time.process_time() - c0)
+            wall.append(time.perf_counter() - w0)
+        size = (Path(d) / "r0.gif").stat().st_size
+    return {"frames": frames, "cpu_s": float(np.median(cpu)), "wall_s": float(np.median(wall)),
+            "mb": size / 2**20}

@@ -1,0 +1,227 @@
+"""``kbcli serve``: adapt with a robot in another process, JSON lines over stdin/stdout or a socket.
+
+The protocol lives in :mod:`kbcli.stages.serve`; this module moves its lines. Stdout carries the
+protocol only (every human message goes to stderr). The session is written atomically after every
+touch, so a robot that disconnects, a Ctrl-C or a kill leaves a valid ``run`` artifact of the
+touches so far.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import socket
+import sys
+from pathlib import Path
+from typing import Annotated, BinaryIO
+
+import typer
+
+from kbcli.cli.app import command, err, output_path
+
+_HELP = """Adapt with a robot in another process: JSON lines on stdin/stdout (or a local socket).
+
+Reads MODEL (kind 'model'). kbcli decides where to touch; the robot touches, and tells what it
+heard and where it felt it landed; kbcli answers with the next action, its estimate of the
+keyboard's displacement and whether to stop. Writes OUTPUT (kind 'run', the same as kbcli adapt
+writes, with the errors unknown: NaN) after every touch, so a robot that disconnects leaves a valid
+artifact of the touches so far; 'kbcli plot adapt' and 'kbcli animate' read it. Messages on
+stderr; stdout carries the protocol only.
+
+\b
+Protocol 1, one JSON object per line each way. kbcli first sends:
+  {"type": "hello", "protocol": 1, "features": ["pitch", "tempo"], "area": [x0, y0, x1, y1],
+   "family": "translation", "parameters": ["dx", "dy"], "max_steps": 40, "step": 0,
+   "action": [x, y], "estimate": {"dx": 0, "dy": 0}, "entropy": 10.4, "mass": 0, "done": false}
+The robot, per touch ("op" may be left out):
+  {"op": "observe", "heard": [pitch, tempo] | null, "felt": [x, y] | null, "action": [x, y],
+   "id": any}
+  heard: the perceived features, null for silence (required); felt: where the finger landed, pad
+  px (optional: without it the aim is used, set --blur); action: where it aimed (optional: the
+  suggested action; must be in the working area); id: echoed back.
+kbcli answers:
+  {"type": "step", "step": 1, "class": 12, "sound": "A4 96 bpm", "estimate": {"dx": 11.9,
+   "dy": -7.1}, "entropy": 2.3, "mass": 0.81, "done": false, "action": [x, y] | null}
+  done: stop touching (stopping rule with --stop, or --max-steps touches); action: the next touch
+  (null after --max-steps touches).
+Also: {"op": "suggest"} (the pending action), {"op": "state"} (estimate, done, action),
+{"op": "end"} (write the artifact, reply {"type": "bye", "steps": n, "file": ...}, exit).
+A bad message (not JSON, unknown op or field, non-numeric features, an action outside the
+working area, a touch beyond --max-steps) gets {"type": "error", "error": "..."}; the session
+goes on. End of input or a closed socket ends the session (exit 0); Ctrl-C exits 130; both write
+the artifact first.
+"""
+
+
+def _listen(socket_path: Path | None, host: str, port: int | None) -> tuple[socket.socket, str]:
+    if socket_path is not None:
+        from kbcli.errors import KbcliError
+
+        if socket_path.exists() or socket_path.is_symlink():
+            raise KbcliError(f"{socket_path}: already exists (a file or a socket in use); remove "
+                             f"it or choose another --socket path")
+        srv = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            srv.bind(str(socket_path))
+        except OSError as exc:
+            srv.close()
+            raise KbcliError(f"{socket_path}: cannot listen ({exc.strerror})") from None
+        srv.listen(1)
+        return srv, f"unix:{socket_path}"
+    srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        srv.bind((host, port))
+    except OSError as exc:
+        srv.close()
+        from kbcli.errors import KbcliError
+
+        raise KbcliError(f"cannot listen on {host}:{port} ({exc.strerror})") from None
+    srv.listen(1)
+    return srv, f"tcp:{host}:{srv.getsockname()[1]}"
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, handled like Ctrl-C (the artifact is written first)."""
+
+
+def _on_sigterm(signum, frame) -> None:
+    raise _Terminated()
+
+
+def _run(session, rfile: BinaryIO, wfile: BinaryIO, save) -> str:
+    """Exchange lines until the robot ends or leaves; return how the session ended."""
+    from kbcli.stages.serve import MAX_LINE
+
+    def send(reply: dict) -> None:
+        wfile.write((json.dumps(reply) + "\n").encode())
+        wfile.flush()
+
+    try:
+        send(session.hello())
+        while True:
+            line = rfile.readline(MAX_LINE + 1)
+            if not line:
+                return "eof"
+            if len(line) > MAX_LINE and not line.endswith(b"\n"):
+                while line and not line.endswith(b"\n"):  # drop the rest of the long line
+                    line = rfile.readline(MAX_LINE)
+                send(session.error_reply(f"a message line is limited to {MAX_LINE} bytes"))
+                continue
+            reply = session.handle(line)
+            if reply is None:
+                continue
+            if reply["type"] == "step":
+                save()
+            elif reply["type"] == "bye":
+                reply["file"] = save()
+                send(reply)
+                return "end"
+            send(reply)
+    except (BrokenPipeError, ConnectionResetError):
+        return "disconnected"
+
+
+@command(name="serve", help=_HELP)
+def serve_cmd(
+    model: Annotated[Path, typer.Option("--model", help="Model artifact (kind 'model').")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Run artifact to write (.h5), "
+                                         "rewritten after every touch.")],
+    config: Annotated[Path | None, typer.Option(
+        "--config", help="TOML file with a [serve] table (any adapt option of the robot's side, "
+        "max_steps, stop); flags override it.")] = None,
+    strategy: Annotated[str | None, typer.Option(
+        "--strategy", help="random, active or infogain [default infogain].")] = None,
+    posterior: Annotated[str | None, typer.Option(
+        "--posterior", help="likelihood or kde [default likelihood].")] = None,
+    family: Annotated[str | None, typer.Option(
+        "--family", help="translation or rigid [default translation].")] = None,
+    max_steps: Annotated[int | None, typer.Option(
+        "--max-steps", "-T", help="Touches at most [default 40].")] = None,
+    stop: Annotated[bool | None, typer.Option(
+        "--stop/--no-stop", help="Say done at the stopping rule (mass within 1 px >= 0.95), or "
+        "only after --max-steps [default --stop].")] = None,
+    blur: Annotated[float | None, typer.Option(
+        "--blur", help="The robot's reach noise, px, used when it does not send where it felt "
+        "it landed [default 0].")] = None,
+    model_blur: Annotated[float | None, typer.Option(
+        "--model-blur", help="Soften the model's map by this many px [default: 1 for a learned "
+        "model, 0 for the exact one].")] = None,
+    resolution: Annotated[float | None, typer.Option(
+        "--resolution", help="Hypothesis grid step, px [default 0.5].")] = None,
+    prior_halfwidth: Annotated[float | None, typer.Option(
+        "--prior-halfwidth", help="Prior box of dx and dy, +-px [default 45].")] = None,
+    socket_path: Annotated[Path | None, typer.Option(
+        "--socket", help="Listen on this Unix socket for one robot instead of stdin/stdout.")
+    ] = None,
+    port: Annotated[int | None, typer.Option(
+        "--port", min=0, max=65535, help="Listen on this TCP port (0: any free one, printed on "
+        "stderr) for one robot instead of stdin/stdout.")] = None,
+    host: Annotated[str, typer.Option(
+        "--host", help="Address to listen on with --port.")] = "127.0.0.1",
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the strategy's draws.")] = 0,
+) -> None:
+    import numpy as np
+
+    from kbcli.errors import KbcliError
+    from kbcli.io.artifact import read_artifact, write_artifact
+    from kbcli.io.config import load_toml
+    from kbcli.stages.serve import ServeConfig, Session
+
+    if socket_path is not None and port is not None:
+        raise KbcliError("give either --socket or --port, not both")
+    values = dict(load_toml(config, "serve")) if config is not None else {}
+    flags = {"strategy": strategy, "posterior": posterior, "family": family,
+             "max_steps": max_steps, "stop": stop, "blur": blur, "model_blur": model_blur,
+             "resolution": resolution, "prior_halfwidth": prior_halfwidth}
+    values.update({k: v for k, v in flags.items() if v is not None})
+    cfg = ServeConfig.from_dict(values)
+    output_path(output)
+    if output.resolve() == model.resolve():
+        raise KbcliError(f"{output}: is the model (an input); write the session elsewhere")
+    model_art = read_artifact(model, "model")
+    transport = "stdio" if socket_path is None and port is None else \
+        ("unix" if socket_path is not None else "tcp")
+    session = Session(cfg, model_art, rng=np.random.default_rng(seed), seed=seed,
+                      transport=transport)
+    started = False
+
+    def save() -> str:
+        write_artifact(session.artifact(), output)
+        return str(output)
+
+    old_term = signal.signal(signal.SIGTERM, _on_sigterm)
+    srv = conn = None
+    ended = "interrupted"
+    try:
+        if transport == "stdio":
+            started = True
+            ended = _run(session, sys.stdin.buffer, sys.stdout.buffer, save)
+        else:
+            srv, where = _listen(socket_path, host, port)
+            err.print(f"kbcli serve: listening on {where}", markup=False)
+            conn, _ = srv.accept()
+            started = True
+            with conn.makefile("rb") as rfile, conn.makefile("wb") as wfile:
+                ended = _run(session, rfile, wfile, save)
+    finally:
+        signal.signal(signal.SIGTERM, old_term)
+        if started:
+            session.ended = session.ended or ended
+            if ended != "end":  # "end" saved before its reply
+                save()
+            err.print(f"kbcli serve: wrote {output}: {session.steps} touch(es), "
+                      f"{session.errors} bad message(s), ended by {session.ended}", markup=False)
+        if ended == "disconnected" and transport == "stdio":
+            with contextlib.suppress(OSError):  # no error at exit flushing a closed stdout
+                devnull = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(devnull, sys.stdout.fileno())
+        for s in (conn, srv):
+            if s is not None:
+                with contextlib.suppress(OSError):
+                    s.close()
+        if socket_path is not None and srv is not None:
+            with contextlib.suppress(OSError):
+                socket_path.unlink()

@@ -1,0 +1,322 @@
+"""Stage ``serve``: the adaptation driven by a robot in another process, over JSON lines.
+
+A robot that is not kbcli's simulator (a real arm, MuJoCo, Gazebo) touches, listens and feels
+where it landed; kbcli decides where to touch next and keeps the posterior (the same
+:class:`~kbcli.core.adapt.Adapter` the ``adapt`` and ``run`` stages use). :class:`Session` is the
+protocol without the transport: one message in (a line of JSON), one reply out (a dict). The CLI
+(``kbcli serve``) moves the lines over stdin/stdout or a local socket and writes the session as an
+ordinary ``run`` artifact (:class:`kbcli.stages.adapt.Recorder`) after every touch; the truth being
+unknown, its errors are NaN.
+
+Protocol 1 (one JSON object per line, UTF-8, each way)
+------------------------------------------------------
+kbcli speaks first::
+
+    {"type": "hello", "protocol": 1, "kbcli": "0.1.0", "features": ["pitch", "tempo"],
+     "area": [x0, y0, x1, y1], "family": "translation", "parameters": ["dx", "dy"],
+     "max_steps": 40, "step": 0, "action": [x, y], "estimate": {"dx": 0.0, "dy": 0.0},
+     "entropy": 10.4, "mass": 0.0, "done": false}
+
+The robot then sends, per touch (``op`` may be left out for an observation)::
+
+    {"op": "observe", "heard": [pitch, tempo] or null, "felt": [x, y] or null,
+     "action": [x, y], "id": any}
+
+``heard``: the perceived features, null for silence (required). ``felt``: where the robot felt its
+finger land, in pad px: the point the posterior is updated at (optional: without it, the aim is used
+and ``--blur`` should be the reach noise). ``action``: where it aimed (optional: the last suggested
+action; it must lie in the working area). ``id``: echoed in the reply. kbcli answers::
+
+    {"type": "step", "step": 1, "class": 12, "sound": "A4 96 bpm",
+     "estimate": {"dx": 11.9, "dy": -7.1}, "entropy": 2.3, "mass": 0.81, "done": false,
+     "action": [x, y]}
+
+``class``: the model's class of the heard sound (0 silence, -1 unknown: the touch is recorded but
+does not move the posterior). ``mass``: the posterior mass within ``stop_radius`` px of the
+estimate. ``done``: stop touching (the stopping rule holds, with ``--stop``, or ``max_steps``
+touches were observed). ``action``: where to touch next (null once ``max_steps`` touches were
+observed). Other messages: ``{"op": "suggest"}`` (the pending action again), ``{"op": "state"}``
+(estimate, entropy, mass, done, action: a ``state`` reply), ``{"op": "end"}`` (kbcli writes the
+artifact, replies ``{"type": "bye", "steps": n, "file": ...}`` and exits).
+
+A message kbcli cannot use (not JSON, not an object, an unknown ``op`` or field, non-numeric
+features, an action outside the working area, an observation beyond ``max_steps``) gets
+``{"type": "error", "error": "...", "id": ...}``; nothing is recorded for it and the session goes on.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from kbcli import __version__
+from kbcli.core import transforms
+from kbcli.core.adapt import Adapter, AdapterConfig, step_record
+from kbcli.core.keyboard import FEATURE_NAMES, sound_name
+from kbcli.core.model import UNKNOWN
+from kbcli.errors import ArtifactError, ConfigError, KbcliError
+from kbcli.stages.adapt import Recorder, run_attrs, run_data
+from kbcli.stages.artifact import Artifact, ref
+from kbcli.stages.models import load_model
+
+PROTOCOL = 1
+#: Longest message line accepted, bytes.
+MAX_LINE = 1 << 16
+#: Fields each ``op`` accepts.
+FIELDS = {
+    "observe": ("op", "heard", "felt", "action", "id"),
+    "suggest": ("op", "id"),
+    "state": ("op", "id"),
+    "end": ("op", "id"),
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class ServeConfig:
+    """A session with an external robot.
+
+    Parameters
+    ----------
+    adapter : AdapterConfig
+        The robot-side settings (strategy, posterior, family, grid, stopping rule).
+    max_steps : int
+        Touches at most; ``done`` holds once they are observed.
+    stop : bool
+        ``done`` also holds when the stopping rule does (else only at ``max_steps``).
+    """
+
+    adapter: AdapterConfig = field(default_factory=AdapterConfig)
+    max_steps: int = 40
+    stop: bool = True
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.max_steps, int) or isinstance(self.max_steps, bool) \
+                or self.max_steps < 1:
+            raise ConfigError(f"max_steps must be a whole number >= 1, got {self.max_steps!r}")
+        if not isinstance(self.stop, bool):
+            raise ConfigError(f"stop must be true or false, got {self.stop!r}")
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ServeConfig:
+        """From a flat mapping (a TOML ``[serve]`` table): any AdapterConfig field, ``max_steps``
+        and ``stop``; unknown keys are rejected."""
+        own = {"max_steps", "stop"}
+        known = set(AdapterConfig.__dataclass_fields__) | own
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ConfigError(f"unknown serve option(s) {', '.join(unknown)}; valid: "
+                              f"{', '.join(sorted(known))}")
+        adapter = {k: v for k, v in d.items() if k not in own}
+        return cls(adapter=AdapterConfig(**adapter),
+                   **{k: v for k, v in d.items() if k in own})
+
+    def to_dict(self) -> dict:
+        """Flat: the adapter's fields, ``max_steps`` and ``stop`` (what :meth:`from_dict` reads)."""
+        return {**asdict(self.adapter), "max_steps": self.max_steps, "stop": self.stop}
+
+
+class MessageError(KbcliError):
+    """A message the session cannot use: answered with an error reply."""
+
+
+def _finite(v: object) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _numbers(v: object, name: str, n: int | None) -> list[float]:
+    """A JSON list of ``n`` finite numbers (booleans and strings refused)."""
+    if not isinstance(v, list) or not all(_finite(x) for x in v):
+        want = f"{n} numbers" if n else "numbers"
+        raise MessageError(f"{name} must be a list of {want}, got {json.dumps(v)[:80]}")
+    if n is not None and len(v) != n:
+        raise MessageError(f"{name} must be a list of {n} numbers, got {len(v)}")
+    return [float(x) for x in v]
+
+
+def _reject_constant(name: str) -> float:
+    raise MessageError(f"{name} is not a number JSON allows")
+
+
+class Session:
+    """One adaptation with an external robot: JSON messages in, replies out.
+
+    Parameters
+    ----------
+    cfg : ServeConfig
+    model_artifact : Artifact
+        The robot's model (kind ``model``).
+    rng : numpy.random.Generator
+        The robot's generator (the strategy's draws).
+    seed : int, optional
+        Recorded in the artifact.
+    transport : str
+        How the messages travel (recorded): ``stdio``, ``unix`` or ``tcp``.
+
+    Raises
+    ------
+    ArtifactError
+        A model artifact of another kind.
+    """
+
+    def __init__(self, cfg: ServeConfig, model_artifact: Artifact, *, rng: np.random.Generator,
+                 seed: int | None = None, transport: str = "stdio", model=None) -> None:
+        if model_artifact.kind != "model":
+            raise ArtifactError(f"{model_artifact.path or 'model'}: is a {model_artifact.kind} "
+                                f"artifact, expected model")
+        self.cfg = cfg
+        self.model_artifact = model_artifact
+        self.seed = seed
+        self.transport = transport
+        self.model = load_model(model_artifact) if model is None else model
+        self.adapter = Adapter(self.model, cfg.adapter, rng=rng, max_steps=cfg.max_steps)
+        self.recorder = Recorder(self.adapter, range(cfg.max_steps + 1))
+        self.names = transforms.FAMILIES[cfg.adapter.family]
+        self.n_features = int(np.shape(self.model.class_features_)[1])
+        self.errors = 0
+        self.ended: str | None = None
+        self._decide_ms = 0.0
+        self.pending: np.ndarray | None = self._suggest()
+
+    # -- state -------------------------------------------------------------------------------------
+    @property
+    def steps(self) -> int:
+        return len(self.recorder)
+
+    def _suggest(self) -> np.ndarray | None:
+        if self.steps >= self.cfg.max_steps:
+            return None
+        t0 = time.perf_counter()
+        a = self.adapter.suggest()
+        self._decide_ms = 1e3 * (time.perf_counter() - t0)
+        return a
+
+    def done(self) -> bool:
+        """Stop touching: the budget is used up, or (with ``stop``) the stopping rule holds."""
+        if self.steps >= self.cfg.max_steps:
+            return True
+        return self.cfg.stop and self.adapter.should_stop()
+
+    def _state(self) -> dict:
+        ad = self.adapter
+        return {
+            "step": self.steps,
+            "estimate": {n: float(v) for n, v in zip(self.names, ad.estimate(), strict=True)},
+            "entropy": float(ad.entropy()),
+            "mass": float(ad.mass_near_estimate()),
+            "done": bool(self.done()),
+            "action": None if self.pending is None else [float(v) for v in self.pending],
+        }
+
+    def hello(self) -> dict:
+        """The first line kbcli sends."""
+        names = list(FEATURE_NAMES[: self.n_features])
+        names += [f"feature{i}" for i in range(len(names), self.n_features)]
+        return {"type": "hello", "protocol": PROTOCOL, "kbcli": __version__, "features": names,
+                "area": [float(v) for v in self.adapter.area], "family": self.cfg.adapter.family,
+                "parameters": list(self.names), "max_steps": self.cfg.max_steps, **self._state()}
+
+    # -- messages ----------------------------------------------------------------------------------
+    def handle(self, line: str | bytes) -> dict | None:
+        """The reply to one message line (None for a blank line)."""
+        msg_id = None
+        try:
+            text = line.decode("utf-8") if isinstance(line, bytes) else line
+            if not text.strip():
+                return None
+            try:
+                msg = json.loads(text, parse_constant=_reject_constant)
+            except json.JSONDecodeError as exc:
+                raise MessageError(f"not JSON ({exc.msg} at column {exc.colno})") from None
+            if not isinstance(msg, dict):
+                raise MessageError(f"a message is a JSON object, got {type(msg).__name__}")
+            msg_id = msg.get("id")
+            op = msg.get("op", "observe")
+            if op not in FIELDS:
+                raise MessageError(f"unknown op {op!r}; valid: {', '.join(FIELDS)}")
+            unknown = sorted(set(msg) - set(FIELDS[op]))
+            if unknown:
+                raise MessageError(f"unknown field(s) {', '.join(unknown)} for op {op!r}; "
+                                   f"valid: {', '.join(FIELDS[op])}")
+            reply = getattr(self, f"_op_{op}")(msg)
+        except UnicodeDecodeError:
+            reply = self.error_reply("a message must be UTF-8 text", None)
+        except (MessageError, KbcliError) as exc:
+            reply = self.error_reply(str(exc), msg_id)
+        else:
+            if msg_id is not None:
+                reply["id"] = msg_id
+        return reply
+
+    def error_reply(self, text: str, msg_id=None) -> dict:
+        """An error reply (counted in the artifact's ``message_errors``)."""
+        self.errors += 1
+        out = {"type": "error", "error": text}
+        if msg_id is not None:
+            out["id"] = msg_id
+        return out
+
+    def _op_suggest(self, msg: dict) -> dict:
+        return {"type": "suggestion", "step": self.steps,
+                "action": None if self.pending is None else [float(v) for v in self.pending]}
+
+    def _op_state(self, msg: dict) -> dict:
+        return {"type": "state", **self._state()}
+
+    def _op_end(self, msg: dict) -> dict:
+        self.ended = "end"
+        return {"type": "bye", "steps": self.steps}
+
+    def _op_observe(self, msg: dict) -> dict:
+        if "heard" not in msg:
+            raise MessageError("an observe message needs heard (the features, or null for "
+                               "silence)")
+        if self.steps >= self.cfg.max_steps:
+            raise MessageError(f"the session has observed its max_steps ({self.cfg.max_steps}) "
+                               f"touches; send {{\"op\": \"end\"}}")
+        heard = msg["heard"]
+        heard = None if heard is None else _numbers(heard, "heard", self.n_features)
+        felt = msg.get("felt")
+        felt = None if felt is None else _numbers(felt, "felt", 2)
+        if msg.get("action") is not None:
+            action = self.adapter.check_action(_numbers(msg["action"], "action", 2))
+        elif self.pending is not None:
+            action = self.pending
+        else:
+            raise MessageError("no action: send the action the robot took")
+        ad = self.adapter
+        h = ad.check_heard(heard)
+        t0 = time.perf_counter()
+        cls = ad.observe(action, h, felt_position=felt)
+        landed = np.full(2, np.nan) if felt is None else np.asarray(felt, float)
+        st = step_record(ad, self.steps + 1, action, landed, h, cls, t0=t0,
+                         extra_ms=self._decide_ms)
+        self.recorder.add(st)
+        self.pending = self._suggest()
+        label = "unknown" if cls == UNKNOWN else sound_name(h)
+        return {"type": "step", "class": cls, "sound": label, **self._state()}
+
+    # -- the record --------------------------------------------------------------------------------
+    def artifact(self) -> Artifact:
+        """The session as a ``run`` artifact (the touches so far)."""
+        res = self.recorder.arrays()
+        attrs = run_attrs(res, self.cfg.adapter)
+        attrs.update(source="external", mode="external", arm=None, ended=self.ended,
+                     message_errors=self.errors, stop=self.cfg.stop)
+        return Artifact(
+            kind="run",
+            config={"adapt": self.cfg.to_dict(),
+                    "serve": {"protocol": PROTOCOL, "transport": self.transport},
+                    "keyboard": self.model_artifact.config["keyboard"],
+                    "snapshot_steps": [int(s) for s in range(self.cfg.max_steps + 1)]},
+            seed=self.seed,
+            data=run_data(res),
+            attrs=attrs,
+            inputs={"model": ref(self.model_artifact)},
+        )
+
+
+__all__ = ["ServeConfig", "Session", "MessageError", "PROTOCOL", "MAX_LINE", "FIELDS"]
