@@ -298,6 +298,11 @@ class Exploration:
         self._model: LearnedModel | None = None
         self._plan = np.empty((0, 2))
 
+    def refit(self, landed: np.ndarray, perceived: np.ndarray) -> LearnedModel:
+        """A fresh model of the same class and settings fitted on other samples (cross-validation)."""
+        return LearnedModel(match_threshold=self.match_threshold, area=self.area).fit(
+            landed, perceived)
+
     @property
     def model(self) -> LearnedModel | None:
         """The model fitted to every sample so far (None before the first reach)."""

@@ -17,7 +17,7 @@ from kbcli import __version__
 #: Current schema version of every artifact kind. Bump a kind's version when its layout changes.
 SCHEMA_VERSIONS: dict[str, int] = {
     "keyboard": 1,
-    "model": 1,
+    "model": 2,
     "scene": 1,
     "history": 1,
     "detection": 1,
