@@ -26,7 +26,9 @@ def report_cmd(
 ) -> None:
     """Write the reproduction report of an evaluation.
 
-    Reads EVALUATION (kind 'evaluation'). Writes into the OUTPUT folder: fig5_posterior.png
+    Reads EVALUATION (kind 'evaluation', or 'model_quality' from kbcli quality: then
+    advantage.png and a README.md that tests the paper's explanation of its robot result). Writes
+    into the OUTPUT folder: fig5_posterior.png
     (posterior evolution per strategy), fig6_entropy.png (entropy reduction), fig7_error_MODE.png
     (error against observations per category) and README.md (tables of observations to each
     threshold, p-values, RMSE, playing success, and the paper's claims against our measurements).
@@ -34,12 +36,15 @@ def report_cmd(
     """
     from kbcli.viz import report as viz
 
-    art = read_artifact(evaluation, "evaluation")
+    art = read_artifact(evaluation, ("evaluation", "model_quality"))
     parent = output.parent if str(output.parent) else Path(".")
     if output.exists() and not output.is_dir():
         raise KbcliError(f"{output}: exists and is not a folder")
     if not parent.is_dir():
         raise KbcliError(f"{output}: parent folder {parent} does not exist")
+    if art.kind == "model_quality":
+        _quality_report(art, output)
+        return
     rep = stage.build(art)
     output.mkdir(exist_ok=True)
     for fig in rep.figures:
@@ -54,3 +59,18 @@ def report_cmd(
     out.print(f"wrote {output}/: README.md and {len(rep.figures)} figures")
     for c in rep.claims:
         out.print(f"  [{c.verdict}] {c.paper} -- {c.measured}", markup=False, soft_wrap=True)
+
+
+def _quality_report(art, output: Path) -> None:
+    """The report of a model-quality sweep: advantage.png and README.md."""
+    from kbcli.stages import quality
+    from kbcli.viz.quality import plot_advantage
+
+    output.mkdir(exist_ok=True)
+    plot_advantage(art, output / "advantage.png")
+    _write_text(output / "README.md", quality.report(art))
+    out.print(f"wrote {output}/: README.md and advantage.png")
+    for r in art.attrs["rows"]:
+        if r != art.attrs["baseline"]:
+            out.print(f"  {r}: the paper's explanation "
+                      f"{quality.verdict(quality.hypothesis(art, r))}", soft_wrap=True)

@@ -115,7 +115,7 @@ def robust_terms(grid: HypothesisGrid, table: LikelihoodTable, action: np.ndarra
     s_n, e_n = len(nuisance.blurs), len(nuisance.outliers)
     out = np.empty((s_n, e_n) + grid.shape, np.float32)
     if cell_sigma < 0.5 * table.step:  # read precomputed blurred maps (translation)
-        reads = [raw_prob(blurred_table(table, float(s)), x, y, cls) for s in nuisance.blurs]
+        reads = [raw_prob(blurred_map(table, float(s)), x, y, cls) for s in nuisance.blurs]
     else:  # blur a window around the touched region per level (rigid: the blur varies per touch)
         step = table.step
         pad = 4 * math.hypot(float(nuisance.blurs.max()), cell_sigma) + 2 * step
@@ -275,13 +275,38 @@ def _planes(table: LikelihoodTable) -> np.ndarray | None:
     return cache["planes"]
 
 
-def blurred_table(table: LikelihoodTable, blur: float) -> LikelihoodTable:
-    """``table``'s map convolved with an isotropic Gaussian of ``blur`` px (soft, same cells, padded
-    with silence beyond the raster); ``table`` itself for a blur under half a cell.
+@dataclass(frozen=True)
+class BlurredMap:
+    """A model's map convolved with a Gaussian: class-major probabilities on the table's cells.
+
+    Attributes
+    ----------
+    planes : (C, H, W) float32 ndarray
+        ``planes[c]`` is p(c | cell), silence beyond the original raster.
+    origin : (2,) ndarray
+        Centre of cell (0, 0).
+    step : float
+        Cell size, px.
+    """
+
+    planes: np.ndarray
+    origin: np.ndarray
+    step: float
+
+    def _index(self, x: np.ndarray, y: np.ndarray):
+        h, w = self.planes.shape[1:]
+        col = np.rint((x - self.origin[0]) / self.step).astype(np.int64)
+        row = np.rint((y - self.origin[1]) / self.step).astype(np.int64)
+        inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
+        return np.clip(row, 0, h - 1), np.clip(col, 0, w - 1), inside
+
+
+def blurred_map(table: LikelihoodTable, blur: float) -> BlurredMap | LikelihoodTable:
+    """``table``'s map convolved with an isotropic Gaussian of ``blur`` px (padded with silence
+    beyond the raster); ``table`` itself for a blur under half a cell.
 
     Cached on ``table``, so every adapter sharing a table (an evaluation's worker) blurs each level
-    once. Memory: one float32 map per class and blur level, stored class-major (its ``probs`` is a
-    view of it).
+    once. Memory: one float32 map per class and blur level.
     """
     if blur < 0.5 * table.step:
         return table
@@ -300,41 +325,57 @@ def blurred_table(table: LikelihoodTable, blur: float) -> LikelihoodTable:
                 inner[k] = table.classes == k
         else:
             inner[...] = np.moveaxis(table.probs, -1, 0)
-        kern = _kernel(blur / table.step)
-        for k in range(c):  # one class map at a time keeps the temporaries small
-            if planes[k].any():
-                tmp = correlate1d(planes[k], kern, axis=0, mode="nearest")
-                planes[k] = correlate1d(tmp, kern, axis=1, mode="nearest")
-        out = LikelihoodTable(np.asarray(table.origin - pad * table.step, float),
-                              float(table.step), c, table.eps, probs=np.moveaxis(planes, 0, -1))
-        _cache(out)["planes"] = planes
-        cache[key] = out
+        # at least two cells per std: wide blurs are computed (and stored) on coarser cells,
+        # block means of k x k; a read is then off by under half a coarse cell (<= blur / 4)
+        k = max(1, int(blur / (2 * table.step)))
+        if k > 1:
+            hh, ww = (planes.shape[1] // k) * k, (planes.shape[2] // k) * k
+            planes = planes[:, :hh, :ww].reshape(c, hh // k, k, ww // k, k).mean(axis=(2, 4))
+        kern = _kernel(blur / (table.step * k))
+        for j in range(c):  # one class map at a time keeps the temporaries small
+            if planes[j].any():
+                tmp = correlate1d(planes[j], kern, axis=0, mode="nearest")
+                planes[j] = correlate1d(tmp, kern, axis=1, mode="nearest")
+        origin = table.origin - pad * table.step + (k - 1) / 2 * table.step
+        cache[key] = BlurredMap(np.ascontiguousarray(planes, np.float32),
+                                np.asarray(origin, float), float(table.step * k))
     return cache[key]
 
 
 def planning_table(table: LikelihoodTable, blur: float, eps: float) -> LikelihoodTable:
     """The model's map as the strategies should plan with it: blurred by ``blur`` px (on top of any
-    blur already in ``table``) and floored at ``eps``. Cached on ``table``."""
+    blur already in ``table``) and floored at ``eps``. Cached on ``table``.
+
+    A map blurred by 2 px or more is planned on cells of at least 1 px (planning needs no finer
+    map there; it is 4x smaller and quicker to prepare).
+    """
     cache = _cache(table)
     key = ("plan", round(float(blur), 6), round(float(eps), 9))
     if key not in cache:
-        b = blurred_table(table, blur)
-        cache[key] = LikelihoodTable(b.origin, b.step, b.n_classes, float(eps),
-                                     classes=b.classes, probs=b.probs)
+        b = blurred_map(table, blur)
+        if isinstance(b, LikelihoodTable):
+            out = LikelihoodTable(b.origin, b.step, b.n_classes, float(eps), classes=b.classes,
+                                  probs=b.probs)
+        else:
+            k = max(1, int(round(1.0 / b.step))) if blur >= 2.0 and b.step < 1.0 else 1
+            probs = np.ascontiguousarray(np.moveaxis(b.planes[:, ::k, ::k], 0, -1))
+            out = LikelihoodTable(b.origin, b.step * k, table.n_classes, float(eps), probs=probs)
+        cache[key] = out
     return cache[key]
 
 
-def raw_prob(table: LikelihoodTable, x: np.ndarray, y: np.ndarray, cls: int) -> np.ndarray:
+def raw_prob(table: LikelihoodTable | BlurredMap, x: np.ndarray, y: np.ndarray,
+             cls: int) -> np.ndarray:
     """``p(cls | (x, y))`` from the map, without the table's floor; silence outside the raster.
 
     For a translation grid (``x`` a row, ``y`` a column) the class's map is read as two ``take``
     calls on its contiguous plane.
     """
     row, col, inside = table._index(x, y)
-    if table.hard:
+    if isinstance(table, LikelihoodTable) and table.hard:
         p = (table.classes[row, col] == cls).astype(np.float32)
     else:
-        plane = _planes(table)[cls]
+        plane = table.planes[cls] if isinstance(table, BlurredMap) else _planes(table)[cls]
         if row.ndim == 2 and col.ndim == 2 and row.shape[1] == 1 and col.shape[0] == 1:
             p = np.take(np.take(plane, row[:, 0], axis=0), col[0], axis=1)
         else:
@@ -344,5 +385,5 @@ def raw_prob(table: LikelihoodTable, x: np.ndarray, y: np.ndarray, cls: int) -> 
     return p
 
 
-__all__ = ["Nuisance", "RobustPosterior", "robust_terms", "planning_table", "blurred_table", "DEFAULT_BLURS",
+__all__ = ["Nuisance", "RobustPosterior", "robust_terms", "planning_table", "blurred_map", "DEFAULT_BLURS",
            "DEFAULT_OUTLIERS"]

@@ -151,7 +151,7 @@ PRESETS: dict[str, ArmConfig] = {
                        settle_time=2.0),
     "realistic": ArmConfig(preset="realistic", kp=2.0e7, kd=2.4e6, max_torque=3.0e7,
                            friction=8.0e4, settle_time=2.0, finger_radius=2.5,
-                           proprio_noise=3.0e-3, proprio_bias=(4.0e-3, -3.0e-3)),
+                           proprio_noise=3.5e-3, proprio_bias=(1.5e-3, -1.0e-3)),
 }
 
 

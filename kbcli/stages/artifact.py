@@ -24,6 +24,7 @@ SCHEMA_VERSIONS: dict[str, int] = {
     "run": 2,  # 2: joint_angles (dynamics mode), attrs arm and mode; serve sessions (no truth)
     "closed_loop": 2,  # 2: steps/joint_angles, steps/estimate, the adaptation posteriors
     "evaluation": 1,
+    "model_quality": 1,
 }
 
 
