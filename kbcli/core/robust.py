@@ -325,9 +325,9 @@ def blurred_map(table: LikelihoodTable, blur: float) -> BlurredMap | LikelihoodT
                 inner[k] = table.classes == k
         else:
             inner[...] = np.moveaxis(table.probs, -1, 0)
-        # at least two cells per std: wide blurs are computed (and stored) on coarser cells,
-        # block means of k x k; a read is then off by under half a coarse cell (<= blur / 4)
-        k = max(1, int(blur / (2 * table.step)))
+        # at least three cells per std: wide blurs are computed (and stored) on coarser cells,
+        # block means of k x k; a read is then off by under half a coarse cell (<= blur / 6)
+        k = max(1, int(blur / (3 * table.step)))
         if k > 1:
             hh, ww = (planes.shape[1] // k) * k, (planes.shape[2] // k) * k
             planes = planes[:, :hh, :ww].reshape(c, hh // k, k, ww // k, k).mean(axis=(2, 4))
