@@ -252,3 +252,49 @@ def bench_adapt_cmd(
     err.print("medians: observations until the error first drops below the threshold; (k): runs "
               "that never got there within T; rmse in px over all runs; p: Wilcoxon rank-sum of "
               "the observation counts against random", markup=False)
+
+
+@command(bench_app, name="robust")
+def bench_robust_cmd(
+    model: Annotated[Path, typer.Option("--model", help="Model artifact.")] = Path(
+        "data/default-model.h5"),
+    experiments: Annotated[int, typer.Option(
+        "--experiments", min=1, help="Runs per category, strategy and posterior.")] = 30,
+    max_steps: Annotated[int, typer.Option("--max-steps", "-T", min=1, help="Touches per run.")] = 30,
+    strategy: Annotated[list[str] | None, typer.Option(
+        "--strategy", help="Strategies (repeat) [default random, active, infogain].")] = None,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of displacements and runs.")] = 0,
+) -> None:
+    """The robust posterior against the plain one on a model: touches to 1 px, final error, time.
+
+    Reads MODEL (default: the embedded default model). Writes nothing. Prints, for the ideal arm in
+    ideal mode and the realistic arm in dynamics mode, per strategy, posterior and category: the
+    median touches to an error below 1 px, the median and 90th percentile of the final error, and
+    the median milliseconds per step (wall clock and CPU).
+    """
+    from kbcli.bench import robust as bench
+    from kbcli.stages import keyboard as keyboard_stage
+    from kbcli.stages.models import load_model
+
+    art = read_artifact(model, "model")
+    m, kb = load_model(art), keyboard_stage.load(art)
+    strategies = tuple(strategy) if strategy else bench.STRATEGIES
+    total = len(bench.SETTINGS) * 3 * len(strategies) * len(bench.POSTERIORS) * experiments
+    bar = progress(iter(range(total)), total, "adaptations")
+    rows = bench.run(m, kb, experiments=experiments, max_steps=max_steps, seed=seed,
+                     strategies=strategies, progress=lambda n: next(bar, None))
+    for _ in bar:  # close the bar
+        pass
+    t = Table(title=f"robust vs plain posterior, {model}: {experiments} runs per row, T = "
+                    f"{max_steps}", title_justify="left")
+    for col in ("mode / arm", "strategy", "posterior", "category", "touches to <1 px",
+                "final median", "final p90", "ms/step wall", "ms/step CPU"):
+        t.add_column(col, justify="left" if col in ("mode / arm", "strategy", "posterior",
+                                                   "category") else "right")
+    for r in rows:
+        t.add_row(f"{r.mode} / {r.arm}", r.strategy, r.posterior, r.category,
+                  f"{r.touches_1px:g}" if r.touches_1px <= max_steps else f">{max_steps}",
+                  f"{r.final_median:.2f}", f"{r.final_p90:.2f}", f"{r.ms_wall:.1f}",
+                  f"{r.ms_cpu:.1f}")
+    con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
+    con.print(t)

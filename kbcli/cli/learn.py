@@ -200,3 +200,37 @@ def bench_arm_cmd(
                   f"{r.reaches_per_s:,.0f}")
     con = out if interactive() else Console(width=max(out.width, 140), highlight=False)
     con.print(t)
+
+
+@command(bench_app, name="reliability")
+def bench_reliability_cmd(
+    budgets: Annotated[str, typer.Option(
+        "--budgets", help="Reach budgets, comma-separated.")] = "150,300,800,1600",
+    mode: Annotated[str, typer.Option("--mode", help="ideal or dynamics.")] = "ideal",
+    arm: Annotated[str, typer.Option("--arm", help="Arm preset (ideal, servo, realistic).")] = "ideal",
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of every learning run.")] = 0,
+) -> None:
+    """How well calibrated learned models are, and how well they know it.
+
+    Reads nothing; writes nothing. For active and random exploration at each budget, learns a model
+    of the default keyboard (calibration included) and prints, against the simulator on a 2 px
+    grid: the expected calibration error of p(sound | felt action), the accuracy and the boundary
+    error; beside the model's own cross-validated estimates of each, and the calibration it chose.
+    """
+    from kbcli.bench import reliability as bench
+
+    rows = bench.run(budgets=_budgets(budgets), mode=mode, arm=arm, seed=seed)
+    t = Table(title=f"calibration and self-assessment of learned models ({mode} mode, arm {arm}, "
+                    f"seed {seed}): measured / the model's own estimate", title_justify="left")
+    for col in ("exploration", "reaches", "calibration error", "mislabel rate",
+                "boundary error (px)", "chosen calibration", "learn s"):
+        t.add_column(col, justify="left" if col in ("exploration", "chosen calibration") else "right")
+    for r in rows:
+        cal = ", ".join(f"{k} {v:g}" for k, v in sorted(r.calibration.items()))
+        t.add_row(r.exploration, str(r.budget), f"{r.ece:.3f} / {r.est_ece:.3f}",
+                  f"{100 * r.mislabel:.1f} % / {100 * r.est_mislabel:.1f} %",
+                  f"{r.boundary_error:.2f} / {r.est_boundary_error:.2f}", cal, f"{r.seconds:.0f}")
+    con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
+    con.print(t)
+    worst = max(r.ece for r in rows)
+    con.print(f"largest calibration error: {worst:.3f} (target <= 0.03)")
