@@ -191,11 +191,15 @@ def _closest_to_segments(p: np.ndarray, hull: np.ndarray) -> tuple[np.ndarray, n
     return d[r, k], foot[r, k]
 
 
-def _separating_line(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
+def _separating_line(a: np.ndarray, b: np.ndarray, tol: float = 0.0) -> tuple[np.ndarray, bool]:
     """Max-margin line between points ``a`` (its positive side) and ``b``.
 
     For separable sets it is the perpendicular bisector of the closest pair of points of their
-    convex hulls (the hard-margin linear SVM, solved exactly in 2-D).
+    convex hulls (the hard-margin linear SVM, solved exactly in 2-D). With a label-noise tolerance
+    ``tol`` > 0 (px), sets that no line separates get a soft-margin line (logistic regression),
+    which counts as separating when every point on its wrong side is within ``tol`` of it: labels
+    flipped near a boundary by an arm that does not feel exactly where it touched then give one
+    straight boundary, not a splinter of pieces.
 
     Returns
     -------
@@ -222,10 +226,32 @@ def _separating_line(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
     n = w / nw
     c = float(n @ (p + q) / 2)
     separable = bool((a @ n - c > 0).all() and (b @ n - c < 0).all())
+    if separable or tol <= 0:
+        return np.array([n[0], n[1], c]), separable
+    n, c = _soft_line(a, b)
+    separable = bool((a @ n - c > -tol).all() and (b @ n - c < tol).all())
     return np.array([n[0], n[1], c]), separable
 
 
-def _pieces(x: np.ndarray, e: np.ndarray, depth: int = 0) -> list[tuple[np.ndarray, np.ndarray]]:
+def _soft_line(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
+    """Unit normal (towards ``a``) and offset of a logistic-regression line between two point
+    sets that overlap (deterministic: lbfgs, centred and scaled coordinates)."""
+    from sklearn.linear_model import LogisticRegression
+
+    pts = np.vstack([a, b])
+    mu = pts.mean(axis=0)
+    scale = max(float(pts.std()), 1e-9)
+    y = np.r_[np.ones(len(a)), np.zeros(len(b))]
+    clf = LogisticRegression(C=10.0).fit((pts - mu) / scale, y)
+    w = clf.coef_[0] / scale
+    nw = max(float(np.hypot(*w)), 1e-12)
+    n = w / nw
+    c = float(n @ mu - clf.intercept_[0] / nw)
+    return n, c
+
+
+def _pieces(x: np.ndarray, e: np.ndarray, depth: int = 0,
+            tol: float = 0.0) -> list[tuple[np.ndarray, np.ndarray]]:
     """Split the straddling edges of one pair of sounds into straight boundary pieces.
 
     The pair's edges get one max-margin line if it separates their two ends; otherwise (an L- or
@@ -238,7 +264,7 @@ def _pieces(x: np.ndarray, e: np.ndarray, depth: int = 0) -> list[tuple[np.ndarr
     list of (edge rows, line)
     """
     ua, ub = np.unique(e[:, 0]), np.unique(e[:, 1])
-    line, ok = _separating_line(x[ua], x[ub])
+    line, ok = _separating_line(x[ua], x[ub], tol)
     if ok or len(e) < 2 or depth >= 4:
         return [(np.arange(len(e)), line)]
     d = x[e[:, 0]] - x[e[:, 1]]
@@ -254,13 +280,13 @@ def _pieces(x: np.ndarray, e: np.ndarray, depth: int = 0) -> list[tuple[np.ndarr
         centres = m / np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-12)
     out = []
     for part in (np.flatnonzero(~side), np.flatnonzero(side)):
-        out += [(part[sub], ln) for sub, ln in _pieces(x, e[part], depth + 1)]
+        out += [(part[sub], ln) for sub, ln in _pieces(x, e[part], depth + 1, tol)]
     return out
 
 
 def _merge_pieces(
     x: np.ndarray, e: np.ndarray, piece_rows: list[np.ndarray], lines: np.ndarray,
-    max_angle: float, max_offset: float,
+    max_angle: float, max_offset: float, tol: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Group boundary pieces that one straight line explains (an edge continuing across keys).
 
@@ -308,7 +334,7 @@ def _merge_pieces(
         a, b = np.union1d(ap, aq), np.union1d(bp, bq)
         if np.intersect1d(a, b).size:
             continue
-        line, separable = _separating_line(x[a], x[b])
+        line, separable = _separating_line(x[a], x[b], tol)
         if not separable:
             continue
         for m in members[rq]:
@@ -338,7 +364,7 @@ def _line_sides(
 
 def _absorb_pieces(
     x: np.ndarray, e: np.ndarray, edge_piece: np.ndarray, pairs: np.ndarray, group: np.ndarray,
-    sign: np.ndarray, glines: np.ndarray, reach: float,
+    sign: np.ndarray, glines: np.ndarray, reach: float, tol: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Re-express lone boundary pieces with lines that several pieces share.
 
@@ -392,7 +418,7 @@ def _absorb_pieces(
             if len(o) != 1 or np.intersect1d(pa, na).size:
                 good = False
                 break
-            line, separable = _separating_line(x[pa], x[na])
+            line, separable = _separating_line(x[pa], x[na], tol)
             if not separable:
                 good = False
                 break
@@ -490,6 +516,10 @@ class LearnedModel:
     noise_sd : float
         Std (px) of the label noise near a boundary (an arm that does not feel exactly where it
         touched, a finger of finite size): combined with sigma_b as ``hypot(sigma_b, noise_sd)``.
+    noise_tol : float
+        Label-noise tolerance (px) of the boundary fit: two sounds' samples that no line separates
+        get one soft-margin line when every sample on its wrong side is within ``noise_tol`` of it
+        (0: exact separation, as for an arm that feels exactly where it touched).
     floor : float
         Share of probability spread evenly over all sounds (``p = (1 - floor) p + floor / C``):
         the rate at which a touch sounds other than the map says, far from any boundary.
@@ -539,6 +569,7 @@ class LearnedModel:
         sd_scale: float = 1.0,
         noise_sd: float = 0.0,
         floor: float = 0.0,
+        noise_tol: float = 0.0,
         extrapolation: float = 1.0,
         merge_angle: float = 10.0,
         merge_offset: float = 10.0,
@@ -552,6 +583,7 @@ class LearnedModel:
         self.sd_scale = sd_scale
         self.noise_sd = noise_sd
         self.floor = floor
+        self.noise_tol = noise_tol
         self.extrapolation = extrapolation
         self.merge_angle = merge_angle
         self.merge_offset = merge_offset
@@ -576,6 +608,8 @@ class LearnedModel:
             raise ConfigError(f"sd_scale must be > 0, got {self.sd_scale!r}")
         if not (np.isfinite(self.noise_sd) and self.noise_sd >= 0):
             raise ConfigError(f"noise_sd must be >= 0 px, got {self.noise_sd!r}")
+        if not (np.isfinite(self.noise_tol) and self.noise_tol >= 0):
+            raise ConfigError(f"noise_tol must be >= 0 px, got {self.noise_tol!r}")
         if not (np.isfinite(self.floor) and 0 <= self.floor < 1):
             raise ConfigError(f"floor must be in [0, 1), got {self.floor!r}")
         if not (np.isfinite(self.extrapolation) and self.extrapolation >= 0):
@@ -644,7 +678,7 @@ class LearnedModel:
         code = labels[e[:, 0]] * len(features) + labels[e[:, 1]]
         for c in np.unique(code):  # one loop per pair of neighbouring sounds
             rows = np.flatnonzero(code == c)
-            for part, line in _pieces(x, e[rows]):
+            for part, line in _pieces(x, e[rows], tol=self.noise_tol):
                 piece[rows[part]] = len(lines)
                 pairs.append(divmod(int(c), len(features)))
                 lines.append(line)
@@ -652,15 +686,15 @@ class LearnedModel:
         lines_arr = np.array(lines, float).reshape(-1, 3)
         if self.merge_angle > 0 and len(lines):
             group, sign, glines = _merge_pieces(
-                x, e, rows_of, lines_arr, np.radians(self.merge_angle), self.merge_offset
-            )
+                x, e, rows_of, lines_arr, np.radians(self.merge_angle), self.merge_offset,
+                self.noise_tol)
         else:
             group, sign, glines = np.arange(len(lines)), np.ones(len(lines)), lines_arr
         pairs_arr = np.array(pairs, dtype=np.int64).reshape(-1, 2)
         if self.merge_angle > 0 and len(lines):
             piece, pairs_arr, group, sign, glines = _absorb_pieces(
-                x, e, piece, pairs_arr, group, sign, glines, reach=2 * self.merge_offset
-            )
+                x, e, piece, pairs_arr, group, sign, glines, reach=2 * self.merge_offset,
+                tol=self.noise_tol)
         self._set_fitted(features, x, labels, e, piece, pairs_arr, group, sign, glines, reach_sd)
         return self
 
@@ -977,6 +1011,7 @@ class LearnedModel:
             "sd_scale": np.float64(self.sd_scale),
             "noise_sd": np.float64(self.noise_sd),
             "floor": np.float64(self.floor),
+            "noise_tol": np.float64(self.noise_tol),
             "extrapolation": np.float64(self.extrapolation),
         }
 
@@ -993,6 +1028,7 @@ class LearnedModel:
                 sd_scale=float(d.get("sd_scale", 1.0)),  # absent before model schema 2
                 noise_sd=float(d.get("noise_sd", 0.0)),
                 floor=float(d.get("floor", 0.0)),
+                noise_tol=float(d.get("noise_tol", 0.0)),
                 extrapolation=float(d["extrapolation"]),
                 merge_angle=float(d["merge_angle"]),
                 merge_offset=float(d["merge_offset"]),
