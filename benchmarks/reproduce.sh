@@ -1,13 +1,16 @@
 #!/usr/bin/env bash
 # Reproduce the paper from nothing and time each stage: keyboard -> learn -> evaluate -> report.
 # This is the recipe of `make reproduce`; it prints the wall time of every stage at the end (and
-# writes it to $OUT/timings.txt).
+# writes it to $OUT/timings.txt, with the machine's load average before and after).
+# pipelines/paper.toml names the methods: `paper` (the paper's KDE posterior, maximum-likelihood
+# estimate, random and active), `kbcli` (ours, with infogain) and a large-displacement ablation.
 #
 #   benchmarks/reproduce.sh                  # both modes (ideal, dynamics), full paper scale
 #   MODE=ideal benchmarks/reproduce.sh       # ideal mode only (Sect. IV-A/B)
 #   JOBS=1 benchmarks/reproduce.sh           # experiments in one process (default: 2 local processes)
 #   SCHEDULER=tcp://HOST:8786 benchmarks/reproduce.sh   # ... or on a Dask cluster
 #   EXPERIMENTS=5 benchmarks/reproduce.sh    # a quick look: 5 runs per parametrization
+#   METHOD=paper benchmarks/reproduce.sh     # one method of the config only
 #
 # An interrupted run continues where it stopped when started again (evaluate --resume).
 set -euo pipefail
@@ -18,6 +21,7 @@ OUT=${OUT:-build}
 REPORT=${REPORT:-report}
 JOBS=${JOBS:-2}
 MODE=${MODE:-}
+METHOD=${METHOD:-}
 EXPERIMENTS=${EXPERIMENTS:-}
 SCHEDULER=${SCHEDULER:-}
 SEED=${SEED:-0}
@@ -25,6 +29,7 @@ mkdir -p "$OUT"
 
 names=()
 times=()
+load_before=$(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo "?")
 stage() {
     local name=$1
     shift
@@ -39,6 +44,7 @@ stage() {
 
 eval_args=(--config pipelines/paper.toml --model "$OUT/model.h5" -o "$OUT/eval.h5" --resume)
 [[ -n $MODE ]] && eval_args+=(--mode "$MODE")
+[[ -n $METHOD ]] && eval_args+=(--method "$METHOD")
 [[ -n $EXPERIMENTS ]] && eval_args+=(--experiments "$EXPERIMENTS")
 if [[ -n $SCHEDULER ]]; then eval_args+=(--scheduler "$SCHEDULER"); else eval_args+=(--jobs "$JOBS"); fi
 
@@ -56,5 +62,7 @@ stage report "$KBCLI" report "$OUT/eval.h5" -o "$REPORT"
     done
     printf '%-10s %10.1f\n' total "$(echo "$total" | awk '{print $1 / 1000}')"
     if [[ -n $SCHEDULER ]]; then where="scheduler $SCHEDULER"; else where="jobs $JOBS"; fi
-    echo "(mode: ${MODE:-ideal+dynamics}; $where; experiments per parametrization: ${EXPERIMENTS:-config})"
+    echo "(mode: ${MODE:-ideal+dynamics}; methods: ${METHOD:-all of the config}; $where;" \
+         "experiments per parametrization: ${EXPERIMENTS:-config})"
+    echo "(load average, 1/5/15 min: $load_before before, $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo "?") after; $(nproc 2>/dev/null || echo "?") cores)"
 } | tee "$OUT/timings.txt"

@@ -83,14 +83,14 @@ def test_adapt_rigid_scene_and_kde_posterior(runner, files):
                scene="rigid.h5")
     assert r.exit_code == 0, r.output
     art = read_artifact(files / "run.h5", "run")
-    assert art.config["adapt"]["family"] == "rigid"  # the scene's family by default
+    assert art.config["adapt"]["robot"]["family"] == "rigid"  # the scene's family by default
     assert art.data["estimates"].shape == (5, 3) and "angle error" in r.output
     assert art.data["snapshot_angles"].shape[0] == 2
 
 
 def test_stage_experiment_api():
     kb = Keyboard(KeyboardConfig())
-    cfg = stage.AdaptConfig(max_steps=8, prior_halfwidth=20.0, strategy="random")
+    cfg = stage.AdaptConfig.flat(max_steps=8, prior_halfwidth=20.0, strategy="random")
     res = stage.experiment(cfg, ExactModel(kb), kb, np.array([3.0, 4.0]),
                            rng=np.random.default_rng(0), snapshot_steps=(0, 8))
     for key in ("actions", "landed", "classes", "estimates", "means", "errors", "angle_errors",
@@ -100,6 +100,17 @@ def test_stage_experiment_api():
     assert np.all(res["angle_errors"] == 0)
     cfg2 = stage.AdaptConfig.from_dict(cfg.to_dict())
     assert cfg2 == cfg
+    # the robot's config is held by composition; its options read through
+    assert cfg.robot.prior_halfwidth == cfg.prior_halfwidth == 20.0
+    assert set(cfg.to_dict()) == {"robot", *stage.LOOP_FIELDS}
+    # the flat layout of schema-1 run artifacts and older TOML files is still read
+    flat = {**cfg.to_dict()["robot"], **{k: v for k, v in cfg.to_dict().items() if k != "robot"}}
+    assert stage.AdaptConfig.from_dict(flat) == cfg
+    # a robot option at the top level overrides the robot table (as a flag overrides a TOML file)
+    both = stage.AdaptConfig.from_dict({"robot": {"strategy": "active"}, "strategy": "infogain"})
+    assert both.robot.strategy == "infogain"
+    aim = stage.AdaptConfig.flat(feedback="aim", reach_noise=2.0)
+    assert aim.adapter_config().blur == 2.0 and aim.robot.blur == 0.0
     with pytest.raises(ConfigError, match="unknown adapt option"):
         stage.AdaptConfig.from_dict({"strategy": "random", "speed": 3})
     with pytest.raises(ConfigError, match="feedback"):
@@ -155,9 +166,19 @@ def test_bench_adapt_small(runner):
     _one_line_error(r, "learned model")
 
 
+def test_bench_adapt_kde_prints_the_step_speed(runner, files):
+    """The kde section times a KDE step on a model (here the exact one, few touches)."""
+    r = runner.invoke(app, ["bench", "adapt", "--section", "kde", "--experiments", "2", "-T", "3",
+                            "--strategy", "random", "--category", "small", "--kde-steps", "5",
+                            "--model", str(files / "model.h5")])
+    assert r.exit_code == 0, r.output
+    assert "median ms/step" in r.output and "kde (Algorithm 2" in r.output
+    assert "random/kde" in r.output and "paired" in r.output
+
+
 def test_experiment_in_dynamics_mode():
     kb = Keyboard(KeyboardConfig())
-    cfg = stage.AdaptConfig(max_steps=3, prior_halfwidth=10.0, mode="dynamics", reach_noise=0.5)
+    cfg = stage.AdaptConfig.flat(max_steps=3, prior_halfwidth=10.0, mode="dynamics", reach_noise=0.5)
     res = stage.experiment(cfg, ExactModel(kb), kb, np.array([2.0, -1.0]),
                            rng=np.random.default_rng(1))
     assert res["landed"].shape == (3, 2)

@@ -45,7 +45,7 @@ def files(tmp_path_factory):
 
 def test_dynamics_run_records_the_arm_pose_of_each_touch(files):
     art = read_artifact(files / "run.h5", "run")
-    assert art.schema_version == 2
+    assert art.schema_version >= 2  # 3: the adapt config nests the robot's options
     q = art.data["joint_angles"]
     assert q.shape == (6, 2)
     # the recorded pose puts the fingertip where the finger landed

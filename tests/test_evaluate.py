@@ -28,10 +28,11 @@ from kbcli.stages.models import exact_artifact
 FAKE = "test_evaluate:fake_experiment"
 
 
-def fake_experiment(cfg, model, keyboard, true_params, *, rng, table=None, snapshot_steps=()):
+def fake_experiment(cfg, model, keyboard, true_params, *, rng, table=None, snapshot_steps=(),
+                    play=None, **_):
     """A deterministic stand-in for ``kbcli.stages.adapt.experiment``: the error shrinks with the
-    step, faster for non-random strategies, with seeded noise. Its wall time per step is real (and
-    must stay out of the artifact)."""
+    step, faster for non-random strategies, with seeded noise; playing success grows as the final
+    error shrinks. Its wall time per step is real (and must stay out of the artifact)."""
     t0 = time.perf_counter()
     steps = getattr(cfg, "max_steps", 12)
     strategy = getattr(cfg, "strategy", "random")
@@ -50,15 +51,23 @@ def fake_experiment(cfg, model, keyboard, true_params, *, rng, table=None, snaps
         "snapshots": rng.random((3, 5, 5)),
         "snapshot_steps": np.array([1, 2, 3]),
     }
+    if play is not None:
+        out["play_adapted"] = float(np.clip(1 - errors[-1] / 50, 0, 1))
+        if play.reference:
+            out["play_before"] = 0.99
+            out["play_unadapted"] = float(np.clip(1 - np.hypot(*true_params) / 50, 0, 1))
     out["step_ms"] = np.full(steps, (time.perf_counter() - t0) * 1e3 / steps)
     return out
 
 
 def small_config(**kw) -> stage.EvaluateConfig:
+    """A small protocol with one method ``m`` (``strategies=`` sets its strategies)."""
+    strategies = kw.pop("strategies", ["random", "active"])
     d = {
         "seed": 7,
         "experiments": 3,
-        "strategies": ["random", "active"],
+        "methods": {"m": {"strategies": strategies}},
+        "judged": "m",
         "modes": ["ideal"],
         "max_steps": 6,
         "thresholds": [10.0, 4.0, 1.0],
@@ -67,8 +76,17 @@ def small_config(**kw) -> stage.EvaluateConfig:
             "large": {"limit": 40.0, "displacements": [[20.0, -25.0]]},
         },
     }
+    if "adapt" in kw:  # the layout before named methods
+        del d["methods"], d["judged"]
+        d["strategies"] = strategies
     d.update(kw)
     return stage.EvaluateConfig.from_dict(d)
+
+
+def test_the_layout_before_methods_is_one_method():
+    cfg = small_config(adapt={"posterior": "kde"})
+    assert [m.name for m in cfg.methods] == ["kbcli"] and cfg.judged == "kbcli"
+    assert stage.adapt_config(cfg, "kbcli", "active", "ideal").robot.posterior == "kde"
 
 
 @pytest.fixture
@@ -100,13 +118,15 @@ def write_config(path, **kw):
     lines = ["[evaluate]"]
     body = cfg.to_dict()
     cats = body.pop("categories")
-    body.pop("adapt")
+    methods = body.pop("methods")
     noise = body.pop("reach_noise")
     arms = body.pop("arm")
     for k, v in body.items():
         lines.append(f"{k} = {json.dumps(v)}")
     lines += ["[evaluate.reach_noise]"] + [f"{m} = {v}" for m, v in noise.items()]
     lines += ["[evaluate.arm]"] + [f'{m} = "{a["preset"]}"' for m, a in arms.items()]
+    for name, m in methods.items():
+        lines += [f"[evaluate.methods.{name}]"] + [f"{k} = {json.dumps(v)}" for k, v in m.items()]
     for name, c in cats.items():
         lines += [f"[evaluate.categories.{name}]", f"limit = {c['limit']}",
                   f"displacements = {json.dumps(c['displacements'])}"]
@@ -125,15 +145,59 @@ def test_rmse_and_samples_to_threshold_known_answers():
     assert med[0] == 2 and med[1] == 2.5 and np.isnan(med[2])
 
 
-def test_ranksum_direction_and_ties():
+def test_mannwhitney_direction_ties_and_tie_correction():
     a = np.array([[1], [2], [2], [3]] * 5)
     b = a + 5
-    stat, p = stats.ranksum_pvalues(a, b)
-    assert stat[0] < 0 and p[0] < 1e-3
-    stat, p = stats.ranksum_pvalues(a, a)
-    assert stat[0] == 0 and p[0] == pytest.approx(1.0)
-    _, p = stats.ranksum_pvalues(np.full((6, 1), 41), np.full((6, 1), 41))  # nobody got there
+    eff, p = stats.mannwhitney_pvalues(a, b)
+    assert eff[0] == -0.5 and p[0] < 1e-3  # every run of a is faster than every run of b
+    eff, p = stats.mannwhitney_pvalues(a, a)
+    assert eff[0] == 0 and p[0] == pytest.approx(1.0)
+    _, p = stats.mannwhitney_pvalues(np.full((6, 1), 41), np.full((6, 1), 41))  # nobody got there
     assert p[0] == 1.0
+    # heavy ties (runs capped at T + 1): the tie-corrected variance is smaller, so p is smaller
+    # than the untied rank-sum test's, and equals the textbook tie-corrected z
+    from scipy import stats as sps
+
+    x = np.array([3, 5, 41, 41, 41, 41, 41, 41] * 3, float)
+    y = np.array([2, 3, 4, 5, 6, 41, 41, 41] * 3, float)
+    _, p = stats.mannwhitney_pvalues(y[:, None], x[:, None])
+    assert p[0] < sps.ranksums(y, x).pvalue
+    n, m = len(y), len(x)
+    r = sps.rankdata(np.concatenate([y, x]))
+    u = r[:n].sum() - n * (n + 1) / 2
+    _, t = np.unique(np.concatenate([y, x]), return_counts=True)
+    var = n * m / 12 * ((n + m + 1) - (t**3 - t).sum() / ((n + m) * (n + m - 1)))
+    z = (abs(u - n * m / 2) - 0.5) / np.sqrt(var)
+    assert p[0] == pytest.approx(2 * sps.norm.sf(z), rel=1e-9)
+
+
+def test_signed_rank_paired_known_answer():
+    a = np.arange(1.0, 11.0)[:, None]
+    b = a + np.arange(1.0, 11.0)[:, None]  # every pair: a faster, by distinct amounts
+    eff, p = stats.signed_rank_pvalues(a, b)
+    assert eff[0] == -1.0 and p[0] == pytest.approx(2 / 2**10)  # exact: the most extreme case
+    assert p[0] == pytest.approx(stats.min_pvalue_paired(10))
+    # the same numbers unpaired: the pairing is what makes them so significant
+    _, pu = stats.mannwhitney_pvalues(a, b)
+    assert pu[0] > 10 * p[0]
+    eff, p = stats.signed_rank_pvalues(a, a)  # no nonzero difference
+    assert eff[0] == 0 and p[0] == 1.0
+    with pytest.raises(ValueError, match="same shape"):
+        stats.signed_rank_pvalues(a, b[:5])
+
+
+def test_smallest_attainable_pvalue():
+    from math import comb
+
+    assert stats.min_pvalue_unpaired(4, 4) == pytest.approx(2 / comb(8, 4))
+    assert stats.min_pvalue_unpaired(200, 200) == pytest.approx(2 / comb(400, 200), rel=1e-9)
+    assert stats.min_pvalue_unpaired(1000, 1000) == 0.0  # underflows: far below any bound
+    assert stats.min_pvalue_paired(1) == 1.0 and stats.min_pvalue_paired(3) == 0.25
+    # no test on 4 + 4 runs can reach p < 0.01, and the exact test does reach the bound
+    from scipy import stats as sps
+
+    exact = sps.mannwhitneyu([1, 2, 3, 4], [5, 6, 7, 8], method="exact").pvalue
+    assert exact == pytest.approx(stats.min_pvalue_unpaired(4, 4))
 
 
 @settings(max_examples=40, deadline=None)
@@ -153,13 +217,51 @@ def test_curve_invariants(n, steps, seed):
     assert np.all(e[rows, counts[rows, cols] - 1] < thr[cols])
 
 
-def test_play_success_known_answers():
+@pytest.mark.parametrize("truth", [(7.3, -3.1), (-13.7, 9.45), (0.37, 21.9)])
+def test_playing_success_is_measured_by_replaying_the_melody(truth):
+    """Algorithm 1 replayed on displacements that are not multiples of any grid spacing (0.5 px
+    grid, 50 px keys): exact before and with the true correction; the analytic share otherwise."""
+    from kbcli.core.model import ExactModel
+    from kbcli.sim import SimConfig
+    from kbcli.stages.adapt import PlayCheck, play_success
+
     kb = Keyboard(KeyboardConfig())
-    true = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, -5.0]])
-    np.testing.assert_allclose(stage.play_success(kb, "translation", true, true), 1.0)
-    got = stage.play_success(kb, "translation", true, np.zeros_like(true), per_key=10)
-    # aiming uniformly inside 50 px keys, a (dx, dy) shift keeps (1 - dx/50)(1 - dy/50) on target
-    np.testing.assert_allclose(got, [1.0, 0.8, 0.8 * 0.9])
+    model = ExactModel(kb)
+    truth = np.asarray(truth)
+    check = PlayCheck(notes=3000)
+    rng = np.random.default_rng(4)
+    got = play_success(model, kb, SimConfig(), "translation", truth, truth, check, rng=rng)
+    assert got["before"] == 1.0 and got["adapted"] == 1.0
+    # actions uniform over a 50 px key land on it with probability (1 - |dx|/50)(1 - |dy|/50)
+    share = np.prod(np.clip(1 - np.abs(truth) / 50, 0, 1))
+    assert abs(got["unadapted"] - share) < 0.03
+    off = truth + np.array([0.37, -1.13])  # an estimate 1.2 px off
+    near = play_success(model, kb, SimConfig(), "translation", truth, off,
+                        PlayCheck(notes=3000, reference=False), rng=rng)
+    assert np.isnan(near["before"]) and np.isnan(near["unadapted"])
+    assert abs(near["adapted"] - (1 - 0.37 / 50) * (1 - 1.13 / 50)) < 0.01
+
+
+def test_replay_follows_algorithm_1():
+    """MATCH moves on to the next note, NO_MATCH restarts from note 0: with note D always missed,
+    the melody A D E D A plays A, D(miss), A, D(miss), ... so every second touch fails."""
+    from kbcli.core.melody import parse_melody
+    from kbcli.core.model import ExactModel
+    from kbcli.core.play import MATCH, NO_MATCH, note_classes, replay
+
+    kb = Keyboard(KeyboardConfig())
+    model = ExactModel(kb)
+    mel = parse_melody("A:1 D:1 E:0.5 D:2 A:1", kb)
+    d_cls = int(note_classes(model, mel)[1])
+
+    def touch(actions):
+        heard = kb.perceive(actions, None, "translation", rng=np.random.default_rng(0))
+        cls = model.classify(heard)
+        heard[cls == d_cls] = np.nan  # D never sounds
+        return actions, heard
+
+    hist = replay(model, mel, touch, rng=np.random.default_rng(1), n_notes=40, chunk=7)
+    assert hist.tolist() == [MATCH, NO_MATCH] * 20
 
 
 # -- config and plan ------------------------------------------------------------------------------
@@ -169,8 +271,22 @@ def test_paper_config_parses_and_plans():
     cfg = stage.EvaluateConfig.from_dict(load_toml("pipelines/paper.toml", "evaluate"))
     assert cfg.experiments == 50 and [c.name for c in cfg.categories] == ["small", "medium", "large"]
     assert [c.limit for c in cfg.categories] == [10.0, 20.0, 40.0]
+    assert [m.name for m in cfg.methods] == ["paper", "kbcli", "paper-likelihood"]
+    assert cfg.judged == "paper"
+    paper = stage.adapt_config(cfg, "paper", "active", "ideal")
+    assert (paper.robot.posterior, paper.robot.estimator) == ("kde", "ml")
+    ours = stage.adapt_config(cfg, "kbcli", "infogain", "dynamics")
+    from kbcli.core.adapt import AdapterConfig
+
+    # kbcli is the adapter's defaults: what they are, it is
+    assert ours.robot == AdapterConfig(strategy="infogain")
     tasks = stage.plan(cfg.with_overrides(experiments=2))
-    assert len(tasks) == 2 * 12 * len(cfg.strategies) * 2
+    # ideal: paper 2 + kbcli 3 strategies (+ the ablation's 2 on the 4 large displacements);
+    # dynamics: paper 2 + kbcli 3
+    assert len(tasks) == 2 * (12 * (5 + 5) + 4 * 2)
+    resolved = stage.resolved_methods(cfg)
+    assert resolved["paper"]["options"]["ideal"]["active"]["robot"]["kde_samples"] == 10000
+    assert resolved["paper-likelihood"]["modes"] == ["ideal"]
     assert cfg == stage.EvaluateConfig.from_dict(cfg.to_dict())
     import pickle
 
@@ -181,12 +297,22 @@ def test_seeds_do_not_depend_on_selected_modes():
     both = stage.plan(small_config(modes=["ideal", "dynamics"]))
     ideal = stage.plan(small_config(modes=["ideal"]))
     dyn = stage.plan(small_config(modes=["dynamics"]))
-    key = lambda t: (t.mode, t.category, t.param_index, t.strategy, t.rep)  # noqa: E731
+    key = lambda t: (t.mode, t.category, t.param_index, t.method, t.strategy, t.rep)  # noqa: E731
     seeds = {key(t): t.seed.generate_state(4).tolist() for t in both}
     for t in ideal + dyn:
         assert t.seed.generate_state(4).tolist() == seeds[key(t)]
     assert len({str(s) for s in seeds.values()}) == len(both)  # all distinct
     assert sum(t.example for t in both) == 2 * 2  # one per mode and strategy
+    # ... nor on the methods selected
+    two = small_config(methods={"m": {"strategies": ["random", "active"]},
+                                "n": {"strategies": ["random"], "posterior": "kde"}})
+    assert len(stage.plan(two)) == len(ideal) + len(ideal) // 2
+    for t in stage.plan(two):
+        if t.method == "m":
+            assert t.seed.generate_state(4).tolist() == seeds[key(t)]
+    # the reference replays (before, unadapted): once per mode, parametrization and repetition
+    refs = [t for t in stage.plan(two) if t.play_reference]
+    assert len(refs) == 3 * 3 and all(t.method == "m" and t.strategy == "random" for t in refs)
 
 
 @pytest.mark.parametrize(
@@ -202,6 +328,15 @@ def test_seeds_do_not_depend_on_selected_modes():
         ({"categories": {"small": {"limit": 10.0, "displacements": [[1.0]]}}}, "parameters"),
         ({"categories": {"small": {"limit": 10.0, "shifts": [[1.0, 1.0]]}}}, "unknown: shifts"),
         ({"adapt": {"strategy": "active"}}, "set per experiment"),
+        ({"methods": {"m": {"strategies": ["random"], "mode": "ideal"}}}, "set per experiment"),
+        ({"methods": {"m": {"strategies": ["active"]}}}, "baseline 'random' must be one of"),
+        ({"methods": {"m": {"strategies": ["random"], "posterior": "particles"}}},
+         "unknown posterior 'particles'"),
+        ({"methods": {"m": {"posterior": "kde"}}}, "methods.m needs strategies"),
+        ({"judged": "nobody"}, "judged 'nobody' must name a method"),
+        ({"categories": {"medium": {"displacements": [[3.0, 4.0]]}}}, "lower bound of 10"),
+        ({"categories": {"small": {"limit": 12.0, "displacements": [[3.0, 4.0]]}}},
+         "size category small"),
         ({"example": "huge"}, "example 'huge' must name a category"),
     ],
 )
@@ -221,8 +356,9 @@ def _job(cfg, model_art):
 
 
 def _same(a: dict, b: dict) -> bool:
+    keys = stage.STEP_KEYS + stage.PLAY_KEYS
     return a.keys() == b.keys() and all(
-        np.array_equal(a[i][k], b[i][k]) for i in a for k in stage.STEP_KEYS
+        np.array_equal(a[i][k], b[i][k], equal_nan=True) for i in a for k in keys
     )
 
 
@@ -232,6 +368,7 @@ def test_backends_bit_identical(model_path, cluster):
     job, tasks = _job(cfg, read_artifact(model_path))
     serial = dict(execute(job, range(len(tasks))))
     assert len(serial) == len(tasks) == 3 * 2 * 3
+    assert all(np.isfinite(r["play_adapted"]) for r in serial.values())
     local = dict(execute(job, range(len(tasks)), jobs=2))
     assert _same(serial, local)
     assert _same(serial, dict(execute(job, range(len(tasks)), scheduler=cluster)))
@@ -241,7 +378,10 @@ def test_backends_bit_identical(model_path, cluster):
 def test_real_experiment_identical_across_backends(model_path, cluster):
     """The adapt stage's experiment itself (both modes: the pymunk arm too) gives bit-identical
     results serially, on 2 local processes and on a 2-worker Dask LocalCluster."""
-    cfg = small_config(strategies=["random", "active", "infogain"], modes=["ideal", "dynamics"],
+    cfg = small_config(methods={"kbcli": {"strategies": ["random", "active", "infogain"]},
+                                "paper": {"strategies": ["random"], "posterior": "kde",
+                                          "estimator": "ml", "kde_samples": 500}},
+                       judged="paper", modes=["ideal", "dynamics"], play_notes=20,
                        experiments=1, max_steps=4,
                        categories={"small": {"limit": 10.0, "displacements": [[3.0, -4.0]]},
                                    "large": {"limit": 40.0, "displacements": [[-20.0, 25.0]]}},
@@ -252,11 +392,15 @@ def test_real_experiment_identical_across_backends(model_path, cluster):
     job = Job(setup="kbcli.stages.evaluate:setup", run="kbcli.stages.evaluate:run_experiment",
               context=ctx, context_key=stage.context_key(ctx), tasks=tuple(tasks))
     serial = dict(execute(job, range(len(tasks))))
-    assert len(serial) == 12
+    assert len(serial) == 16
     assert _same(serial, dict(execute(job, range(len(tasks)), jobs=2)))
     assert _same(serial, dict(execute(job, range(len(tasks)), scheduler=cluster)))
     ex = [serial[t.row]["extra"] for t in tasks if t.example]
-    assert len(ex) == 6 and all(e["snapshots"].shape[0] == 2 for e in ex)
+    assert len(ex) == 8 and all(e["snapshots"].shape[0] == 2 for e in ex)
+    for t in tasks:
+        r = serial[t.row]
+        assert 0 <= r["play_adapted"] <= 1
+        assert np.isfinite(r["play_before"]) == t.play_reference
     assert all(np.isfinite(r["errors"]).all() and r["errors"].shape == (4,) for r in serial.values())
 
 
@@ -375,6 +519,20 @@ def test_cli_bad_input(runner, tmp_path, model_path, fake, monkeypatch, extra, f
     assert not out.exists() and not Checkpoint.beside(out).exists()
 
 
+def test_cli_defaults_to_the_embedded_model(runner, tmp_path, fake, monkeypatch):
+    """Without --model, evaluate adapts with data/default-model.h5 (as the README says)."""
+    from pathlib import Path
+
+    conf = write_config(tmp_path / "e.toml", experiments=1)
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])
+    out = tmp_path / "e.h5"
+    r = runner.invoke(app, ["evaluate", "--config", str(conf), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    art = read_artifact(out, "evaluation")
+    assert art.inputs["model"]["file"] == "default-model.h5"
+    assert art.inputs["model"]["sha256"] == sha256_file(Path("data/default-model.h5"))
+
+
 def test_cli_bad_config_file(runner, tmp_path, model_path):
     conf = tmp_path / "bad.toml"
     conf.write_text("[evaluate]\nstrategies = ['random', 'psychic']\n")
@@ -399,17 +557,28 @@ def test_artifact_layout(tmp_path, model_path, fake):
     assert art.array("steps/errors").shape == (n, 6)
     assert art.array("steps/estimates").shape == (n, 6, 2)
     assert art.array("experiments/strategy").tolist().count("active") == n // 2
-    cur = art.data["curves"]["ideal"]["small"]["active"]
+    assert set(art.array("experiments/method").tolist()) == {"m"}
+    cur = art.data["curves"]["ideal"]["m"]["small"]["active"]
     assert cur["rmse"].shape == (6,) and cur["rmse_by_param"].shape == (2, 6)
     assert cur["samples_to_threshold"].shape == (2 * 3, 3)
-    p = art.data["pvalues"]["ideal"]["small"]["active"]["pvalue"]
+    pv = art.data["pvalues"]["ideal"]["m"]["small"]["active"]
+    p = pv["pvalue"]
     assert p.shape == (3,) and np.all((p >= 0) & (p <= 1))
-    assert "random" not in art.data["pvalues"]["ideal"]["small"]
-    ex = art.data["examples"]["ideal"]["active"]
+    assert pv["min_pvalue"] == pytest.approx(2 / 924)  # 6 runs each: 2 / C(12, 6)
+    assert "random" not in art.data["pvalues"]["ideal"]["m"]["small"]
+    # before / unadapted measured once per (parametrization, repetition), shared by its rows
+    exp = art.data["experiments"]
+    assert np.isfinite(exp["play_before"]).all() and np.isfinite(exp["play_adapted"]).all()
+    for k in ("play_before", "play_unadapted"):
+        for i, j in ((0, 3), (1, 4)):  # random rep i and active rep i of the first displacement
+            assert exp["param_index"][i] == exp["param_index"][j] and exp["rep"][i] == exp["rep"][j]
+            assert exp[k][i] == exp[k][j]
+    assert art.attrs["methods"]["m"]["options"]["ideal"]["active"]["robot"]["strategy"] == "active"
+    ex = art.data["examples"]["ideal"]["m"]["active"]
     assert ex["snapshots"].shape == (3, 5, 5) and art.array("experiments/category")[ex["row"]] == "small"
     assert "step_ms" not in art.data["steps"]
     write_artifact(art, tmp_path / "a.h5")
     back = read_artifact(tmp_path / "a.h5", "evaluation")
-    np.testing.assert_array_equal(back.array("curves/ideal/small/active/rmse"), cur["rmse"])
+    np.testing.assert_array_equal(back.array("curves/ideal/m/small/active/rmse"), cur["rmse"])
     np.testing.assert_array_equal(back.array("steps/errors"), art.array("steps/errors"))
     assert back.config == cfg.to_dict()

@@ -84,11 +84,26 @@ def test_audio_lengths_pitch_and_silence():
 def test_category_draws_stay_in_their_ring(seed, category, family):
     lo, hi = perturb.CATEGORIES[category]
     p = perturb.draw(category, family, 20, rng=np.random.default_rng(seed))
-    d = np.abs(p[:, -2:]).max(axis=1)
+    d = np.hypot(p[:, -2], p[:, -1])  # the size is the Euclidean norm of the translation
     assert p.shape == (20, 2 if family == "translation" else 3)
     assert np.all((d > lo) & (d <= hi))
+    assert all(perturb.size_category(row) == category for row in p)
     if family == "rigid":
         assert np.all(np.abs(p[:, 0]) <= 5.0)
+
+
+def test_size_categories_are_euclidean_and_uniform_over_the_ring():
+    # (8, 8) is 11.3 px: medium, though neither axis exceeds 10 px
+    assert perturb.size_category((8.0, 8.0)) == "medium"
+    assert perturb.size_category((0.0, 10.0)) == "small"
+    assert perturb.size_category((30.0, 30.0)) is None  # 42.4 px: beyond large
+    p = perturb.draw("large", "translation", 4000, rng=np.random.default_rng(5))
+    r = np.hypot(*p.T)
+    # uniform over the ring 20 < r <= 40: P(r <= 30) = (30^2 - 20^2) / (40^2 - 20^2) = 5/12
+    assert abs(np.mean(r <= 30) - 5 / 12) < 0.03
+    # every direction: the four quadrants hold a quarter each
+    quad = (p[:, 0] > 0) * 2 + (p[:, 1] > 0)
+    assert np.all(np.abs(np.bincount(quad, minlength=4) / len(p) - 0.25) < 0.03)
 
 
 def test_scene_artifact_holds_the_truth(tmp_path):

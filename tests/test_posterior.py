@@ -15,9 +15,11 @@ from kbcli.core.adapt import AdapterConfig, build_table
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.model import ExactModel
 from kbcli.core.posterior import (
+    ActionSamples,
     HypothesisGrid,
     LikelihoodTable,
     Posterior,
+    binned_kde,
     cell_sigma,
     grid_bytes,
     kde_term,
@@ -154,11 +156,70 @@ def test_kde_term_peaks_where_the_likelihood_does():
     assert logk[lik].mean() > logk[~lik].mean() + 3
 
 
+@pytest.mark.parametrize("bandwidth,res", [(1.0, 0.5), (2.5, 0.5), (1.5, 1.0)])
+def test_fft_kde_matches_the_direct_sum(bandwidth, res):
+    """The binned FFT KDE against the direct sum of Gaussians at every grid cell (Eq. 7)."""
+    rng = np.random.default_rng(11)
+    # a lumpy sample: two clusters and points scattered past the grid's edge
+    pts = np.vstack([rng.normal((-3.0, 2.0), 1.5, size=(150, 2)),
+                     rng.normal((4.0, -5.0), 0.7, size=(80, 2)),
+                     rng.uniform(-14, 14, size=(70, 2))])
+    n, x0 = 31 if res == 0.5 else 17, -7.5 if res == 0.5 else -8.0
+    dens = binned_kde(pts, x0, x0 + 0.25, res, n, bandwidth)
+    gx = x0 + res * np.arange(n)
+    gy = x0 + 0.25 + res * np.arange(n)
+    d2 = ((gx[None, :, None] - pts[None, None, :, 0]) ** 2
+          + (gy[:, None, None] - pts[None, None, :, 1]) ** 2)
+    direct = np.exp(-0.5 * d2 / bandwidth**2).sum(axis=-1) / (2 * math.pi * bandwidth**2 * len(pts))
+    assert dens.shape == (n, n)
+    # linear binning errs by O((res / bandwidth)^2) of the local density
+    tol = 0.25 * (res / bandwidth) ** 2 * direct.max()
+    assert np.max(np.abs(dens - direct)) < tol
+    assert np.max(np.abs(dens - direct)) < 0.1 * direct.max()
+    # a different sample does not match: the check can fail
+    other = binned_kde(pts + 1.0, x0, x0 + 0.25, res, n, bandwidth)
+    assert np.max(np.abs(other - direct)) > tol
+
+
+def test_fft_kde_batches_are_independent():
+    rng = np.random.default_rng(12)
+    a, b = rng.normal(0, 2, size=(2, 100, 2))
+    both = binned_kde(np.stack([a, b]), -5.0, -5.0, 0.5, 21, 1.0)
+    assert np.allclose(both[0], binned_kde(a, -5.0, -5.0, 0.5, 21, 1.0))
+    assert np.allclose(both[1], binned_kde(b, -5.0, -5.0, 0.5, 21, 1.0))
+
+
+def test_action_samples_are_drawn_once_per_class_in_any_order():
+    s1 = ActionSamples(MODEL, 500, 3)
+    s2 = ActionSamples(MODEL, 500, 3)
+    a5, bw5 = s1.get(5)
+    s2.get(9)
+    b5, _ = s2.get(5)
+    assert np.array_equal(a5, b5)  # the order classes are heard in does not matter
+    assert s1.get(5)[0] is a5 and len(s1) == 1  # cached, not redrawn
+    # class 5 is key 4: every sample lies on that key
+    assert (MODEL.predict_class(a5) == 5).all()
+    assert 0.5 <= bw5 <= 4.0
+    g = grid(half=20)
+    act = np.array([262.0, 281.0])
+    cls = int(MODEL.predict_class(act[None])[0])
+    cached, _ = kde_term(g, MODEL, act, cls, n_samples=500, eps=1e-3, samples=s1)
+    again, _ = kde_term(g, MODEL, act, cls, n_samples=500, eps=1e-3, samples=s1)
+    assert np.array_equal(cached, again)
+
+
 def test_kde_term_rigid_runs_every_angle():
+    """Each angle slice is its own KDE; the angle-0 slice is the translation family's KDE of the
+    same samples, and a turned slice differs from it."""
     g = grid("rigid", half=10)
     a = np.array([262.0, 281.0])
-    logk, _ = kde_term(g, MODEL, a, 1, np.random.default_rng(4), n_samples=2000, eps=1e-3)
+    samples = ActionSamples(MODEL, 2000, 4)
+    logk, _ = kde_term(g, MODEL, a, 1, n_samples=2000, eps=1e-3, samples=samples)
     assert logk.shape == g.shape and np.isfinite(logk).all()
+    flat, _ = kde_term(grid(half=10), MODEL, a, 1, n_samples=2000, eps=1e-3, samples=samples)
+    zero = int(np.flatnonzero(g.angles == 0)[0])
+    np.testing.assert_allclose(logk[zero], flat, atol=1e-9)
+    assert np.max(np.abs(logk[0] - flat)) > 0.1
 
 
 # -- the posterior -------------------------------------------------------------------------------

@@ -110,7 +110,7 @@ def test_a_tiny_sweep_runs_and_reports(runner, small_kb, tmp_path):
     art = read_artifact(out, "model_quality")
     assert art.data["experiments"]["errors"].shape == (2 * 1 * 2 * 2, 6)
     assert set(art.attrs["models"]) == {"random-40", "random-120"}
-    assert art.attrs["rows_resolved"]["infogain"]["robust"] is True
+    assert art.attrs["rows_resolved"]["infogain"]["robot"]["robust"] is True
     assert not (tmp_path / "q.h5.ckpt").exists()
     # same inputs and seed: the same numbers
     r = runner.invoke(app, [*args[:-1], str(tmp_path / "again.h5")])

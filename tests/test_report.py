@@ -15,38 +15,60 @@ from kbcli.stages.models import exact_artifact
 
 
 def _evaluation(pvalues: dict, stats_sign: float = -1.0, reached: float = 1.0,
-                play: float = 1.0, modes=("ideal",)) -> Artifact:
-    """A hand-made evaluation artifact: thresholds 10, 8, 4 px; p-values per category given."""
+                play: float = 1.0, modes=("ideal",), min_p: float = 1e-30,
+                before: float = 0.99, entropy_active=None) -> Artifact:
+    """A hand-made evaluation artifact: methods ``paper`` (judged) and ``kbcli`` with random and
+    active; thresholds 10, 8, 4 px; ``paper``'s p-values per category as given, ``kbcli``'s all
+    1e-9; playing success after adaptation ``play``, before ``before``."""
     thr = np.array([10.0, 8.0, 4.0])
     cats = ["small", "medium", "large"]
     strategies = ["random", "active"]
+    methods = ["paper", "kbcli"]
     T = 5
     curve = {"rmse": np.linspace(10, 1, T), "q25": np.ones(T), "q75": np.ones(T) * 3,
              "median_samples": np.array([1.0, 2.0, 3.0]), "reached": np.full(3, reached)}
-    n = len(modes) * len(cats) * 2
+    rows = [(m, x, c, s) for m in modes for c in cats for x in methods for s in strategies]
+    n = len(rows)
     exp = {
-        "mode": np.repeat(np.array(modes), len(cats) * 2),
-        "category": np.tile(np.repeat(np.array(cats), 2), len(modes)),
-        "strategy": np.tile(np.array(strategies), len(modes) * len(cats)),
+        "mode": np.array([r[0] for r in rows]), "method": np.array([r[1] for r in rows]),
+        "category": np.array([r[2] for r in rows]), "strategy": np.array([r[3] for r in rows]),
         "play_adapted": np.full(n, play), "play_unadapted": np.full(n, 0.5),
-        "params": np.zeros((n, 2)),
+        "play_before": np.full(n, before), "params": np.zeros((n, 2)),
     }
+
+    def pv(x, c):
+        p = pvalues[c] if x == "paper" else [1e-9] * 3
+        return {"active": {"pvalue": np.asarray(p, float), "statistic": np.full(3, stats_sign),
+                           "min_pvalue": np.float64(min_p)}}
+
+    ent_active = np.arange(T, 0, -1.0) - 0.5 if entropy_active is None else entropy_active
     data = {
         "thresholds": thr,
         "experiments": exp,
-        "curves": {m: {c: {s: dict(curve) for s in strategies} for c in cats} for m in modes},
-        "pvalues": {m: {c: {"active": {"pvalue": np.asarray(pvalues[c], float),
-                                       "statistic": np.full(3, stats_sign)}} for c in cats}
-                    for m in modes},
-        "entropy": {m: {s: {"mean": np.arange(T, 0, -1.0), "q25": np.zeros(T), "q75": np.ones(T)}
-                        for s in strategies} for m in modes},
+        "curves": {m: {x: {c: {s: dict(curve) for s in strategies} for c in cats}
+                       for x in methods} for m in modes},
+        "pvalues": {m: {x: {c: pv(x, c) for c in cats} for x in methods} for m in modes},
+        "entropy": {m: {x: {"random": {"mean": np.arange(T, 0, -1.0), "q25": np.zeros(T),
+                                       "q75": np.ones(T)},
+                            "active": {"mean": np.asarray(ent_active, float), "q25": np.zeros(T),
+                                       "q75": np.ones(T)}} for x in methods} for m in modes},
         "examples": {m: {} for m in modes},
     }
     cfg = {"experiments": 1, "example": "small", "family": "translation",
            "categories": {c: {"limit": lim, "displacements": [[1.0, 1.0]]}
                           for c, lim in zip(cats, (10.0, 20.0, 40.0), strict=True)}}
+    opts = {"paper": {"posterior": "kde", "estimator": "ml"},
+            "kbcli": {"posterior": "likelihood", "estimator": "mean"}}
     attrs = {"modes": list(modes), "categories": cats, "strategies": strategies,
-             "baseline": "random", "max_steps": T, "model_strategy": "exact"}
+             "baseline": "random", "max_steps": T, "model_strategy": "exact", "judged": "paper",
+             "method_order": methods,
+             "play_notes": 200, "melody": "A:1",
+             "methods": {x: {"strategies": strategies, "description": f"{x} method",
+                             "modes": list(modes), "categories": cats,
+                             "options": {m: {s: {"robot": {**opts[x], "strategy": s},
+                                                 "mode": m, "feedback": "landed"}
+                                             for s in strategies} for m in modes}}
+                         for x in methods}}
     return Artifact(kind="evaluation", config=cfg, seed=1, data=data, attrs=attrs)
 
 
@@ -56,6 +78,8 @@ PAPER_LIKE = {"small": [1e-7, 1e-6, 1e-6], "medium": [0.5, 1e-4, 1e-4], "large":
 def _key(claim) -> str:
     if claim.source.startswith("Sect. IV-B"):
         return claim.paper.split(" ")[0]  # small, medium, large
+    if claim.source.startswith("Sect. IV-A"):
+        return "entropy"
     return "restores" if "restores" in claim.paper else "dynamics_ns"
 
 
@@ -66,8 +90,13 @@ def _verdicts(art):
 def test_claims_agree_with_paper_like_numbers():
     v = _verdicts(_evaluation(PAPER_LIKE))
     # medium: p at 10 px is 0.5 but the claim is only "up to 8 px"
-    assert v == {"small": "agrees", "medium": "agrees", "large": "agrees",
+    assert v == {"entropy": "agrees", "small": "agrees", "medium": "agrees", "large": "agrees",
                  "restores": "not measured", "dynamics_ns": "not measured"}
+    # every claim row names the method it judged and its options
+    for c in stage.claims(_evaluation(PAPER_LIKE)):
+        assert c.method == "paper"
+        if c.verdict != "not measured":
+            assert "posterior kde" in c.options and "estimator ml" in c.options
 
 
 def test_claims_differ_when_measurements_do():
@@ -76,6 +105,22 @@ def test_claims_differ_when_measurements_do():
     assert v["small"] == "differs" and v["large"] == "differs" and v["medium"] == "agrees"
     # significant but in the baseline's favour is not the paper's claim
     assert _verdicts(_evaluation(PAPER_LIKE, stats_sign=1.0))["small"] == "differs"
+    # active's entropy above random's at some step: Fig. 6's claim differs
+    flat = np.full(5, 10.0)
+    assert _verdicts(_evaluation(PAPER_LIKE, entropy_active=flat))["entropy"] == "differs"
+
+
+def test_underpowered_rather_than_differs():
+    """With too few runs to reach the paper's bound at all, a miss is 'underpowered'."""
+    weak = {"small": [1e-3, 1e-3, 1e-3], "medium": [0.02] * 3, "large": [0.3, 0.2, 0.9]}
+    v = _verdicts(_evaluation(weak, min_p=1e-4))  # 1e-5 not attainable, 1e-3 attainable
+    assert v["small"] == "underpowered" and v["medium"] == "differs"
+    v = _verdicts(_evaluation(weak, min_p=2 / 924))  # 6 + 6 runs: no p below 2.2e-3
+    assert v["small"] == "underpowered" and v["medium"] == "underpowered"
+    assert _verdicts(_evaluation(weak, min_p=0.02))["large"] == "underpowered"
+    assert _verdicts(_evaluation(weak))["small"] == "differs"  # enough runs: a real difference
+    text = stage.build(_evaluation(weak, min_p=2 / 924)).readme
+    assert "the smallest exact p-value of these sample sizes is 2.2e-03" in text
 
 
 def test_uninformative_thresholds_are_not_counted():
@@ -84,27 +129,73 @@ def test_uninformative_thresholds_are_not_counted():
     assert cl["small"].verdict == "not measured" and "uninformative" in cl["small"].measured
 
 
-def test_dynamics_claim():
+def test_dynamics_claims_compare_with_the_measured_before():
     both = ("ideal", "dynamics")
     v = _verdicts(_evaluation(PAPER_LIKE, modes=both, play=0.99))
     assert v["restores"] == "agrees"
     assert v["dynamics_ns"] == "differs"  # PAPER_LIKE is significant in small and medium
     assert _verdicts(_evaluation(PAPER_LIKE, modes=both, play=0.6))["restores"] == "differs"
+    # the same 90 % after adaptation restores an arm that played 91 % before, not one at 99 %
+    assert _verdicts(_evaluation(PAPER_LIKE, modes=both, play=0.9, before=0.91))["restores"] == \
+        "agrees"
+    assert _verdicts(_evaluation(PAPER_LIKE, modes=both, play=0.9, before=0.99))["restores"] == \
+        "differs"
     calm = {c: [0.3, 0.2, 0.9] for c in PAPER_LIKE}
     assert _verdicts(_evaluation(calm, modes=both))["dynamics_ns"] == "agrees"
+    restores = next(c for c in stage.claims(_evaluation(PAPER_LIKE, modes=both, play=0.97,
+                                                         before=0.985)) if _key(c) == "restores")
+    assert "before the displacement 98.5 %" in restores.measured and "97.0 %" in restores.measured
+    assert "100 %" not in restores.measured
 
 
 def test_readme_has_every_table_and_claim():
     rep = stage.build(_evaluation(PAPER_LIKE, modes=("ideal", "dynamics")))
     text = rep.readme
     for heading in ("The paper's claims", "Observations to reach each error threshold (ideal mode)",
-                    "Wilcoxon rank-sum p-values against random (dynamics mode)",
-                    "RMSE (px) after t observations", "Playing success"):
+                    "Mann-Whitney U p-values against random (dynamics mode)",
+                    "RMSE (px) after t observations", "Playing success",
+                    "Methods: every resolved option",
+                    "Large displacements: representation, estimator or strategy?"):
         assert heading in text
     assert "p < 1e-05 at 10 px (p=1.0e-07)" in text
-    assert text.count("| Sect. IV-") == 5
+    assert text.count("| Sect. IV-") == 6
+    # the other method beside the judged one, and the options that differ in bold
+    assert "kbcli active:" in text and "| **posterior** | kde | likelihood |" in text
     assert [f.name for f in rep.figures] == ["fig6_entropy.png", "fig7_error_ideal.png",
                                              "fig7_error_dynamics.png"]  # no snapshots: no Fig. 5
+
+
+def test_schema_1_artifacts_are_still_read():
+    """An evaluation written before named methods: one method, its derived play numbers dropped."""
+    thr = np.array([10.0, 4.0])
+    cats, strategies, T = ["small"], ["random", "active"], 3
+    cnt = np.array([[1, 2], [2, 3]])
+    curve = {"rmse": np.ones(T), "q25": np.ones(T), "q75": np.ones(T),
+             "median_samples": np.array([1.0, 2.0]), "reached": np.ones(2),
+             "samples_to_threshold": cnt}
+    art = Artifact(
+        kind="evaluation", schema_version=1, seed=1,
+        config={"experiments": 1, "example": "small", "adapt": {},
+                "categories": {"small": {"limit": 10.0, "displacements": [[1.0, 1.0]]}}},
+        data={"thresholds": thr,
+              "experiments": {"mode": np.array(["ideal"] * 2), "category": np.array(["small"] * 2),
+                              "strategy": np.array(strategies), "params": np.zeros((2, 2)),
+                              "play_adapted": np.ones(2), "play_unadapted": np.ones(2)},
+              "curves": {"ideal": {"small": {s: dict(curve) for s in strategies}}},
+              "pvalues": {"ideal": {"small": {"active": {"pvalue": np.array([0.3, 0.3]),
+                                                          "statistic": np.array([-1.0, -1.0])}}}},
+              "entropy": {"ideal": {s: {"mean": np.ones(T), "q25": np.ones(T), "q75": np.ones(T)}
+                                    for s in strategies}},
+              "examples": {"ideal": {}}},
+        attrs={"modes": ["ideal"], "categories": cats, "strategies": strategies,
+               "baseline": "random", "max_steps": T, "model_strategy": "exact"})
+    rep = stage.build(art)
+    assert "schema-1 artifact" in rep.readme and "`kbcli`" in rep.readme
+    # 2 runs against 2: no p below 2 / C(4, 2) = 0.33 is attainable
+    up = stage.upgrade(art)
+    assert up.data["pvalues"]["ideal"]["kbcli"]["small"]["active"]["min_pvalue"] == \
+        pytest.approx(1 / 3)
+    assert np.isnan(up.data["experiments"]["play_adapted"]).all()  # derived, not measured
 
 
 def test_report_cli_from_an_evaluation(runner, tmp_path, monkeypatch):
@@ -123,7 +214,7 @@ def test_report_cli_from_an_evaluation(runner, tmp_path, monkeypatch):
         assert (tmp_path / "rep" / n).read_bytes()[:4] == b"\x89PNG"
     readme = (tmp_path / "rep" / "README.md").read_text()
     assert "![Fig. 5: evolution of the posterior](fig5_posterior.png)" in readme
-    assert "[agrees]" in r.output or "[differs]" in r.output or "[not measured]" in r.output
+    assert any(f"[{v}]" in r.output for v in stage.VERDICTS)
 
 
 @pytest.mark.parametrize("case", ["wrong kind", "missing", "output is a file"])
@@ -146,3 +237,5 @@ def test_report_reads_back_written_artifact(tmp_path):
     write_artifact(_evaluation(PAPER_LIKE), path)
     rep = stage.build(read_artifact(path, "evaluation"))
     assert "sha256" in rep.readme and rep.claims[0].verdict == "agrees"
+    assert "| option | `paper` | `kbcli` |" in rep.readme  # the config's order survives HDF5
+    assert [c.verdict for c in rep.claims] == [c.verdict for c in stage.claims(_evaluation(PAPER_LIKE))]

@@ -204,3 +204,80 @@ def test_the_plain_posterior_softens_learned_models_and_the_robust_one_learns_th
     truth = np.array([-3.3, 2.2])
     steps = list(adapt(ad, make_touch(truth), 12))
     assert np.hypot(*(steps[-1].estimate - truth)) < 1.5
+
+
+# -- the active strategy's selection rule on a hand-made case ------------------------------------
+def _four_hypotheses():
+    """A posterior on four cells: h1 (0, 0) 0.3 (the maximum-likelihood one), h2 (6, 0) 0.25,
+    h3 (6, 6) 0.25, h4 (0, 6) 0.2; every other cell ~1e-22."""
+    cfg = AdapterConfig(strategy="active", prior_halfwidth=10.0, active_keep=2)
+    ad = Adapter(MODEL, cfg, rng=np.random.default_rng(0), table=TABLE)
+    g = ad.grid
+    hyp = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 6.0], [0.0, 6.0]])
+    w = np.array([0.3, 0.25, 0.25, 0.2])
+    logp = np.full(g.shape, -50.0)
+    for h, p in zip(hyp, w, strict=True):
+        logp.reshape(-1)[g.index_of(h)] = math.log(p)
+    ad.posterior = Posterior(g, logp)
+    return ad, hyp, w
+
+
+def _find(hyp, pattern):
+    """An action whose outcome classes under the four hypotheses follow ``pattern`` (equal
+    letters: the same class), searched on a grid of the working area."""
+    xs, ys = np.meshgrid(np.arange(160.0, 640.0, 1.0), np.arange(210.0, 490.0, 1.0))
+    acts = np.column_stack([xs.ravel(), ys.ravel()])
+    cls = np.stack([MODEL.predict_class(acts - h) for h in hyp], axis=1)  # (n, 4)
+    ok = np.ones(len(acts), bool)
+    for i in range(4):
+        for j in range(4):
+            same = cls[:, i] == cls[:, j]
+            ok &= same if pattern[i] == pattern[j] else ~same
+    assert ok.any(), pattern
+    return acts[np.flatnonzero(ok)[0]]
+
+
+def test_active_keeps_the_most_confusing_then_simulates_the_best_hypothesis(monkeypatch):
+    """S1 = {h1 | h2 h3 h4} confuses less (H(0.3) = 0.61 nats) than S2 = {h1 h4 | h2 h3}
+    (H(0.5) = 0.69) but, simulated under the best hypothesis h1, settles the posterior on h1
+    (entropy ~0) where S2 leaves h1 and h4 (0.67 nats). W tells nothing. Active keeps the
+    ``active_keep`` most confusing candidates, then picks the lowest simulated entropy."""
+    import kbcli.core.strategies as strategies
+
+    ad, hyp, w = _four_hypotheses()
+    s1, s2, wasted = _find(hyp, "abbb"), _find(hyp, "aabb"), _find(hyp, "aaaa")
+    fixed = np.array([s2, wasted, s1])
+    monkeypatch.setattr(strategies, "uniform_actions", lambda area, n, rng: fixed.copy())
+    pred, _ = outcome_distribution(TABLE, "translation", hyp, w, fixed, KB.centre)
+    conf = entropy_rows(pred)
+    assert conf[0] > conf[2] > conf[1]  # S2 most confusing, then S1, W nothing
+    assert np.array_equal(ad.propose(), s1)  # keep 2 (S2, S1): S1 settles the posterior
+    ad.cfg = AdapterConfig(strategy="active", prior_halfwidth=10.0, active_keep=1)
+    assert np.array_equal(ad.propose(), s2)  # keep 1: only the most confusing is left
+    ad.cfg = AdapterConfig(strategy="active", prior_halfwidth=10.0, active_keep=3)
+    assert np.array_equal(ad.propose(), s1)
+    # infogain, on the same posterior, values S2's even split above S1
+    monkeypatch.setattr(strategies, "boundary_candidates",
+                        lambda ctx, ne, nc, hyp, w, rng: np.empty((0, 2)))
+    ad.cfg = AdapterConfig(strategy="infogain", prior_halfwidth=10.0)
+    ad._strategy = get_strategy("infogain")
+    assert np.array_equal(ad.propose(), s2)
+
+
+def test_strategies_rank_on_a_fixed_set_of_displacements():
+    """Six fixed displacements (none a multiple of the 0.5 px grid or of the 50 px keys), 12
+    touches each: the model-based strategies pin every one below 1 px; random, on the same
+    displacements and seeds, does worse on average."""
+    truths = np.array([[7.3, -12.6], [-3.71, 4.13], [15.2, 9.9], [-21.35, -6.07], [0.83, 18.4],
+                       [-9.6, -16.9]])
+    final = {}
+    for name in ("random", "active", "infogain"):
+        cfg = AdapterConfig(strategy=name, prior_halfwidth=25.0)
+        errs = []
+        for i, truth in enumerate(truths):
+            ad = Adapter(MODEL, cfg, rng=np.random.default_rng(100 + i), table=TABLE)
+            steps = list(adapt(ad, make_touch(truth, seed=i), 12))
+            errs.append(np.hypot(*(steps[-1].estimate - truth)))
+        final[name] = np.array(errs)
+    assert np.all(final["infogain"] < 1.0) and np.all(final["active"] < 1.0)
+    assert final["random"].mean() > 2 * max(final["active"].mean(), final["infogain"].mean())

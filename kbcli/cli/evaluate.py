@@ -20,12 +20,14 @@ from kbcli.stages import evaluate as stage
 DEFAULT_CONFIG = Path("pipelines/paper.toml")
 
 
-def _load_config(config: Path, experiments: int | None, mode: str | None) -> stage.EvaluateConfig:
+def _load_config(config: Path, experiments: int | None, mode: str | None,
+                 methods: list[str] | None = None) -> stage.EvaluateConfig:
     if config == DEFAULT_CONFIG and not config.is_file():
         raise KbcliError(f"{config}: no such config file here; run from the kbcli checkout or pass "
                          f"--config FILE")
     cfg = stage.EvaluateConfig.from_dict(dict(load_toml(config, "evaluate")))
-    return cfg.with_overrides(experiments=experiments, mode=mode)
+    return cfg.with_overrides(experiments=experiments, mode=mode,
+                              methods=tuple(methods) if methods else None)
 
 
 def _job(cfg: stage.EvaluateConfig, model_art, experiment: str) -> Job:
@@ -49,18 +51,25 @@ def _summary(art, elapsed: float, n_run: int, step_ms: np.ndarray) -> None:
     thr = art.array("thresholds")
     j = int(np.argmin(np.abs(thr - 4.0)))  # the threshold nearest 4 px
     T = art.attrs["max_steps"]
+    exp = art.data["experiments"]
     table = Table(title="evaluation summary")
-    for col in ("mode", "category", "strategy", f"RMSE at t={T} (px)",
-                f"median obs. to < {thr[j]:g} px", f"p vs {base} (< {thr[j]:g} px)"):
-        table.add_column(col, justify="left" if col in ("mode", "category", "strategy") else "right")
+    for col in ("mode", "method", "category", "strategy", f"RMSE at t={T} (px)",
+                f"median obs. to < {thr[j]:g} px", f"p vs {base} (< {thr[j]:g} px)",
+                "playing success after"):
+        table.add_column(col, justify="left" if col in ("mode", "method", "category", "strategy")
+                         else "right")
+    from kbcli.stages.report import ordered
+
     for m in art.attrs["modes"]:
-        for c in art.attrs["categories"]:
-            for s in art.attrs["strategies"]:
-                cur = art.data["curves"][m][c][s]
-                med = cur["median_samples"][j]
-                p = "" if s == base else f"{art.data['pvalues'][m][c][s]['pvalue'][j]:.1e}"
-                table.add_row(m, c, s, f"{cur['rmse'][-1]:.2f}",
-                              f">{T}" if np.isnan(med) else f"{med:g}", p)
+        for x, c, s, cur in ordered(art, "curves", m):
+            med = cur["median_samples"][j]
+            p = "" if s == base else f"{art.data['pvalues'][m][x][c][s]['pvalue'][j]:.1e}"
+            sel = ((exp["mode"] == m) & (exp["method"] == x) & (exp["category"] == c)
+                   & (exp["strategy"] == s))
+            play = exp["play_adapted"][sel]
+            ptxt = "" if np.isnan(play).all() else f"{100 * np.nanmedian(play):.1f} %"
+            table.add_row(m, x, c, s, f"{cur['rmse'][-1]:.2f}",
+                          f">{T}" if np.isnan(med) else f"{med:g}", p, ptxt)
     out.print(table)
     if n_run:
         med = float(np.median(step_ms)) if len(step_ms) else float("nan")
@@ -70,9 +79,13 @@ def _summary(art, elapsed: float, n_run: int, step_ms: np.ndarray) -> None:
 
 @command(name="evaluate")
 def evaluate_cmd(
-    model: Annotated[Path, typer.Option("--model", help="Model artifact (.h5, kind 'model') to adapt with.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Evaluation artifact to write (.h5).")],
+    model: Annotated[Path | None, typer.Option(
+        "--model", help="Model artifact (.h5, kind 'model') to adapt with [default: the embedded "
+        "default model, data/default-model.h5].")] = None,
     config: Annotated[Path, typer.Option("--config", help="TOML with an [evaluate] table.")] = DEFAULT_CONFIG,
+    method: Annotated[list[str] | None, typer.Option(
+        "--method", help="Only this method of the config (repeat for several) [default: all].")] = None,
     experiments: Annotated[int | None, typer.Option(
         "--experiments", help="Repetitions per parametrization, strategy and mode (overrides the config).")] = None,
     mode: Annotated[str | None, typer.Option(
@@ -88,15 +101,18 @@ def evaluate_cmd(
     checkpoint_every: Annotated[int, typer.Option(
         "--checkpoint-every", help="Save finished experiments to OUTPUT.ckpt after this many.")] = 10,
 ) -> None:
-    """Run the paper's evaluation protocol: every displacement x strategy x mode, N times each.
+    """Run the paper's evaluation protocol: every displacement x method x strategy x mode, N times.
 
-    Reads the TOML config and the model artifact. Writes OUTPUT (kind 'evaluation': errors and
-    entropy per step, RMSE curves, observations to thresholds, rank-sum p-values, the experiment
-    table, example posteriors). While running, finished experiments are kept in OUTPUT.ckpt/
-    (removed once OUTPUT is written); --resume continues from there. Prints a progress bar, then a
-    table of final RMSE, median observations and p-values, and the speed.
+    Reads the TOML config (its [evaluate.methods.NAME] tables name the methods: 'paper', the
+    paper's KDE posterior, maximum-likelihood estimate, random and active; 'kbcli', ours) and the
+    model artifact. Writes OUTPUT (kind 'evaluation': errors and entropy per step, RMSE curves,
+    observations to thresholds, tie-corrected Mann-Whitney p-values, measured playing success, the
+    experiment table, example posteriors, every resolved option of every method). While running,
+    finished experiments are kept in OUTPUT.ckpt/ (removed once OUTPUT is written); --resume
+    continues from there. Prints a progress bar, then a table of final RMSE, median observations,
+    p-values and playing success, and the speed.
     """
-    cfg = _load_config(config, experiments, mode)
+    cfg = _load_config(config, experiments, mode, method)
     if arm is not None:
         from dataclasses import replace
 
@@ -105,6 +121,10 @@ def evaluate_cmd(
     _check_backend(jobs, scheduler)
     if checkpoint_every < 1:
         raise ConfigError(f"--checkpoint-every must be >= 1, got {checkpoint_every}")
+    if model is None:
+        from kbcli.stages.models import default_model_path
+
+        model = default_model_path()
     model_art = read_artifact(model, "model")
     output_path(output)
     from kbcli.stages import keyboard as keyboard_stage
@@ -138,8 +158,8 @@ def evaluate_cmd(
     art = stage.assemble(cfg, tasks, results, model_art, keyboard)
     write_artifact(art, output)
     ckpt.remove()
-    out.print(f"wrote {output}: {len(tasks)} experiments ({', '.join(cfg.modes)}; "
-              f"{', '.join(cfg.strategies)})")
+    out.print(f"wrote {output}: {len(tasks)} experiments ({', '.join(cfg.modes)}; methods "
+              + ", ".join(f"{m.name} ({', '.join(m.strategies)})" for m in cfg.methods) + ")")
     _summary(art, elapsed, len(fresh), stage.timing(fresh))
 
 
@@ -200,7 +220,7 @@ def bench_evaluate_cmd(
     ref = rows[0][-1]
 
     def same(res: dict) -> bool:
-        return all(np.array_equal(res[i][k], ref[i][k]) for i in ref for k in stage.STEP_KEYS)
+        return all(np.array_equal(res[i][k], ref[i][k], equal_nan=True) for i in ref for k in stage.STEP_KEYS)
 
     table = Table(title=f"kbcli evaluate backends: {n} experiments ({mode}, {cfg.max_steps} steps, "
                         f"{model_art.config.get('strategy')} model)")

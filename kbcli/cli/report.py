@@ -29,14 +29,18 @@ def report_cmd(
     Reads EVALUATION (kind 'evaluation', or 'model_quality' from kbcli quality: then
     advantage.png and a README.md that tests the paper's explanation of its robot result). Writes
     into the OUTPUT folder: fig5_posterior.png
-    (posterior evolution per strategy), fig6_entropy.png (entropy reduction), fig7_error_MODE.png
-    (error against observations per category) and README.md (tables of observations to each
-    threshold, p-values, RMSE, playing success, and the paper's claims against our measurements).
-    Prints each claim's verdict.
+    (posterior evolution per method and strategy, px axes), fig6_entropy.png (entropy reduction),
+    fig7_error_MODE.png (error against observations per category and method) and README.md (every
+    resolved option of every method, the paper's claims judged on the paper's method with ours
+    beside it, the large-displacement ablation, tables of observations to each threshold,
+    p-values with the smallest attainable one, RMSE and measured playing success). Prints each
+    claim's verdict.
     """
     from kbcli.viz import report as viz
 
     art = read_artifact(evaluation, ("evaluation", "model_quality"))
+    if art.kind == "evaluation":
+        art = stage.upgrade(art)
     parent = output.parent if str(output.parent) else Path(".")
     if output.exists() and not output.is_dir():
         raise KbcliError(f"{output}: exists and is not a folder")
@@ -58,7 +62,8 @@ def report_cmd(
     _write_text(output / "README.md", rep.readme)
     out.print(f"wrote {output}/: README.md and {len(rep.figures)} figures")
     for c in rep.claims:
-        out.print(f"  [{c.verdict}] {c.paper} -- {c.measured}", markup=False, soft_wrap=True)
+        out.print(f"  [{c.verdict}] {c.paper} -- {c.method}: {c.measured}", markup=False,
+                  soft_wrap=True)
 
 
 def _quality_report(art, output: Path) -> None:

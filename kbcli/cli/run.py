@@ -54,7 +54,7 @@ def run_cmd(
     cfg = stage.LoopConfig(
         melody=melody, steps=steps, perturb_at=perturb_at, max_adapt_steps=max_adapt_steps,
         detector=DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold),
-        adapt=AdaptConfig(strategy=strategy, posterior=posterior, family=family, mode=mode,
+        adapt=AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
                           reach_noise=reach_noise, arm=load_arm(arm), stop=True),
     )
     model_art = read_artifact(model, "model")

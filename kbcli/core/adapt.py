@@ -51,6 +51,7 @@ from kbcli.core import transforms
 from kbcli.core.config import check_known
 from kbcli.core.model import UNKNOWN, ExactModel
 from kbcli.core.posterior import (
+    ActionSamples,
     HypothesisGrid,
     LikelihoodTable,
     Posterior,
@@ -140,7 +141,8 @@ class AdapterConfig:
     active_keep, active_hypotheses : int
         Most confusing candidates kept by ``active``, and the cells its simulated updates use.
     kde_samples : int
-        N, actions drawn from p(action | sound) per observation (kde posterior).
+        N, actions drawn from p(action | sound) per sound class, once (kde posterior; see
+        :class:`kbcli.core.posterior.ActionSamples`).
     kde_bandwidth : float or None
         Kernel std, px; None: Scott's rule (see :mod:`kbcli.core.posterior`).
     estimator : str
@@ -296,6 +298,13 @@ def build_table(model, cfg: AdapterConfig,
     return LikelihoodTable.from_model(model, step, eps=cfg.outlier, blur=blur, area=area)
 
 
+def build_samples(model, cfg: AdapterConfig, seed) -> ActionSamples:
+    """The ``kde`` posterior's per-class samples of p(action | sound) for ``cfg`` (drawn lazily,
+    once per class, from ``SeedSequence([*seed, cls])``; share it across adaptations)."""
+    return ActionSamples(model, cfg.kde_samples, seed, bandwidth=cfg.kde_bandwidth,
+                         resolution=cfg.resolution)
+
+
 def total_blur(model, cfg: AdapterConfig) -> float:
     """Std (px) the model's raster is blurred by: the unseen reach noise and, for the plain
     posterior, the model softening (the robust posterior blurs per touch instead)."""
@@ -333,6 +342,9 @@ class Adapter:
         keyboard's centre at its reference pose).
     table : LikelihoodTable, optional
         A prebuilt :func:`build_table` (saves rasterising the model again).
+    samples : ActionSamples, optional
+        The ``kde`` posterior's samples of p(action | sound), drawn once per class and shared (see
+        :func:`build_samples`); default: a cache of this adapter's own, seeded from ``rng``.
     max_steps : int, optional
         A touch budget: :meth:`done` holds once this many touches were observed (None: only the
         stopping rule ends the adaptation).
@@ -353,6 +365,7 @@ class Adapter:
     def __init__(self, model, cfg: AdapterConfig, *, rng: np.random.Generator,
                  area: tuple[float, float, float, float] | None = None,
                  centre: np.ndarray | None = None, table: LikelihoodTable | None = None,
+                 samples: ActionSamples | None = None,
                  max_steps: int | None = None) -> None:
         if max_steps is not None:
             _int("max_steps", max_steps)
@@ -378,6 +391,9 @@ class Adapter:
         self._edges: np.ndarray | None = None
         self._corners: np.ndarray | None = None
         self.bandwidths: list[float] = []
+        if cfg.posterior == "kde" and samples is None:
+            samples = build_samples(model, cfg, [int(v) for v in rng.integers(2**32, size=2)])
+        self.samples = samples
 
     @classmethod
     def from_model(cls, model, *, strategy: str = "infogain", family: str = "translation",
@@ -516,9 +532,8 @@ class Adapter:
             return
         a = np.asarray(action, float).reshape(2)
         if self.cfg.posterior == "kde":
-            term, bw = kde_term(self.grid, self.model, a, cls, self.rng,
-                                n_samples=self.cfg.kde_samples, eps=self.cfg.outlier,
-                                bandwidth=self.cfg.kde_bandwidth)
+            term, bw = kde_term(self.grid, self.model, a, cls, n_samples=self.cfg.kde_samples,
+                                eps=self.cfg.outlier, samples=self.samples)
             self.bandwidths.append(bw)
         elif self.robust is not None:
             sigma = cell_sigma(self.grid, a) if self.cfg.cell_average and self.grid.rigid else 0.0
@@ -651,4 +666,4 @@ def step_record(adapter: Adapter, t: int, action: np.ndarray, landed: np.ndarray
 
 
 __all__ = ["AdapterConfig", "Adapter", "Estimate", "Step", "adapt", "step_record", "build_table",
-           "STRATEGIES", "POSTERIORS"]
+           "build_samples", "STRATEGIES", "POSTERIORS"]

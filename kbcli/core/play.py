@@ -194,3 +194,79 @@ def expected_failure_rate(
     b[:, -1, 0] = 1.0
     pi = np.linalg.solve(a, b)[..., 0]
     return (pi * f).sum(axis=1)
+
+
+def replay(model, melody: Melody, touch: Touch, *, rng: np.random.Generator, n_notes: int = 200,
+           correction: np.ndarray | None = None, family: str = "translation",
+           centre: np.ndarray | None = None, chunk: int = 32,
+           sampler: Callable[[int, int, np.random.Generator], np.ndarray] | None = None
+           ) -> np.ndarray:
+    """Play ``n_notes`` touches of Algorithm 1 and return their history (vectorised).
+
+    The same rules as :func:`play` (sample an action for the aimed note, touch, match the heard
+    sound with Eq. 2; MATCH moves on to the next note, NO_MATCH restarts from note 0), with the
+    touches batched: for each sound class, ``chunk`` actions are drawn and touched at once, and the
+    note sequence consumes them in order (a class's next chunk is drawn when its actions run out).
+    The draws are i.i.d., so this is Algorithm 1 exactly, except that in ``dynamics`` mode the arm
+    reaches a class's batch one after the other rather than in the order of the melody (each reach
+    starts from where the previous one ended).
+
+    Parameters
+    ----------
+    touch : callable
+        ``touch(actions (n, 2)) -> (landed (n, 2), perceived (n, D))``.
+    n_notes : int
+        Touches to play.
+    correction : (P,) ndarray, optional
+        The robot's estimate of the displacement: every sampled action ``a`` is sent as
+        ``T_correction(a)`` (as :mod:`kbcli.core.loop` resumes after adapting). None: no correction.
+    family : str
+        Transform family of ``correction``.
+    centre : (2,) ndarray, optional
+        Rotation centre of the family (default: the centre of the model's working area).
+    sampler : callable, optional
+        ``sampler(cls, n, rng) -> (n, 2)`` draws from p(action | sound) (Algorithm 1, line 10);
+        default ``model.sample_actions``. A pool of draws made once per class, resampled (e.g.
+        :meth:`kbcli.core.posterior.ActionSamples.draw`), saves the model's rejection sampling in
+        repeated replays.
+
+    Returns
+    -------
+    (n_notes,) int ndarray
+        :data:`MATCH` (0) or :data:`NO_MATCH` (1) per touch; the success rate is
+        ``mean(history == MATCH)``.
+    """
+    from kbcli.core import transforms
+
+    if n_notes < 1:
+        raise ConfigError(f"n_notes must be >= 1, got {n_notes}")
+    classes = note_classes(model, melody)
+    sounds = np.asarray(model.class_features_, float)[classes]
+    if centre is None:
+        x0, y0, x1, y1 = model.area
+        centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
+    corr = None if correction is None else np.asarray(correction, float)
+    draw = model.sample_actions if sampler is None else sampler
+    queues: dict[int, list] = {}  # class -> [ok (k,) bool, next index]
+
+    def outcomes(cls: int) -> np.ndarray:
+        a = np.asarray(draw(cls, chunk, rng), float).reshape(-1, 2)
+        if corr is not None:
+            a = transforms.apply(family, corr, a, centre)
+        _, heard = touch(a)
+        m = match(np.asarray(heard, float).reshape(len(a), -1), sounds, model.match_threshold)
+        return (m >= 0) & (classes[np.maximum(m, 0)] == cls)
+
+    history = np.empty(n_notes, dtype=np.int64)
+    n = len(melody)
+    target = 0
+    for step in range(n_notes):
+        cls = int(classes[target])
+        q = queues.get(cls)
+        if q is None or q[1] >= len(q[0]):
+            q = queues[cls] = [outcomes(cls), 0]
+        ok = bool(q[0][q[1]])
+        q[1] += 1
+        history[step] = MATCH if ok else NO_MATCH
+        target = (target + 1) % n if ok else 0
+    return history

@@ -7,10 +7,20 @@ small, medium and large displacements, and reports
   the per-experiment error over the experiments of a group, ``RMSE(t) = sqrt(mean_i e_i(t)^2)``,
   with its spread (quartiles and standard deviation of ``e_i(t)``, and the RMSE of each
   parametrization);
-- how many observations each experiment needed to bring its error below a threshold, and the
-  Wilcoxon rank-sum test between two strategies on those counts (``scipy.stats.ranksums``); an
-  experiment that never gets below a threshold within its ``T`` steps counts as ``T + 1`` (it ranks
-  after every experiment that did, and ties with the others that did not);
+- how many observations each experiment needed to bring its error below a threshold, and a test
+  between two strategies on those counts; an experiment that never gets below a threshold within
+  its ``T`` steps counts as ``T + 1`` (it ranks after every experiment that did, and ties with the
+  others that did not). The counts tie heavily, so the tests are tie-corrected:
+
+  - unpaired samples (the evaluation: every run has its own seed): the Wilcoxon rank-sum test in
+    its Mann-Whitney U form, ``scipy.stats.mannwhitneyu(method="asymptotic")``, whose normal
+    approximation uses the tie-corrected variance (:func:`mannwhitney_pvalues`);
+  - paired samples (the adapt benchmark: run ``i`` of every strategy shares its displacement and
+    seed): the Wilcoxon signed-rank test, ``scipy.stats.wilcoxon`` on the differences, zero
+    differences dropped (:func:`signed_rank_pvalues`);
+
+  and the smallest p-value a design can give at all (:func:`min_pvalue_unpaired`,
+  :func:`min_pvalue_paired`) tells whether a claim of ``p < bound`` could be checked at all;
 - the entropy of the posterior per step (Fig. 6).
 
 Pure numpy/scipy: no I/O, no plotting. Shapes: ``errors`` is ``(n, T)`` (experiment, step), step
@@ -18,6 +28,8 @@ Pure numpy/scipy: no I/O, no plotting. Shapes: ``errors`` is ``(n, T)`` (experim
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from scipy import stats as _sps
@@ -121,27 +133,93 @@ def median_samples(counts: np.ndarray, max_steps: int) -> np.ndarray:
     return np.where(med <= max_steps, med, np.nan)
 
 
-def ranksum_pvalues(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two-sided Wilcoxon rank-sum test between two strategies, per threshold.
+def mannwhitney_pvalues(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two-sided, tie-corrected Mann-Whitney U (Wilcoxon rank-sum) test per threshold.
 
     Parameters
     ----------
-    a, b : (n, k) and (m, k) int ndarrays
+    a, b : (n, k) and (m, k) ndarrays
         Observations to each of ``k`` thresholds (:func:`samples_to_threshold`), one row per
-        experiment of each strategy.
+        experiment of each strategy (independent samples).
 
     Returns
     -------
-    statistic, pvalue : (k,) ndarrays
-        ``statistic < 0`` when ``a`` needed fewer observations than ``b``. Identical samples give
-        statistic 0 and p-value 1.
+    effect, pvalue : (k,) ndarrays
+        ``effect = P(a > b) + P(a = b) / 2 - 1/2`` (from U / (n m)), in [-0.5, 0.5]: < 0 when ``a``
+        needed fewer observations than ``b``. ``pvalue`` from the normal approximation with the
+        tie-corrected variance and continuity correction. Samples with no spread at all (every
+        count tied) give effect 0 and p-value 1.
     """
     a = np.asarray(a, float)
     b = np.asarray(b, float)
-    res = _sps.ranksums(a, b, axis=0)
-    stat = np.nan_to_num(np.asarray(res.statistic, float), nan=0.0)
-    p = np.nan_to_num(np.asarray(res.pvalue, float), nan=1.0)
-    return stat, p
+    with np.errstate(divide="ignore", invalid="ignore"):
+        res = _sps.mannwhitneyu(a, b, axis=0, alternative="two-sided", method="asymptotic",
+                                use_continuity=True)
+    effect = np.asarray(res.statistic, float) / (a.shape[0] * b.shape[0]) - 0.5
+    p = np.asarray(res.pvalue, float)
+    tied = np.all(np.concatenate([a, b]) == np.concatenate([a, b])[:1], axis=0)
+    return np.where(tied, 0.0, effect), np.where(tied | np.isnan(p), 1.0, p)
+
+
+def ranksum_pvalues(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The Wilcoxon rank-sum test: :func:`mannwhitney_pvalues` (kept for the old name; it used
+    ``scipy.stats.ranksums``, which has no tie correction)."""
+    return mannwhitney_pvalues(a, b)
+
+
+def signed_rank_pvalues(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two-sided Wilcoxon signed-rank test of paired samples per threshold.
+
+    Parameters
+    ----------
+    a, b : (n, k) ndarrays
+        Row ``i`` of ``a`` and of ``b`` are a pair (same displacement and seed).
+
+    Returns
+    -------
+    effect, pvalue : (k,) ndarrays
+        ``effect = (R+ - R-) / (R+ + R-)``, the rank-biserial correlation of the differences
+        ``a - b`` (zeros dropped), in [-1, 1]: < 0 when ``a`` needed fewer. ``pvalue`` from
+        ``scipy.stats.wilcoxon`` (``zero_method="wilcox"``; exact for small samples without ties,
+        else the tie-corrected normal approximation). No nonzero difference: effect 0, p-value 1.
+    """
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    if a.shape != b.shape:
+        raise ValueError(f"paired samples need the same shape, got {a.shape} and {b.shape}")
+    d = a - b
+    k = d.shape[1]
+    effect = np.zeros(k)
+    p = np.ones(k)
+    for j in range(k):
+        dj = d[:, j][d[:, j] != 0]
+        if len(dj) == 0:
+            continue
+        r = _sps.rankdata(np.abs(dj))
+        effect[j] = (r[dj > 0].sum() - r[dj < 0].sum()) / r.sum()
+        with np.errstate(divide="ignore", invalid="ignore"):
+            res = _sps.wilcoxon(dj, zero_method="wilcox", alternative="two-sided")
+        p[j] = 1.0 if np.isnan(res.pvalue) else float(res.pvalue)
+    return effect, p
+
+
+def min_pvalue_unpaired(n: int, m: int) -> float:
+    """Smallest two-sided p-value any rank test of two independent samples of sizes ``n`` and
+    ``m`` can give: ``2 / C(n + m, n)``, the probability of the most extreme arrangement (every
+    run of one strategy faster than every run of the other) under the null hypothesis. With ties
+    the attainable minimum is larger still. 0.0 when it underflows a float (below ~1e-308)."""
+    if n < 1 or m < 1:
+        return 1.0
+    log_p = math.log(2) - (math.lgamma(n + m + 1) - math.lgamma(n + 1) - math.lgamma(m + 1))
+    return min(1.0, math.exp(log_p)) if log_p > -708 else 0.0
+
+
+def min_pvalue_paired(n: int) -> float:
+    """Smallest two-sided p-value of the Wilcoxon signed-rank test on ``n`` pairs: ``2 / 2^n``
+    (every difference of one sign). 0.0 when it underflows."""
+    if n < 1:
+        return 1.0
+    return min(1.0, 2.0 ** (1 - n)) if n < 1000 else 0.0
 
 
 def entropy_curves(entropy: np.ndarray) -> dict[str, np.ndarray]:

@@ -17,20 +17,38 @@ after each touch in dynamics mode, and the arm's geometry and the mode in the at
 :class:`Recorder` and :func:`run_attrs` build the same artifact for a session with a robot in
 another process (``kbcli serve``, :mod:`kbcli.stages.serve`): there the truth is unknown and the
 errors are NaN (their summaries None).
+
+The stage's config, :class:`AdaptConfig`, holds the robot's :class:`~kbcli.core.adapt.AdapterConfig`
+by composition (``AdaptConfig(robot=AdapterConfig(...), mode=..., reach_noise=...)``) beside the
+simulated arm's and the loop's options; run artifacts of schema 2 store it nested
+(``config["adapt"]["robot"]``), and the flat layout of schema 1 is still read.
+
+:func:`play_success` measures the playing success around an adaptation by replaying the melody
+with Algorithm 1 (:func:`kbcli.core.play.replay`): before the displacement, after it without
+adaptation, and after it with the final estimate as the correction (``experiment(play=...)``).
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+import math
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from kbcli.core import transforms
-from kbcli.core.adapt import POSTERIORS, Adapter, AdapterConfig, Step, adapt, build_table
-from kbcli.core.config import check_known
+from kbcli.core.adapt import (
+    POSTERIORS,
+    Adapter,
+    AdapterConfig,
+    Step,
+    adapt,
+    build_samples,
+    build_table,
+)
 from kbcli.core.keyboard import Keyboard
-from kbcli.core.posterior import LikelihoodTable
-from kbcli.core.robust import DEFAULT_BLURS, DEFAULT_OUTLIERS
+from kbcli.core.melody import DEFAULT_MELODY, parse_melody
+from kbcli.core.play import MATCH, replay
+from kbcli.core.posterior import ActionSamples, LikelihoodTable
 from kbcli.errors import ArtifactError, ConfigError, KbcliError
 from kbcli.sim import MODES, SimConfig, World, make_reacher
 from kbcli.sim.arms import PRESETS, ArmConfig, arm_config
@@ -42,66 +60,74 @@ FEEDBACKS = ("landed", "aim")
 DEFAULT_SNAPSHOTS = (0, 1, 2, 3, 5, 10, 20, 40)
 
 
-@dataclass(frozen=True, kw_only=True)
+#: The world-side and loop options of :class:`AdaptConfig` (everything else is the robot's).
+LOOP_FIELDS = ("mode", "reach_noise", "arm", "feedback", "max_steps", "stop")
+
+
+@dataclass(frozen=True, kw_only=True, init=False)
 class AdaptConfig:
-    """One adaptation: the robot's settings (see :class:`kbcli.core.adapt.AdapterConfig`, whose
-    fields are repeated here) plus the simulated arm's and the loop's.
+    """One adaptation: the robot's settings (``robot``, a :class:`kbcli.core.adapt.AdapterConfig`)
+    plus the simulated arm's and the loop's.
 
     Parameters
     ----------
+    robot : AdapterConfig
+        How the robot adapts: strategy, posterior, estimator, grid, ... (its defaults are kbcli's
+        best choice).
     mode : str
         ``ideal`` or ``dynamics`` (:class:`kbcli.sim.SimConfig`).
     reach_noise : float
         Landing scatter of the arm, px.
-    feedback : str
-        ``landed``: the robot observes where its finger landed (proprioception); ``aim``: only where
-        it aimed, and blurs its likelihood by ``reach_noise``.
     arm : ArmConfig
         How the simulated arm errs (:mod:`kbcli.sim.arms`; a preset name or a table is accepted):
         its landing error, its finger and how well it feels where it landed.
-    model_blur : float or None
-        Extra softening of the model's map, px (see :class:`kbcli.core.adapt.AdapterConfig`;
-        None: 1 px for a learned model, 0 for the exact one).
+    feedback : str
+        ``landed``: the robot observes where its finger landed (proprioception); ``aim``: only where
+        it aimed, and blurs its likelihood by ``reach_noise`` (``robot.blur`` is then set to it).
     max_steps : int
         T, observations at most.
     stop : bool
         End at the stopping rule (else always run T steps and record when the rule fired).
+
+    Notes
+    -----
+    The robot's options read through as attributes (``cfg.strategy`` is ``cfg.robot.strategy``), and
+    :meth:`from_dict` also takes the flat layout of schema-1 artifacts and older TOML files (robot
+    options beside ``mode``): the layout before the robot's config was held by composition.
     """
 
-    strategy: str = "infogain"
-    posterior: str = "likelihood"
-    family: str = "translation"
+    robot: AdapterConfig = field(default_factory=AdapterConfig)
     mode: str = "ideal"
     reach_noise: float = 0.0
-    feedback: str = "landed"
     arm: ArmConfig = PRESETS["ideal"]
-    robust: bool = True
-    robust_blurs: tuple[float, ...] = DEFAULT_BLURS
-    robust_outliers: tuple[float, ...] = DEFAULT_OUTLIERS
-    model_blur: float | None = None
+    feedback: str = "landed"
     max_steps: int = 40
     stop: bool = False
-    resolution: float = 0.5
-    prior_halfwidth: float = 45.0
-    max_angle: float = 5.0
-    angle_resolution: float = 0.25
-    outlier: float = 1e-3
-    cell_average: bool = True
-    raster_step: float | None = None
-    candidates: int = 256
-    hypotheses: int = 512
-    active_keep: int = 8
-    active_hypotheses: int = 2048
-    kde_samples: int = 10000
-    kde_bandwidth: float | None = None
-    estimator: str = "mean"
-    stop_ml: float | None = None
-    stop_mass: float = 0.95
-    stop_radius: float = 1.0
-    stop_angle: float = 0.5
-    max_memory_mb: float = 2048.0
+
+    def __init__(self, *, robot: AdapterConfig | None = None, mode: str = "ideal",
+                 reach_noise: float = 0.0, arm: ArmConfig | str | dict = "ideal",
+                 feedback: str = "landed", max_steps: int = 40, stop: bool = False,
+                 **robot_options) -> None:
+        # robot options given flat (``AdaptConfig(strategy="random")``, the layout before the
+        # composition) still work: they override ``robot``'s
+        unknown = sorted(set(robot_options) - set(AdapterConfig.__dataclass_fields__))
+        if unknown:
+            raise ConfigError(f"unknown adapt option(s) {', '.join(unknown)}")
+        if robot is None:
+            robot = AdapterConfig(**robot_options)
+        elif robot_options:
+            if not isinstance(robot, AdapterConfig):
+                raise ConfigError(f"robot must be an AdapterConfig, got {type(robot).__name__}")
+            robot = replace(robot, **robot_options)
+        for k, v in (("robot", robot), ("mode", mode), ("reach_noise", reach_noise),
+                     ("arm", arm_config(arm)), ("feedback", feedback), ("max_steps", max_steps),
+                     ("stop", stop)):
+            object.__setattr__(self, k, v)
+        self.__post_init__()
 
     def __post_init__(self) -> None:
+        if not isinstance(self.robot, AdapterConfig):
+            raise ConfigError(f"robot must be an AdapterConfig, got {type(self.robot).__name__}")
         if self.mode not in MODES:
             raise ConfigError(f"unknown mode {self.mode!r}; valid: {', '.join(MODES)}")
         if self.feedback not in FEEDBACKS:
@@ -112,34 +138,120 @@ class AdaptConfig:
         if not isinstance(self.stop, bool):
             raise ConfigError(f"stop must be true or false, got {self.stop!r}")
         object.__setattr__(self, "arm", arm_config(self.arm))
-        for name in ("robust_blurs", "robust_outliers"):
-            v = getattr(self, name)
-            if isinstance(v, list):
-                object.__setattr__(self, name, tuple(v))
         self.sim_config()
         self.adapter_config()
+
+    def __getattr__(self, name: str):
+        # the robot's options read through (``cfg.strategy``); only called for missing attributes
+        if name != "robot" and not name.startswith("__") and name in AdapterConfig.__dataclass_fields__:
+            return getattr(self.robot, name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    @classmethod
+    def flat(cls, **options) -> AdaptConfig:
+        """Build from one flat set of options (robot and loop options mixed), as flags give them."""
+        return cls.from_dict(options)
+
+    def with_robot(self, **changes) -> AdaptConfig:
+        """A copy with some robot options changed."""
+        return replace(self, robot=replace(self.robot, **changes))
 
     def sim_config(self) -> SimConfig:
         return SimConfig(mode=self.mode, reach_noise=self.reach_noise, arm=self.arm)
 
     def adapter_config(self) -> AdapterConfig:
         """The robot-side config (``blur`` is the reach noise under ``aim`` feedback)."""
-        d = {k: v for k, v in asdict(self).items() if k in AdapterConfig.__dataclass_fields__}
-        d["blur"] = float(self.reach_noise) if self.feedback == "aim" else 0.0
-        return AdapterConfig(**d)
+        if self.feedback == "aim":
+            return replace(self.robot, blur=float(self.reach_noise))
+        return self.robot
 
     def to_dict(self) -> dict:
-        d = asdict(self)
+        """Every resolved option, the robot's nested under ``robot``."""
+        d = {k: getattr(self, k) for k in LOOP_FIELDS}
         d["arm"] = self.arm.to_dict()
-        d["robust_blurs"] = list(self.robust_blurs)
-        d["robust_outliers"] = list(self.robust_outliers)
-        return d
+        return {"robot": self.robot.to_dict(), **d}
 
     @classmethod
     def from_dict(cls, d: dict) -> AdaptConfig:
-        """Build from a mapping (a TOML table, an artifact's config); unknown keys are rejected."""
-        check_known(cls, d, "adapt")
-        return cls(**d)
+        """Build from a mapping (a TOML table, an artifact's config); unknown keys are rejected.
+
+        Takes the nested layout (``robot = {...}`` beside the loop options) and the flat one of
+        schema-1 artifacts (robot options at the top level); a robot option given at the top level
+        overrides the same option in the ``robot`` table (as a command-line flag overrides a TOML
+        file).
+        """
+        if not isinstance(d, dict):
+            raise ConfigError("the adapt options must be a table")
+        robot_keys = set(AdapterConfig.__dataclass_fields__)
+        flat = {k: v for k, v in d.items() if k in robot_keys}
+        rest = {k: v for k, v in d.items() if k not in robot_keys}
+        known = set(cls.__dataclass_fields__) | robot_keys
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ConfigError(f"unknown adapt option(s) {', '.join(unknown)}; valid: "
+                              f"{', '.join(sorted(known))}")
+        robot = rest.pop("robot", None)
+        if isinstance(robot, AdapterConfig):
+            robot = robot.to_dict()
+        if robot is None:
+            robot = {}
+        if not isinstance(robot, dict):
+            raise ConfigError("robot must be a table of adapter options")
+        robot_cfg = AdapterConfig.from_dict({**robot, **flat})
+        return cls(robot=robot_cfg, **rest)
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlayCheck:
+    """Playing success measured by replaying the melody (Algorithm 1) around an adaptation.
+
+    Parameters
+    ----------
+    melody : str
+        Notes ``NOTE:BEATS`` (:mod:`kbcli.core.melody`).
+    notes : int
+        Touches per replay.
+    reference : bool
+        Also replay before the displacement and after it without adaptation (else only after
+        adaptation, with the final estimate).
+    """
+
+    melody: str = DEFAULT_MELODY
+    notes: int = 200
+    reference: bool = True
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.notes, int) or isinstance(self.notes, bool) or self.notes < 1:
+            raise ConfigError(f"play notes must be a whole number >= 1, got {self.notes!r}")
+
+
+def play_success(model, keyboard: Keyboard, sim: SimConfig, family: str, truth: np.ndarray,
+                 estimate: np.ndarray | None, check: PlayCheck, *, rng: np.random.Generator,
+                 pool: ActionSamples | None = None) -> dict[str, float]:
+    """Success rates (MATCH share) of ``check.notes`` touches of Algorithm 1 with the model's
+    actions and the arm of ``sim``: ``before`` (keyboard at its reference pose), ``unadapted``
+    (at ``truth``, no correction) and ``adapted`` (at ``truth``, actions corrected by
+    ``estimate``); NaN for what was not measured. ``pool``: per-class draws of p(action | sound)
+    to resample instead of calling ``model.sample_actions`` (see :func:`kbcli.core.play.replay`).
+    """
+    melody = parse_melody(check.melody, keyboard)
+    n = len(transforms.FAMILIES[family])
+    out = {"before": math.nan, "unadapted": math.nan, "adapted": math.nan}
+    runs = []
+    if check.reference:
+        runs += [("before", np.zeros(n), None), ("unadapted", truth, None)]
+    if estimate is not None:
+        runs.append(("adapted", truth, np.asarray(estimate, float)))
+    for (name, pose, corr), r in zip(runs, rng.spawn(len(runs)), strict=True):
+        world = World(keyboard, make_reacher(sim), np.asarray(pose, float), family)
+
+        def touch(actions: np.ndarray, world=world, r=r) -> tuple[np.ndarray, np.ndarray]:
+            return world.touch(actions, r)
+
+        hist = replay(model, melody, touch, rng=r, n_notes=check.notes, correction=corr,
+                      family=family, sampler=None if pool is None else pool.draw)
+        out[name] = float(np.mean(hist == MATCH))
+    return out
 
 
 def _errors(est: np.ndarray, truth: np.ndarray, robot_family: str,
@@ -246,7 +358,9 @@ def end_angles(reacher) -> np.ndarray | None:
 def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndarray, *,
                rng: np.random.Generator, world_family: str | None = None,
                table: LikelihoodTable | None = None,
-               snapshot_steps: tuple[int, ...] = ()) -> dict[str, np.ndarray]:
+               snapshot_steps: tuple[int, ...] = (), samples: ActionSamples | None = None,
+               play: PlayCheck | None = None,
+               play_pool: ActionSamples | None = None) -> dict[str, np.ndarray]:
     """One adaptation against a world whose keyboard sits at ``true_params``.
 
     Parameters
@@ -256,13 +370,21 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     keyboard : Keyboard
         The instrument (world side).
     true_params : (P,) ndarray
-        The true displacement in ``world_family`` parameters (default: ``cfg.family``).
+        The true displacement in ``world_family`` parameters (default: ``cfg.robot.family``).
     rng : numpy.random.Generator
         Split into the robot's and the world's generators.
     table : LikelihoodTable, optional
         A prebuilt :func:`kbcli.core.adapt.build_table` for ``model`` (rasterise once, reuse).
     snapshot_steps : tuple of int
         Steps (0: the prior) at which to keep the posterior.
+    samples : ActionSamples, optional
+        The ``kde`` posterior's per-class samples (:func:`kbcli.core.adapt.build_samples`), shared
+        across experiments; default: drawn per run.
+    play : PlayCheck, optional
+        Also measure the playing success (adds ``play_before``, ``play_unadapted``,
+        ``play_adapted``, each a float, NaN when not measured), from a third child of ``rng``.
+    play_pool : ActionSamples, optional
+        Per-class draws of p(action | sound) the replays resample (default: the model samples).
 
     Returns
     -------
@@ -270,18 +392,18 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         ``actions`` (T, 2), ``landed`` (T, 2) where the robot felt it landed, ``true_landed``
         (T, 2) where it did (world side), ``perceived`` (T, D), ``classes`` (T,),
         ``estimates`` (T, P) maximum-likelihood cell, ``means`` (T, P) posterior mean,
-        ``errors`` (T,) px error of the estimate (``cfg.estimator``) vs truth, ``ml_errors`` (T,),
+        ``errors`` (T,) px error of the estimate (``cfg.robot.estimator``) vs truth, ``ml_errors`` (T,),
         ``angle_errors`` (T,) deg, ``entropy`` (T,) nats, ``ml_prob`` (T,), ``mass`` (T,),
         ``stop`` (T,) bool, ``step_ms`` (T,); ``joint_angles`` (T, 2) the arm's pose after each
         touch (dynamics mode); ``snapshot_steps`` (S,), ``snapshots`` (S, ny, nx)
         log translation marginals, ``snapshot_angles`` (S, A) angle marginals (rigid); ``dx``,
         ``dy``, ``angles`` grid axes.
     """
-    world_family = cfg.family if world_family is None else world_family
+    world_family = cfg.robot.family if world_family is None else world_family
     truth = np.asarray(true_params, float)
     robot_rng, world_rng = rng.spawn(2)
     acfg = cfg.adapter_config()
-    adapter = Adapter(model, acfg, rng=robot_rng, table=table)
+    adapter = Adapter(model, acfg, rng=robot_rng, table=table, samples=samples)
     world = World(keyboard, make_reacher(cfg.sim_config()), truth, world_family)
     poses: list[np.ndarray] = []
 
@@ -299,19 +421,37 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     rec = Recorder(adapter, snaps)
     for st in adapt(adapter, touch, cfg.max_steps, use_landed=cfg.feedback == "landed",
                     stop=cfg.stop):
-        err, aerr = _errors(st.estimate, truth, cfg.family, world_family)
-        ml_err, _ = _errors(st.ml, truth, cfg.family, world_family)
+        err, aerr = _errors(st.estimate, truth, cfg.robot.family, world_family)
+        ml_err, _ = _errors(st.ml, truth, cfg.robot.family, world_family)
         rec.add(st, (err, ml_err, aerr), poses[-1] if poses else None)
     out = rec.arrays()
     out["true_landed"] = np.asarray(true_landed, float).reshape(-1, 2)
+    if play is not None:
+        final = out["means"][-1] if cfg.robot.estimator == "mean" else out["estimates"][-1]
+        if world_family != cfg.robot.family:  # correct in the world's parameters
+            final = _as_family(final, cfg.robot.family, world_family)
+        res = play_success(model, keyboard, cfg.sim_config(), world_family, truth, final, play,
+                           rng=rng.spawn(1)[0], pool=play_pool)
+        out.update({f"play_{k}": np.float64(v) for k, v in res.items()})
     return out
+
+
+def _as_family(est: np.ndarray, family: str, world_family: str) -> np.ndarray:
+    """An estimate in ``family`` parameters as ``world_family`` parameters (angle 0 added or
+    dropped)."""
+    est = np.asarray(est, float)
+    if family == world_family:
+        return est
+    if world_family == "rigid":
+        return np.concatenate([[0.0], est[-2:]])
+    return est[-2:]
 
 
 def _inside_prior(cfg: AdaptConfig, truth: np.ndarray, world_family: str) -> bool:
     """Whether the true pose lies in the robot's prior box (else no estimate can reach it)."""
-    inside = bool(np.all(np.abs(truth[-2:]) <= cfg.prior_halfwidth))
+    inside = bool(np.all(np.abs(truth[-2:]) <= cfg.robot.prior_halfwidth))
     angle = float(truth[0]) if world_family == "rigid" else 0.0
-    limit = cfg.max_angle if cfg.family == "rigid" else 0.0
+    limit = cfg.robot.max_angle if cfg.robot.family == "rigid" else 0.0
     return inside and abs(angle) <= limit + 1e-9
 
 
@@ -431,6 +571,15 @@ def build_shared_table(cfg: AdaptConfig, model) -> LikelihoodTable:
     return build_table(model, cfg.adapter_config())
 
 
-__all__ = ["AdaptConfig", "experiment", "run", "check_inputs", "steps_below", "build_shared_table",
+def build_shared_samples(cfg: AdaptConfig, model, seed) -> ActionSamples | None:
+    """The ``kde`` posterior's per-class samples for ``cfg`` (None for other posteriors), drawn
+    from ``seed`` once per class, to share across many :func:`experiment` calls."""
+    if cfg.robot.posterior != "kde":
+        return None
+    return build_samples(model, cfg.adapter_config(), seed)
+
+
+__all__ = ["AdaptConfig", "PlayCheck", "play_success", "experiment", "run", "check_inputs",
+           "steps_below", "build_shared_table", "build_shared_samples", "LOOP_FIELDS",
            "Recorder", "run_attrs", "run_data", "RECORDS", "POSTERIORS", "FEEDBACKS",
            "DEFAULT_SNAPSHOTS"]

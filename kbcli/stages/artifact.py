@@ -21,9 +21,10 @@ SCHEMA_VERSIONS: dict[str, int] = {
     "scene": 1,
     "history": 1,
     "detection": 1,
-    "run": 2,  # 2: joint_angles (dynamics mode), attrs arm and mode; serve sessions (no truth)
-    "closed_loop": 2,  # 2: steps/joint_angles, steps/estimate, the adaptation posteriors
-    "evaluation": 1,
+    "run": 3,  # 2: joint_angles (dynamics mode), attrs arm and mode; serve sessions (no truth);
+    #            3: the adapt config holds the robot's options under "robot" (2 still read)
+    "closed_loop": 3,  # 2: steps/joint_angles, steps/estimate, the adaptation posteriors; 3: likewise
+    "evaluation": 2,  # 2: named methods, measured playing success, tie-corrected tests
     "model_quality": 1,
 }
 

@@ -30,3 +30,28 @@ def load_model(art: Artifact):
     from kbcli.core.learned import LearnedModel
 
     return LearnedModel.from_arrays(art.data["model"])
+
+
+#: The embedded default model (learned in dynamics mode by ``make data``), relative to a checkout.
+DEFAULT_MODEL = "data/default-model.h5"
+
+
+def default_model_path():
+    """Where the embedded default model is: ``data/default-model.h5`` of the current folder, else
+    of the kbcli checkout this package runs from.
+
+    Raises
+    ------
+    KbcliError
+        When neither exists (an installed kbcli without its checkout): pass ``--model``.
+    """
+    from pathlib import Path
+
+    from kbcli.errors import KbcliError
+
+    for base in (Path.cwd(), Path(__file__).resolve().parents[2]):
+        path = base / DEFAULT_MODEL
+        if path.is_file():
+            return path
+    raise KbcliError(f"no default model ({DEFAULT_MODEL} not found here nor in the kbcli checkout): "
+                     f"pass --model FILE")

@@ -2,11 +2,16 @@
 
 A scene artifact (kind ``scene``) holds the keyboard, the transform family (``translation``: the
 paper's ``(dx, dy)``; ``rigid``: ``(angle, dx, dy)``, see :mod:`kbcli.core.transforms`) and the true
-parameters, given explicitly or drawn at random by category. The categories follow the paper's
-Sect. IV-B, "displacements up to 10, 20 and 40 pixels": a draw of category ``small``, ``medium`` or
-``large`` has its largest per-axis displacement in (0, 10], (10, 20] or (20, 40] px (uniform over
-that square ring), so the categories do not overlap; a rigid draw also turns the keyboard by an
-angle uniform in [-5, 5] degrees about its centre.
+parameters, given explicitly or drawn at random by category.
+
+Size categories (one definition for ``perturb``, the adapt benchmark and ``evaluate``): the paper's
+Sect. IV-B groups "displacements up to 10, 20 and 40 pixels". Here the size of a displacement is
+the **Euclidean norm of its translation**, ``sqrt(dx^2 + dy^2)`` (the rotation of a rigid move is
+not counted), and category ``small``, ``medium`` or ``large`` holds the sizes in (0, 10], (10, 20]
+or (20, 40] px (:data:`CATEGORIES`, :func:`size_category`), so the categories do not overlap. A
+random draw is uniform over the category's ring of the plane (uniform direction, density of the
+size proportional to it); a rigid draw also turns the keyboard by an angle uniform in [-5, 5]
+degrees about its centre.
 
 The scene is ground truth: only the simulated world (:class:`kbcli.sim.World`) and the evaluation
 read it, never the robot's side.
@@ -29,7 +34,8 @@ from kbcli.sim import SimConfig, workspace_check
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages.artifact import Artifact, ref
 
-#: category -> (exclusive lower, inclusive upper) bound of the largest per-axis displacement, px
+#: category -> (exclusive lower, inclusive upper) bound of the displacement's size, px: the Euclidean
+#: norm of its translation (see the module docstring).
 CATEGORIES: dict[str, tuple[float, float]] = {
     "small": (0.0, 10.0),
     "medium": (10.0, 20.0),
@@ -102,15 +108,30 @@ def draw(
     if category not in CATEGORIES:
         raise ConfigError(f"unknown category {category!r}; valid: {', '.join(CATEGORIES)}")
     lo, hi = CATEGORIES[category]
-    d = np.empty((0, 2))
-    while len(d) < n:  # rejection from the square [-hi, hi]^2 minus [-lo, lo]^2 (accepts >= 3/4)
-        cand = rng.uniform(-hi, hi, size=(2 * n + 8, 2))
-        d = np.vstack([d, cand[np.abs(cand).max(axis=1) > lo]])
-    d = d[:n]
+    # uniform over the ring lo < |d| <= hi: the squared radius is uniform on (lo^2, hi^2]
+    r = np.sqrt(lo * lo + (hi * hi - lo * lo) * (1.0 - rng.random(n)))
+    phi = rng.uniform(0.0, 2 * np.pi, size=n)
+    d = np.column_stack([r * np.cos(phi), r * np.sin(phi)])
     if len(names) == 3:
         angle = rng.uniform(-max_angle, max_angle, size=(n, 1))
         return np.hstack([angle, d])
     return d
+
+
+def displacement_size(params: np.ndarray) -> np.ndarray:
+    """The size (px) of displacements: the Euclidean norm of the translation, the last two
+    parameters ``(dx, dy)`` of any family. ``(..., P) -> (...)``."""
+    p = np.asarray(params, float)
+    return np.hypot(p[..., -2], p[..., -1])
+
+
+def size_category(params: np.ndarray) -> str | None:
+    """The category (:data:`CATEGORIES`) of one displacement's size, None beyond the largest."""
+    size = float(displacement_size(np.asarray(params, float)))
+    for name, (lo, hi) in CATEGORIES.items():
+        if lo < size <= hi:
+            return name
+    return None
 
 
 def key_outline(kb: Keyboard) -> np.ndarray:

@@ -136,7 +136,9 @@ def load_replay(art: Artifact) -> Replay:
         landed = np.where(np.isfinite(landed), landed, actions)  # no felt position: the aim
         perceived = np.asarray(d["perceived"], float).reshape(len(actions), -1)
         family = a.get("family", "translation")
-        estimator = (art.config.get("adapt") or {}).get("estimator", "mean")
+        adapt_cfg = art.config.get("adapt") or {}
+        # run schema 3 nests the robot's options under "robot"; sessions and schema <= 2: flat
+        estimator = (adapt_cfg.get("robot") or adapt_cfg).get("estimator", "mean")
         belief = np.asarray(d["means"] if estimator == "mean" else d["estimates"], float)
         belief = belief.reshape(len(actions), -1)
         truth_d = a.get("truth")
@@ -160,7 +162,8 @@ def load_replay(art: Artifact) -> Replay:
     landed = np.asarray(st["landed"], float).reshape(-1, 2)
     perceived = np.asarray(st["perceived"], float).reshape(len(landed), -1)
     loop_cfg = art.config.get("loop") or {}
-    family = (loop_cfg.get("adapt") or {}).get("family", "translation")
+    loop_adapt = loop_cfg.get("adapt") or {}
+    family = (loop_adapt.get("robot") or loop_adapt).get("family", "translation")
     belief = np.asarray(st["correction"], float).reshape(len(landed), -1)
     if "estimate" in st:  # schema 2: the adapter's estimate while adapting
         est = np.asarray(st["estimate"], float).reshape(belief.shape)

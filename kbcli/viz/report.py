@@ -1,9 +1,11 @@
 """The report's figures from an ``evaluation`` artifact (paper Figs. 5, 6 and 7).
 
-- :func:`plot_posterior` (Fig. 5): the posterior over the displacement after successive
-  observations of one example run per strategy (Eq. 8, the product of the per-observation terms);
-- :func:`plot_entropy` (Fig. 6): posterior entropy against observations per strategy;
-- :func:`plot_error` (Fig. 7): RMSE of the estimate against observations, one panel per category.
+- :func:`plot_posterior` (Fig. 5): the posterior over the displacement (px) after successive
+  observations of one example run per method and strategy (Eq. 8, the product of the
+  per-observation terms: of KDEs for the paper's method);
+- :func:`plot_entropy` (Fig. 6): posterior entropy against observations per method and strategy;
+- :func:`plot_error` (Fig. 7): RMSE of the estimate against observations, one panel per category
+  and method.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.colors import LogNorm  # noqa: E402
 
 from kbcli.stages.artifact import Artifact  # noqa: E402
 from kbcli.viz.common import save  # noqa: E402
@@ -47,77 +50,140 @@ def _snapshot_arrays(ex: dict) -> tuple[np.ndarray, np.ndarray, tuple[float, flo
     return snaps, steps, ext
 
 
+def _rows(art: Artifact, mode: str, key: str = "curves") -> list[tuple[str, str]]:
+    """(method, strategy) pairs present in ``mode``, in method order."""
+    out = []
+    from kbcli.stages.report import method_names
+
+    tree = art.data[key].get(mode, {})
+    for x in [x for x in method_names(art) if x in tree]:
+        by = tree[x]
+        strategies = art.attrs["methods"][x]["strategies"]
+        if key == "curves":
+            present = {s for by_s in by.values() for s in by_s}
+        else:
+            present = set(by)
+        out += [(x, s) for s in strategies if s in present]
+    return out
+
+
+LINESTYLES = ("-", "--", ":", "-.")
+
+
 def plot_posterior(art: Artifact, path: str | os.PathLike, mode: str | None = None,
                    max_columns: int = 6) -> None:
-    """Fig. 5: one row per strategy, one column per snapshot step, the true displacement crossed."""
+    """Fig. 5: one row per method and strategy, one column per snapshot step, in px coordinates
+    (the displacement dx, dy), each panel scaled to its own maximum on a log colour scale (one
+    colour bar), the true displacement marked."""
+    from kbcli.stages.report import upgrade
+
+    art = upgrade(art)
     modes = art.attrs["modes"]
     mode = mode or ("ideal" if "ideal" in modes else modes[0])
-    examples = art.data["examples"][mode]
-    rows = [s for s in art.attrs["strategies"] if s in examples and "snapshots" in examples[s]]
+    examples = art.data["examples"].get(mode, {})
+    rows = [(x, s) for x, s in _rows(art, mode, "examples") if "snapshots" in examples[x][s]]
     if not rows:
         raise ValueError("no posterior snapshots in this evaluation")
-    data = {s: _snapshot_arrays(examples[s]) for s in rows}
+    data = {r: _snapshot_arrays(examples[r[0]][r[1]]) for r in rows}
     ncol = min(max_columns, max(len(d[1]) for d in data.values()))
-    fig, axes = plt.subplots(len(rows), ncol, figsize=(2.1 * ncol, 2.2 * len(rows)), squeeze=False)
+    fig, axes = plt.subplots(len(rows), ncol, figsize=(1.9 * ncol + 1.2, 1.95 * len(rows) + 0.6),
+                             squeeze=False, sharex=True, sharey=True)
     params = art.array("experiments/params")
-    for r, s in enumerate(rows):
-        snaps, steps, ext = data[s]
-        truth = params[int(examples[s]["row"])][-2:]
+    norm = LogNorm(vmin=1e-3, vmax=1.0)
+    im = None
+    for r, (x, s) in enumerate(rows):
+        snaps, steps, ext = data[(x, s)]
+        truth = params[int(examples[x][s]["row"])][-2:]
         for c in range(ncol):
             ax = axes[r, c]
-            ax.set_xticks([])
-            ax.set_yticks([])
             if c >= len(snaps):
                 ax.axis("off")
                 continue
             p = snaps[c] / max(snaps[c].max(), 1e-300)
-            ax.imshow(p, origin="lower", extent=ext, cmap="magma", vmin=0, vmax=1,
-                      interpolation="nearest")
-            ax.plot(*truth, marker="+", color="cyan", ms=9, mew=1.2)
+            im = ax.imshow(np.maximum(p, 1e-3), origin="lower", extent=ext, cmap="magma",
+                           norm=norm, interpolation="nearest")
+            ax.plot(*truth, marker="+", color="cyan", ms=10, mew=1.4)
             ax.set_title(f"t = {int(steps[c])}", fontsize=8)
+            ax.tick_params(labelsize=7)
+            if r == len(rows) - 1:
+                ax.set_xlabel("dx (px)", fontsize=8)
             if c == 0:
-                ax.set_ylabel(s, fontsize=9)
-    fig.suptitle(f"Posterior over the displacement (dx, dy), {mode} mode", fontsize=10)
+                ax.set_ylabel(f"{x}\n{s}\ndy (px)", fontsize=8)
+    fig.suptitle(f"Posterior over the displacement, {mode} mode (cross: the truth, "
+                 f"({truth[0]:g}, {truth[1]:g}) px)", fontsize=10)
+    fig.tight_layout(rect=(0, 0, 0.92, 0.97))
+    cax = fig.add_axes((0.93, 0.15, 0.015, 0.7))
+    cb = fig.colorbar(im, cax=cax)
+    cb.set_label("posterior / its maximum (log)", fontsize=8)
+    cb.ax.tick_params(labelsize=7)
     save(fig, path)
 
 
+def _style(art: Artifact, x: str, s: str, i: int) -> dict:
+    from kbcli.stages.report import method_names
+
+    meths = method_names(art)
+    j = meths.index(x) if x in meths else 0
+    return {"color": _colour(s, i), "ls": LINESTYLES[j % len(LINESTYLES)]}
+
+
 def plot_entropy(art: Artifact, path: str | os.PathLike) -> None:
-    """Fig. 6: mean posterior entropy per step and strategy, interquartile range shaded."""
+    """Fig. 6: mean posterior entropy per step, method (line style) and strategy (colour),
+    interquartile range shaded."""
+    from kbcli.stages.report import upgrade
+
+    art = upgrade(art)
     modes = art.attrs["modes"]
-    fig, axes = plt.subplots(1, len(modes), figsize=(4.6 * len(modes), 3.4), squeeze=False)
+    fig, axes = plt.subplots(1, len(modes), figsize=(5.2 * len(modes), 3.8), squeeze=False)
     for ax, m in zip(axes[0], modes, strict=True):
-        for i, s in enumerate(art.attrs["strategies"]):
-            e = art.data["entropy"][m][s]
+        for i, (x, s) in enumerate(_rows(art, m, "entropy")):
+            e = art.data["entropy"][m][x][s]
             t = np.arange(1, len(e["mean"]) + 1)
-            ax.plot(t, e["mean"], color=_colour(s, i), label=s)
-            ax.fill_between(t, e["q25"], e["q75"], color=_colour(s, i), alpha=0.2, lw=0)
+            st = _style(art, x, s, i)
+            ax.plot(t, e["mean"], label=f"{x} / {s}", **st)
+            ax.fill_between(t, e["q25"], e["q75"], color=st["color"], alpha=0.12, lw=0)
         ax.set_xlabel("observations")
         ax.set_ylabel("posterior entropy (nats)")
         ax.set_title(f"{m} mode", fontsize=10)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=7)
     save(fig, path)
 
 
 def plot_error(art: Artifact, path: str | os.PathLike, mode: str) -> None:
-    """Fig. 7: RMSE against observations per strategy, one panel per category (log scale)."""
+    """Fig. 7: RMSE against observations per strategy, one panel per category (columns) and
+    method (rows), log scale."""
+    from kbcli.stages.report import upgrade
+
+    art = upgrade(art)
     cats = art.attrs["categories"]
-    fig, axes = plt.subplots(1, len(cats), figsize=(4.2 * len(cats), 3.4), squeeze=False,
-                             sharey=True)
-    for ax, c in zip(axes[0], cats, strict=True):
-        for i, s in enumerate(art.attrs["strategies"]):
-            cur = art.data["curves"][mode][c][s]
-            t = np.arange(1, len(cur["rmse"]) + 1)
-            floor = 1e-2
-            ax.plot(t, np.maximum(cur["rmse"], floor), color=_colour(s, i), label=s)
-            ax.fill_between(t, np.maximum(cur["q25"], floor), np.maximum(cur["q75"], floor),
-                            color=_colour(s, i), alpha=0.18, lw=0)
-        limit = art.config["categories"][c]["limit"]
-        ax.set_title(f"{c} (up to {limit:g} px)", fontsize=10)
-        ax.set_yscale("log")
-        ax.set_xlabel("observations")
-        ax.grid(alpha=0.3, which="both")
-    axes[0, 0].set_ylabel("RMSE of the displacement (px)")
-    axes[0, 0].legend(fontsize=8)
-    fig.suptitle(f"Estimation error, {mode} mode", fontsize=10, y=1.03)
+    from kbcli.stages.report import method_names
+
+    meths = [x for x in method_names(art) if x in art.data["curves"][mode]]
+    fig, axes = plt.subplots(len(meths), len(cats), figsize=(4.2 * len(cats), 3.0 * len(meths)),
+                             squeeze=False, sharey=True, sharex=True)
+    for r, x in enumerate(meths):
+        for ax, c in zip(axes[r], cats, strict=True):
+            by_s = art.data["curves"][mode][x].get(c)
+            if by_s is None:
+                ax.text(0.5, 0.5, "not run", ha="center", va="center", transform=ax.transAxes)
+            else:
+                order = [s for s in art.attrs["methods"][x]["strategies"] if s in by_s]
+                for i, (s, cur) in enumerate((s, by_s[s]) for s in order):
+                    t = np.arange(1, len(cur["rmse"]) + 1)
+                    floor = 1e-2
+                    ax.plot(t, np.maximum(cur["rmse"], floor), color=_colour(s, i), label=s)
+                    ax.fill_between(t, np.maximum(cur["q25"], floor),
+                                    np.maximum(cur["q75"], floor), color=_colour(s, i),
+                                    alpha=0.18, lw=0)
+                ax.legend(fontsize=7, title=x, title_fontsize=8)
+            limit = art.config["categories"][c]["limit"]
+            if r == 0:
+                ax.set_title(f"{c} (up to {limit:g} px)", fontsize=10)
+            ax.set_yscale("log")
+            ax.grid(alpha=0.3, which="both")
+            if r == len(meths) - 1:
+                ax.set_xlabel("observations")
+        axes[r, 0].set_ylabel(f"{x}: RMSE (px)")
+    fig.suptitle(f"Estimation error, {mode} mode", fontsize=10, y=1.01)
     save(fig, path)
