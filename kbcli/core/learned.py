@@ -637,7 +637,7 @@ class LearnedModel:
         """Candidate values of the calibration parameters (read at prediction time, so a fitted
         model is recalibrated by setting them; :func:`kbcli.core.reliability.assess` picks them by
         held-out likelihood)."""
-        return {"noise_sd": (0.0, 0.5, 1.0, 1.5, 2.0, 3.0), "floor": (0.0, 0.002, 0.01)}
+        return {"noise_sd": (0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.5, 6.0), "floor": (0.0, 0.002, 0.01)}
 
     # -- fitting --------------------------------------------------------------------------------
     def fit(

@@ -198,10 +198,11 @@ class QualityConfig:
                                   "displacements}")
             out = []
             for name, t in cats.items():
-                if not isinstance(t, dict) or set(t) != {"limit", "displacements"}:
-                    raise ConfigError(f"quality.categories.{name} must have exactly limit and "
-                                      "displacements")
-                out.append(Category(name=name, limit=t["limit"],
+                if not isinstance(t, dict) or "displacements" not in t or \
+                        set(t) - {"limit", "displacements"}:
+                    raise ConfigError(f"quality.categories.{name} must have displacements (and "
+                                      "may have limit)")
+                out.append(Category(name=name, limit=t.get("limit"),
                                     displacements=tuple(tuple(r) for r in t["displacements"])))
             d["categories"] = tuple(out)
         return cls(**d)
