@@ -10,12 +10,12 @@ SEED   ?= 0
 
 JOBS   ?= 2
 
-.PHONY: help install demo test lint data reproduce reproduce-ideal model-quality bench clean
+.PHONY: help install demo test lint data data-files reproduce reproduce-ideal model-quality bench clean
 
 help:
 	@echo "make demo        install, then run the main job on the embedded default model"
 	@echo "make test        install (with the dev extra), then run the test suite"
-	@echo "make data        rebuild data/ (keyboard and default model) from scratch"
+	@echo "make data        rebuild data/ (keyboard, default model, golden set) from scratch"
 	@echo "make reproduce   learn, evaluate and report the paper's experiments (out/report/)"
 	@echo "make model-quality  test the paper's Sect. IV-C hypothesis: advantage vs model quality"
 	@echo "make bench       print the benchmark tables"
@@ -48,11 +48,33 @@ demo: $(STAMP)
 	$(KBCLI) inspect $(OUT)/demo/run.h5
 	@echo "figures: $(OUT)/demo/keyboard.png $(OUT)/demo/model.png $(OUT)/demo/run.png $(OUT)/demo/run.gif"
 
-# data/ holds only what the demo and the tests need; this rebuilds it from scratch.
-data: $(STAMP)
-	$(KBCLI) keyboard --config pipelines/keyboard.toml -o data/keyboard.h5
-	$(KBCLI) learn --keyboard data/keyboard.h5 --mode dynamics --strategy active --budget 800 \
-	    --seed 0 -o data/default-model.h5
+# data/ holds only what the demo and the tests need; this rebuilds it from scratch: the default
+# keyboard and model, and the golden set (one small artifact of every kind, pipelines/golden.toml)
+# that the smoke tests read. DATA=folder builds it elsewhere (tests/test_golden.py checks that a
+# rebuild gives the same numbers). data/schema/vN/ keeps a file of every schema version ever written:
+# never rebuilt, copy a golden file there when you bump a kind's schema version.
+DATA ?= data
+G := $(DATA)/golden
+data: $(STAMP) data-files
+
+data-files:
+	@mkdir -p $(G)
+	$(KBCLI) keyboard --config pipelines/keyboard.toml -o $(DATA)/keyboard.h5
+	$(KBCLI) learn --keyboard $(DATA)/keyboard.h5 --mode dynamics --strategy active --budget 800 \
+	    --seed 0 -o $(DATA)/default-model.h5
+	cp $(DATA)/keyboard.h5 $(G)/keyboard.h5
+	cp $(DATA)/default-model.h5 $(G)/model.h5
+	$(KBCLI) perturb --keyboard $(G)/keyboard.h5 --dx 12 --dy -7 -o $(G)/scene.h5
+	$(KBCLI) play --model $(G)/model.h5 --scene $(G)/scene.h5 --steps 120 --perturb-at 60 \
+	    --seed 0 -o $(G)/history.h5
+	$(KBCLI) detect $(G)/history.h5 --n-lt 40 --n-st 8 -o $(G)/detection.h5
+	$(KBCLI) adapt --config pipelines/golden.toml --model $(G)/model.h5 --scene $(G)/scene.h5 \
+	    --snapshots 0,1,2,4,8 --seed 0 -o $(G)/run.h5
+	$(KBCLI) run --model $(G)/model.h5 --scene $(G)/scene.h5 --steps 160 --perturb-at 120 \
+	    --max-adapt-steps 12 --seed 0 -o $(G)/closed_loop.h5
+	$(KBCLI) evaluate --config pipelines/golden.toml --model $(G)/model.h5 -o $(G)/evaluation.h5
+	$(KBCLI) quality --config pipelines/golden.toml --keyboard $(G)/keyboard.h5 \
+	    -o $(G)/model_quality.h5
 
 # The paper from nothing: keyboard -> learn -> evaluate -> report, timing each stage
 # (benchmarks/reproduce.sh; JOBS=, EXPERIMENTS=, SCHEDULER=tcp://HOST:PORT are honoured).

@@ -27,9 +27,15 @@ def cfg(name: str = "binomial", **kw) -> DetectorConfig:
 
 def fake_history(result, perturb_at=None) -> Artifact:
     result = np.asarray(result, dtype=np.uint8)
-    return Artifact(kind="history", config={"steps": len(result)}, seed=0,
-                    data={"result": result, "target": np.zeros(len(result), np.int64)},
-                    attrs={"perturb_at": perturb_at, "steps": len(result)})
+    n = len(result)
+    xy = np.zeros((n, 2))
+    ints = np.zeros(n, np.int64)
+    data = {"result": result, "target": ints, "action": xy, "landed": xy, "perceived": xy,
+            "cls": ints, "heard": ints, "perturbed": np.zeros(n, bool),
+            "melody": {"midi": np.array([69]), "durations": np.array([1.0]),
+                       "keys": np.array([0])}}  # every dataset a history holds (kbcli.io.schema)
+    return Artifact(kind="history", config={"steps": n, "keyboard": {}}, seed=0, data=data,
+                    attrs={"perturb_at": perturb_at, "steps": n})
 
 
 # -- config and registry ----------------------------------------------------------------------

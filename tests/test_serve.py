@@ -301,7 +301,7 @@ def test_serve_bad_input_one_line(model_file, tmp_path, runner):
     one_line(runner.invoke(app, [*base, "--model", str(model_file / "model.h5"), "--strategy",
                                  "psychic"]), "unknown strategy")
     one_line(runner.invoke(app, ["serve", "--model", str(model_file / "model.h5"), "-o",
-                                 str(model_file / "model.h5")]), "is the model")
+                                 str(model_file / "model.h5")]), "is the input")
     sock = tmp_path / "taken"
     sock.write_text("a user's file")
     one_line(runner.invoke(app, [*base, "--model", str(model_file / "model.h5"), "--socket",

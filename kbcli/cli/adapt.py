@@ -12,14 +12,18 @@ from rich.console import Console
 from rich.table import Table
 
 from kbcli.cli.app import (
+    FIGURE_HELP,
     bench_app,
+    busy,
+    check_io,
     command,
     err,
+    figure_output,
     interactive,
     out,
-    output_path,
     plot_app,
     progress,
+    ticker,
 )
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -91,6 +95,7 @@ def adapt_cmd(
     the estimate, its error against the scene's true pose, the posterior entropy and the time
     spent; plus posterior snapshots. Prints the final error and the steps to an error below 1 px.
     """
+    check_io({"--model": model, "--scene": scene, "--config": config}, ("--output", output))
     values = dict(load_toml(config, "adapt")) if config is not None else {}
     flags = {"strategy": strategy, "posterior": posterior, "family": family, "mode": mode,
              "reach_noise": reach_noise, "feedback": feedback, "model_blur": model_blur,
@@ -105,9 +110,10 @@ def adapt_cmd(
     cfg = stage.AdaptConfig.from_dict(values)
     steps = _snapshots(snapshots, cfg.max_steps)
     stage.check_inputs(model_art, scene_art)
-    output_path(output)
-    art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
-                    snapshot_steps=steps)
+    what = f"adapting ({cfg.strategy}, {cfg.posterior} posterior), observations"
+    with ticker(cfg.max_steps, what) as tick:
+        art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
+                        snapshot_steps=steps, on_step=tick)
     write_artifact(art, output)
     a = art.attrs
     est = ", ".join(f"{k}={v:.2f}" for k, v in a["estimate"].items())
@@ -128,23 +134,24 @@ def adapt_cmd(
 @command(plot_app, name="adapt")
 def plot_adapt_cmd(
     run: Annotated[Path, typer.Argument(help="Run artifact (kind 'run') from kbcli adapt.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path(
+    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path(
         "adapt.png"),
 ) -> None:
     """Draw the posterior's evolution (the paper's Fig. 5) and the error and entropy curves.
 
-    Reads RUN (kind 'run'); writes a PNG; prints its path.
+    Reads RUN (kind 'run'); writes the figure (PNG, PDF or SVG by the suffix of -o); prints its path.
     """
     from kbcli.viz.adapt import plot_adapt
 
+    check_io({"RUN": run}, figure_output(output))
     art = read_artifact(run, "run")
     if len(art.data.get("errors", ())) == 0:
         raise ConfigError(f"{run}: holds no touches (a session that ended before the first one)")
     if "snapshots" not in art.data:
         raise ConfigError(f"{run}: holds no posterior snapshots (rerun kbcli adapt with "
                           f"--snapshots)")
-    output_path(output)
-    plot_adapt(art, output)
+    with busy("drawing"):
+        plot_adapt(art, output)
     out.print(f"wrote {output}")
 
 
@@ -215,7 +222,7 @@ def bench_adapt_cmd(
         "--kde-steps", min=1, help="kde section: touches timed for the KDE step's speed (on --model, "
         "default data/default-model.h5).")] = 200,
 ) -> None:
-    """Sample efficiency and speed of the adaptation strategies (issue 5's benchmark).
+    """Benchmark the adaptation strategies: sample efficiency and speed.
 
     Reads MODEL if given. Writes nothing. Prints per section, strategy and category: median
     observations to an error below 4, 2, 1, 0.5 px (in brackets: runs that never got there within

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from kbcli.cli.app import bench_app, command, err, interactive, out, output_path
+from kbcli.cli.app import bench_app, check_io, command, err, interactive, out
 
 
 @command(name="animate")
@@ -38,13 +38,9 @@ def animate_cmd(
     from kbcli.io.artifact import read_artifact
     from kbcli.viz.animate import animate, make_writer
 
+    check_io({"ARTIFACT": artifact}, ("--output", output))
     make_writer(output.suffix.lower(), fps)  # a bad format or no ffmpeg: fail before reading
     art = read_artifact(artifact, ("run", "closed_loop"))
-    output_path(output)
-    if output.resolve() == artifact.resolve():
-        from kbcli.errors import KbcliError
-
-        raise KbcliError(f"{output}: is the input artifact; write the animation elsewhere")
     n = animate(art, output, fps=fps, max_frames=max_frames, dpi=dpi)
     out.print(f"wrote {output}: {n} frames at {fps:g} per second")
 

@@ -6,8 +6,11 @@ on stderr and exit 1; usage errors keep Click's exit 2; Ctrl-C exits 130 without
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import inspect
 import os
+import re
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -19,6 +22,7 @@ from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
     Progress,
+    SpinnerColumn,
     TextColumn,
     TimeElapsedColumn,
     TimeRemainingColumn,
@@ -26,29 +30,49 @@ from rich.progress import (
 
 from kbcli import __version__
 from kbcli.errors import KbcliError
+from kbcli.io.paths import Output, check_outputs, figure_format, probe_writable
 
 app = typer.Typer(
     name="kbcli",
     help=(
         "Where is my keyboard? A robot arm learns a virtual keyboard, notices when it is moved, "
         "and recovers the displacement with few, well-chosen touches. Each stage reads and writes "
-        "HDF5 artifacts: keyboard -> learn -> perturb -> play -> detect -> adapt -> evaluate -> report."
+        "HDF5 artifacts: keyboard -> learn -> perturb -> play -> detect -> adapt -> evaluate -> "
+        "report. run chains play, detect, adapt and play on (the closed loop); serve adapts with "
+        "a robot in another process; animate replays a run; inspect shows any artifact; plot "
+        "draws one; bench prints the benchmarks."
     ),
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,
     rich_markup_mode=None,
 )
-plot_app = typer.Typer(help="Draw an artifact as a PNG figure.", no_args_is_help=True)
+plot_app = typer.Typer(help="Draw an artifact as a figure (PNG, PDF or SVG by the -o suffix).",
+                       no_args_is_help=True)
+
+#: help of every plot command's -o option
+FIGURE_HELP = "Figure to write: .png, .pdf or .svg (the suffix picks the format)."
 bench_app = typer.Typer(
-    help="Benchmarks: print tables of speed and sample-efficiency figures (not tests).",
+    help="Benchmarks: tables of speed and sample efficiency (not tests).",
     no_args_is_help=True,
 )
 app.add_typer(plot_app, name="plot")
 app.add_typer(bench_app, name="bench")
 
-out = Console()
-err = Console(stderr=True, highlight=False, soft_wrap=True)
+#: Width of the consoles when the stream is not a terminal (a pipe, a file, a CI log): wide enough
+#: that Rich never wraps a line in the middle of a value (a hash, a path, a number).
+PIPE_WIDTH = 10_000
+
+
+def _console(stderr: bool = False) -> Console:
+    stream = sys.stderr if stderr else sys.stdout
+    tty = stream.isatty()
+    return Console(stderr=stderr, highlight=not stderr, soft_wrap=stderr or not tty,
+                   width=None if tty else PIPE_WIDTH)
+
+
+out = _console()
+err = _console(stderr=True)
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -70,10 +94,21 @@ def handle_errors(fn: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+def first_sentence(doc: str | None) -> str:
+    """The first sentence of a docstring, whole (the command list shows it; never cut)."""
+    para = inspect.cleandoc(doc or "").split("\n\n")[0].replace("\n", " ")
+    for m in re.finditer(r"[.!?](?=\s+[A-Z(]|$)", para):
+        if not re.search(r"\b(Fig|Figs|Sect|Eq|Eqs|Alg|e\.g|i\.e|vs|cf)\.$", para[:m.end()]):
+            return para[:m.end()]
+    return para
+
+
 def command(typer_app: typer.Typer = app, **kwargs: Any) -> Callable[[F], F]:
-    """Register a command on ``typer_app`` behind the error boundary."""
+    """Register a command on ``typer_app`` behind the error boundary; its line in the command list
+    (``short_help``) is the docstring's first sentence, whole, unless given."""
 
     def deco(fn: F) -> F:
+        kwargs.setdefault("short_help", first_sentence(kwargs.get("help") or fn.__doc__))
         return typer_app.command(**kwargs)(handle_errors(fn))
 
     return deco
@@ -87,12 +122,9 @@ def interactive() -> bool:
 T = TypeVar("T")
 
 
-def progress(items: Iterable[T], total: int | None, description: str) -> Iterator[T]:
-    """Iterate with a Rich progress bar on a terminal (count, rate, time left); plain otherwise."""
-    if not interactive():
-        yield from items
-        return
-    cols = (
+def _bar_columns() -> tuple:
+    """The columns of a progress bar: description, bar, count, elapsed, time left."""
+    return (
         TextColumn("[progress.description]{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
@@ -100,11 +132,60 @@ def progress(items: Iterable[T], total: int | None, description: str) -> Iterato
         TextColumn("left"),
         TimeRemainingColumn(),
     )
+
+
+def progress(items: Iterable[T], total: int | None, description: str, *,
+             advance: Callable[[T], float] | None = None,
+             describe: Callable[[T], str | None] | None = None) -> Iterator[T]:
+    """Iterate with a Rich progress bar on a terminal (count, rate, time left); plain otherwise.
+
+    Parameters
+    ----------
+    total : int, optional
+        Units of work in all (None: a count without a bar end).
+    advance : callable, optional
+        Units of work an item stands for (default 1), e.g. the reaches of a batch.
+    describe : callable, optional
+        A new description after an item (None keeps the current one).
+    """
+    if not interactive():
+        yield from items
+        return
+    cols = _bar_columns()
     with Progress(*cols, console=err, transient=True) as bar:
         task = bar.add_task(description, total=total)
         for item in items:
             yield item
-            bar.advance(task)
+            bar.advance(task, 1 if advance is None else advance(item))
+            if describe is not None and (text := describe(item)) is not None:
+                bar.update(task, description=text)
+
+
+@contextlib.contextmanager
+def ticker(total: int | None, description: str) -> Iterator[Callable[..., None]]:
+    """A progress bar driven by a callback, for stages that report their steps through one:
+    ``with ticker(T, "adapting") as tick: stage.run(..., on_step=tick)``. Plain when not a
+    terminal (the callback does nothing)."""
+    if not interactive():
+        yield lambda *a, **k: None
+        return
+    cols = _bar_columns()
+    with Progress(*cols, console=err, transient=True) as bar:
+        task = bar.add_task(description, total=total)
+        yield lambda *a, **k: bar.advance(task)
+
+
+@contextlib.contextmanager
+def busy(description: str) -> Iterator[None]:
+    """A spinner with the elapsed time on a terminal, for work that has no natural count (drawing a
+    figure, writing a report); nothing otherwise."""
+    if not interactive():
+        yield
+        return
+    cols = (SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn())
+    with Progress(*cols, console=err, transient=True) as bar:
+        bar.add_task(description, total=None)
+        yield
 
 
 def output_path(path: Path, force: bool = True) -> Path:
@@ -114,7 +195,56 @@ def output_path(path: Path, force: bool = True) -> Path:
         raise KbcliError(f"{path}: output folder {folder} does not exist")
     if path.is_dir():
         raise KbcliError(f"{path}: is a folder, expected a file name")
+    probe_writable(folder, path)
     return path
+
+
+def output_folder(path: Path) -> Path:
+    """Check a folder output (a report) can be created or filled before any work is done."""
+    parent = path.parent if str(path.parent) else Path(".")
+    if path.exists() and not path.is_dir():
+        raise KbcliError(f"{path}: exists and is not a folder")
+    if not parent.is_dir():
+        raise KbcliError(f"{path}: parent folder {parent} does not exist")
+    probe_writable(path if path.is_dir() else parent, path, folder_output=not path.is_dir())
+    return path
+
+
+def figure_output(path: Path, what: str = "figure") -> Output:
+    """A figure output (``-o x.png``, ``.pdf`` or ``.svg``): the format is the file's suffix,
+    checked by :func:`check_io` after the input check."""
+    return Output(Path(path), what, figure=True)
+
+
+def check_io(inputs: dict[str, Path | None], *outputs: Output | tuple[str, Path | None]) -> None:
+    """Every check on a command's paths, before any work: each file output's folder exists and is
+    writable, a folder output can be made, and no output is one of the inputs (the same path, a
+    symlink or a hard link to it, or a folder holding it that would be overwritten or removed).
+
+    Parameters
+    ----------
+    inputs : dict
+        What the command reads, by option name (``{"--model": path}``); None entries are skipped.
+    outputs : Output or (what, path)
+        What it writes; a (what, None) pair is skipped.
+    """
+    outs: list[Output] = []
+    for o in outputs:
+        if isinstance(o, tuple):
+            what, p = o
+            if p is None:
+                continue
+            o = Output(Path(p), what)
+        outs.append(o)
+    check_outputs(inputs, outs)
+    for o in outs:
+        if o.folder:
+            if not o.removes:
+                output_folder(o.path)
+        else:
+            output_path(o.path)
+        if o.figure:
+            figure_format(o.path)  # ConfigError for a suffix other than .png, .pdf, .svg
 
 
 def version_callback(value: bool) -> None:

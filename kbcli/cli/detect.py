@@ -12,7 +12,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from kbcli.cli.app import bench_app, command, err, out, output_path, progress
+from kbcli.cli.app import bench_app, check_io, command, err, out, progress
 from kbcli.core.detect import DETECTORS, DetectorConfig
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -39,10 +39,10 @@ def detect_cmd(
     firing steps); prints the first firing and, if the history has a perturbation, the delay after
     it (post-move actions seen when it fired) and the false alarms before it.
     """
+    check_io({"HISTORY": history}, ("--output", output))
     cfg = DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold, shift=shift,
                          hazard=hazard)
     hist = read_artifact(history, "history")
-    output_path(output)
     art = stage.run(cfg, hist)
     write_artifact(art, output)
     a = art.attrs

@@ -10,10 +10,11 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from kbcli.cli.app import bench_app, command, err, out, output_path, progress
+from kbcli.cli.app import bench_app, check_io, command, err, out, progress
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_arm, load_toml
+from kbcli.io.paths import Output
 from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
 from kbcli.stages import evaluate as stage
 
@@ -26,6 +27,12 @@ def _load_config(config: Path, experiments: int | None, mode: str | None,
         raise KbcliError(f"{config}: no such config file here; run from the kbcli checkout or pass "
                          f"--config FILE")
     cfg = stage.EvaluateConfig.from_dict(dict(load_toml(config, "evaluate")))
+    if cfg.family == "rigid":
+        for cat in cfg.categories:
+            for d in cat.displacements:
+                if not -180.0 < float(d[0]) <= 180.0:
+                    raise ConfigError(f"{config}: categories.{cat.name}: angle {d[0]:g} is outside "
+                                      f"(-180, 180] degrees")
     return cfg.with_overrides(experiments=experiments, mode=mode,
                               methods=tuple(methods) if methods else None)
 
@@ -112,6 +119,12 @@ def evaluate_cmd(
     continues from there. Prints a progress bar, then a table of final RMSE, median observations,
     p-values and playing success, and the speed.
     """
+    if model is None:
+        from kbcli.stages.models import default_model_path
+
+        model = default_model_path()
+    check_io({"--model": model, "--config": config}, ("--output", output),
+             Output(Checkpoint.beside(output), "checkpoint folder", folder=True, removes=True))
     cfg = _load_config(config, experiments, mode, method)
     if arm is not None:
         from dataclasses import replace
@@ -121,12 +134,7 @@ def evaluate_cmd(
     _check_backend(jobs, scheduler)
     if checkpoint_every < 1:
         raise ConfigError(f"--checkpoint-every must be >= 1, got {checkpoint_every}")
-    if model is None:
-        from kbcli.stages.models import default_model_path
-
-        model = default_model_path()
     model_art = read_artifact(model, "model")
-    output_path(output)
     from kbcli.stages import keyboard as keyboard_stage
 
     keyboard = keyboard_stage.load(model_art)
@@ -147,9 +155,17 @@ def evaluate_cmd(
             ckpt.add(i, res)
             fresh[i] = res
     except KeyboardInterrupt:
-        ckpt.flush()
-        err.print(f"kbcli: interrupted; {len(done) + len(fresh)} of {len(tasks)} experiments kept "
-                  f"in {ckpt.folder}: rerun with --resume to continue", markup=False)
+        try:
+            ckpt.flush()
+        except KbcliError:
+            pass
+        kept = len(done) + len(fresh)
+        if kept and ckpt.exists():
+            msg = (f"{kept} of {len(tasks)} experiments kept in {ckpt.folder}: rerun with --resume "
+                   f"to continue")
+        else:
+            msg = f"no experiment of {len(tasks)} had finished; nothing was kept"
+        err.print(f"kbcli: interrupted; {msg}", markup=False)
         raise typer.Exit(130) from None
     finally:
         ckpt.flush()

@@ -10,6 +10,7 @@ import typer
 from rich.table import Table
 
 from kbcli.cli.app import command, out
+from kbcli.errors import ArtifactError
 from kbcli.io.artifact import describe, provenance_chain
 
 
@@ -18,10 +19,14 @@ def inspect_cmd(
     artifact: Annotated[Path, typer.Argument(help="Any kbcli artifact (.h5).")],
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON for scripts instead of tables.")] = False,
 ) -> None:
-    """Print an artifact's kind, schema, config, provenance chain and dataset shapes."""
+    """Print an artifact's kind, schema, config, provenance chain (with full sha256 hashes) and
+    dataset shapes; and, for a damaged file, what does not match its kind's schema (then exit 1).
+    """
     d = describe(artifact)
     if as_json:
         print(json.dumps(d, indent=2, sort_keys=True))
+        if d["problem"]:
+            raise ArtifactError(f"{artifact}: {d['problem']}")
         return
     t = Table(title=f"{artifact}", show_header=False)
     for key in ("kind", "schema_version", "kbcli_version", "seed", "sha256"):
@@ -47,7 +52,7 @@ def inspect_cmd(
     prov.add_column("sha256")
     rows = list(provenance_chain(d["inputs"]))
     for depth, role, r in rows:
-        prov.add_row("  " * depth + role, str(r.get("kind")), str(r.get("file")), str(r.get("sha256"))[:16])
+        prov.add_row("  " * depth + role, str(r.get("kind")), str(r.get("file")), str(r.get("sha256")))
     if not rows:
         prov.add_row("(none)", "", "", "")
     out.print(prov)
@@ -58,6 +63,8 @@ def inspect_cmd(
     for name, info in sorted(d["datasets"].items()):
         ds.add_row(name, " x ".join(map(str, info["shape"])) or "scalar", info["dtype"])
     out.print(ds)
+    if d["problem"]:
+        raise ArtifactError(f"{artifact}: {d['problem']}")
 
 
 def _flatten(d: dict, prefix: str = ""):

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from kbcli.cli.app import command, out, output_path, plot_app
+from kbcli.cli.app import FIGURE_HELP, busy, check_io, command, figure_output, out, plot_app
 from kbcli.core.keyboard import KeyboardConfig
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml
@@ -37,6 +37,7 @@ def keyboard_cmd(
     Reads an optional TOML config; flags override it. Writes OUTPUT (kind 'keyboard') and prints
     a one-line summary.
     """
+    check_io({"--config": config}, ("--output", output))
     values = dict(load_toml(config, "keyboard")) if config is not None else {}
     flags = {
         "rows": rows, "cols": cols, "key_size": key_size, "margin": margin,
@@ -47,7 +48,6 @@ def keyboard_cmd(
         ox, oy = values.get("origin", KeyboardConfig().origin)
         values["origin"] = (ox if origin_x is None else origin_x, oy if origin_y is None else origin_y)
     cfg = KeyboardConfig.from_dict(values)
-    output_path(output)
     art = stage.run(cfg)
     write_artifact(art, output)
     kb = stage.load(art)
@@ -58,12 +58,13 @@ def keyboard_cmd(
 @command(plot_app, name="keyboard")
 def plot_keyboard_cmd(
     artifact: Annotated[Path, typer.Argument(help="Keyboard artifact (or any artifact made from one).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path("keyboard.png"),
+    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path("keyboard.png"),
 ) -> None:
-    """Draw the keyboard: keys labelled with note and tempo, the working area dashed. Writes a PNG."""
+    """Draw the keyboard: keys labelled with note and tempo, the working area dashed. Writes the figure (PNG, PDF or SVG by the suffix of -o)."""
     from kbcli.viz.keyboard import plot_keyboard
 
+    check_io({"ARTIFACT": artifact}, figure_output(output))
     art = read_artifact(artifact, "keyboard")
-    output_path(output)
-    plot_keyboard(stage.load(art), output)
+    with busy("drawing"):
+        plot_keyboard(stage.load(art), output)
     out.print(f"wrote {output}")

@@ -12,17 +12,21 @@ from rich.console import Console
 from rich.table import Table
 
 from kbcli.cli.app import (
+    FIGURE_HELP,
     bench_app,
+    busy,
+    check_io,
     command,
+    figure_output,
     interactive,
     out,
-    output_path,
     plot_app,
     progress,
 )
-from kbcli.errors import ConfigError
+from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_arm
+from kbcli.io.schema import MIN_SOUNDS
 from kbcli.sim import SimConfig
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import learn as stage
@@ -38,7 +42,9 @@ def learn_cmd(
     strategy: Annotated[str, typer.Option(
         "--strategy", help="active, random (exploration) or exact (the keyboard's own geometry, "
         "no learning).")] = "active",
-    budget: Annotated[int, typer.Option("--budget", help="Reaches to explore with.")] = 800,
+    budget: Annotated[int, typer.Option(
+        "--budget", help="Reaches to explore with; a run that hears fewer than two distinct sounds "
+        "is refused (nothing written).")] = 800,
     seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the exploration and arm noise.")] = 0,
     reach_noise: Annotated[float, typer.Option(
         "--reach-noise", help="Landing scatter of a reach, px (motor noise in dynamics mode).")
@@ -63,8 +69,8 @@ def learn_cmd(
     sim = SimConfig(mode=mode, reach_noise=reach_noise, arm=load_arm(arm))
     cfg = stage.LearnConfig(strategy=strategy, budget=budget, batch=batch,
                             explore_radius=explore_radius, curve_every=curve_every, sim=sim)
+    check_io({"--keyboard": keyboard}, ("--output", output))
     kb_art = read_artifact(keyboard, "keyboard")
-    output_path(output)
     if cfg.strategy == "exact":
         art = stage.run(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
         write_artifact(art, output)
@@ -72,11 +78,24 @@ def learn_cmd(
                   f"{stage.check_keyboard(kb_art).n_keys} keys)")
         return
     learning = stage.learn(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
-    for _ in progress(learning, len(learning), f"{strategy} exploration ({mode})"):
+    done = [0]
+
+    def reaches(n: int) -> int:  # each item is a batch; the bar counts reaches
+        step, done[0] = n - done[0], n
+        return step
+
+    for _ in progress(learning, cfg.budget, f"{strategy} exploration ({mode}), reaches",
+                      advance=reaches):
         pass
     art = learning.artifact()
-    write_artifact(art, output)
     a = art.attrs
+    sounds = a["n_classes"] - 1
+    if sounds < MIN_SOUNDS:
+        raise KbcliError(
+            f"learned only {sounds} sound class(es) besides silence in {a['n_reaches']} reaches, "
+            f"fewer than the {MIN_SOUNDS} a model needs to find a moved keyboard; nothing written: "
+            f"raise --budget")
+    write_artifact(art, output)
     to99 = a["reaches_to_99"]
     out.print(
         f"wrote {output}: {strategy} exploration, {mode} mode, {a['n_reaches']} reaches: "
@@ -89,17 +108,18 @@ def learn_cmd(
 @command(plot_app, name="model")
 def plot_model_cmd(
     artifact: Annotated[Path, typer.Argument(help="Model artifact (.h5).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path(
+    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path(
         "model.png"),
 ) -> None:
     """Draw a model: the learned map (predicted key, uncertainty, reaches) beside the true layout,
-    and the learning curve. Reads ARTIFACT (kind 'model'); writes a PNG."""
+    and the learning curve. Reads ARTIFACT (kind 'model'); writes the figure (PNG, PDF or SVG by the suffix of -o)."""
     from kbcli.stages.models import load_model
     from kbcli.viz.model import plot_model
 
+    check_io({"ARTIFACT": artifact}, figure_output(output))
     art = read_artifact(artifact, "model")
-    output_path(output)
-    plot_model(art, load_model(art), keyboard_stage.load(art), output)
+    with busy("drawing"):
+        plot_model(art, load_model(art), keyboard_stage.load(art), output)
     out.print(f"wrote {output}")
 
 
@@ -129,7 +149,7 @@ def bench_learn_cmd(
         "--boundary-budget", help="Reaches at which the boundary error and the learn wall time "
         "are measured.")] = 800,
 ) -> None:
-    """Sample efficiency and speed of learning the model (issue 3's benchmark).
+    """Benchmark learning the model: sample efficiency and speed.
 
     Reads and writes nothing. Prints, per strategy over SEEDS runs on the default keyboard: the
     median accuracy (2 px grid) at each budget, the median reaches until 99 % accuracy, the median

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated
 
 import numpy as np
 import typer
 
-from kbcli.cli.app import command, out, output_path
+from kbcli.cli.app import check_io, command, err, out
+from kbcli.core.transforms import wrap_degrees
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import perturb as stage
@@ -22,7 +24,7 @@ def perturb_cmd(
     dy: Annotated[float | None, typer.Option("--dy", help="Displacement along y, px.")] = None,
     angle: Annotated[float | None, typer.Option(
         "--angle", help="Rotation about the keyboard centre, degrees counter-clockwise (makes the "
-        "move rigid).")] = None,
+        "move rigid); wrapped to (-180, 180].")] = None,
     category: Annotated[str | None, typer.Option(
         "--category", help="Draw a random move instead: small, medium or large (largest per-axis "
         "displacement in (0,10], (10,20] or (20,40] px).")] = None,
@@ -37,6 +39,7 @@ def perturb_cmd(
     world and the evaluation only); prints the pose. A move that takes any key out of the arm's
     reach is refused (exit 1, nothing written).
     """
+    check_io({"--keyboard": keyboard}, ("--output", output))
     explicit = dx is not None or dy is not None or angle is not None
     if explicit and category is not None:
         raise ConfigError("give either --dx/--dy/--angle or --category, not both")
@@ -46,6 +49,12 @@ def perturb_cmd(
         family = "rigid" if angle is not None else "translation"
     if angle is not None and family != "rigid":
         raise ConfigError("--angle makes a rigid move; it cannot be used with --family translation")
+    if angle is not None and math.isfinite(angle):
+        wrapped = wrap_degrees(angle)
+        if wrapped != angle:
+            err.print(f"kbcli: note: --angle {angle:g} is the rotation {wrapped:g} (angles are "
+                      f"wrapped to (-180, 180])", markup=False)
+        angle = wrapped
     if explicit:
         d = (dx or 0.0, dy or 0.0)
         params = d if family == "translation" else (angle or 0.0, *d)
@@ -53,7 +62,6 @@ def perturb_cmd(
     else:
         cfg = stage.PerturbConfig(family=family, category=category)
     kb_art = read_artifact(keyboard, ("keyboard", "model"))
-    output_path(output)
     art = stage.run(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
     write_artifact(art, output)
     pose = ", ".join(f"{k}={v:.2f}" for k, v in art.attrs["pose"].items())

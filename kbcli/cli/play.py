@@ -9,14 +9,38 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from kbcli.cli.app import command, out, output_path, plot_app, progress
+from kbcli.cli.app import (
+    FIGURE_HELP,
+    busy,
+    check_io,
+    command,
+    figure_output,
+    out,
+    plot_app,
+    progress,
+)
 from kbcli.core.audio import SAMPLE_RATE, to_pcm16
-from kbcli.core.melody import DEFAULT_MELODY
+from kbcli.core.melody import DEFAULT_MELODY, MAX_BEATS, MAX_NOTES, parse_melody
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.atomic import atomic_path
 from kbcli.io.config import load_arm
+from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import play as stage
+
+#: Longest WAV ``play --wav`` writes, seconds (about 53 MB of 16-bit mono at 22,050 Hz).
+MAX_WAV_SECONDS = 1200.0
+
+
+def wav_seconds_bound(melody_text: str, keyboard, steps: int) -> float:
+    """Upper bound on the WAV length of ``steps`` notes of a melody, seconds: every note at the
+    keyboard's slowest tempo (a wrong key or a silence never lasts longer than that)."""
+    melody = parse_melody(melody_text, keyboard)
+    beats = np.asarray(melody.durations, float)
+    cycles, rest = divmod(int(steps), len(beats))
+    total = cycles * beats.sum() + beats[:rest].sum()
+    slowest = float(np.min(np.asarray(keyboard.features, float)[:, 1]))
+    return float(total * 60.0 / max(slowest, 1e-9))
 
 
 def write_wav(path: Path, samples: np.ndarray, sample_rate: int) -> None:
@@ -35,7 +59,8 @@ def play_cmd(
     scene: Annotated[Path | None, typer.Option(
         "--scene", help="Scene artifact (kbcli perturb): where the keyboard moves at --perturb-at.")] = None,
     melody: Annotated[str, typer.Option(
-        "--melody", help="Notes NOTE:BEATS, looped (the paper's Fig. 3 example by default).")] = DEFAULT_MELODY,
+        "--melody", help=f"Notes NOTE:BEATS, looped (the paper's Fig. 3 example by default); at "
+        f"most {MAX_NOTES} notes of at most {MAX_BEATS:g} beats each.")] = DEFAULT_MELODY,
     steps: Annotated[int, typer.Option("--steps", help="Number of actions.")] = 300,
     perturb_at: Annotated[int | None, typer.Option(
         "--perturb-at", help="Step at which the keyboard moves [default steps/2 with a scene].")] = None,
@@ -46,7 +71,9 @@ def play_cmd(
         "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields).")] = "ideal",
     seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the robot's and the world's randomness.")] = 0,
     wav: Annotated[Path | None, typer.Option(
-        "--wav", help="Also write what was heard as a WAV file (silence where the finger missed).")] = None,
+        "--wav", help=f"Also write what was heard as a WAV file (silence where the finger "
+        f"missed); at most {MAX_WAV_SECONDS / 60:g} minutes: --steps notes at the keyboard's "
+        f"slowest tempo.")] = None,
 ) -> None:
     """Play a melody in a loop with a model; the keyboard moves at --perturb-at (Algorithm 1).
 
@@ -54,15 +81,17 @@ def play_cmd(
     actions, landing points, heard features, aimed notes, MATCH/NO_MATCH per step) and optionally a
     WAV; prints the failure rates before and after the move.
     """
+    check_io({"--model": model, "--scene": scene}, ("--output", output), ("--wav", wav))
     cfg = stage.PlayConfig(melody=melody, steps=steps, perturb_at=perturb_at, mode=mode,
                            reach_noise=reach_noise, arm=load_arm(arm))
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene") if scene is not None else None
-    output_path(output)
     if wav is not None:
-        output_path(wav)
-        if wav.resolve() == output.resolve():
-            raise ConfigError("--wav and --output must be different files")
+        longest = wav_seconds_bound(melody, keyboard_stage.load(model_art), steps)
+        if longest > MAX_WAV_SECONDS:
+            raise ConfigError(
+                f"--wav: {steps} notes of this melody may last up to {longest:,.0f} s, more than "
+                f"the {MAX_WAV_SECONDS:g} s a WAV may hold: play fewer --steps or shorter notes")
     session = stage.Session(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed)
     for _ in progress(session, cfg.steps, "playing"):
         pass
@@ -93,16 +122,17 @@ def plot_play_cmd(
     history: Annotated[Path, typer.Argument(help="History artifact (kbcli play).")],
     detection: Annotated[Path | None, typer.Option(
         "--detection", help="Detection artifact (kbcli detect) to mark where the detector fired.")] = None,
-    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path("play.png"),
+    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path("play.png"),
 ) -> None:
     """Draw a play history: aimed note and result per step, running success rate, the move, and
-    (with --detection) the detector's score and firings. Reads HISTORY; writes a PNG."""
+    (with --detection) the detector's score and firings. Reads HISTORY; writes the figure (PNG, PDF or SVG by the suffix of -o)."""
     from kbcli.viz.play import plot_play
 
+    check_io({"HISTORY": history, "--detection": detection}, figure_output(output))
     hist = read_artifact(history, "history")
     det = read_artifact(detection, "detection") if detection is not None else None
     if det is not None and det.inputs.get("history", {}).get("sha256") not in (None, hist.sha256):
         raise ConfigError(f"{detection} was computed on another history than {history}")
-    output_path(output)
-    plot_play(hist, output, det)
+    with busy("drawing"):
+        plot_play(hist, output, det)
     out.print(f"wrote {output}")

@@ -8,10 +8,11 @@ from typing import Annotated
 
 import typer
 
-from kbcli.cli.app import command, err, out, output_path, progress
+from kbcli.cli.app import check_io, command, err, out, progress
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml
+from kbcli.io.paths import Output
 from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
 from kbcli.stages import quality as stage
 
@@ -58,8 +59,14 @@ def quality_cmd(
     if config == DEFAULT_CONFIG and not config.is_file():
         raise KbcliError(f"{config}: no such config file here; run from the kbcli checkout or pass "
                          "--config FILE")
+    ckpt_dir = Checkpoint.beside(output)
     cfg = stage.QualityConfig.from_dict(dict(load_toml(config, "quality")))
     cfg = cfg.with_overrides(experiments=experiments, budgets=_budgets(budgets))
+    names = tuple(f"{n}.h5" for n, _, _ in stage.model_names(cfg))
+    check_io({"--config": config, "--keyboard": keyboard}, ("--output", output),
+             Output(ckpt_dir, "checkpoint folder", folder=True, removes=True),
+             *((Output(models_dir, "--models folder", folder=True, files=names),)
+               if models_dir is not None else ()))
     if jobs < 1:
         raise ConfigError(f"--jobs must be >= 1, got {jobs}")
     if scheduler is not None:
@@ -67,10 +74,8 @@ def quality_cmd(
             raise ConfigError("--jobs and --scheduler exclude each other")
         check_scheduler_address(scheduler)
     kb_art = read_artifact(keyboard, "keyboard")
-    output_path(output)
     if models_dir is not None and not models_dir.is_dir():
         raise KbcliError(f"{models_dir}: no such folder (for --models)")
-    ckpt_dir = Checkpoint.beside(output)
     fp = {**stage.fingerprint(cfg, kb_art), "source_code": source_digest()}
     ckpt = Checkpoint(ckpt_dir, fp, every=20)
     done = ckpt.load(resume)

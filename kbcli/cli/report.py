@@ -7,10 +7,11 @@ from typing import Annotated
 
 import typer
 
-from kbcli.cli.app import command, out
-from kbcli.errors import KbcliError
+from kbcli.cli.app import busy, check_io, command, out
+from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact
 from kbcli.io.atomic import atomic_path
+from kbcli.io.paths import FIGURE_FORMATS, Output
 from kbcli.stages import report as stage
 
 
@@ -23,6 +24,8 @@ def _write_text(path: Path, text: str) -> None:
 def report_cmd(
     evaluation: Annotated[Path, typer.Argument(help="Evaluation artifact (.h5) from kbcli evaluate.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Report folder to write (created if needed).")] = Path("report"),
+    fmt: Annotated[str, typer.Option(
+        "--format", help=f"Figure format: {', '.join(FIGURE_FORMATS)}.")] = "png",
 ) -> None:
     """Write the reproduction report of an evaluation.
 
@@ -33,48 +36,61 @@ def report_cmd(
     fig7_error_MODE.png (error against observations per category and method) and README.md (every
     resolved option of every method, the paper's claims judged on the paper's method with ours
     beside it, the large-displacement ablation, tables of observations to each threshold,
-    p-values with the smallest attainable one, RMSE and measured playing success). Prints each
-    claim's verdict.
+    p-values with the smallest attainable one, RMSE and measured playing success); --format pdf or
+    svg writes the figures in that format instead. Prints each claim's verdict.
     """
     from kbcli.viz import report as viz
 
+    if fmt not in FIGURE_FORMATS:
+        raise ConfigError(f"--format must be one of {', '.join(FIGURE_FORMATS)}, got {fmt!r}")
+    check_io({"EVALUATION": evaluation}, Output(output, "report folder", folder=True))
     art = read_artifact(evaluation, ("evaluation", "model_quality"))
-    if art.kind == "evaluation":
-        art = stage.upgrade(art)
-    parent = output.parent if str(output.parent) else Path(".")
-    if output.exists() and not output.is_dir():
-        raise KbcliError(f"{output}: exists and is not a folder")
-    if not parent.is_dir():
-        raise KbcliError(f"{output}: parent folder {parent} does not exist")
     if art.kind == "model_quality":
-        _quality_report(art, output)
+        _quality_report(art, evaluation, output, fmt)
         return
+    art = stage.upgrade(art)
     rep = stage.build(art)
-    output.mkdir(exist_ok=True)
-    for fig in rep.figures:
-        path = output / fig.name
-        if fig.name.startswith("fig5"):
-            viz.plot_posterior(art, path)
-        elif fig.name.startswith("fig6"):
-            viz.plot_entropy(art, path)
-        else:
-            viz.plot_error(art, path, fig.name.removeprefix("fig7_error_").removesuffix(".png"))
-    _write_text(output / "README.md", rep.readme)
-    out.print(f"wrote {output}/: README.md and {len(rep.figures)} figures")
+    names = {f.name: str(Path(f.name).with_suffix("." + fmt)) for f in rep.figures}
+    check_io({"EVALUATION": evaluation},
+             Output(output, "report folder", folder=True, files=("README.md", *names.values())))
+    try:
+        output.mkdir(exist_ok=True)
+    except OSError as exc:
+        raise KbcliError(f"{output}: cannot create the report folder ({exc.strerror})") from None
+    readme = rep.readme
+    with busy("drawing the report's figures"):
+        for fig in rep.figures:
+            path = output / names[fig.name]
+            readme = readme.replace(f"]({fig.name})", f"]({names[fig.name]})")
+            if fig.name.startswith("fig5"):
+                viz.plot_posterior(art, path)
+            elif fig.name.startswith("fig6"):
+                viz.plot_entropy(art, path)
+            else:
+                viz.plot_error(art, path, fig.name.removeprefix("fig7_error_").removesuffix(".png"))
+    _write_text(output / "README.md", readme)
+    out.print(f"wrote {output}/: README.md and {len(rep.figures)} figures ({fmt})")
     for c in rep.claims:
         out.print(f"  [{c.verdict}] {c.paper} -- {c.method}: {c.measured}", markup=False,
                   soft_wrap=True)
 
 
-def _quality_report(art, output: Path) -> None:
-    """The report of a model-quality sweep: advantage.png and README.md."""
+def _quality_report(art, source: Path, output: Path, fmt: str) -> None:
+    """The report of a model-quality sweep: the advantage figure and README.md."""
     from kbcli.stages import quality
     from kbcli.viz.quality import plot_advantage
 
-    output.mkdir(exist_ok=True)
-    plot_advantage(art, output / "advantage.png")
-    _write_text(output / "README.md", quality.report(art))
-    out.print(f"wrote {output}/: README.md and advantage.png")
+    fig = f"advantage.{fmt}"
+    check_io({"EVALUATION": source},
+             Output(output, "report folder", folder=True, files=("README.md", fig)))
+    try:
+        output.mkdir(exist_ok=True)
+    except OSError as exc:
+        raise KbcliError(f"{output}: cannot create the report folder ({exc.strerror})") from None
+    with busy("drawing the report's figure"):
+        plot_advantage(art, output / fig)
+    _write_text(output / "README.md", quality.report(art).replace("](advantage.png)", f"]({fig})"))
+    out.print(f"wrote {output}/: README.md and {fig}")
     for r in art.attrs["rows"]:
         if r != art.attrs["baseline"]:
             out.print(f"  {r}: the paper's explanation "

@@ -8,8 +8,18 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from kbcli.cli.app import command, out, output_path, plot_app, progress
+from kbcli.cli.app import (
+    FIGURE_HELP,
+    busy,
+    check_io,
+    command,
+    figure_output,
+    out,
+    plot_app,
+    progress,
+)
 from kbcli.core.detect import DetectorConfig
+from kbcli.core.loop import PLAY
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_arm
@@ -51,6 +61,7 @@ def run_cmd(
     robot is not told). Writes OUTPUT (kind 'closed_loop': every touch with its phase, result and
     detector score) and prints the success rate before the move, after it, and after adaptation.
     """
+    check_io({"--model": model, "--scene": scene}, ("--output", output))
     cfg = stage.LoopConfig(
         melody=melody, steps=steps, perturb_at=perturb_at, max_adapt_steps=max_adapt_steps,
         detector=DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold),
@@ -59,9 +70,17 @@ def run_cmd(
     )
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
-    output_path(output)
     session = stage.LoopSession(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed)
-    for _ in progress(session, None, "playing"):
+    adapting = [0]
+
+    def describe(s) -> str:
+        if s.phase == PLAY:
+            return "playing, touches"
+        adapting[0] += 1
+        return f"adapting (touch {adapting[0]}); play touches"
+
+    for _ in progress(session, cfg.steps, "playing, touches",
+                      advance=lambda s: 1 if s.phase == PLAY else 0, describe=describe):
         pass
     art = session.artifact()
     write_artifact(art, output)
@@ -83,13 +102,15 @@ def run_cmd(
 @command(plot_app, name="run")
 def plot_run_cmd(
     artifact: Annotated[Path, typer.Argument(help="Closed-loop artifact (kbcli run).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="PNG to write.")] = Path("run.png"),
+    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path("run.png"),
 ) -> None:
     """Draw a closed-loop session: success over time, the move, the detection, the adaptation
-    touches on the keyboard. Writes a PNG."""
+    touches on the keyboard. Writes the figure (PNG, PDF or SVG by the suffix of -o)."""
     from kbcli.viz.loop import plot_loop
 
+    check_io({"ARTIFACT": artifact}, figure_output(output))
     art = read_artifact(artifact, "closed_loop")
-    output_path(output)
-    plot_loop(art.data["steps"], art.attrs, keyboard_stage.load(art), output)
+    with busy("drawing"):
+        plot_loop(art.data["steps"], art.attrs, keyboard_stage.load(art), output,
+                  config=art.config)
     out.print(f"wrote {output}")

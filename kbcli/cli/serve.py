@@ -19,7 +19,7 @@ from typing import Annotated, BinaryIO
 
 import typer
 
-from kbcli.cli.app import command, err, output_path
+from kbcli.cli.app import check_io, command, err
 
 _HELP = """Adapt with a robot in another process: JSON lines on stdin/stdout (or a local socket).
 
@@ -170,6 +170,8 @@ def serve_cmd(
     from kbcli.io.config import load_toml
     from kbcli.stages.serve import ServeConfig, Session
 
+    check_io({"--model": model, "--config": config}, ("--output", output),
+             ("--socket", socket_path))
     if socket_path is not None and port is not None:
         raise KbcliError("give either --socket or --port, not both")
     values = dict(load_toml(config, "serve")) if config is not None else {}
@@ -178,9 +180,6 @@ def serve_cmd(
              "resolution": resolution, "prior_halfwidth": prior_halfwidth}
     values.update({k: v for k, v in flags.items() if v is not None})
     cfg = ServeConfig.from_dict(values)
-    output_path(output)
-    if output.resolve() == model.resolve():
-        raise KbcliError(f"{output}: is the model (an input); write the session elsewhere")
     model_art = read_artifact(model, "model")
     transport = "stdio" if socket_path is None and port is None else \
         ("unix" if socket_path is not None else "tcp")

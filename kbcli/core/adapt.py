@@ -194,6 +194,8 @@ class AdapterConfig:
         _num("resolution", self.resolution)
         _num("prior_halfwidth", self.prior_halfwidth)
         _num("max_angle", self.max_angle, strict=False)
+        if self.max_angle > 180:
+            raise ConfigError(f"max_angle must be in [0, 180] degrees, got {self.max_angle!r}")
         _num("angle_resolution", self.angle_resolution)
         if self.prior_halfwidth < self.resolution:
             raise ConfigError("prior_halfwidth must be at least one resolution step")

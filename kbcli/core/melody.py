@@ -18,6 +18,10 @@ from kbcli.errors import ConfigError
 #: The paper's Fig. 3 example, S = {(A, 1), (D, 1), (E, 0.5), (D, 2), (A, 1)}.
 DEFAULT_MELODY = "A:1 D:1 E:0.5 D:2 A:1"
 
+#: Limits of a melody: at most this many notes, each lasting at most this many beats.
+MAX_NOTES = 256
+MAX_BEATS = 16.0
+
 
 @dataclass(frozen=True)
 class Melody:
@@ -55,12 +59,15 @@ def parse_melody(text: str, keyboard: Keyboard) -> Melody:
     Raises
     ------
     ConfigError
-        Empty melody, a malformed token, a duration that is not a positive number, or a note that is
-        unknown or not on the keyboard (the message names it).
+        Empty melody or more than :data:`MAX_NOTES` notes, a malformed token, a duration that is
+        not a number in (0, :data:`MAX_BEATS`] beats, or a note that is unknown or not on the
+        keyboard (the message names it).
     """
     tokens = str(text).split()
     if not tokens:
         raise ConfigError("melody is empty: give notes like 'A:1 D:1 E:0.5 D:2 A:1'")
+    if len(tokens) > MAX_NOTES:
+        raise ConfigError(f"melody has {len(tokens)} notes, more than the {MAX_NOTES} allowed")
     notes, midi, durations, keys = [], [], [], []
     for tok in tokens:
         name, sep, beats = tok.partition(":")
@@ -75,8 +82,9 @@ def parse_melody(text: str, keyboard: Keyboard) -> Melody:
                 ) from None
         else:
             dur = 1.0
-        if not (math.isfinite(dur) and dur > 0):
-            raise ConfigError(f"melody token {tok!r}: duration must be > 0 beats, got {beats!r}")
+        if not (math.isfinite(dur) and 0 < dur <= MAX_BEATS):
+            raise ConfigError(f"melody token {tok!r}: duration must be > 0 and at most {MAX_BEATS:g} beats, "
+                              f"got {beats!r}")
         m = name_to_midi(name)  # ConfigError naming an unknown note
         k = keyboard.note_key(name)  # ConfigError naming a note that is not on the keyboard
         notes.append(name)

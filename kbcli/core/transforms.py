@@ -33,6 +33,14 @@ def check_family(family: str) -> tuple[str, ...]:
         ) from None
 
 
+def wrap_degrees(angle: np.ndarray | float) -> np.ndarray | float:
+    """Angles (degrees) wrapped to (-180, 180]: ``wrap_degrees(190) == -170``, ``wrap_degrees(-180)
+    == 180``. A float in gives a float out."""
+    a = np.asarray(angle, float)
+    w = 180.0 - np.mod(180.0 - a, 360.0)
+    return float(w) if np.ndim(angle) == 0 else w
+
+
 def _split(family: str, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(..., P) params -> angle in radians (...,) and translation (..., 2)."""
     names = check_family(family)

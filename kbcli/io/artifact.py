@@ -25,6 +25,7 @@ import numpy as np
 
 from kbcli.errors import ArtifactError
 from kbcli.io.atomic import atomic_path
+from kbcli.io.schema import validate as check_schema
 from kbcli.stages.artifact import SCHEMA_VERSIONS, Artifact
 
 _COMPRESS_ABOVE = 4096  # elements; small datasets stay contiguous
@@ -133,22 +134,63 @@ def _read_group(group: h5py.Group) -> dict[str, Any]:
     return out
 
 
+def _text_attr(f: h5py.File, name: str, path: Path) -> str:
+    value = f.attrs[name]
+    if isinstance(value, bytes):
+        value = value.decode("utf-8", "replace")
+    if not isinstance(value, str):
+        raise ArtifactError(f"{path}: attribute {name!r} must be text, got {type(value).__name__}")
+    return value
+
+
+def _int_attr(f: h5py.File, name: str, path: Path) -> int:
+    value = f.attrs[name]
+    if isinstance(value, np.ndarray) and value.shape == ():
+        value = value[()]
+    if not isinstance(value, (int, np.integer)) or isinstance(value, (bool, np.bool_)):
+        raise ArtifactError(f"{path}: attribute {name!r} must be a whole number, got {value!r:.40}")
+    return int(value)
+
+
+def _json_attr(f: h5py.File, name: str, path: Path, required: bool = False) -> dict:
+    """A JSON-object attribute (config, attrs, inputs); {} when absent and not required."""
+    if name not in f.attrs:
+        if required:
+            raise ArtifactError(f"{path}: attribute {name!r} is missing")
+        return {}
+    text = _text_attr(f, name, path)
+    try:
+        value = json.loads(text)
+    except ValueError:
+        raise ArtifactError(f"{path}: attribute {name!r} is not valid JSON (truncated?)") from None
+    if not isinstance(value, dict):
+        raise ArtifactError(f"{path}: attribute {name!r} must hold a JSON object, got "
+                            f"{type(value).__name__}")
+    return value
+
+
 def _kinds(kind: str | tuple[str, ...] | None) -> tuple[str, ...] | None:
     return (kind,) if isinstance(kind, str) else kind
 
 
-def read_artifact(path: str | os.PathLike, kind: str | tuple[str, ...] | None = None) -> Artifact:
-    """Read an artifact, checking that it is one, of the expected kind and of a known schema.
+def read_artifact(path: str | os.PathLike, kind: str | tuple[str, ...] | None = None, *,
+                  validate: bool = True) -> Artifact:
+    """Read an artifact, checking that it is one, of the expected kind and of a known schema, and
+    (``validate``) that it holds what its kind's schema requires (:mod:`kbcli.io.schema`).
 
     Parameters
     ----------
     kind : str or tuple of str, optional
         The kind(s) accepted.
+    validate : bool
+        Check the datasets, summary attributes and config entries against the schema (False:
+        only the root attributes, e.g. to show a damaged file with ``kbcli inspect``).
 
     Raises
     ------
     ArtifactError
-        Missing file, not HDF5, truncated or corrupt, not a kbcli artifact, wrong kind, newer schema.
+        Missing file, not HDF5, truncated or corrupt, not a kbcli artifact, wrong kind, newer
+        schema, or (``validate``) a missing or malformed dataset, attribute or config entry.
     """
     path = Path(path)
     if not path.exists():
@@ -163,8 +205,8 @@ def read_artifact(path: str | os.PathLike, kind: str | tuple[str, ...] | None = 
         with h5py.File(path, "r") as f:
             if "kind" not in f.attrs or "schema_version" not in f.attrs:
                 raise ArtifactError(f"{path}: an HDF5 file but not a kbcli artifact (no kind attribute)")
-            got = str(f.attrs["kind"])
-            version = int(f.attrs["schema_version"])
+            got = _text_attr(f, "kind", path)
+            version = _int_attr(f, "schema_version", path)
             wanted = _kinds(kind)
             if wanted is not None and got not in wanted:
                 raise ArtifactError(
@@ -178,30 +220,42 @@ def read_artifact(path: str | os.PathLike, kind: str | tuple[str, ...] | None = 
                     f"{path}: {got} artifact of schema {version}, newer than this kbcli reads "
                     f"({known}); you may need to update kbcli"
                 )
-            seed = int(f.attrs["seed"])
+            if version < 1:
+                raise ArtifactError(f"{path}: attribute 'schema_version' must be >= 1, got {version}")
+            seed = _int_attr(f, "seed", path) if "seed" in f.attrs else -1
             art = Artifact(
                 kind=got,
-                config=json.loads(f.attrs["config"]),
+                config=_json_attr(f, "config", path, required=True),
                 seed=None if seed < 0 else seed,
                 data=_read_group(f),
-                attrs=json.loads(f.attrs.get("attrs", "{}")),
-                inputs=json.loads(f.attrs.get("inputs", "{}")),
+                attrs=_json_attr(f, "attrs", path),
+                inputs=_json_attr(f, "inputs", path),
                 schema_version=version,
                 kbcli_version=str(f.attrs.get("kbcli_version", "?")),
             )
     except ArtifactError:
         raise
-    except (OSError, KeyError, ValueError, RuntimeError) as exc:
+    except (OSError, KeyError, ValueError, RuntimeError, TypeError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ArtifactError(f"{path}: truncated or corrupt HDF5 file ({first})") from None
+    if not all(isinstance(v, dict) for v in art.inputs.values()):
+        raise ArtifactError(f"{path}: attribute 'inputs' must map each input to a table")
+    if validate:
+        check_schema(art, str(path))
     art.sha256 = sha256_file(path)
     art.path = str(path)
     return art
 
 
 def describe(path: str | os.PathLike) -> dict[str, Any]:
-    """What ``kbcli inspect`` shows: kind, schema, versions, config, provenance and dataset shapes."""
-    art = read_artifact(path)
+    """What ``kbcli inspect`` shows: kind, schema, versions, config, provenance and dataset shapes,
+    and ``problem``: what does not match the kind's schema (None when all is well)."""
+    art = read_artifact(path, validate=False)
+    try:
+        check_schema(art, "")
+        problem = None
+    except ArtifactError as exc:
+        problem = str(exc)
     shapes: dict[str, dict[str, Any]] = {}
     with h5py.File(path, "r") as f:
 
@@ -221,6 +275,7 @@ def describe(path: str | os.PathLike) -> dict[str, Any]:
         "attrs": art.attrs,
         "inputs": art.inputs,
         "datasets": shapes,
+        "problem": problem,
     }
 
 

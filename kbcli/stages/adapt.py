@@ -31,6 +31,7 @@ adaptation, and after it with the final estimate as the correction (``experiment
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -260,7 +261,7 @@ def _errors(est: np.ndarray, truth: np.ndarray, robot_family: str,
     t_err = float(np.hypot(*(est[-2:] - truth[-2:])))
     a_est = float(est[0]) if robot_family == "rigid" else 0.0
     a_true = float(truth[0]) if world_family == "rigid" else 0.0
-    return t_err, abs(a_est - a_true)
+    return t_err, abs(transforms.wrap_degrees(a_est - a_true))
 
 
 #: Per-step records of a ``run`` artifact, in the order :meth:`Recorder.add` takes them.
@@ -360,7 +361,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
                table: LikelihoodTable | None = None,
                snapshot_steps: tuple[int, ...] = (), samples: ActionSamples | None = None,
                play: PlayCheck | None = None,
-               play_pool: ActionSamples | None = None) -> dict[str, np.ndarray]:
+               play_pool: ActionSamples | None = None,
+               on_step: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
     """One adaptation against a world whose keyboard sits at ``true_params``.
 
     Parameters
@@ -385,6 +387,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         ``play_adapted``, each a float, NaN when not measured), from a third child of ``rng``.
     play_pool : ActionSamples, optional
         Per-class draws of p(action | sound) the replays resample (default: the model samples).
+    on_step : callable, optional
+        Called with the step number after each observation (a progress bar).
 
     Returns
     -------
@@ -424,6 +428,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         err, aerr = _errors(st.estimate, truth, cfg.robot.family, world_family)
         ml_err, _ = _errors(st.ml, truth, cfg.robot.family, world_family)
         rec.add(st, (err, ml_err, aerr), poses[-1] if poses else None)
+        if on_step is not None:
+            on_step(st.t)
     out = rec.arrays()
     out["true_landed"] = np.asarray(true_landed, float).reshape(-1, 2)
     if play is not None:
@@ -480,7 +486,8 @@ def check_inputs(model_artifact: Artifact, scene_artifact: Artifact) -> None:
 
 def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
         rng: np.random.Generator, seed: int | None = None,
-        snapshot_steps: tuple[int, ...] = DEFAULT_SNAPSHOTS, model=None) -> Artifact:
+        snapshot_steps: tuple[int, ...] = DEFAULT_SNAPSHOTS, model=None,
+        on_step: Callable[[int], None] | None = None) -> Artifact:
     """Adapt to a scene with a model: the ``run`` artifact.
 
     Parameters
@@ -489,6 +496,8 @@ def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
         Recorded in the artifact (``rng`` should be ``default_rng(seed)``).
     model : SoundModel, optional
         The already loaded model of ``model_artifact`` (saves loading it again).
+    on_step : callable, optional
+        Called with the step number after each observation (a progress bar).
 
     Raises
     ------
@@ -501,7 +510,7 @@ def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
     world_family = scene_artifact.config["family"]
     truth = np.asarray(scene_artifact.config["params"], float)
     res = experiment(cfg, model, kb, truth, rng=rng, world_family=world_family,
-                     snapshot_steps=snapshot_steps)
+                     snapshot_steps=snapshot_steps, on_step=on_step)
     attrs = run_attrs(res, cfg.adapter_config(), truth=truth, world_family=world_family)
     attrs["truth_inside_prior"] = _inside_prior(cfg, truth, world_family)
     sim = cfg.sim_config()

@@ -1,12 +1,14 @@
 """Figure of one adaptation run: the posterior's evolution (the paper's Fig. 5) and the error and
 entropy curves (Figs. 6, 7 for a single experiment).
 
-Top row: the translation posterior (log scale over 30 nats, the angle summed out for the rigid
-family) at the stored snapshot steps, the true displacement marked with a cross and the estimate
-(posterior mean) with a circle; the last panel zooms in to +-4 px around the estimate.
-Bottom: the estimation error (px, log scale) and the entropy (nats) against the observations. A
-session with a robot in another process (``kbcli serve``) has no ground truth: no cross, and the
-error panel shows the robot's own confidence instead (the posterior mass near the estimate).
+Top row: the translation posterior (log scale over 30 nats below its maximum, with a colour bar;
+the angle summed out for the rigid family) at the stored snapshot steps, the true displacement
+marked with a cross and the estimate (posterior mean) with a circle; the last panel zooms in on the
+estimate, wide enough to keep the truth in view. Bottom: the translation error (px, log scale)
+with the 1 px level, the angle error (degrees, rigid runs, on its own axis) and the entropy (nats)
+against the observations, the stopping rule marked. One legend names every mark. A session with a
+robot in another process (``kbcli serve``) has no ground truth: no cross, and the error panel shows
+the robot's own confidence instead (the posterior mass near the estimate).
 """
 
 from __future__ import annotations
@@ -15,102 +17,156 @@ import os
 
 import matplotlib.pyplot as plt
 import numpy as np
-from matplotlib.ticker import MaxNLocator
+from matplotlib.lines import Line2D
+from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator
 
 from kbcli.stages.artifact import Artifact
 from kbcli.viz.common import save
 
 MAX_PANELS = 6
 DYNAMIC_RANGE = 30.0  # nats of log-posterior shown
-ZOOM = 4.0  # px, half-width of the last panel
+ZOOM = 4.0  # px, least half-width of the last panel
+MARGIN = 1.5  # px around the estimate and the truth in the zoomed panel
+
+
+def _plain(v: float, _pos=None) -> str:
+    return f"{v:g}"
+
+
+def _steps_axis(ax, n: int) -> None:
+    """Whole-number ticks on the observation axis, sane for a run of one or two steps."""
+    if n <= 12:
+        ax.set_xticks(np.arange(1, max(n, 1) + 1))
+    else:
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlim(0.5, max(n, 1) + 0.5)
 
 
 def plot_adapt(run: Artifact, path: str | os.PathLike) -> None:
-    """Draw a ``run`` artifact to a PNG."""
+    """Draw a ``run`` artifact to a figure file (format from the suffix)."""
     d = run.data
+    a = run.attrs
     steps = np.asarray(d.get("snapshot_steps", np.zeros(0, int)))
     snaps = d.get("snapshots")
     errors = np.asarray(d["errors"], float)
     entropy = np.asarray(d["entropy"], float)
-    truth = run.attrs.get("truth") or {}
-    tx, ty = truth.get("dx", np.nan), truth.get("dy", np.nan)
-    known = bool(truth) and bool(np.isfinite(errors).any())
+    truth = a.get("truth") or {}
+    tx, ty = float(truth.get("dx", np.nan)), float(truth.get("dy", np.nan))
+    has_truth = bool(np.isfinite(tx) and np.isfinite(ty)) and bool(np.isfinite(errors).any())
     means = np.asarray(d["means"], float)
-    pick = np.arange(len(steps))
+    rigid = a.get("family") == "rigid" or a.get("world_family") == "rigid"
+    stop = a.get("stop_step")
+    pick = np.arange(len(steps)) if snaps is not None else np.arange(0)
     if len(pick) > MAX_PANELS:
         pick = np.unique(np.rint(np.linspace(0, len(steps) - 1, MAX_PANELS)).astype(int))
-    n = max(len(pick), 1)
-    fig = plt.figure(figsize=(2.6 * n + 0.6, 6.4))
-    gs = fig.add_gridspec(2, n, height_ratios=[1.15, 1.0])
-    dx, dy = np.asarray(d["dx"]), np.asarray(d["dy"])
+    n = max(len(pick), 3 if rigid and has_truth else 2)
+    fig = plt.figure(figsize=(2.7 * n + 1.2, 6.9))
+    gs = fig.add_gridspec(2, n + 1, height_ratios=[1.15, 1.0], width_ratios=[1] * n + [0.07])
+    dx, dy = np.asarray(d["dx"], float), np.asarray(d["dy"], float)
     extent = (dx[0], dx[-1], dy[0], dy[-1])
+    image = None
     for i, j in enumerate(pick):
         ax = fig.add_subplot(gs[0, i])
         lp = np.asarray(snaps[j], float)
-        top = float(np.max(lp))
-        ax.imshow(lp, origin="lower", extent=extent, cmap="magma", aspect="equal",
-                  vmin=top - DYNAMIC_RANGE, vmax=top, interpolation="nearest")
-        if known:
-            ax.plot([tx], [ty], "x", color="cyan", ms=9, mew=2, label="truth")
+        top = float(np.max(lp)) if np.isfinite(lp).any() else 0.0
+        image = ax.imshow(lp - top, origin="lower", extent=extent, cmap="magma", aspect="equal",
+                          vmin=-DYNAMIC_RANGE, vmax=0.0, interpolation="nearest")
+        if has_truth:
+            ax.plot([tx], [ty], "x", color="cyan", ms=9, mew=2)
         t = int(steps[j])
-        if t >= 1:
-            ax.plot([means[t - 1, -2]], [means[t - 1, -1]], "o", mfc="none", mec="lime", ms=9,
-                    mew=1.5, label="estimate")
-        zoom = i == len(pick) - 1 and t >= 1 and len(pick) > 1
-        if zoom:  # the last panel zooms in on the estimate
-            cx, cy = means[t - 1, -2], means[t - 1, -1]
-            ax.set_xlim(cx - ZOOM, cx + ZOOM)
-            ax.set_ylim(cy - ZOOM, cy + ZOOM)
-        ax.set_title(f"t = {t}" + (" (prior)" if t == 0 else "")
-                     + (f" (zoom +-{ZOOM:g} px)" if zoom else ""), fontsize=9)
+        est = means[t - 1, -2:] if 1 <= t <= len(means) else None
+        if est is not None:
+            ax.plot([est[0]], [est[1]], "o", mfc="none", mec="lime", ms=9, mew=1.5)
+        zoom = i == len(pick) - 1 and est is not None and len(pick) > 1
+        if zoom:  # the last panel zooms in on the estimate, keeping the truth in view
+            lo = est.copy()
+            hi = est.copy()
+            if has_truth:
+                lo, hi = np.minimum(lo, (tx, ty)), np.maximum(hi, (tx, ty))
+            centre = (lo + hi) / 2
+            half = max(ZOOM, float(np.max(hi - lo)) / 2 + MARGIN)
+            ax.set_xlim(centre[0] - half, centre[0] + half)
+            ax.set_ylim(centre[1] - half, centre[1] + half)
+        ax.set_title(f"after {t} observation{'s' if t != 1 else ''}" if t else "prior (t = 0)",
+                     fontsize=9)
+        if zoom:
+            ax.set_title(f"after {t} observation{'s' if t != 1 else ''}\n(zoom: +-{half:.3g} px)",
+                         fontsize=9)
         ax.set_xlabel("dx (px)", fontsize=8)
         if i == 0:
             ax.set_ylabel("dy (px)", fontsize=8)
-            if ax.get_legend_handles_labels()[0]:
-                ax.legend(loc="lower left", fontsize=7, framealpha=0.6)
         ax.tick_params(labelsize=7)
+    if image is not None:
+        cax = fig.add_subplot(gs[0, n])
+        cb = fig.colorbar(image, cax=cax)
+        cb.set_label("log posterior - max (nats)", fontsize=8)
+        cb.ax.tick_params(labelsize=7)
+
     t = np.arange(1, len(errors) + 1)
-    half = max(n // 2, 1)
-    ax = fig.add_subplot(gs[1, :half])
-    if known:
-        ax.semilogy(t, np.maximum(errors, 1e-3), "-o", ms=3, label="translation error")
-        ang = np.asarray(d.get("angle_errors", np.zeros_like(errors)), float)
-        if run.attrs.get("family") == "rigid":
-            ax.semilogy(t, np.maximum(ang, 1e-3), "-s", ms=3, label="angle error (deg)")
+    T = len(errors)
+    three = rigid and has_truth
+    cols = [(0, n // 3 if three else n // 2), (n // 3, 2 * n // 3),
+            (2 * n // 3 if three else n // 2, n)]
+    ax = fig.add_subplot(gs[1, cols[0][0]:cols[0][1]])
+    if has_truth:
+        ax.semilogy(t, np.maximum(errors, 1e-3), "-o", ms=3, color="tab:blue")
         ax.axhline(1.0, color="0.5", ls="--", lw=0.8)
-        ax.set_ylabel("error (px)")
+        ax.set_ylabel("translation error (px)")
+        ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+        ax.yaxis.set_major_formatter(FuncFormatter(_plain))
+        ax.yaxis.set_minor_formatter(FuncFormatter(lambda v, _p: ""))
     else:  # a real robot: no ground truth, show the robot's own confidence
         ax.plot(t, np.asarray(d.get("mass", np.full_like(errors, np.nan)), float), "-o", ms=3,
-                color="tab:green", label="posterior mass near the estimate")
+                color="tab:green")
         ax.set_ylim(-0.02, 1.02)
-        ax.set_ylabel("mass within the stop radius")
+        ax.set_ylabel("posterior mass near the estimate")
         ax.set_title("ground truth unknown (external robot): no error", fontsize=8)
     ax.set_xlabel("observations")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    ax2 = fig.add_subplot(gs[1, half:] if n > 1 else gs[1, :])
-    if n == 1:
-        ax2 = ax.twinx()
-    ax2.plot(t, entropy, "-", color="tab:purple", label="entropy")
+    axes = [ax]
+    if rigid and has_truth:
+        ang = np.asarray(d.get("angle_errors", np.full(T, np.nan)), float)
+        ax_a = fig.add_subplot(gs[1, cols[1][0]:cols[1][1]])
+        ax_a.plot(t, ang, "-s", ms=3, color="tab:orange")
+        ax_a.set_xlabel("observations")
+        ax_a.set_ylabel("angle error (degrees)")
+        ax_a.set_ylim(bottom=0)
+        axes.append(ax_a)
+    ax2 = fig.add_subplot(gs[1, cols[2][0]:cols[2][1]])
+    ax2.plot(t, entropy, "-", color="tab:purple", marker="." if T < 15 else None)
     ax2.set_xlabel("observations")
     ax2.set_ylabel("posterior entropy (nats)")
-    stop = run.attrs.get("stop_step")
+    axes.append(ax2)
+    for axx in axes:
+        axx.grid(alpha=0.3)
+        _steps_axis(axx, T)
+        if stop:
+            axx.axvline(stop, color="tab:green", lw=1.0, ls=":")
+
+    handles = [Line2D([], [], ls="", marker="o", mfc="none", mec="lime", mew=1.5,
+                      label="estimate (posterior mean)")]
+    if has_truth:
+        handles.insert(0, Line2D([], [], ls="", marker="x", color="cyan", mew=2,
+                                 label="true displacement"))
+    if has_truth:
+        handles.append(Line2D([], [], color="0.5", ls="--", lw=0.8, label="1 px"))
     if stop:
-        for a in (ax, ax2):
-            a.axvline(stop, color="tab:green", lw=0.8, ls=":")
-    ax2.grid(alpha=0.3)
-    for a in (ax, ax2):
-        a.xaxis.set_major_locator(MaxNLocator(integer=True))
-    a = run.attrs
-    if known:
-        result = f"final error {a.get('final_error_px', np.nan):.2f} px"
+        handles.append(Line2D([], [], color="tab:green", ls=":", lw=1.0,
+                              label=f"stopping rule met (t = {stop})"))
+    fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0.965),
+               ncol=len(handles), fontsize=8, frameon=False)
+    if has_truth:
+        final = a.get("final_error_px", np.nan)
+        final = np.nan if final is None else final
+        angle = (f", angle error {a.get('final_angle_error_deg', np.nan):.2f} deg"
+                 if rigid and isinstance(a.get("final_angle_error_deg"), (int, float)) else "")
+        result = f"final error {final:.2f} px{angle}"
     else:
         est = a.get("estimate") or {}
         result = "estimate " + ", ".join(f"{k} {v:+.2f}" for k, v in est.items()) + \
             " (truth unknown)"
     source = " (external robot)" if a.get("source") == "external" else ""
     fig.suptitle(f"adaptation{source}: {a.get('strategy')} strategy, {a.get('posterior')} "
-                 f"posterior, {a.get('family')} family; {result}"
-                 + (f", stopping rule at t = {stop}" if stop else ""), fontsize=10)
-    fig.tight_layout()
+                 f"posterior, {a.get('family')} family, {T} observation{'s' if T != 1 else ''}; "
+                 f"{result}", fontsize=10, y=0.995)
+    fig.tight_layout(rect=(0, 0, 1, 0.945))
     save(fig, path)

@@ -1,4 +1,13 @@
-"""Figure of a closed-loop session: results over time, detector score, adaptation touches."""
+"""Figure of a closed-loop session (``kbcli run``): success over time, the detector's score against
+its threshold, and the adaptation touches on the keyboard.
+
+Top left: success (running mean over ``window`` play touches), each NO_MATCH, the move, the
+detection and the adaptation (shaded); lines break across the adaptation, where nothing is played.
+Bottom left: the detector's score (log) with its threshold. Right: the keyboard at its reference
+pose (faded), where it really is (red, rotated for a rigid move) and where the robot believes it is
+after adapting (green, dashed), with the adaptation touches numbered in order. The title gives the
+success rates exactly, with their counts.
+"""
 
 from __future__ import annotations
 
@@ -6,64 +15,197 @@ import os
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch, Polygon
 
+from kbcli.core import transforms
 from kbcli.core.keyboard import Keyboard
 from kbcli.viz.common import draw_keyboard, save
 
+PLAY, ADAPT = 0, 1
 
-def plot_loop(steps: dict, attrs: dict, kb: Keyboard, path: str | os.PathLike, window: int = 20) -> None:
-    """Top: success (running mean over ``window`` play touches), move, detection and adaptation.
-    Middle: detector score (log). Right: the adaptation touches on the reference keyboard."""
-    phase = steps["phase"]
-    result = steps["result"].astype(float)
+
+def _pct(v: float | None, count: tuple[int, int] | None = None) -> str:
+    """A rate as an exact percentage: one decimal, never rounded up to 100 % (nor down to 0 %)."""
+    if v is None:
+        return "n/a"
+    txt = f"{100 * v:.1f}"
+    if (txt == "100.0" and v < 1) or (txt == "0.0" and v > 0):
+        txt = f"{100 * v:.3g}"
+    txt = txt.removesuffix(".0")
+    return f"{txt}%" + (f" ({count[0]}/{count[1]})" if count else "")
+
+
+def _gaps(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Insert NaN between points whose x are not consecutive, so no line crosses a gap."""
+    if len(x) < 2:
+        return x.astype(float), y.astype(float)
+    cut = np.flatnonzero(np.diff(x) > 1) + 1
+    return (np.insert(x.astype(float), cut, np.nan), np.insert(y.astype(float), cut, np.nan))
+
+
+def _counts(phase: np.ndarray, result: np.ndarray, attrs: dict) -> dict[str, tuple[int, int]]:
+    """Counts behind the three success rates (the closed loop's own definitions)."""
     t = np.arange(len(phase))
-    play = phase == 0
-    fig = plt.figure(figsize=(13, 6))
-    gs = fig.add_gridspec(2, 2, width_ratios=(2.2, 1), height_ratios=(1.3, 1))
+    play = phase == PLAY
+    ok = result == 0
+    moved = int(attrs["perturbed_at"])
+    fire = attrs.get("detected_at")
+    out = {"success_before": play & (t < moved)}
+    out["success_after_perturbation"] = play & (t >= moved) & (
+        t <= (fire if fire is not None else t[-1] if len(t) else 0))
+    if fire is not None:
+        nxt = t[(t > fire) & play]
+        adapt_t = t[(phase == ADAPT) & (t > fire)]
+        end = int(nxt[0]) - 1 if len(nxt) else (int(adapt_t.max()) if len(adapt_t) else None)
+        if end is not None:
+            out["success_after_adaptation"] = play & (t > end)
+    return {k: (int((ok & m).sum()), int(m.sum())) for k, m in out.items()}
+
+
+def _key_polygons(kb: Keyboard, family: str, params: np.ndarray) -> np.ndarray:
+    """(K, 4, 2) corners of every key moved by ``params`` (rotation about the keyboard centre)."""
+    h = kb.config.key_size / 2
+    corners = (kb.key_centres()[:, None, :]
+               + np.array([[-h, -h], [h, -h], [h, h], [-h, h]])[None]).reshape(-1, 2)
+    moved = transforms.apply(family, params, corners, np.asarray(kb.centre, float))
+    return moved.reshape(-1, 4, 2)
+
+
+def _pose(d: dict) -> tuple[str, np.ndarray]:
+    """(family, params) of a pose given as a dict of named parameters."""
+    if "angle" in d:
+        return "rigid", np.array([d.get("angle", 0.0), d.get("dx", 0.0), d.get("dy", 0.0)], float)
+    return "translation", np.array([d.get("dx", 0.0), d.get("dy", 0.0)], float)
+
+
+def plot_loop(steps: dict, attrs: dict, kb: Keyboard, path: str | os.PathLike, window: int = 20,
+              config: dict | None = None) -> None:
+    """Draw a closed-loop session to a figure file (format from the suffix).
+
+    Parameters
+    ----------
+    steps : dict
+        The artifact's ``steps`` group (``phase``, ``result``, ``score``, ``landed``).
+    attrs : dict
+        Its summary attributes.
+    config : dict, optional
+        Its config (for the detector's threshold).
+    """
+    phase = np.asarray(steps["phase"]).astype(int)
+    result = np.asarray(steps["result"]).astype(int)
+    score = np.asarray(steps["score"], float)
+    t = np.arange(len(phase))
+    play = phase == PLAY
+    fig = plt.figure(figsize=(16, 7.6))
+    gs = fig.add_gridspec(2, 2, width_ratios=(1.25, 1.0), height_ratios=(1.25, 1.0))
     ax = fig.add_subplot(gs[0, 0])
     ok = 1.0 - result[play]
-    run = np.convolve(ok, np.ones(window) / window, mode="full")[: len(ok)]
-    run[: window - 1] = np.cumsum(ok)[: window - 1] / np.arange(1, min(window, len(ok) + 1))[: window - 1]
-    ax.plot(t[play], run, lw=1.2, label=f"success (mean of last {window} notes)")
-    ax.scatter(t[play][ok == 0], np.zeros((ok == 0).sum()) - 0.04, marker="|", color="crimson",
-               s=30, label="NO_MATCH")
-    adapt_t = t[phase == 1]
+    c = np.concatenate([[0.0], np.cumsum(ok)])
+    i = np.arange(1, len(ok) + 1)
+    lo = np.maximum(i - window, 0)
+    running = (c[i] - c[lo]) / np.maximum(i - lo, 1)
+    ax.plot(*_gaps(t[play], running), lw=1.4, color="tab:blue",
+            label=f"success (mean of the last {window} notes)")
+    miss = t[play][ok == 0]
+    ax.plot(miss, np.full(len(miss), -0.05), ls="", marker="|", color="crimson", ms=9,
+            label=f"NO_MATCH ({len(miss)})")
+    adapt_t = t[phase == ADAPT]
     if len(adapt_t):
-        ax.axvspan(adapt_t.min() - 0.5, adapt_t.max() + 0.5, color="orange", alpha=0.3,
-                   label=f"adaptation ({len(adapt_t)} touches)")
-    ax.axvline(attrs["perturbed_at"], color="k", ls="--", lw=1, label="keyboard moved")
-    if attrs.get("detected_at") is not None:
-        ax.axvline(attrs["detected_at"], color="crimson", lw=1,
-                   label=f"detector fired (+{attrs['detection_delay']})")
-    ax.set_ylim(-0.1, 1.05)
+        for blk in np.split(adapt_t, np.flatnonzero(np.diff(adapt_t) > 1) + 1):
+            ax.axvspan(blk.min() - 0.5, blk.max() + 0.5, color="orange", alpha=0.3, lw=0)
+        ax.plot([], [], color="orange", alpha=0.5, lw=8,
+                label=f"adaptation ({len(adapt_t)} touches)")
+    moved = attrs["perturbed_at"]
+    ax.axvline(moved, color="k", ls="--", lw=1, label=f"keyboard moved (touch {moved})")
+    fired = attrs.get("detected_at")
+    if fired is not None:
+        ax.axvline(fired, color="crimson", lw=1,
+                   label=f"detector fired ({attrs.get('detection_delay')} touches later)")
+    ax.set_ylim(-0.12, 1.05)
     ax.set_ylabel("success")
+    ax.tick_params(labelbottom=False)
+    ax.legend(fontsize=8, loc="lower left", bbox_to_anchor=(0.0, 1.01), ncol=3, frameon=False)
 
-    def pct(v):
-        return "n/a" if v is None else f"{100 * v:.0f}%"
-
-    ax.set_title(f"success before {pct(attrs['success_before'])}, after the move "
-                 f"{pct(attrs['success_after_perturbation'])}, after adaptation "
-                 f"{pct(attrs['success_after_adaptation'])}", fontsize=10)
-    ax.legend(fontsize=7, loc="lower left")
     ax2 = fig.add_subplot(gs[1, 0], sharex=ax)
-    score = steps["score"]
-    ax2.semilogy(t[play], np.clip(score[play], 1e-12, 1), lw=1)
-    ax2.axvline(attrs["perturbed_at"], color="k", ls="--", lw=1)
-    ax2.set_ylabel("detector score")
+    ax2.semilogy(*_gaps(t[play], np.clip(score[play], 1e-12, 1)), lw=1, color="tab:purple",
+                 label="detector score")
+    thr = None
+    if config is not None:
+        thr = ((config.get("loop") or {}).get("detector") or {}).get("threshold")
+    if isinstance(thr, (int, float)) and thr > 0:
+        ax2.axhline(thr, color="crimson", ls=":", lw=1.2, label=f"threshold {thr:g} (fires below)")
+    ax2.axvline(moved, color="k", ls="--", lw=1)
+    if fired is not None:
+        ax2.axvline(fired, color="crimson", lw=1)
+    for blk in (np.split(adapt_t, np.flatnonzero(np.diff(adapt_t) > 1) + 1) if len(adapt_t)
+                else []):
+        ax2.axvspan(blk.min() - 0.5, blk.max() + 0.5, color="orange", alpha=0.3, lw=0)
+    ax2.set_ylabel("detector score (log)")
     ax2.set_xlabel("touch")
+    ax2.legend(fontsize=8, loc="lower left")
+    ax2.set_xlim(-1, max(len(t), 1))
+
     ax3 = fig.add_subplot(gs[:, 1])
-    draw_keyboard(ax3, kb, labels=False, alpha=0.35)
-    truth = attrs["truth"]
-    offset = (truth.get("dx", 0.0), truth.get("dy", 0.0))
-    draw_keyboard(ax3, kb, labels=False, fill=False, edge="crimson", offset=offset)
+    draw_keyboard(ax3, kb, labels=False, alpha=0.3)
+    fam, params = _pose(attrs.get("truth") or {})
+    moved_keys = _key_polygons(kb, fam, params)
+    for poly in moved_keys:
+        ax3.add_patch(Polygon(poly, closed=True, fill=False, ec="crimson", lw=1.1))
+    shown = [moved_keys.reshape(-1, 2), _key_polygons(kb, "translation", np.zeros(2)).reshape(-1, 2)]
+    handles = [Patch(facecolor="0.85", edgecolor="0.4", label="where the robot learned it"),
+               Patch(facecolor="none", edgecolor="crimson",
+                     label="where it is: " + ", ".join(f"{k} {v:+.2f}" for k, v in
+                                                       (attrs.get("truth") or {}).items()))]
+    corr = attrs.get("correction") or {}
+    if fired is not None and corr:
+        cf, cp = _pose(corr)
+        for poly in _key_polygons(kb, cf, cp):
+            ax3.add_patch(Polygon(poly, closed=True, fill=False, ec="forestgreen", lw=1.0,
+                                  ls="--"))
+        handles.append(Line2D([], [], color="forestgreen", ls="--",
+                              label="where the robot believes it is: " + ", ".join(
+                                  f"{k} {v:+.2f}" for k, v in corr.items())))
     if len(adapt_t):
-        pts = steps["landed"][phase == 1]
-        ax3.plot(pts[:, 0], pts[:, 1], "k.-", lw=0.6, ms=5)
-        for i, (x, y) in enumerate(pts, 1):
-            ax3.annotate(str(i), (x, y), fontsize=7, xytext=(2, 2), textcoords="offset points")
+        pts = np.asarray(steps["landed"], float)[phase == ADAPT]
+        shown.append(pts[np.isfinite(pts).all(axis=1)])
+        ax3.plot(pts[:, 0], pts[:, 1], "-", color="0.2", lw=0.6, alpha=0.6)
+        ax3.plot(pts[:, 0], pts[:, 1], "o", color="black", ms=4)
+        groups: dict[tuple[int, int], list[int]] = {}  # touches within 3 px share one label
+        for k, (x, y) in enumerate(pts, 1):
+            if np.isfinite(x) and np.isfinite(y):
+                groups.setdefault((int(round(x / 3)), int(round(y / 3))), []).append(k)
+        for ks in groups.values():
+            x, y = pts[ks[0] - 1]
+            ax3.annotate(",".join(map(str, ks)), (x, y), fontsize=9, xytext=(4, 4),
+                         textcoords="offset points",
+                         bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none",
+                               "alpha": 0.8})
+        handles.append(Line2D([], [], color="black", marker="o", ms=4, lw=0.6,
+                              label=f"adaptation touches, in order (1-{len(pts)})"))
+    # the keys (both poses) and the touches fill the panel, within the working area
     x0, y0, x1, y1 = kb.area
-    ax3.set_xlim(x0, x1)
-    ax3.set_ylim(y0, y1)
+    box = np.vstack(shown)
+    lo = np.maximum(box.min(axis=0) - 12, (x0, y0))
+    hi = np.minimum(box.max(axis=0) + 12, (x1, y1))
+    ax3.set_xlim(lo[0], hi[0])
+    ax3.set_ylim(lo[1], hi[1])
     ax3.set_aspect("equal")
-    ax3.set_title("adaptation touches; red: moved keyboard", fontsize=10)
+    ax3.set_xlabel("pad x (px)")
+    ax3.set_ylabel("pad y (px)")
+    ax3.legend(handles=handles, fontsize=8.5, loc="lower center", bbox_to_anchor=(0.5, 1.01),
+               frameon=False, title="the keyboard and the adaptation touches",
+               title_fontsize=10)
+
+    counts = _counts(phase, result, attrs)
+
+    def rate(key: str) -> str:
+        v, n = attrs.get(key), counts.get(key)
+        exact = n is not None and v is not None and n[1] and abs(n[0] / n[1] - v) < 1e-9
+        return _pct(v, n if exact else None)
+
+    fig.suptitle(f"closed loop: success before the move {rate('success_before')}, after it "
+                 f"{rate('success_after_perturbation')}, after adaptation "
+                 f"{rate('success_after_adaptation')}", fontsize=11)
+    fig.tight_layout()
     save(fig, path)

@@ -1,12 +1,13 @@
 """Figure of a model artifact: the learned map beside the true layout, and the learning curve.
 
 Left: the key the model predicts in each 2 px cell (colours as in the true layout, silence white),
-its uncertainty (the confusion factor 1 - (p1 - p2), Sect. III-E) shaded dark, the fitted boundary
-lines thin, and the explored points (where the finger landed) as dots; cells whose predicted key is
-wrong are marked red. Middle: the true layout. Right: the learning curve (accuracy on a 2 px grid
-against reaches), with the 99 % level dashed, and the model's own estimate of its reliability
-(cross-validated, :mod:`kbcli.core.reliability`) beside the measured values. An exact-model
-artifact shows its map alone.
+its uncertainty (the confusion factor 1 - (p1 - p2), Sect. III-E) shaded dark with a colour bar,
+the fitted boundary lines thin, and the explored points (where the finger landed) as dots; cells
+whose predicted key is wrong are red; a legend names each. Middle: the true layout. Right: the
+learning curve (accuracy on a 2 px grid against reaches), with the 99 % level dashed and labelled.
+The model's own estimate of its reliability (cross-validated, :mod:`kbcli.core.reliability`)
+sits beside the measured values. An exact-model artifact shows its map and the layout, titled as
+such.
 """
 
 from __future__ import annotations
@@ -15,26 +16,31 @@ import os
 
 import matplotlib.pyplot as plt
 import numpy as np
-from matplotlib.colors import ListedColormap
+from matplotlib.colors import LinearSegmentedColormap, ListedColormap
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 
 from kbcli.core import accuracy as scoring
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.model import grid_points
 from kbcli.stages.artifact import Artifact
-from kbcli.viz.common import draw_keyboard, save
+from kbcli.viz.common import draw_keyboard, key_colours, save
 
 MAP_STEP = 2.0  # px
 
 
 def _key_colours(kb: Keyboard) -> np.ndarray:
-    """RGBA per key index + 2: -2 (a sound that is no key) grey, -1 (silence) white, keys tab20."""
-    cmap = plt.get_cmap("tab20")
-    keys = [cmap(k % 20) for k in range(kb.n_keys)]
-    return np.vstack([(0.6, 0.6, 0.6, 1.0), (1, 1, 1, 1), *keys])
+    """RGBA per key index + 2: -2 (a sound that is no key) grey, -1 (silence) white, then the keys'
+    colours (:func:`kbcli.viz.common.key_colours`, as in the true layout)."""
+    return np.vstack([(0.6, 0.6, 0.6, 1.0), (1, 1, 1, 1), *key_colours(kb.n_keys)])
+
+
+#: the shading of uncertainty: white (sure) to near black (a coin flip between two keys)
+SHADE = LinearSegmentedColormap.from_list("confusion", [(0, 0, 0, 0), (0.1, 0.1, 0.1, 0.85)])
 
 
 def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> None:
-    """Draw a ``model`` artifact (with its loaded model and keyboard) to a PNG."""
+    """Draw a ``model`` artifact (with its loaded model and keyboard) to a figure file."""
     learned = art.config.get("strategy") != "exact"
     x0, y0, x1, y1 = kb.area
     extent = (x0, x1, y0, y1)
@@ -49,62 +55,82 @@ def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> N
     colours = _key_colours(kb)
 
     ncols = 3 if learned else 2
-    fig, axes = plt.subplots(1, ncols, figsize=(6.2 * ncols, 4.6),
-                             gridspec_kw={"width_ratios": [1.25, 1.25, 1.0][:ncols]})
+    fig, axes = plt.subplots(1, ncols, figsize=(6.0 * ncols, 5.2),
+                             gridspec_kw={"width_ratios": [1.3, 1.2, 1.0][:ncols]})
     ax = axes[0]
     ax.imshow(keys + 2, origin="lower", extent=extent, interpolation="nearest",
               cmap=ListedColormap(colours), vmin=-0.5, vmax=len(colours) - 0.5)
-    shade = np.zeros((*confusion.shape, 4))
-    shade[..., 3] = 0.85 * confusion
-    ax.imshow(shade, origin="lower", extent=extent, interpolation="nearest")
+    shade = ax.imshow(confusion, origin="lower", extent=extent, interpolation="nearest",
+                      cmap=SHADE, vmin=0.0, vmax=1.0)
     red = np.zeros((*wrong.shape, 4))
     red[wrong] = (0.9, 0.0, 0.0, 0.9)
     ax.imshow(red, origin="lower", extent=extent, interpolation="nearest")
-    title = "exact model (the keyboard's geometry)"
+    handles = [Patch(facecolor="white", edgecolor="0.5", label="silence")]
+    if wrong.any():
+        handles.append(Patch(facecolor=(0.9, 0, 0), label=f"wrong key ({100 * wrong.mean():.2f} % "
+                                                           f"of cells)"))
     if learned:
         d = art.data
         landed = np.asarray(d["samples"]["landed"], float)
         ax.plot(landed[:, 0], landed[:, 1], ".", color="black", ms=1.6, alpha=0.7)
+        handles.append(Line2D([], [], ls="", marker=".", color="black",
+                              label=f"reaches ({len(landed)})"))
         lines = np.asarray(d["model"].get("lines", np.empty((0, 3))), float)
         t = np.linspace(-1e3, 1e3, 2)
         for nx, ny, c in lines:
             xy = np.outer(t, (-ny, nx)) + c * np.array([nx, ny])
             ax.plot(xy[:, 0], xy[:, 1], color="0.25", lw=0.3, alpha=0.6)
+        if len(lines):
+            handles.append(Line2D([], [], color="0.25", lw=0.6,
+                                  label=f"fitted boundaries ({len(lines)})"))
         a = art.attrs
-        title = (f"learned ({a.get('strategy')}, {a.get('mode')}, {a.get('n_reaches')} reaches): "
-                 f"accuracy {100 * a.get('accuracy', np.nan):.2f} %, "
+        title = (f"learned model: {a.get('strategy')} exploration, {a.get('mode')} mode, "
+                 f"{a.get('n_reaches')} reaches\naccuracy {100 * a.get('accuracy', np.nan):.2f} %, "
                  f"boundary error {a.get('boundary_error_px', np.nan):.2f} px")
-    ax.set_title(title + "\ndark: uncertainty (confusion); red: wrong; dots: reaches",
-                 fontsize=8.5)
+    else:
+        title = "exact model: the keyboard's own geometry\n(no learning; predicted key per 2 px cell)"
+    ax.set_title(title, fontsize=9)
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
     ax.set_xlabel("pad x (px)")
     ax.set_ylabel("pad y (px)")
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2,
+              fontsize=7.5, frameon=False)
+    if np.nanmax(confusion) > 0:  # an exact model is never unsure
+        cb = fig.colorbar(shade, cax=ax.inset_axes([1.03, 0.0, 0.035, 1.0]))
+        cb.set_label("uncertainty: 1 - (p1 - p2)", fontsize=8)
+        cb.ax.tick_params(labelsize=7)
 
     ax = axes[1]
-    draw_keyboard(ax, kb)
+    draw_keyboard(ax, kb, fontsize=6 if kb.n_keys > 32 else 6.5)
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
-    ax.set_title("true layout", fontsize=9)
+    ax.set_title(f"true layout: {kb.n_keys} keys (note, tempo)", fontsize=9)
     ax.set_xlabel("pad x (px)")
 
     if learned:
         ax = axes[2]
         n = np.asarray(art.data["curve"]["reaches"])
         acc = np.asarray(art.data["curve"]["accuracy"], float)
-        ax.plot(n, 100 * acc, "o-", ms=3, color="tab:blue")
-        ax.axhline(99.0, ls="--", color="grey", lw=1)
+        ax.plot(n, 100 * acc, "o-", ms=3, color="tab:blue", label="accuracy")
+        ax.axhline(99.0, ls="--", color="grey", lw=1, label="99 % (the target)")
+        ax.text(0.02, 99.0, " 99 %", transform=ax.get_yaxis_transform(), ha="left", va="bottom",
+                fontsize=8, color="0.35")
         ax.set_xlabel("reaches")
         ax.set_ylabel("accuracy (%, 2 px grid)")
-        ax.set_ylim(max(0.0, 100 * float(np.min(acc)) - 5) if len(acc) else 0, 100.5)
-        ax.set_title("learning curve", fontsize=9)
+        lo = 100 * float(np.nanmin(acc)) if len(acc) and np.isfinite(acc).any() else 0.0
+        ax.set_ylim(max(0.0, min(lo, 99.0) - 5), 100.5)
+        to99 = art.attrs.get("reaches_to_99")
+        ax.set_title("learning curve: " + (f"99 % after {to99} reaches" if to99 is not None
+                                           else "99 % not reached"), fontsize=9)
+        ax.legend(fontsize=7.5, loc="lower right")
         ax.grid(alpha=0.3)
         rel = art.attrs.get("reliability")
         if rel:  # what the model estimates of itself from its samples (model schema 2)
             cal = ", ".join(f"{k} {v:g}" for k, v in sorted(rel.get("calibration", {}).items()))
-            ax.text(0.97, 0.04,
+            ax.text(0.97, 0.20,
                     f"the model's own estimate ({rel['folds']}-fold cross-validation):\n"
                     f"boundary error ~{rel['boundary_error']:.2f} px "
                     f"(measured {a.get('boundary_error_px', np.nan):.2f})\n"

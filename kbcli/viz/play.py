@@ -9,6 +9,7 @@ import os
 import matplotlib.pyplot as plt
 import numpy as np
 
+from kbcli.core.keyboard import midi_to_name
 from kbcli.stages.artifact import Artifact
 from kbcli.viz.common import save
 
@@ -38,8 +39,15 @@ def plot_play(history: Artifact, path: str | os.PathLike, detection: Artifact | 
     ok = result == 0
     ax.scatter(t[ok], target[ok], s=10, c="tab:green", label="MATCH")
     ax.scatter(t[~ok], target[~ok], s=18, c="tab:red", marker="x", label="NO_MATCH")
-    ax.set_ylabel("melody note")
-    ax.set_yticks(np.arange(len(history.array("melody/midi"))))
+    ax.set_ylabel("note aimed for")
+    midi = history.array("melody/midi")
+    beats = history.array("melody/durations")
+    every = max(1, int(np.ceil(len(midi) / 24)))  # at most 24 labels
+    ticks = np.arange(0, len(midi), every)
+    ax.set_yticks(ticks)
+    ax.set_yticklabels([f"{i + 1}. {midi_to_name(int(midi[i]))} ({beats[i]:g})" for i in ticks],
+                       fontsize=8 if len(ticks) <= 12 else 6.5)
+    ax.set_ylim(-0.6, len(midi) - 0.4)
     ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), fontsize=7, ncol=3, frameon=False)
     ax.set_title(f"melody {history.attrs.get('melody', '')} -- {len(result)} actions", loc="left",
                  fontsize=10)

@@ -1,0 +1,194 @@
+"""Smoke tests on the stored artifacts in data/: the golden set (one small artifact of every kind,
+rebuilt by ``make data`` from pipelines/golden.toml), a stored file of every schema version ever
+written (data/schema/vN/), and the rebuild itself.
+
+- every read-only stage and every plot command runs on the golden set (figures in each format);
+- every schema version of every kind is still read, and its readers run on it;
+- ``make data`` into a temporary folder gives the same artifacts (byte for byte, or numerically
+  equal where the wall-clock time of a step is recorded).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from kbcli.cli import app
+from kbcli.io.artifact import read_artifact
+from kbcli.stages.artifact import SCHEMA_VERSIONS
+
+ROOT = Path(__file__).resolve().parent.parent
+DATA = ROOT / "data"
+GOLDEN = DATA / "golden"
+KINDS = tuple(SCHEMA_VERSIONS)
+
+MAGIC = {"png": b"\x89PNG", "pdf": b"%PDF", "svg": b"<?xml"}
+
+#: the readers of each kind: CLI invocations with {path} and {tmp} placeholders (read-only stages,
+#: plots, and stages that read the kind to make something else from it).
+READERS: dict[str, list[list[str]]] = {
+    "keyboard": [["plot", "keyboard", "{path}", "-o", "{tmp}/k.png"],
+                 ["perturb", "--keyboard", "{path}", "--dx", "3", "-o", "{tmp}/s.h5"],
+                 ["learn", "--keyboard", "{path}", "--strategy", "exact", "-o", "{tmp}/m.h5"]],
+    "model": [["plot", "model", "{path}", "-o", "{tmp}/m.png"],
+              ["play", "--model", "{path}", "--steps", "5", "-o", "{tmp}/h.h5"],
+              ["perturb", "--keyboard", "{path}", "--dx", "3", "-o", "{tmp}/s.h5"]],
+    "scene": [["play", "--model", str(GOLDEN / "model.h5"), "--scene", "{path}", "--steps", "6",
+               "--perturb-at", "3", "-o", "{tmp}/h.h5"],
+              ["adapt", "--model", str(GOLDEN / "model.h5"), "--scene", "{path}", "-T", "2",
+               "--resolution", "2", "--prior-halfwidth", "20", "-o", "{tmp}/r.h5"]],
+    "history": [["detect", "{path}", "-o", "{tmp}/d.h5"],
+                ["plot", "play", "{path}", "-o", "{tmp}/p.png"]],
+    "detection": [["plot", "play", str(GOLDEN / "history.h5"), "--detection", "{path}", "-o",
+                   "{tmp}/p.png"]],
+    "run": [["plot", "adapt", "{path}", "-o", "{tmp}/a.png"],
+            ["animate", "{path}", "--max-frames", "3", "--dpi", "40", "-o", "{tmp}/a.gif"]],
+    "closed_loop": [["plot", "run", "{path}", "-o", "{tmp}/r.png"],
+                    ["animate", "{path}", "--max-frames", "3", "--dpi", "40", "-o", "{tmp}/r.gif"]],
+    "evaluation": [["report", "{path}", "-o", "{tmp}/rep"]],
+    "model_quality": [["report", "{path}", "-o", "{tmp}/rep"]],
+}
+
+
+def _ok(r):
+    assert r.exit_code == 0, r.output
+    assert "Traceback" not in r.output
+    return r
+
+
+def test_golden_set_holds_every_kind():
+    for kind in KINDS:
+        art = read_artifact(GOLDEN / f"{kind}.h5", kind)
+        assert art.schema_version == SCHEMA_VERSIONS[kind], (
+            f"data/golden/{kind}.h5 is of schema {art.schema_version}: run make data")
+    total = sum(p.stat().st_size for p in DATA.rglob("*.h5"))
+    assert total < 5e6  # a small golden set
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_inspect_every_golden_artifact(runner, kind):
+    path = GOLDEN / f"{kind}.h5"
+    d = json.loads(_ok(runner.invoke(app, ["inspect", "--json", str(path)])).output)
+    assert d["kind"] == kind and d["problem"] is None
+    assert re.fullmatch(r"[0-9a-f]{64}", d["sha256"])
+    for ref in d["inputs"].values():  # full hashes of the inputs too
+        assert re.fullmatch(r"[0-9a-f]{64}", ref["sha256"])
+    table = _ok(runner.invoke(app, ["inspect", str(path)])).output
+    for ref in d["inputs"].values():
+        assert ref["sha256"] in table  # never cut, never wrapped
+    assert d["sha256"] in table
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_every_reader_runs_on_the_golden_set(runner, tmp_path, kind):
+    for argv in READERS[kind]:
+        _ok(runner.invoke(app, [a.format(path=GOLDEN / f"{kind}.h5", tmp=tmp_path) for a in argv]))
+
+
+@pytest.mark.parametrize("fmt", ["png", "pdf", "svg"])
+def test_every_plot_writes_the_format_of_its_suffix(runner, tmp_path, fmt):
+    plots = [["plot", "keyboard", GOLDEN / "keyboard.h5"], ["plot", "model", GOLDEN / "model.h5"],
+             ["plot", "play", GOLDEN / "history.h5", "--detection", GOLDEN / "detection.h5"],
+             ["plot", "adapt", GOLDEN / "run.h5"], ["plot", "run", GOLDEN / "closed_loop.h5"]]
+    for argv in plots:
+        out = tmp_path / f"{argv[1]}.{fmt}"
+        _ok(runner.invoke(app, [*map(str, argv), "-o", str(out)]))
+        assert out.read_bytes()[:5].startswith(MAGIC[fmt]), (argv, out.read_bytes()[:20])
+    _ok(runner.invoke(app, ["report", str(GOLDEN / "evaluation.h5"), "-o", str(tmp_path / "rep"),
+                            "--format", fmt]))
+    figs = sorted(p for p in (tmp_path / "rep").iterdir() if p.suffix == f".{fmt}")
+    assert len(figs) >= 3 and all(p.read_bytes()[:5].startswith(MAGIC[fmt]) for p in figs)
+    readme = (tmp_path / "rep" / "README.md").read_text()
+    for p in figs:
+        assert f"]({p.name})" in readme
+
+
+def test_detect_on_the_golden_history_gives_the_golden_detection(runner, tmp_path):
+    """The stored detection is what detect computes today from the stored history."""
+    cfg = read_artifact(GOLDEN / "detection.h5").config
+    out = tmp_path / "d.h5"
+    _ok(runner.invoke(app, ["detect", str(GOLDEN / "history.h5"), "--n-lt", str(cfg["n_lt"]),
+                            "--n-st", str(cfg["n_st"]), "-o", str(out)]))
+    new, old = read_artifact(out), read_artifact(GOLDEN / "detection.h5")
+    np.testing.assert_array_equal(new.data["score"], old.data["score"])
+    assert new.attrs == old.attrs
+
+
+def _versions():
+    for kind, current in SCHEMA_VERSIONS.items():
+        for v in range(1, current + 1):
+            yield pytest.param(kind, v, id=f"{kind}-v{v}")
+
+
+@pytest.mark.parametrize("kind, version", list(_versions()))
+def test_every_schema_version_ever_written_is_read(runner, tmp_path, kind, version):
+    path = DATA / "schema" / f"v{version}" / f"{kind}.h5"
+    assert path.is_file(), (f"{path.relative_to(ROOT)} is missing: when you bump a kind's schema, "
+                            f"copy its golden file there (cp data/golden/{kind}.h5 {path.parent})")
+    art = read_artifact(path, kind)
+    assert art.schema_version == version
+    for argv in READERS[kind]:
+        _ok(runner.invoke(app, [a.format(path=path, tmp=tmp_path) for a in argv]))
+
+
+# -- make data rebuilds the same artifacts ------------------------------------------------------
+#: datasets and summary attributes that hold wall-clock times (never equal between two runs)
+TIMING = re.compile(r"(^|/)timing(/|$)|_ms$|_s$|seconds|elapsed")
+
+
+def _tree(path: Path) -> dict[str, np.ndarray]:
+    out = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda n, o: out.__setitem__(n, o[()]) if isinstance(o, h5py.Dataset)
+                     else None)
+        attrs = {k: f.attrs[k] for k in f.attrs}
+    return out, attrs
+
+
+def _strip_times(obj):
+    if isinstance(obj, dict):
+        return {k: _strip_times(v) for k, v in obj.items() if not TIMING.search(k)}
+    return obj
+
+
+def _same_numbers(new: Path, old: Path) -> None:
+    (dn, an), (do, ao) = _tree(new), _tree(old)
+    assert sorted(dn) == sorted(do), new.name
+    for k in dn:
+        if not TIMING.search(k):
+            np.testing.assert_array_equal(dn[k], do[k], err_msg=f"{new.name}: {k}")
+    assert sorted(an) == sorted(ao)
+    for k in an:
+        if k in ("inputs",) or k.startswith("input_sha256."):
+            continue  # hashes of inputs that hold times themselves
+        if k == "attrs":
+            assert _strip_times(json.loads(an[k])) == _strip_times(json.loads(ao[k])), new.name
+        else:
+            assert an[k] == ao[k], f"{new.name}: attribute {k}"
+
+
+def test_make_data_rebuilds_the_stored_artifacts(tmp_path):
+    """`make data` (its recipe, data-files) into a temporary folder gives the stored files."""
+    if shutil.which("make") is None:
+        pytest.skip("make is not installed (it is needed for `make test` itself)")
+    kbcli = Path(sys.executable).parent / "kbcli"
+    env = {**os.environ, "CI": "1"}
+    r = subprocess.run(["make", "--no-print-directory", "-s", "data-files", f"DATA={tmp_path}",
+                        f"KBCLI={kbcli}"], cwd=ROOT, capture_output=True, text=True, env=env)
+    assert r.returncode == 0, r.stdout + r.stderr
+    stored = sorted(p.relative_to(DATA) for p in DATA.rglob("*.h5") if "schema" not in p.parts)
+    built = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*.h5"))
+    assert built == stored
+    for rel in built:
+        new, old = tmp_path / rel, DATA / rel
+        if new.read_bytes() != old.read_bytes():  # only wall-clock timings may differ
+            _same_numbers(new, old)
