@@ -48,7 +48,7 @@ READERS: dict[str, list[list[str]]] = {
                "--resolution", "2", "--prior-halfwidth", "20", "-o", "{tmp}/r.h5"]],
     "history": [["detect", "{path}", "-o", "{tmp}/d.h5"],
                 ["plot", "play", "{path}", "-o", "{tmp}/p.png"]],
-    "detection": [["plot", "play", str(GOLDEN / "history.h5"), "--detection", "{path}", "-o",
+    "detection": [["plot", "play", "{dir}/history.h5", "--detection", "{path}", "-o",
                    "{tmp}/p.png"]],
     "run": [["plot", "adapt", "{path}", "-o", "{tmp}/a.png"],
             ["animate", "{path}", "--max-frames", "3", "--dpi", "40", "-o", "{tmp}/a.gif"]],
@@ -91,7 +91,8 @@ def test_inspect_every_golden_artifact(runner, kind):
 @pytest.mark.parametrize("kind", KINDS)
 def test_every_reader_runs_on_the_golden_set(runner, tmp_path, kind):
     for argv in READERS[kind]:
-        _ok(runner.invoke(app, [a.format(path=GOLDEN / f"{kind}.h5", tmp=tmp_path) for a in argv]))
+        _ok(runner.invoke(app, [a.format(path=GOLDEN / f"{kind}.h5", tmp=tmp_path, dir=GOLDEN)
+                                for a in argv]))
 
 
 @pytest.mark.parametrize("fmt", ["png", "pdf", "svg"])
@@ -137,7 +138,8 @@ def test_every_schema_version_ever_written_is_read(runner, tmp_path, kind, versi
     art = read_artifact(path, kind)
     assert art.schema_version == version
     for argv in READERS[kind]:
-        _ok(runner.invoke(app, [a.format(path=path, tmp=tmp_path) for a in argv]))
+        _ok(runner.invoke(app, [a.format(path=path, tmp=tmp_path, dir=path.parent)
+                                for a in argv]))
 
 
 # -- make data rebuilds the same artifacts ------------------------------------------------------
