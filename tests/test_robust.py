@@ -165,8 +165,9 @@ def random_samples():
     return landed, heard
 
 
-def _fit(a, s):
-    return LearnedModel(match_threshold=KB.config.match_threshold, area=KB.area).fit(a, s)
+def _fit(a, s, **params):
+    return LearnedModel(match_threshold=KB.config.match_threshold, area=KB.area,
+                        **params).fit(a, s)
 
 
 def test_reliability_estimates_match_the_measured_ones_on_random_exploration(random_samples):
@@ -188,7 +189,8 @@ def test_reliability_estimates_match_the_measured_ones_on_random_exploration(ran
     assert measured < 0.05
     assert abs(rel.cv_ece - measured) < 0.05
     assert rel.boundary_error > 0 and np.isfinite(rel.boundary_error)
-    assert set(rel.calibration) == set(LearnedModel.calibration_grid())
+    assert set(rel.calibration) == set(LearnedModel.calibration_grid()) | set(
+        LearnedModel.fit_grid())
     assert rel.folds == 5 and rel.samples == len(x)
 
 
@@ -196,7 +198,7 @@ def test_calibration_is_chosen_from_the_grid_and_applied_to_a_copy(random_sample
     x, s = random_samples
     full = _fit(x, s)
     model, rel = assess(_fit, full, x, s, rng=np.random.default_rng(0))
-    grid = LearnedModel.calibration_grid()
+    grid = {**LearnedModel.calibration_grid(), **LearnedModel.fit_grid()}
     for k, v in rel.calibration.items():
         assert v in grid[k] and getattr(model, k) == v
     assert full.noise_sd == 0.0 and full.floor == 0.0  # the input model is unchanged

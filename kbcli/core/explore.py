@@ -298,10 +298,11 @@ class Exploration:
         self._model: LearnedModel | None = None
         self._plan = np.empty((0, 2))
 
-    def refit(self, landed: np.ndarray, perceived: np.ndarray) -> LearnedModel:
-        """A fresh model of the same class and settings fitted on other samples (cross-validation)."""
-        return LearnedModel(match_threshold=self.match_threshold, area=self.area).fit(
-            landed, perceived)
+    def refit(self, landed: np.ndarray, perceived: np.ndarray, **params) -> LearnedModel:
+        """A fresh model of the same class and settings (``params`` on top) fitted on other
+        samples (cross-validation, calibration)."""
+        return LearnedModel(match_threshold=self.match_threshold, area=self.area,
+                            **params).fit(landed, perceived)
 
     @property
     def model(self) -> LearnedModel | None:

@@ -27,8 +27,9 @@ to its 6th nearest sample, an inverse density), so the estimates describe the wo
 uniform grid would (``kbcli bench reliability`` prints them against the truth).
 
 Any model class works that follows the model interface and exposes ``calibration_grid()`` (a dict
-of parameter name -> candidate values, applied with ``setattr`` on a copy) — or none (then only
-the reliability is estimated).
+of parameter name -> candidate values read at prediction time, applied with ``setattr`` on a
+copy) and ``fit_grid()`` (parameters of the fit itself, such as the line model's label-noise
+tolerance: the model is refitted with each) — or neither (then only the reliability is estimated).
 """
 
 from __future__ import annotations
@@ -138,7 +139,7 @@ def _held_out_probs(model, x: np.ndarray, cmap: np.ndarray, n_full: int) -> np.n
     return out
 
 
-def assess(fit: Callable[[np.ndarray, np.ndarray], object], full_model, actions: np.ndarray,
+def assess(fit: Callable[..., object], full_model, actions: np.ndarray,
            perceived: np.ndarray, *, rng: np.random.Generator, folds: int = FOLDS,
            calibrate: bool = True) -> tuple[object, Reliability]:
     """Cross-validate a model class on its samples, calibrate it, and estimate its reliability.
@@ -146,7 +147,8 @@ def assess(fit: Callable[[np.ndarray, np.ndarray], object], full_model, actions:
     Parameters
     ----------
     fit : callable
-        ``fit(actions, perceived) -> fitted model`` (a fresh model of the class, same settings).
+        ``fit(actions, perceived, **fit_params) -> fitted model`` (a fresh model of the class, same
+        settings; ``fit_params`` from the class's ``fit_grid()``, if it has one).
     full_model : SoundModel
         The model fitted on every sample (``fit(actions, perceived)``).
     actions, perceived : (n, 2), (n, D) ndarrays
@@ -154,12 +156,15 @@ def assess(fit: Callable[[np.ndarray, np.ndarray], object], full_model, actions:
     rng : numpy.random.Generator
         Assigns samples to folds.
     calibrate : bool
-        Choose the calibration parameters by held-out likelihood (if the model has any).
+        Choose the calibration parameters by held-out likelihood (if the model has any): those
+        read at prediction time (``calibration_grid()``, set on a copy) and those of the fit
+        (``fit_grid()``, the model is refitted with the chosen values).
 
     Returns
     -------
     model : SoundModel
-        ``full_model`` with the chosen calibration (a copy; ``full_model`` itself is unchanged).
+        ``full_model`` with the chosen calibration (a copy or a refit; ``full_model`` itself is
+        unchanged).
     reliability : Reliability
     """
     x = np.asarray(actions, float).reshape(-1, 2)
@@ -172,43 +177,54 @@ def assess(fit: Callable[[np.ndarray, np.ndarray], object], full_model, actions:
     grid_cands = getattr(full_model, "calibration_grid", lambda: {})() if calibrate else {}
     names = sorted(grid_cands)
     combos = list(itertools.product(*(grid_cands[nm] for nm in names))) or [()]
+    fit_cands = getattr(full_model, "fit_grid", lambda: {})() if calibrate else {}
+    fit_names = sorted(fit_cands)
+    fit_combos = list(itertools.product(*(fit_cands[nm] for nm in fit_names))) or [()]
     fold = _fold_ids(n, k, rng)
     _, pts = grid_points(tuple(float(v) for v in full_model.area), BOUNDARY_STEP)
     flat = pts.reshape(-1, 2)
-    full_map = full_model.predict_class(flat).reshape(pts.shape[:2])
-    held = np.zeros((len(combos), n, c_full))
-    berr = []
-    for f in range(k):  # K fits
-        test = fold == f
-        if test.all() or not test.any():
-            continue
-        m = fit(x[~test], s[~test])
-        cmap = _class_map(m.class_features_, full_model.class_features_, thr)
-        fold_map = cmap[m.predict_class(flat)].reshape(pts.shape[:2])
-        berr.append(_boundary_error(fold_map, full_map, BOUNDARY_STEP))
-        for i, combo in enumerate(combos):
-            mc = copy.copy(m)
-            for nm, v in zip(names, combo, strict=True):
-                setattr(mc, nm, v)
-            held[i, test] = _held_out_probs(mc, x[test], cmap, c_full)
+    held = np.zeros((len(fit_combos), len(combos), n, c_full))
+    berr: list[list[float]] = []
+    fulls = []
+    for j, fc in enumerate(fit_combos):  # F x (K + 1) fits
+        fp = dict(zip(fit_names, fc, strict=True))
+        full_j = fit(x, s, **fp) if fp else full_model
+        fulls.append(full_j)
+        cmap_full = _class_map(full_j.class_features_, full_model.class_features_, thr)
+        full_map = cmap_full[full_j.predict_class(flat)].reshape(pts.shape[:2])
+        berr.append([])
+        for f in range(k):
+            test = fold == f
+            if test.all() or not test.any():
+                continue
+            m = fit(x[~test], s[~test], **fp)
+            cmap = _class_map(m.class_features_, full_model.class_features_, thr)
+            fold_map = cmap[m.predict_class(flat)].reshape(pts.shape[:2])
+            berr[j].append(_boundary_error(fold_map, full_map, BOUNDARY_STEP))
+            for i, combo in enumerate(combos):
+                mc = copy.copy(m)
+                for nm, v in zip(names, combo, strict=True):
+                    setattr(mc, nm, v)
+                held[j, i, test] = _held_out_probs(mc, x[test], cmap, c_full)
     known = labels >= 0
     w = _area_weights(x)[known]
-    p_true = held[:, known, :][:, np.arange(known.sum()), labels[known]]  # (combos, n_known)
-    nll = -(np.log(np.maximum(p_true, 1e-12)) @ w)
-    best = int(np.argmin(nll))
-    chosen = dict(zip(names, combos[best], strict=True))
-    model = copy.copy(full_model)
-    for nm, v in chosen.items():
+    p_true = held[:, :, known, :][:, :, np.arange(known.sum()), labels[known]]  # (F, P, n_known)
+    nll = -(np.log(np.maximum(p_true, 1e-12)) @ w)  # (F, P)
+    bj, bi = np.unravel_index(int(np.argmin(nll)), nll.shape)
+    chosen = {**dict(zip(fit_names, fit_combos[bj], strict=True)),
+              **dict(zip(names, combos[bi], strict=True))}
+    model = copy.copy(fulls[bj])
+    for nm, v in zip(names, combos[bi], strict=True):
         setattr(model, nm, v)
-    hp = held[best, known]
+    hp = held[bj, bi, known]
     pred = hp.argmax(axis=1)
     hit = pred == labels[known]
-    finite = [b for b in berr if np.isfinite(b)]
+    finite = [b for b in berr[bj] if np.isfinite(b)]
     rel = Reliability(
         folds=k,
         samples=n,
         cv_error=float(1.0 - hit @ w) if len(hit) else float("nan"),
-        cv_log_loss=float(nll[best]),
+        cv_log_loss=float(nll[bj, bi]),
         cv_ece=expected_calibration_error(hp, hit.astype(float), weights=w) if len(hit)
         else float("nan"),
         boundary_error=float(np.mean(finite)) if finite else float("inf"),
