@@ -63,6 +63,8 @@ from kbcli.core.posterior import (
 from kbcli.core.robust import (
     DEFAULT_BLURS,
     DEFAULT_OUTLIERS,
+    RIGID_BLURS,
+    RIGID_OUTLIERS,
     Nuisance,
     RobustPosterior,
     planning_table,
@@ -116,10 +118,12 @@ class AdapterConfig:
         Marginalise the model's error (boundary blur ``robust_blurs`` and outlier rate
         ``robust_outliers``, uniform prior) online (:mod:`kbcli.core.robust`); likelihood posterior
         only. False: the plain posterior, which reads the map as the truth.
-    robust_blurs : tuple of float
-        Boundary blurs (px) the robust posterior weighs.
-    robust_outliers : tuple of float
-        Outlier rates the robust posterior weighs.
+    robust_blurs : tuple of float or None
+        Boundary blurs (px) the robust posterior weighs; None: 0, 1, 2.5 and 5 px (translation),
+        0 px only (rigid, whose grid is 41 times larger: outliers only).
+    robust_outliers : tuple of float or None
+        Outlier rates the robust posterior weighs; None: 0.001, 0.02 and 0.1 (translation),
+        0.001 and 0.05 (rigid).
     model_blur : float or None
         Override: softening (px, a Gaussian) of the model's map. With ``robust``, the blur is fixed
         to it instead of being learned. Without, None means ``LEARNED_BLUR`` (1 px) for a learned
@@ -166,8 +170,8 @@ class AdapterConfig:
     outlier: float = 1e-3
     blur: float = 0.0
     robust: bool = True
-    robust_blurs: tuple[float, ...] = DEFAULT_BLURS
-    robust_outliers: tuple[float, ...] = DEFAULT_OUTLIERS
+    robust_blurs: tuple[float, ...] | None = None
+    robust_outliers: tuple[float, ...] | None = None
     model_blur: float | None = None
     cell_average: bool = True
     raster_step: float | None = None
@@ -204,6 +208,12 @@ class AdapterConfig:
             _num("model_blur", self.model_blur, strict=False)
         if not isinstance(self.robust, bool):
             raise ConfigError(f"robust must be true or false, got {self.robust!r}")
+        rigid = self.family == "rigid"
+        if self.robust_blurs is None:
+            object.__setattr__(self, "robust_blurs", RIGID_BLURS if rigid else DEFAULT_BLURS)
+        if self.robust_outliers is None:
+            object.__setattr__(self, "robust_outliers",
+                               RIGID_OUTLIERS if rigid else DEFAULT_OUTLIERS)
         for name in ("robust_blurs", "robust_outliers"):
             v = getattr(self, name)
             if isinstance(v, (str, bytes)) or not hasattr(v, "__len__") or len(v) == 0:

@@ -56,6 +56,9 @@ from kbcli.core.posterior import (
 #: Default nuisance grids: boundary blur (px) and outlier rate.
 DEFAULT_BLURS = (0.0, 1.0, 2.5, 5.0)
 DEFAULT_OUTLIERS = (0.001, 0.02, 0.1)
+#: ... for the rigid family, whose hypothesis grid is 41 times larger: outliers only.
+RIGID_BLURS = (0.0,)
+RIGID_OUTLIERS = (0.001, 0.05)
 #: Cells this many nats below the most probable one are negligible (exp(-50) ~ 2e-22).
 NEGLIGIBLE = 50.0
 
@@ -114,19 +117,25 @@ def robust_terms(grid: HypothesisGrid, table: LikelihoodTable, action: np.ndarra
     c = table.n_classes
     s_n, e_n = len(nuisance.blurs), len(nuisance.outliers)
     out = np.empty((s_n, e_n) + grid.shape, np.float32)
-    if cell_sigma < 0.5 * table.step:  # read precomputed blurred maps (translation)
-        reads = [raw_prob(blurred_map(table, float(s)), x, y, cls) for s in nuisance.blurs]
-    else:  # blur a window around the touched region per level (rigid: the blur varies per touch)
-        step = table.step
-        pad = 4 * math.hypot(float(nuisance.blurs.max()), cell_sigma) + 2 * step
-        x0, x1 = float(np.min(x)) - pad, float(np.max(x)) + pad
-        y0, y1 = float(np.min(y)) - pad, float(np.max(y)) + pad
-        patch, org = table.window(cls, (x0, y0, x1, y1))
-        h, w = patch.shape
-        col = _cell_index(x, org[0], step, w)
-        row = _cell_index(y, org[1], step, h)
-        reads = [_blurred_read(patch, row, col, math.hypot(float(s), cell_sigma) / step)
-                 for s in nuisance.blurs]
+    reads: list[np.ndarray] = []
+    patch = None
+    for s in nuisance.blurs:
+        s = float(s)
+        if cell_sigma < 0.5 * table.step or s >= 2 * cell_sigma:
+            # a precomputed blurred map (a grid cell's own spread, if any, is lost in the blur:
+            # hypot(s, cell_sigma) <= 1.12 s)
+            reads.append(raw_prob(blurred_map(table, s), x, y, cls))
+            continue
+        if patch is None:  # blur a window around the touched region (rigid: varies per touch)
+            step = table.step
+            pad = 4 * math.hypot(s, cell_sigma) + 2 * step
+            x0, x1 = float(np.min(x)) - pad, float(np.max(x)) + pad
+            y0, y1 = float(np.min(y)) - pad, float(np.max(y)) + pad
+            patch, org = table.window(cls, (x0, y0, x1, y1))
+            h, w = patch.shape
+            col = _cell_index(x, org[0], step, w)
+            row = _cell_index(y, org[1], step, h)
+        reads.append(_blurred_read(patch, row, col, math.hypot(s, cell_sigma) / table.step))
     for i, v in enumerate(reads):
         v = np.broadcast_to(v, grid.shape)
         for j, e in enumerate(nuisance.outliers):
