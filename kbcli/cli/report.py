@@ -27,7 +27,7 @@ def report_cmd(
     fmt: Annotated[str, typer.Option(
         "--format", help=f"Figure format: {', '.join(FIGURE_FORMATS)}.")] = "png",
 ) -> None:
-    """Write the reproduction report of an evaluation.
+    """Write the reproduction report of an evaluation (or of a model-quality sweep).
 
     Reads EVALUATION (kind 'evaluation', or 'model_quality' from kbcli quality: then
     advantage.png and a README.md that tests the paper's explanation of its robot result). Writes
