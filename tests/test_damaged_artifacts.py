@@ -53,6 +53,7 @@ COMMANDS: dict[str, list[list[str]]] = {
                     ["animate", "{path}", "--max-frames", "2", "--dpi", "40", "-o",
                      "{tmp}/r.gif"]],
     "evaluation": [["report", "{path}", "-o", "{tmp}/rep"]],
+    "model_quality": [["report", "{path}", "-o", "{tmp}/rep"]],
 }
 
 

@@ -120,9 +120,11 @@ def write_config(path, **kw):
     cats = body.pop("categories")
     methods = body.pop("methods")
     noise = body.pop("reach_noise")
+    arms = body.pop("arm")
     for k, v in body.items():
         lines.append(f"{k} = {json.dumps(v)}")
     lines += ["[evaluate.reach_noise]"] + [f"{m} = {v}" for m, v in noise.items()]
+    lines += ["[evaluate.arm]"] + [f'{m} = "{a["preset"]}"' for m, a in arms.items()]
     for name, m in methods.items():
         lines += [f"[evaluate.methods.{name}]"] + [f"{k} = {json.dumps(v)}" for k, v in m.items()]
     for name, c in cats.items():

@@ -56,6 +56,7 @@ READERS: dict[str, list[list[str]]] = {
     "closed_loop": [["plot", "run", "{path}", "-o", "{tmp}/r.png"],
                     ["animate", "{path}", "--max-frames", "3", "--dpi", "40", "-o", "{tmp}/r.gif"]],
     "evaluation": [["report", "{path}", "-o", "{tmp}/rep"]],
+    "model_quality": [["report", "{path}", "-o", "{tmp}/rep"]],
 }
 
 
@@ -138,7 +139,8 @@ def test_every_schema_version_ever_written_is_read(runner, tmp_path, kind, versi
     art = read_artifact(path, kind)
     assert art.schema_version == version
     for argv in READERS[kind]:
-        _ok(runner.invoke(app, [a.format(path=path, tmp=tmp_path, dir=path.parent) for a in argv]))
+        _ok(runner.invoke(app, [a.format(path=path, tmp=tmp_path, dir=path.parent)
+                                for a in argv]))
 
 
 # -- make data rebuilds the same artifacts ------------------------------------------------------

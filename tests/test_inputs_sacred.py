@@ -46,6 +46,8 @@ CASES: dict[str, tuple[list[str], list[str], list[str]]] = {
                  ["model", "toml_golden"], ["out"]),
     "report": (["report", "{evaluation}", "-o", "{folder}"], ["evaluation"], ["folder"]),
     "animate": (["animate", "{run}", "-o", "{gif}"], ["run"], ["gif"]),
+    "quality": (["quality", "--config", "{toml_quality}", "--keyboard", "{keyboard}", "-o",
+                 "{out}"], ["keyboard", "toml_quality"], ["out"]),
     "serve": (["serve", "--model", "{model}", "--config", "{toml_serve}", "-o", "{out}",
                "--socket", "{sock}"], ["model", "toml_serve"], ["out", "sock"]),
 }
@@ -62,6 +64,10 @@ def _inputs(tmp: Path) -> dict[str, Path]:
     shutil.copy(PIPELINES / "keyboard.toml", files["toml_kb"])
     files["toml_golden"] = tmp / "golden.toml"
     shutil.copy(PIPELINES / "golden.toml", files["toml_golden"])
+    files["toml_quality"] = tmp / "quality.toml"
+    files["toml_quality"].write_text(
+        '[quality]\nbudgets = [20]\nexplorations = ["random"]\nmode = "ideal"\narm = "ideal"\n'
+        'experiments = 1\nmax_steps = 2\n')
     files["toml_serve"] = tmp / "serve.toml"
     files["toml_serve"].write_text("[serve]\nmax_steps = 3\n")
     return files

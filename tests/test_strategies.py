@@ -183,13 +183,20 @@ class _SoftWrapper:
         return self._m.sample_actions(cls, n, rng)
 
 
-def test_learned_models_are_softened_by_default():
+def test_the_plain_posterior_softens_learned_models_and_the_robust_one_learns_the_blur():
     from kbcli.core.adapt import LEARNED_BLUR, total_blur
 
     soft = _SoftWrapper(MODEL)
-    cfg = AdapterConfig(prior_halfwidth=10.0, raster_step=1.0)
-    assert total_blur(MODEL, cfg) == 0.0 and total_blur(soft, cfg) == LEARNED_BLUR
-    assert total_blur(soft, AdapterConfig(model_blur=0.0, blur=2.0)) == 2.0
+    plain = AdapterConfig(prior_halfwidth=10.0, raster_step=1.0, robust=False)
+    assert total_blur(MODEL, plain) == 0.0 and total_blur(soft, plain) == LEARNED_BLUR
+    assert total_blur(soft, AdapterConfig(model_blur=0.0, blur=2.0, robust=False)) == 2.0
+    # the robust posterior blurs per touch, by the blurs it weighs: the raster keeps only the
+    # aim-only feedback's blur, and model_blur, when given, fixes the blur it weighs
+    robust = AdapterConfig(prior_halfwidth=10.0, raster_step=1.0, blur=1.5)
+    assert total_blur(soft, robust) == 1.5
+    assert list(robust.nuisance().blurs) == sorted(robust.robust_blurs)
+    assert list(AdapterConfig(model_blur=3.0).nuisance().blurs) == [3.0]
+    cfg = plain
     with pytest.raises(ConfigError, match="model_blur"):
         AdapterConfig(model_blur=-1.0)
     ad = Adapter(soft, cfg, rng=np.random.default_rng(15))

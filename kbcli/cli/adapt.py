@@ -27,7 +27,7 @@ from kbcli.cli.app import (
 )
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.io.config import load_toml
+from kbcli.io.config import load_arm, load_toml
 from kbcli.stages import adapt as stage
 
 
@@ -66,6 +66,9 @@ def adapt_cmd(
     feedback: Annotated[str | None, typer.Option(
         "--feedback", help="landed (the robot feels where it landed) or aim [default landed].")
     ] = None,
+    arm: Annotated[str | None, typer.Option("--arm", help="Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains "
+        "and joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
+        "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields) [default ideal].")] = None,
     model_blur: Annotated[float | None, typer.Option(
         "--model-blur", help="Soften the model's map by this many px, for a model whose "
         "boundaries are less certain than it says [default: 1 for a learned model, 0 for the "
@@ -99,6 +102,8 @@ def adapt_cmd(
              "max_steps": max_steps,
              "resolution": resolution, "prior_halfwidth": prior_halfwidth, "stop": stop}
     values.update({k: v for k, v in flags.items() if v is not None})
+    if arm is not None:
+        values["arm"] = load_arm(arm)
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
     values.setdefault("family", scene_art.config.get("family", "translation"))
@@ -315,3 +320,49 @@ def bench_adapt_cmd(
               "test of the observation counts against random on the paired runs (same "
               f"displacement and seed; the smallest p {experiments} pairs can give is "
               f"{2.0 ** (1 - experiments):.0e})", markup=False)
+
+
+@command(bench_app, name="robust")
+def bench_robust_cmd(
+    model: Annotated[Path, typer.Option("--model", help="Model artifact.")] = Path(
+        "data/default-model.h5"),
+    experiments: Annotated[int, typer.Option(
+        "--experiments", min=1, help="Runs per category, strategy and posterior.")] = 30,
+    max_steps: Annotated[int, typer.Option("--max-steps", "-T", min=1, help="Touches per run.")] = 30,
+    strategy: Annotated[list[str] | None, typer.Option(
+        "--strategy", help="Strategies (repeat) [default random, active, infogain].")] = None,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of displacements and runs.")] = 0,
+) -> None:
+    """The robust posterior against the plain one on a model: touches to 1 px, final error, time.
+
+    Reads MODEL (default: the embedded default model). Writes nothing. Prints, for the ideal arm in
+    ideal mode and the realistic arm in dynamics mode, per strategy, posterior and category: the
+    median touches to an error below 1 px, the median and 90th percentile of the final error, and
+    the median milliseconds per step (wall clock and CPU).
+    """
+    from kbcli.bench import robust as bench
+    from kbcli.stages import keyboard as keyboard_stage
+    from kbcli.stages.models import load_model
+
+    art = read_artifact(model, "model")
+    m, kb = load_model(art), keyboard_stage.load(art)
+    strategies = tuple(strategy) if strategy else bench.STRATEGIES
+    total = len(bench.SETTINGS) * 3 * len(strategies) * len(bench.POSTERIORS) * experiments
+    bar = progress(iter(range(total)), total, "adaptations")
+    rows = bench.run(m, kb, experiments=experiments, max_steps=max_steps, seed=seed,
+                     strategies=strategies, progress=lambda n: next(bar, None))
+    for _ in bar:  # close the bar
+        pass
+    t = Table(title=f"robust vs plain posterior, {model}: {experiments} runs per row, T = "
+                    f"{max_steps}", title_justify="left")
+    for col in ("mode / arm", "strategy", "posterior", "category", "touches to <1 px",
+                "final median", "final p90", "ms/step wall", "ms/step CPU"):
+        t.add_column(col, justify="left" if col in ("mode / arm", "strategy", "posterior",
+                                                   "category") else "right")
+    for r in rows:
+        t.add_row(f"{r.mode} / {r.arm}", r.strategy, r.posterior, r.category,
+                  f"{r.touches_1px:g}" if r.touches_1px <= max_steps else f">{max_steps}",
+                  f"{r.final_median:.2f}", f"{r.final_p90:.2f}", f"{r.ms_wall:.1f}",
+                  f"{r.ms_cpu:.1f}")
+    con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
+    con.print(t)

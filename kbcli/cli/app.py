@@ -39,8 +39,9 @@ app = typer.Typer(
         "and recovers the displacement with few, well-chosen touches. Each stage reads and writes "
         "HDF5 artifacts: keyboard -> learn -> perturb -> play -> detect -> adapt -> evaluate -> "
         "report. run chains play, detect, adapt and play on (the closed loop); serve adapts with "
-        "a robot in another process; animate replays a run; inspect shows any artifact; plot "
-        "draws one; bench prints the benchmarks."
+        "a robot in another process; animate replays a run; quality measures how the strategies' "
+        "advantage depends on the model's quality; inspect shows any artifact; plot draws one; "
+        "bench prints the benchmarks."
     ),
     no_args_is_help=True,
     pretty_exceptions_enable=False,

@@ -13,7 +13,7 @@ from rich.table import Table
 from kbcli.cli.app import bench_app, check_io, command, err, out, progress
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.io.config import load_toml
+from kbcli.io.config import load_arm, load_toml
 from kbcli.io.paths import Output
 from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
 from kbcli.stages import evaluate as stage
@@ -97,6 +97,9 @@ def evaluate_cmd(
         "--experiments", help="Repetitions per parametrization, strategy and mode (overrides the config).")] = None,
     mode: Annotated[str | None, typer.Option(
         "--mode", help="Only this mode: ideal or dynamics (default: the config's modes).")] = None,
+    arm: Annotated[str | None, typer.Option("--arm", help="Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains "
+        "and joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
+        "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields) [default: the config's [evaluate.arm] per mode].")] = None,
     jobs: Annotated[int, typer.Option("--jobs", "-j", help="Local worker processes (joblib/loky).")] = 1,
     scheduler: Annotated[str | None, typer.Option(
         "--scheduler", help="Run on a Dask cluster: address of its scheduler, tcp://HOST:PORT.")] = None,
@@ -123,6 +126,11 @@ def evaluate_cmd(
     check_io({"--model": model, "--config": config}, ("--output", output),
              Output(Checkpoint.beside(output), "checkpoint folder", folder=True, removes=True))
     cfg = _load_config(config, experiments, mode, method)
+    if arm is not None:
+        from dataclasses import replace
+
+        arm_cfg = load_arm(arm).to_dict()
+        cfg = replace(cfg, arm={m: arm_cfg for m in cfg.modes})
     _check_backend(jobs, scheduler)
     if checkpoint_every < 1:
         raise ConfigError(f"--checkpoint-every must be >= 1, got {checkpoint_every}")

@@ -24,6 +24,7 @@ from kbcli.cli.app import (
 )
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.io.config import load_arm
 from kbcli.io.schema import MIN_SOUNDS
 from kbcli.sim import SimConfig
 from kbcli.stages import keyboard as keyboard_stage
@@ -47,6 +48,9 @@ def learn_cmd(
     reach_noise: Annotated[float, typer.Option(
         "--reach-noise", help="Landing scatter of a reach, px (motor noise in dynamics mode).")
     ] = 0.0,
+    arm: Annotated[str, typer.Option("--arm", help="Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains "
+        "and joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
+        "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields).")] = "ideal",
     batch: Annotated[int, typer.Option("--batch", help="Reaches per model refit.")] = 10,
     explore_radius: Annotated[float, typer.Option(
         "--explore-radius", help="active: first cover the working area to this radius, px.")
@@ -65,7 +69,7 @@ def learn_cmd(
     model's predicted key map). Prints the model's accuracy and boundary error against the
     simulator's ground truth.
     """
-    sim = SimConfig(mode=mode, reach_noise=reach_noise)
+    sim = SimConfig(mode=mode, reach_noise=reach_noise, arm=load_arm(arm))
     cfg = stage.LearnConfig(strategy=strategy, budget=budget, batch=batch,
                             explore_radius=explore_radius, curve_every=curve_every, sim=sim,
                             model_class=model_class)
@@ -266,3 +270,64 @@ def _targets(cfg, res):
     from kbcli.bench.layouts import targets
 
     return targets(cfg, res)
+
+
+@command(bench_app, name="arm")
+def bench_arm_cmd(
+    reaches: Annotated[int, typer.Option("--reaches", min=1, help="Reaches per preset and mode.")] = 500,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the targets and the noise.")] = 0,
+) -> None:
+    """How each arm preset errs: landing error and felt-minus-true error.
+
+    Reads nothing; writes nothing. For each preset (ideal, servo, realistic) and mode, reaches
+    REACHES targets uniform over the default keyboard's working area in turn and prints the median
+    and 95th percentile of |landed - target| (tracking), |felt - landed| (proprioception) and
+    |contact - landed| (the finger's contact disc), and the simulated reaches per second.
+    """
+    from kbcli.bench import arm as bench
+
+    rows = bench.run(reaches=reaches, seed=seed)
+    t = Table(title=f"arm presets: {reaches} reaches each over the default working area, px "
+                    "(median / 95th percentile)", title_justify="left")
+    for col in ("preset", "mode", "|landed - target|", "|felt - landed|", "|contact - landed|",
+                "reaches/s"):
+        t.add_column(col, justify="left" if col in ("preset", "mode") else "right")
+    for r in rows:
+        t.add_row(r.preset, r.mode, *(f"{m:.2f} / {p:.2f}" for m, p in (r.landing, r.felt, r.contact)),
+                  f"{r.reaches_per_s:,.0f}")
+    con = out if interactive() else Console(width=max(out.width, 140), highlight=False)
+    con.print(t)
+
+
+@command(bench_app, name="reliability")
+def bench_reliability_cmd(
+    budgets: Annotated[str, typer.Option(
+        "--budgets", help="Reach budgets, comma-separated.")] = "150,300,800,1600",
+    mode: Annotated[str, typer.Option("--mode", help="ideal or dynamics.")] = "ideal",
+    arm: Annotated[str, typer.Option("--arm", help="Arm preset (ideal, servo, realistic).")] = "ideal",
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of every learning run.")] = 0,
+) -> None:
+    """How well calibrated learned models are, and how well they know it.
+
+    Reads nothing; writes nothing. For active and random exploration at each budget, learns a model
+    of the default keyboard (calibration included) and prints, against the simulator on a 2 px
+    grid: the expected calibration error of p(sound | felt action), the accuracy and the boundary
+    error; beside the model's own cross-validated estimates of each, and the calibration it chose.
+    """
+    from kbcli.bench import reliability as bench
+
+    rows = bench.run(budgets=_budgets(budgets), mode=mode, arm=arm, seed=seed)
+    t = Table(title=f"calibration and self-assessment of learned models ({mode} mode, arm {arm}, "
+                    f"seed {seed}): measured / the model's own estimate", title_justify="left")
+    for col in ("exploration", "reaches", "calibration error", "mislabel rate",
+                "boundary error (px)", "chosen calibration", "learn s"):
+        t.add_column(col, justify="left" if col in ("exploration", "chosen calibration") else "right")
+    for r in rows:
+        cal = ", ".join(f"{k} {v:g}" for k, v in sorted(r.calibration.items()))
+        t.add_row(r.exploration, str(r.budget), f"{r.ece:.3f} / {r.est_ece:.3f}",
+                  f"{100 * r.mislabel:.1f} % / {100 * r.est_mislabel:.1f} %",
+                  f"{r.boundary_error:.2f} / {r.est_boundary_error:.2f}", cal, f"{r.seconds:.0f}")
+    con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
+    con.print(t)
+    worst = max(r.ece for r in rows)
+    con.print(f"largest calibration error: {worst:.3f} (target <= 0.03)")

@@ -24,6 +24,7 @@ from kbcli.core.melody import DEFAULT_MELODY, MAX_BEATS, MAX_NOTES, parse_melody
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.atomic import atomic_path
+from kbcli.io.config import load_arm
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import play as stage
 
@@ -65,6 +66,9 @@ def play_cmd(
         "--perturb-at", help="Step at which the keyboard moves [default steps/2 with a scene].")] = None,
     mode: Annotated[str, typer.Option("--mode", help="ideal or dynamics reaching.")] = "ideal",
     reach_noise: Annotated[float, typer.Option("--reach-noise", help="Landing scatter of the arm, px.")] = 0.0,
+    arm: Annotated[str, typer.Option("--arm", help="Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains "
+        "and joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
+        "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields).")] = "ideal",
     seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the robot's and the world's randomness.")] = 0,
     wav: Annotated[Path | None, typer.Option(
         "--wav", help=f"Also write what was heard as a WAV file (silence where the finger "
@@ -79,7 +83,7 @@ def play_cmd(
     """
     check_io({"--model": model, "--scene": scene}, ("--output", output), ("--wav", wav))
     cfg = stage.PlayConfig(melody=melody, steps=steps, perturb_at=perturb_at, mode=mode,
-                           reach_noise=reach_noise)
+                           reach_noise=reach_noise, arm=load_arm(arm))
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene") if scene is not None else None
     if wav is not None:

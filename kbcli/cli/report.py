@@ -27,9 +27,11 @@ def report_cmd(
     fmt: Annotated[str, typer.Option(
         "--format", help=f"Figure format: {', '.join(FIGURE_FORMATS)}.")] = "png",
 ) -> None:
-    """Write the reproduction report of an evaluation.
+    """Write the reproduction report of an evaluation (or of a model-quality sweep).
 
-    Reads EVALUATION (kind 'evaluation'). Writes into the OUTPUT folder: fig5_posterior.png
+    Reads EVALUATION (kind 'evaluation', or 'model_quality' from kbcli quality: then
+    advantage.png and a README.md that tests the paper's explanation of its robot result). Writes
+    into the OUTPUT folder: fig5_posterior.png
     (posterior evolution per method and strategy, px axes), fig6_entropy.png (entropy reduction),
     fig7_error_MODE.png (error against observations per category and method) and README.md (every
     resolved option of every method, the paper's claims judged on the paper's method with ours
@@ -42,7 +44,11 @@ def report_cmd(
     if fmt not in FIGURE_FORMATS:
         raise ConfigError(f"--format must be one of {', '.join(FIGURE_FORMATS)}, got {fmt!r}")
     check_io({"EVALUATION": evaluation}, Output(output, "report folder", folder=True))
-    art = stage.upgrade(read_artifact(evaluation, "evaluation"))
+    art = read_artifact(evaluation, ("evaluation", "model_quality"))
+    if art.kind == "model_quality":
+        _quality_report(art, evaluation, output, fmt)
+        return
+    art = stage.upgrade(art)
     rep = stage.build(art)
     names = {f.name: str(Path(f.name).with_suffix("." + fmt)) for f in rep.figures}
     check_io({"EVALUATION": evaluation},
@@ -67,3 +73,25 @@ def report_cmd(
     for c in rep.claims:
         out.print(f"  [{c.verdict}] {c.paper} -- {c.method}: {c.measured}", markup=False,
                   soft_wrap=True)
+
+
+def _quality_report(art, source: Path, output: Path, fmt: str) -> None:
+    """The report of a model-quality sweep: the advantage figure and README.md."""
+    from kbcli.stages import quality
+    from kbcli.viz.quality import plot_advantage
+
+    fig = f"advantage.{fmt}"
+    check_io({"EVALUATION": source},
+             Output(output, "report folder", folder=True, files=("README.md", fig)))
+    try:
+        output.mkdir(exist_ok=True)
+    except OSError as exc:
+        raise KbcliError(f"{output}: cannot create the report folder ({exc.strerror})") from None
+    with busy("drawing the report's figure"):
+        plot_advantage(art, output / fig)
+    _write_text(output / "README.md", quality.report(art).replace("](advantage.png)", f"]({fig})"))
+    out.print(f"wrote {output}/: README.md and {fig}")
+    for r in art.attrs["rows"]:
+        if r != art.attrs["baseline"]:
+            out.print(f"  {r}: the paper's explanation "
+                      f"{quality.verdict(quality.hypothesis(art, r))}", soft_wrap=True)

@@ -22,6 +22,7 @@ from kbcli.core.detect import DetectorConfig
 from kbcli.core.loop import PLAY
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.io.config import load_arm
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import run as stage
 from kbcli.stages.adapt import AdaptConfig
@@ -44,6 +45,9 @@ def run_cmd(
     family: Annotated[str, typer.Option(help="Transform family the robot estimates: translation or rigid.")] = "translation",
     mode: Annotated[str, typer.Option(help="ideal or dynamics reaching.")] = "ideal",
     reach_noise: Annotated[float, typer.Option(help="Landing scatter of the arm, px.")] = 0.0,
+    arm: Annotated[str, typer.Option("--arm", help="Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains "
+        "and joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
+        "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields).")] = "ideal",
     max_adapt_steps: Annotated[int, typer.Option(help="Touches at most per adaptation.")] = 40,
     detector: Annotated[str, typer.Option(help="Failure detector: binomial (the paper's), cusum or bocpd.")] = "binomial",
     n_lt: Annotated[int, typer.Option(help="Detector long-term window N_LT.")] = 100,
@@ -62,7 +66,7 @@ def run_cmd(
         melody=melody, steps=steps, perturb_at=perturb_at, max_adapt_steps=max_adapt_steps,
         detector=DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold),
         adapt=AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
-                          reach_noise=reach_noise, stop=True),
+                          reach_noise=reach_noise, arm=load_arm(arm), stop=True),
     )
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")

@@ -21,12 +21,13 @@ Choices
 - The robot uses the landed finger position it *feels* (proprioception, ``felt_position``) as the
   point of the observation; ``action`` is where it aimed. When it only knows its aim (no
   ``felt_position``), set ``blur`` to the reach noise: the model raster is blurred by it.
-- A learned model's map is softened by ``model_blur`` (default 1 px; 0 for the exact model): its
-  edges can sit off by more than its probabilities admit, and an unsoftened map lets the touches
-  that contradict it drag the estimate away as evidence piles up. A poor model needs about its own
-  boundary error (which the robot does not know): with a 4 px-boundary-error model, 1 px was not
-  enough and infogain, which seeks exactly the contested edges, did worse than random; 4 px fixed
-  it (see the benchmark notes in :mod:`kbcli.bench.adapt`).
+- The model is not trusted blindly (``robust = True``, the default with the likelihood
+  posterior): its boundary blur and an outlier rate are unknowns marginalised online on a small
+  grid (:mod:`kbcli.core.robust`), so a poor model's wrong edges widen the posterior instead of
+  dragging the estimate away, and the strategies plan with the map as blurred as the touches say
+  it is. ``model_blur`` (px) fixes the blur instead of learning it (an override). With
+  ``robust = False`` the map is read as it is, a learned model's softened by ``model_blur``
+  (default 1 px) and floored at ``outlier``: the historical posterior, kept for comparison.
 - The first decision on the flat prior is the most expensive (resampling the full grid); later
   ones work on the shrinking support of the posterior.
 - The estimate is the posterior mean (``estimator = "mean"``, the RMSE-optimal choice) or the
@@ -58,6 +59,16 @@ from kbcli.core.posterior import (
     grid_bytes,
     kde_term,
     likelihood_term,
+)
+from kbcli.core.robust import (
+    DEFAULT_BLURS,
+    DEFAULT_OUTLIERS,
+    RIGID_BLURS,
+    RIGID_OUTLIERS,
+    Nuisance,
+    RobustPosterior,
+    planning_table,
+    robust_terms,
 )
 from kbcli.core.strategies import STRATEGIES, Context, get_strategy
 from kbcli.errors import ConfigError, ObservationError
@@ -103,10 +114,20 @@ class AdapterConfig:
         eps of the outlier floor (``p_eps = (1 - eps) p + eps / C``; the KDE mixes eps of the prior).
     blur : float
         Std (px) of the landing scatter the robot cannot see (0 when it knows where it landed).
+    robust : bool
+        Marginalise the model's error (boundary blur ``robust_blurs`` and outlier rate
+        ``robust_outliers``, uniform prior) online (:mod:`kbcli.core.robust`); likelihood posterior
+        only. False: the plain posterior, which reads the map as the truth.
+    robust_blurs : tuple of float or None
+        Boundary blurs (px) the robust posterior weighs; None: 0, 1, 2.5 and 5 px (translation),
+        0 px only (rigid, whose grid is 41 times larger: outliers only).
+    robust_outliers : tuple of float or None
+        Outlier rates the robust posterior weighs; None: 0.001, 0.02 and 0.1 (translation),
+        0.001 and 0.05 (rigid).
     model_blur : float or None
-        Softening (px, a Gaussian) of the model's map for a model whose boundaries are less
-        certain than its probabilities say; None: ``LEARNED_BLUR`` (1 px) for a learned model, 0
-        for the exact one. A learned model's probabilities are read as calibrated, but its edges
+        Override: softening (px, a Gaussian) of the model's map. With ``robust``, the blur is fixed
+        to it instead of being learned. Without, None means ``LEARNED_BLUR`` (1 px) for a learned
+        model and 0 for the exact one. A learned model's probabilities are read as calibrated, but its edges
         can sit a pixel or two off: touches that contradict them then pull the posterior off the
         truth, and the estimate drifts as evidence piles up (benchmarked: a model with 1.1 px
         boundary error drifted to 2.1 px RMSE at step 40 unsoftened, 0.28 px with 1 px).
@@ -148,6 +169,9 @@ class AdapterConfig:
     angle_resolution: float = 0.25
     outlier: float = 1e-3
     blur: float = 0.0
+    robust: bool = True
+    robust_blurs: tuple[float, ...] | None = None
+    robust_outliers: tuple[float, ...] | None = None
     model_blur: float | None = None
     cell_average: bool = True
     raster_step: float | None = None
@@ -182,6 +206,23 @@ class AdapterConfig:
         _num("blur", self.blur, strict=False)
         if self.model_blur is not None:
             _num("model_blur", self.model_blur, strict=False)
+        if not isinstance(self.robust, bool):
+            raise ConfigError(f"robust must be true or false, got {self.robust!r}")
+        rigid = self.family == "rigid"
+        if self.robust_blurs is None:
+            object.__setattr__(self, "robust_blurs", RIGID_BLURS if rigid else DEFAULT_BLURS)
+        if self.robust_outliers is None:
+            object.__setattr__(self, "robust_outliers",
+                               RIGID_OUTLIERS if rigid else DEFAULT_OUTLIERS)
+        for name in ("robust_blurs", "robust_outliers"):
+            v = getattr(self, name)
+            if isinstance(v, (str, bytes)) or not hasattr(v, "__len__") or len(v) == 0:
+                raise ConfigError(f"{name} must be a non-empty list of numbers, got {v!r}")
+            for x in v:
+                _num(name, x, strict=name == "robust_outliers")
+            object.__setattr__(self, name, tuple(float(x) for x in v))
+        if any(e >= 1 for e in self.robust_outliers):
+            raise ConfigError(f"robust_outliers must be rates in (0, 1), got {self.robust_outliers!r}")
         if not isinstance(self.cell_average, bool):
             raise ConfigError(f"cell_average must be true or false, got {self.cell_average!r}")
         _num("outlier", self.outlier)
@@ -214,8 +255,21 @@ class AdapterConfig:
         return grid_bytes(self.family, self.prior_halfwidth, self.resolution, self.max_angle,
                           self.angle_resolution)[0]
 
+    @property
+    def is_robust(self) -> bool:
+        """Whether the robust posterior is used (asked for, with the likelihood posterior)."""
+        return self.robust and self.posterior == "likelihood"
+
+    def nuisance(self) -> Nuisance:
+        """The blurs and outlier rates the robust posterior marginalises."""
+        blurs = self.robust_blurs if self.model_blur is None else (self.model_blur,)
+        return Nuisance.build(blurs, self.robust_outliers)
+
     def to_dict(self) -> dict:
-        return asdict(self)
+        d = asdict(self)
+        d["robust_blurs"] = list(self.robust_blurs)
+        d["robust_outliers"] = list(self.robust_outliers)
+        return d
 
     @classmethod
     def from_dict(cls, d: dict) -> AdapterConfig:
@@ -264,7 +318,10 @@ def build_samples(model, cfg: AdapterConfig, seed) -> ActionSamples:
 
 
 def total_blur(model, cfg: AdapterConfig) -> float:
-    """Std (px) the model's map is blurred by: the unseen reach noise and the model softening."""
+    """Std (px) the model's raster is blurred by: the unseen reach noise and, for the plain
+    posterior, the model softening (the robust posterior blurs per touch instead)."""
+    if cfg.is_robust:
+        return float(cfg.blur)
     mb = cfg.model_blur
     if mb is None:
         mb = 0.0 if isinstance(model, ExactModel) else LEARNED_BLUR
@@ -339,6 +396,9 @@ class Adapter:
                                          angle_resolution=cfg.angle_resolution)
         self.table = build_table(model, cfg, self.area) if table is None else table
         self.posterior = Posterior.uniform(self.grid)
+        #: the robust posterior (None with the plain one); ``posterior`` is then its marginal
+        self.robust: RobustPosterior | None = (
+            RobustPosterior(self.grid, cfg.nuisance()) if cfg.is_robust else None)
         self._strategy = get_strategy(cfg.strategy)
         self._edges: np.ndarray | None = None
         self._corners: np.ndarray | None = None
@@ -392,10 +452,20 @@ class Adapter:
         return cls(model, config, rng=rng, max_steps=max_steps)
 
     # -- deciding ----------------------------------------------------------------------------------
+    def planning_table(self) -> LikelihoodTable:
+        """The map the strategies plan with: the model's, or with the robust posterior, blurred by
+        the most probable boundary blur and floored at the most probable outlier rate."""
+        if self.robust is None:
+            return self.table
+        i, j = self.robust.map_index()
+        nz = self.robust.nuisance
+        return planning_table(self.table, float(nz.blurs[i]), float(nz.outliers[j]))
+
     def context(self) -> Context:
         if self._edges is None:
             self._edges, self._corners = self.table.boundary_points()
-        return Context(self.posterior, self.table, self.area, self._edges, self._corners, self.cfg)
+        return Context(self.posterior, self.planning_table(), self.area, self._edges,
+                       self._corners, self.cfg)
 
     def suggest(self) -> np.ndarray:
         """(2,) the next action (pad px) chosen by the strategy."""
@@ -477,6 +547,12 @@ class Adapter:
             term, bw = kde_term(self.grid, self.model, a, cls, n_samples=self.cfg.kde_samples,
                                 eps=self.cfg.outlier, samples=self.samples)
             self.bandwidths.append(bw)
+        elif self.robust is not None:
+            sigma = cell_sigma(self.grid, a) if self.cfg.cell_average and self.grid.rigid else 0.0
+            terms = robust_terms(self.grid, self.table, a, cls, self.robust.nuisance, sigma)
+            self.robust = self.robust.update(terms)
+            self.posterior = self.robust.marginal()
+            return
         else:
             sigma = cell_sigma(self.grid, a) if self.cfg.cell_average else 0.0
             term = likelihood_term(self.grid, self.table, a, cls, sigma)

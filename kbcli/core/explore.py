@@ -307,6 +307,12 @@ class Exploration:
         self._model = None
         self._plan = np.empty((0, 2))
 
+    def refit(self, landed: np.ndarray, perceived: np.ndarray, **params):
+        """A fresh model of the same class and settings (``params`` on top) fitted on other
+        samples (cross-validation, calibration)."""
+        return fit_model(self.cfg.model_class, landed, perceived,
+                         match_threshold=self.match_threshold, area=self.area, **params)
+
     @property
     def model(self):
         """The model (of ``cfg.model_class``) fitted to every sample so far (None before the

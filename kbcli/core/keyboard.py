@@ -449,6 +449,8 @@ def match(perceived: np.ndarray, known: np.ndarray, threshold: float) -> np.ndar
     """
     perceived = np.atleast_2d(np.asarray(perceived, float))
     known = np.atleast_2d(np.asarray(known, float))
+    if known.shape[0] == 0 or known.size == 0:  # nothing known: nothing matches
+        return np.full(len(perceived), -1, dtype=np.int64)
     d = np.abs(perceived[:, None, :] - known[None, :, :]).sum(axis=-1)  # (n, m)
     d = np.where(np.isnan(d), np.inf, d)
     best = np.argmin(d, axis=1)

@@ -27,11 +27,13 @@ simulator's key ids) the model
      boundary, s is the signed distance (px) of a to its piece's line and
      ``p(a on i's side) = Phi(s / sigma)``, sigma the line's uncertainty at a: the width of the
      band between the hulls of the samples on either side (where any separating line must pass),
-     over sqrt(12), growing beyond the samples, clipped to [``min_sd``, ``max_sd``]. A pair with
+     over sqrt(12), growing beyond the samples, times ``sd_scale`` and clipped to [``min_sd``,
+     ``max_sd``], combined with the label noise ``noise_sd`` (``hypot``). A pair with
      several pieces: of the pieces near a (within ``piece_reach`` px of the nearest), the sound
      inside (a corner key; whichever explains the pair's samples better) must be on its side of
-     all, the other of any. Each candidate's log-score sums log p over its pairwise contests (log space,
-     ``log_ndtr``); p(sound | a) is their softmax. Its spread across a boundary is the paper's
+     all, the other of any. Each candidate's log-score sums log 2p over its pairwise contests (log
+     space, ``log_ndtr``; the factor 2 makes an undecided contest neutral); p(sound | a) is their
+     softmax, floored at ``floor``. Its spread across a boundary is the paper's
      *confusion factor* (Sect. III-E). The landing scatter of a reach is estimated
      (``reach_sd_``) but not folded in: a caller that knows only where it aimed blurs by it.
 3. **samples actions for a sound**, p(action | sound) ~ p(sound | action) p(action) with p(action)
@@ -53,6 +55,10 @@ from kbcli.core.model import SILENCE, ProbabilityRaster, classify_features, grid
 from kbcli.errors import ArtifactError, ConfigError
 
 _CHUNK = 16384  # query points per block
+#: Added to both sides of every pairwise contest: log(2 Phi(z)) instead of log Phi(z), so that a
+#: contest the model knows nothing about (z = 0) is neutral instead of penalising the candidates
+#: that take part in more contests (which made wide, honest boundary bands cost accuracy).
+_NEUTRAL = float(np.log(2.0))
 
 
 def discover_classes(perceived: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
@@ -185,11 +191,15 @@ def _closest_to_segments(p: np.ndarray, hull: np.ndarray) -> tuple[np.ndarray, n
     return d[r, k], foot[r, k]
 
 
-def _separating_line(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
+def _separating_line(a: np.ndarray, b: np.ndarray, tol: float = 0.0) -> tuple[np.ndarray, bool]:
     """Max-margin line between points ``a`` (its positive side) and ``b``.
 
     For separable sets it is the perpendicular bisector of the closest pair of points of their
-    convex hulls (the hard-margin linear SVM, solved exactly in 2-D).
+    convex hulls (the hard-margin linear SVM, solved exactly in 2-D). With a label-noise tolerance
+    ``tol`` > 0 (px), sets that no line separates get a soft-margin line (logistic regression),
+    which counts as separating when every point on its wrong side is within ``tol`` of it: labels
+    flipped near a boundary by an arm that does not feel exactly where it touched then give one
+    straight boundary, not a splinter of pieces.
 
     Returns
     -------
@@ -216,10 +226,32 @@ def _separating_line(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
     n = w / nw
     c = float(n @ (p + q) / 2)
     separable = bool((a @ n - c > 0).all() and (b @ n - c < 0).all())
+    if separable or tol <= 0:
+        return np.array([n[0], n[1], c]), separable
+    n, c = _soft_line(a, b)
+    separable = bool((a @ n - c > -tol).all() and (b @ n - c < tol).all())
     return np.array([n[0], n[1], c]), separable
 
 
-def _pieces(x: np.ndarray, e: np.ndarray, depth: int = 0) -> list[tuple[np.ndarray, np.ndarray]]:
+def _soft_line(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
+    """Unit normal (towards ``a``) and offset of a logistic-regression line between two point
+    sets that overlap (deterministic: lbfgs, centred and scaled coordinates)."""
+    from sklearn.linear_model import LogisticRegression
+
+    pts = np.vstack([a, b])
+    mu = pts.mean(axis=0)
+    scale = max(float(pts.std()), 1e-9)
+    y = np.r_[np.ones(len(a)), np.zeros(len(b))]
+    clf = LogisticRegression(C=10.0).fit((pts - mu) / scale, y)
+    w = clf.coef_[0] / scale
+    nw = max(float(np.hypot(*w)), 1e-12)
+    n = w / nw
+    c = float(n @ mu - clf.intercept_[0] / nw)
+    return n, c
+
+
+def _pieces(x: np.ndarray, e: np.ndarray, depth: int = 0,
+            tol: float = 0.0) -> list[tuple[np.ndarray, np.ndarray]]:
     """Split the straddling edges of one pair of sounds into straight boundary pieces.
 
     The pair's edges get one max-margin line if it separates their two ends; otherwise (an L- or
@@ -232,7 +264,7 @@ def _pieces(x: np.ndarray, e: np.ndarray, depth: int = 0) -> list[tuple[np.ndarr
     list of (edge rows, line)
     """
     ua, ub = np.unique(e[:, 0]), np.unique(e[:, 1])
-    line, ok = _separating_line(x[ua], x[ub])
+    line, ok = _separating_line(x[ua], x[ub], tol)
     if ok or len(e) < 2 or depth >= 4:
         return [(np.arange(len(e)), line)]
     d = x[e[:, 0]] - x[e[:, 1]]
@@ -248,13 +280,13 @@ def _pieces(x: np.ndarray, e: np.ndarray, depth: int = 0) -> list[tuple[np.ndarr
         centres = m / np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-12)
     out = []
     for part in (np.flatnonzero(~side), np.flatnonzero(side)):
-        out += [(part[sub], ln) for sub, ln in _pieces(x, e[part], depth + 1)]
+        out += [(part[sub], ln) for sub, ln in _pieces(x, e[part], depth + 1, tol)]
     return out
 
 
 def _merge_pieces(
     x: np.ndarray, e: np.ndarray, piece_rows: list[np.ndarray], lines: np.ndarray,
-    max_angle: float, max_offset: float,
+    max_angle: float, max_offset: float, tol: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Group boundary pieces that one straight line explains (an edge continuing across keys).
 
@@ -302,7 +334,7 @@ def _merge_pieces(
         a, b = np.union1d(ap, aq), np.union1d(bp, bq)
         if np.intersect1d(a, b).size:
             continue
-        line, separable = _separating_line(x[a], x[b])
+        line, separable = _separating_line(x[a], x[b], tol)
         if not separable:
             continue
         for m in members[rq]:
@@ -332,7 +364,7 @@ def _line_sides(
 
 def _absorb_pieces(
     x: np.ndarray, e: np.ndarray, edge_piece: np.ndarray, pairs: np.ndarray, group: np.ndarray,
-    sign: np.ndarray, glines: np.ndarray, reach: float,
+    sign: np.ndarray, glines: np.ndarray, reach: float, tol: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Re-express lone boundary pieces with lines that several pieces share.
 
@@ -386,7 +418,7 @@ def _absorb_pieces(
             if len(o) != 1 or np.intersect1d(pa, na).size:
                 good = False
                 break
-            line, separable = _separating_line(x[pa], x[na])
+            line, separable = _separating_line(x[pa], x[na], tol)
             if not separable:
                 good = False
                 break
@@ -475,7 +507,22 @@ class LearnedModel:
     n_neighbors : int
         Samples looked at around an action to find the sounds it could make.
     min_sd, max_sd : float
-        Bounds (px) of a boundary line's uncertainty sigma_b in p(sound | action).
+        Bounds (px) of a boundary line's uncertainty sigma_b in p(sound | action). A line known
+        only from samples 30 px apart is uncertain by about 9 px: the bound must not make it sure
+        (a 4 px bound made weak models confidently wrong, expected calibration error 0.10-0.19).
+    sd_scale : float
+        Factor on every boundary's band-width uncertainty (calibration, see
+        :mod:`kbcli.core.reliability`; 1: the band as it is).
+    noise_sd : float
+        Std (px) of the label noise near a boundary (an arm that does not feel exactly where it
+        touched, a finger of finite size): combined with sigma_b as ``hypot(sigma_b, noise_sd)``.
+    noise_tol : float
+        Label-noise tolerance (px) of the boundary fit: two sounds' samples that no line separates
+        get one soft-margin line when every sample on its wrong side is within ``noise_tol`` of it
+        (0: exact separation, as for an arm that feels exactly where it touched).
+    floor : float
+        Share of probability spread evenly over all sounds (``p = (1 - floor) p + floor / C``):
+        the rate at which a touch sounds other than the map says, far from any boundary.
     extrapolation : float
         Growth (px per px) of a boundary band's width beyond the samples along its line.
     merge_angle, merge_offset : float
@@ -518,7 +565,11 @@ class LearnedModel:
         area: tuple[float, float, float, float] = (150.0, 200.0, 650.0, 500.0),
         n_neighbors: int = 8,
         min_sd: float = 0.05,
-        max_sd: float = 4.0,
+        max_sd: float = 25.0,
+        sd_scale: float = 1.0,
+        noise_sd: float = 0.0,
+        floor: float = 0.0,
+        noise_tol: float = 0.0,
         extrapolation: float = 1.0,
         merge_angle: float = 10.0,
         merge_offset: float = 10.0,
@@ -529,6 +580,10 @@ class LearnedModel:
         self.n_neighbors = n_neighbors
         self.min_sd = min_sd
         self.max_sd = max_sd
+        self.sd_scale = sd_scale
+        self.noise_sd = noise_sd
+        self.floor = floor
+        self.noise_tol = noise_tol
         self.extrapolation = extrapolation
         self.merge_angle = merge_angle
         self.merge_offset = merge_offset
@@ -549,6 +604,14 @@ class LearnedModel:
             raise ConfigError(f"min_sd must be > 0 px, got {self.min_sd!r}")
         if not (np.isfinite(self.max_sd) and self.max_sd >= self.min_sd):
             raise ConfigError(f"max_sd must be >= min_sd, got {self.max_sd!r}")
+        if not (np.isfinite(self.sd_scale) and self.sd_scale > 0):
+            raise ConfigError(f"sd_scale must be > 0, got {self.sd_scale!r}")
+        if not (np.isfinite(self.noise_sd) and self.noise_sd >= 0):
+            raise ConfigError(f"noise_sd must be >= 0 px, got {self.noise_sd!r}")
+        if not (np.isfinite(self.noise_tol) and self.noise_tol >= 0):
+            raise ConfigError(f"noise_tol must be >= 0 px, got {self.noise_tol!r}")
+        if not (np.isfinite(self.floor) and 0 <= self.floor < 1):
+            raise ConfigError(f"floor must be in [0, 1), got {self.floor!r}")
         if not (np.isfinite(self.extrapolation) and self.extrapolation >= 0):
             raise ConfigError(f"extrapolation must be >= 0, got {self.extrapolation!r}")
         if not (np.isfinite(self.merge_angle) and 0 <= self.merge_angle < 90):
@@ -568,6 +631,20 @@ class LearnedModel:
     def n_classes(self) -> int:
         self._check_fitted()
         return len(self.class_features_)
+
+    @staticmethod
+    def fit_grid() -> dict[str, tuple[float, ...]]:
+        """Candidate values of the fit's own calibration parameter, the label-noise tolerance
+        (px; :func:`kbcli.core.reliability.assess` refits with each and keeps the best held-out
+        likelihood: 0 for an arm that feels exactly where it touched, more for a noisy one)."""
+        return {"noise_tol": (0.0, 2.0, 4.0)}
+
+    @staticmethod
+    def calibration_grid() -> dict[str, tuple[float, ...]]:
+        """Candidate values of the calibration parameters (read at prediction time, so a fitted
+        model is recalibrated by setting them; :func:`kbcli.core.reliability.assess` picks them by
+        held-out likelihood)."""
+        return {"noise_sd": (0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.5, 6.0), "floor": (0.0, 0.002, 0.01)}
 
     # -- fitting --------------------------------------------------------------------------------
     def fit(
@@ -608,7 +685,7 @@ class LearnedModel:
         code = labels[e[:, 0]] * len(features) + labels[e[:, 1]]
         for c in np.unique(code):  # one loop per pair of neighbouring sounds
             rows = np.flatnonzero(code == c)
-            for part, line in _pieces(x, e[rows]):
+            for part, line in _pieces(x, e[rows], tol=self.noise_tol):
                 piece[rows[part]] = len(lines)
                 pairs.append(divmod(int(c), len(features)))
                 lines.append(line)
@@ -616,15 +693,15 @@ class LearnedModel:
         lines_arr = np.array(lines, float).reshape(-1, 3)
         if self.merge_angle > 0 and len(lines):
             group, sign, glines = _merge_pieces(
-                x, e, rows_of, lines_arr, np.radians(self.merge_angle), self.merge_offset
-            )
+                x, e, rows_of, lines_arr, np.radians(self.merge_angle), self.merge_offset,
+                self.noise_tol)
         else:
             group, sign, glines = np.arange(len(lines)), np.ones(len(lines)), lines_arr
         pairs_arr = np.array(pairs, dtype=np.int64).reshape(-1, 2)
         if self.merge_angle > 0 and len(lines):
             piece, pairs_arr, group, sign, glines = _absorb_pieces(
-                x, e, piece, pairs_arr, group, sign, glines, reach=2 * self.merge_offset
-            )
+                x, e, piece, pairs_arr, group, sign, glines, reach=2 * self.merge_offset,
+                tol=self.noise_tol)
         self._set_fitted(features, x, labels, e, piece, pairs_arr, group, sign, glines, reach_sd)
         return self
 
@@ -719,7 +796,9 @@ class LearnedModel:
         sd = np.empty_like(v)
         for j in range(len(pieces)):  # a few pieces per pair
             sd[:, j] = self._band(int(g[j]), t[:, j])[0] / np.sqrt(12.0)
-        sd = np.clip(sd, self.min_sd, self.max_sd)
+        sd = np.clip(sd * self.sd_scale, self.min_sd, self.max_sd)
+        if self.noise_sd > 0:
+            sd = np.hypot(sd, self.noise_sd)
         lp_lo, lp_hi = log_ndtr(v / sd), log_ndtr(-v / sd)
         if len(pieces) == 1:
             return lp_lo[:, 0], lp_hi[:, 0]
@@ -814,8 +893,8 @@ class LearnedModel:
                 continue  # sounds that never met: no boundary between them to judge by
             sel = np.flatnonzero(code == c)
             lp_lo, lp_hi = self._pair_logp(int(c), q[rows[sel]])
-            np.add.at(score, (rows[sel], slo[sel]), lp_lo)
-            np.add.at(score, (rows[sel], shi[sel]), lp_hi)
+            np.add.at(score, (rows[sel], slo[sel]), lp_lo + _NEUTRAL)
+            np.add.at(score, (rows[sel], shi[sel]), lp_hi + _NEUTRAL)
         return cls, score
 
     def _predict(self, points: np.ndarray, proba: bool) -> np.ndarray:
@@ -852,7 +931,10 @@ class LearnedModel:
         (n, C) ndarray
             Rows sum to 1.
         """
-        return self._predict(points, proba=True)
+        p = self._predict(points, proba=True)
+        if self.floor > 0:
+            p = (1 - self.floor) * p + self.floor / p.shape[1]
+        return p
 
     def predict_class(self, points: np.ndarray) -> np.ndarray:
         """(n,) most probable sound class at each point."""
@@ -933,6 +1015,10 @@ class LearnedModel:
             "n_neighbors": np.int64(self.n_neighbors),
             "min_sd": np.float64(self.min_sd),
             "max_sd": np.float64(self.max_sd),
+            "sd_scale": np.float64(self.sd_scale),
+            "noise_sd": np.float64(self.noise_sd),
+            "floor": np.float64(self.floor),
+            "noise_tol": np.float64(self.noise_tol),
             "extrapolation": np.float64(self.extrapolation),
         }
 
@@ -946,6 +1032,10 @@ class LearnedModel:
                 n_neighbors=int(d["n_neighbors"]),
                 min_sd=float(d["min_sd"]),
                 max_sd=float(d["max_sd"]),
+                sd_scale=float(d.get("sd_scale", 1.0)),  # absent before model schema 2
+                noise_sd=float(d.get("noise_sd", 0.0)),
+                floor=float(d.get("floor", 0.0)),
+                noise_tol=float(d.get("noise_tol", 0.0)),
                 extrapolation=float(d["extrapolation"]),
                 merge_angle=float(d["merge_angle"]),
                 merge_offset=float(d["merge_offset"]),

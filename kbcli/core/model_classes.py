@@ -130,6 +130,6 @@ def _svc_from(d: dict):
 
 register("lines", "straight key edges shared across keys (polygon keys)", _lines, _lines_from,
          ("n_neighbors", "min_sd", "max_sd", "extrapolation", "merge_angle", "merge_offset",
-          "piece_reach"))
+          "piece_reach", "sd_scale", "noise_sd", "floor", "noise_tol"))
 register("svc", "scikit-learn RBF SVMs per pair of neighbouring sounds (any key shape)", _svc,
          _svc_from, ("length_scale", "C", "local_radius", "n_neighbors"))

@@ -9,6 +9,24 @@ from typing import Any
 from kbcli.errors import ConfigError
 
 
+def load_arm(value: str | None):
+    """The arm of ``--arm VALUE``: a preset name (``ideal``, ``servo``, ``realistic``) or a TOML
+    file with an ``[arm]`` table (``preset = NAME`` plus fields to override). None: ``ideal``.
+
+    Raises
+    ------
+    ConfigError
+        An unknown preset, a missing file or an invalid table.
+    """
+    from kbcli.sim.arms import PRESETS, arm_config
+
+    if value is None:
+        return arm_config(None)
+    if value in PRESETS or not value.endswith(".toml"):
+        return arm_config(value)
+    return arm_config(load_toml(value, "arm"))
+
+
 def load_toml(path: str | Path, table: str | None = None) -> dict[str, Any]:
     """Parse a TOML file, optionally returning one top-level table.
 

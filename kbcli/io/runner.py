@@ -111,6 +111,21 @@ def _state_for(setup: str, context: Any, key: str) -> Any:
     return _STATE[token]
 
 
+def _no_leak_restarts() -> None:
+    """Tell loky (in this worker) not to take the per-process caches for a leak.
+
+    loky restarts a worker whose memory grew by more than 300 MB since its first task; the state a
+    worker keeps on purpose (model rasters, the robust posterior's blurred maps, about 0.5 GB a
+    model) would then be rebuilt again and again. Raised to 16 GB, the check still catches a real
+    runaway.
+    """
+    with contextlib.suppress(ImportError, AttributeError):
+        from joblib.externals.loky import process_executor
+
+        process_executor._MAX_MEMORY_LEAK_SIZE = max(process_executor._MAX_MEMORY_LEAK_SIZE,
+                                                     16 << 30)
+
+
 def run_tasks(
     setup: str, run: str, context: Any, key: str, items: list[tuple[int, Any]]
 ) -> list[tuple[int, dict]]:
@@ -120,6 +135,7 @@ def run_tasks(
     """
     from threadpoolctl import threadpool_limits
 
+    _no_leak_restarts()
     with threadpool_limits(limits=1):
         state = _state_for(setup, context, key)
         fn = resolve(run)

@@ -299,44 +299,6 @@ SCHEMAS: dict[str, dict[int, Schema]] = {
         ),
         attrs={"accuracy?": "num?", "boundary_error_px?": "num?", "n_reaches?": "int?"},
         checks=(_keyboard, _two_sounds),
-    ), 2: Schema(  # a model class (config model_class): lines or svc
-        config={"strategy": "str", "model_class?": "str", **_KEYBOARD_CFG},
-        datasets=tuple(
-            Dataset(p, k, s, when=w, index=ix) for p, k, s, ix, w in (
-                ("samples/actions", FLOAT, ("N", 2), None, _learned),
-                ("samples/landed", FLOAT, ("N", 2), None, _learned),
-                ("samples/perceived", FLOAT, ("N", "F"), None, _learned),
-                ("curve/reaches", INT, ("C",), None, _learned),
-                ("curve/accuracy", FLOAT, ("C",), None, _learned),
-                ("model/class_features", FLOAT, ("M", "F"), None, _learned),
-                ("model/actions", FLOAT, ("A", 2), None, _learned),
-                ("model/labels", INT, ("A",), "M", _learned),
-                ("model/area", FLOAT, (4,), None, _learned),
-                ("model/reach_sd_fitted", FLOAT, (), None, _learned),
-                ("model/match_threshold", FLOAT, (), None, _learned),
-                ("model/n_neighbors", INT, (), None, _learned),
-                ("model/edges", INT, ("E", 2), "A", _lines),
-                ("model/edge_piece", INT, ("E",), None, _lines),
-                ("model/piece_pair", INT, ("P", 2), "M", _lines),
-                ("model/piece_line", INT, ("P",), "L", _lines),
-                ("model/piece_sign", FLOAT, ("P",), None, _lines),
-                ("model/lines", FLOAT, ("L", 3), None, _lines),
-                ("model/merge_angle", FLOAT, (), None, _lines),
-                ("model/merge_offset", FLOAT, (), None, _lines),
-                ("model/piece_reach", FLOAT, (), None, _lines),
-                ("model/min_sd", FLOAT, (), None, _lines),
-                ("model/max_sd", FLOAT, (), None, _lines),
-                ("model/extrapolation", FLOAT, (), None, _lines),
-                ("model/pairs", INT, ("Q", 2), "M", _svc),
-                ("model/n_support", INT, ("Q",), None, _svc),
-                ("model/length_scale", FLOAT, (), None, _svc),
-                ("model/C", FLOAT, (), None, _svc),
-                ("model/local_radius", FLOAT, (), None, _svc),
-            )
-        ),
-        attrs={"accuracy?": "num?", "boundary_error_px?": "num?", "n_reaches?": "int?",
-               "model_class?": "str"},
-        checks=(_keyboard, _two_sounds, _model_class),
     )},
     "scene": {1: Schema(
         config={"family": "str", "params": "nums", **_KEYBOARD_CFG},
@@ -504,6 +466,113 @@ SCHEMAS["evaluation"][2] = Schema(
 # run 3, closed_loop 3: the adapt config nests the robot's options under "robot"
 SCHEMAS["run"][3] = SCHEMAS["run"][2]
 SCHEMAS["closed_loop"][3] = SCHEMAS["closed_loop"][2]
+
+
+def _reliability(art) -> str | None:
+    """A learned model of schema 2 carries its own estimate of how good it is."""
+    if not _learned(art):
+        return None
+    rel = art.attrs.get("reliability")
+    if not isinstance(rel, dict):
+        return "summary attribute 'reliability' is missing or not a table"
+    for key in ("cv_error", "cv_log_loss", "cv_ece", "boundary_error"):
+        if not _TYPES["num"](rel.get(key)):
+            return f"summary attribute reliability.{key} must be a number, got {rel.get(key)!r:.40}"
+    if not _TYPES["numdict"](rel.get("calibration", {})):
+        return "summary attribute reliability.calibration must be a table of numbers"
+    return None
+
+
+# model 2: calibrated (label noise, floor; a label-noise tolerance of the fit) and self-assessed
+SCHEMAS["model"][2] = Schema(
+    datasets=(*SCHEMAS["model"][1].datasets,
+              *(Dataset(f"model/{k}", FLOAT, (), when=_learned)
+                for k in ("sd_scale", "noise_sd", "floor", "noise_tol"))),
+    attrs={**SCHEMAS["model"][1].attrs, "reliability?": "dict?"},
+    config=SCHEMAS["model"][1].config,
+    checks=(*SCHEMAS["model"][1].checks, _reliability),
+)
+
+# model 3: a model class (config model_class: lines or svc), calibrated and self-assessed as in 2
+SCHEMAS["model"][3] = Schema(
+    config={"strategy": "str", "model_class?": "str", **_KEYBOARD_CFG},
+    datasets=tuple(
+        Dataset(p, k, s, when=w, index=ix) for p, k, s, ix, w in (
+            ("samples/actions", FLOAT, ("N", 2), None, _learned),
+            ("samples/landed", FLOAT, ("N", 2), None, _learned),
+            ("samples/perceived", FLOAT, ("N", "F"), None, _learned),
+            ("curve/reaches", INT, ("C",), None, _learned),
+            ("curve/accuracy", FLOAT, ("C",), None, _learned),
+            ("model/class_features", FLOAT, ("M", "F"), None, _learned),
+            ("model/actions", FLOAT, ("A", 2), None, _learned),
+            ("model/labels", INT, ("A",), "M", _learned),
+            ("model/area", FLOAT, (4,), None, _learned),
+            ("model/reach_sd_fitted", FLOAT, (), None, _learned),
+            ("model/match_threshold", FLOAT, (), None, _learned),
+            ("model/n_neighbors", INT, (), None, _learned),
+            ("model/edges", INT, ("E", 2), "A", _lines),
+            ("model/edge_piece", INT, ("E",), None, _lines),
+            ("model/piece_pair", INT, ("P", 2), "M", _lines),
+            ("model/piece_line", INT, ("P",), "L", _lines),
+            ("model/piece_sign", FLOAT, ("P",), None, _lines),
+            ("model/lines", FLOAT, ("L", 3), None, _lines),
+            ("model/merge_angle", FLOAT, (), None, _lines),
+            ("model/merge_offset", FLOAT, (), None, _lines),
+            ("model/piece_reach", FLOAT, (), None, _lines),
+            ("model/min_sd", FLOAT, (), None, _lines),
+            ("model/max_sd", FLOAT, (), None, _lines),
+            ("model/extrapolation", FLOAT, (), None, _lines),
+            *((f"model/{k}", FLOAT, (), None, _lines)
+              for k in ("sd_scale", "noise_sd", "floor", "noise_tol")),
+            ("model/pairs", INT, ("Q", 2), "M", _svc),
+            ("model/n_support", INT, ("Q",), None, _svc),
+            ("model/length_scale", FLOAT, (), None, _svc),
+            ("model/C", FLOAT, (), None, _svc),
+            ("model/local_radius", FLOAT, (), None, _svc),
+        )
+    ),
+    attrs={"accuracy?": "num?", "boundary_error_px?": "num?", "n_reaches?": "int?",
+           "model_class?": "str", "reliability?": "dict?"},
+    checks=(_keyboard, _two_sounds, _model_class, _reliability),
+)
+
+
+def _quality_lists(art) -> str | None:
+    a = art.attrs
+    if not a["rows"] or a["baseline"] not in a["rows"]:
+        return f"baseline {a['baseline']!r} is not among the rows {a['rows']}"
+    for m, info in a["models"].items():
+        if not isinstance(info, dict) or not _TYPES["num"](info.get("boundary_error")):
+            return f"summary attribute models.{m}.boundary_error must be a number"
+        per = a["summary"].get(m)
+        if not isinstance(per, dict) or not isinstance(per.get("all"), dict):
+            return f"summary attribute summary.{m} is missing or has no 'all' table"
+        for r in a["rows"]:
+            cell = per["all"].get(r)
+            if not isinstance(cell, dict) or not _TYPES["num"](cell.get("final_median")):
+                return f"summary attribute summary.{m}.all.{r} is missing its numbers"
+            if r != a["baseline"] and not (_TYPES["num"](cell.get("advantage"))
+                                           and _TYPES["num"](cell.get("pvalue"))):
+                return f"summary attribute summary.{m}.all.{r} lacks advantage or pvalue"
+    return None
+
+
+# model_quality 1: the model-quality sweep (kbcli quality)
+SCHEMAS["model_quality"] = {1: Schema(
+    datasets=(
+        Dataset("experiments/model", TEXT, ("N",)),
+        Dataset("experiments/category", TEXT, ("N",)),
+        Dataset("experiments/row", TEXT, ("N",)),
+        Dataset("experiments/param_index", INT, ("N",)),
+        Dataset("experiments/rep", INT, ("N",)),
+        Dataset("experiments/errors", FLOAT, ("N", "T")),
+    ),
+    attrs={"models": "dict", "summary": "dict", "rows": "strs", "baseline": "str",
+           "max_steps": "int", "categories": "strs", "n_experiments": "int"},
+    config={"mode": "str", "arm": "dict", "experiments": "int", "budgets": "nums",
+            "explorations": "strs", "rows": "dict"},
+    checks=(_quality_lists,),
+)}
 
 
 def schema_for(kind: str, version: int) -> Schema | None:

@@ -14,6 +14,7 @@ import numpy as np
 from kbcli.core.config import check_known
 from kbcli.core.keyboard import Keyboard
 from kbcli.errors import ConfigError
+from kbcli.sim.arms import PRESETS, ArmConfig, arm_config
 
 MODES = ("ideal", "dynamics")
 
@@ -34,12 +35,16 @@ class SimConfig:
     reach_noise : float
         Std (px) of the landing scatter: motor noise in ``dynamics`` mode, Gaussian scatter of the
         landing point in ``ideal`` mode.
+    arm : ArmConfig
+        How the arm errs beyond ``reach_noise``: servo, friction, finger, proprioception
+        (:mod:`kbcli.sim.arms`; default the ``ideal`` preset). A preset name or a table is accepted.
     """
 
     mode: str = "ideal"
     base: tuple[float, float] = (400.0, 0.0)
     link_lengths: tuple[float, float] = (320.0, 280.0)
     reach_noise: float = 0.0
+    arm: ArmConfig = PRESETS["ideal"]
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -51,10 +56,11 @@ class SimConfig:
             raise ConfigError(f"reach_noise must be >= 0 px, got {self.reach_noise!r}")
         object.__setattr__(self, "base", (float(self.base[0]), float(self.base[1])))
         object.__setattr__(self, "link_lengths", (float(l1), float(l2)))
+        object.__setattr__(self, "arm", arm_config(self.arm))
 
     def to_dict(self) -> dict:
         return {"mode": self.mode, "base": list(self.base), "link_lengths": list(self.link_lengths),
-                "reach_noise": self.reach_noise}
+                "reach_noise": self.reach_noise, "arm": self.arm.to_dict()}
 
     @classmethod
     def from_dict(cls, d: dict) -> SimConfig:
@@ -63,6 +69,8 @@ class SimConfig:
         for k in ("base", "link_lengths"):
             if k in d:
                 d[k] = tuple(d[k])
+        if "arm" in d:
+            d["arm"] = arm_config(d["arm"])
         return cls(**d)
 
 
@@ -136,11 +144,78 @@ def check_keyboard_reachable(cfg: SimConfig, keyboard: Keyboard) -> None:
     raise OutOfReachError(f"{where}: every key is reachable but part of the margin is not")
 
 
+def inverse_kinematics(cfg: SimConfig, targets: np.ndarray) -> np.ndarray:
+    """Joint angles (shoulder q1, elbow q2 > 0) that put the fingertip on each target.
+
+    Parameters
+    ----------
+    targets : (n, 2) ndarray
+        Pad points inside the workspace.
+
+    Returns
+    -------
+    (n, 2) ndarray
+        q1 is the upper arm's angle from the pad's x axis, q2 the forearm's angle relative to it.
+    """
+    p = np.asarray(targets, float).reshape(-1, 2) - np.asarray(cfg.base)
+    l1, l2 = cfg.link_lengths
+    c2 = (np.sum(p * p, axis=1) - l1 * l1 - l2 * l2) / (2 * l1 * l2)
+    q2 = np.arccos(np.clip(c2, -1.0, 1.0))
+    q1 = np.arctan2(p[:, 1], p[:, 0]) - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
+    return np.column_stack([q1, q2])
+
+
+def forward_kinematics(cfg: SimConfig, angles: np.ndarray) -> np.ndarray:
+    """(n, 2) joint angles -> (n, 2) fingertip positions on the pad."""
+    q = np.asarray(angles, float).reshape(-1, 2)
+    l1, l2 = cfg.link_lengths
+    a = q[:, 0] + q[:, 1]
+    return np.asarray(cfg.base) + np.column_stack(
+        [l1 * np.cos(q[:, 0]) + l2 * np.cos(a), l1 * np.sin(q[:, 0]) + l2 * np.sin(a)]
+    )
+
+
+def felt_positions(cfg: SimConfig, angles: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Where the robot feels its fingertip: the forward kinematics of its encoder readings.
+
+    The encoders read the true joint ``angles`` (n, 2) plus the arm's ``proprio_bias`` and
+    Gaussian noise of ``proprio_noise`` rad (no draw when it is 0). Returns (n, 2) px.
+    """
+    arm = cfg.arm
+    q = np.asarray(angles, float).reshape(-1, 2) + np.asarray(arm.proprio_bias)
+    if arm.proprio_noise > 0:
+        q = q + rng.normal(0.0, arm.proprio_noise, size=q.shape)
+    return forward_kinematics(cfg, q)
+
+
+def contact_points(cfg: SimConfig, landed: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Where the pad registers each touch: uniform in the finger's contact disc around ``landed``
+    (the landed points themselves, and no draw, for a point finger)."""
+    p = np.asarray(landed, float).reshape(-1, 2)
+    r = cfg.arm.finger_radius
+    if r <= 0 or len(p) == 0:
+        return p
+    u = rng.random((len(p), 2))
+    rho, phi = r * np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]
+    return p + np.column_stack([rho * np.cos(phi), rho * np.sin(phi)])
+
+
 class IdealReacher:
-    """The finger lands on the target (plus optional Gaussian scatter of ``reach_noise`` px)."""
+    """The finger lands on the target (plus optional Gaussian scatter of ``reach_noise`` px).
+
+    Attributes
+    ----------
+    last_felt : (n, 2) ndarray
+        Where the robot felt each landing of the last :meth:`reach` call (the landings themselves
+        unless the arm's proprioception is imperfect).
+    last_angles : (n, 2) ndarray
+        True joint angles at each landing of the last call.
+    """
 
     def __init__(self, cfg: SimConfig) -> None:
         self.cfg = cfg
+        self.last_felt = np.empty((0, 2))
+        self.last_angles = np.empty((0, 2))
 
     def reach(self, targets: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """(n, 2) targets -> (n, 2) landed finger positions. Raises OutOfReachError."""
@@ -153,7 +228,44 @@ class IdealReacher:
             raise OutOfReachError(f"target ({bad[0]:.1f}, {bad[1]:.1f}) is outside the arm's workspace")
         if self.cfg.reach_noise > 0:
             t = t + rng.normal(0.0, self.cfg.reach_noise, size=t.shape)
+        self.last_angles = inverse_kinematics(self.cfg, t)
+        arm = self.cfg.arm
+        if arm.proprio_noise > 0 or arm.proprio_bias != (0.0, 0.0):
+            self.last_felt = felt_positions(self.cfg, self.last_angles, rng)
+        else:
+            self.last_felt = t.copy()
         return t
+
+
+def keys_heard_when_felt(cfg: SimConfig, keyboard: Keyboard, felt: np.ndarray, samples: int,
+                         rng: np.random.Generator) -> np.ndarray:
+    """Ground truth of p(key | where the robot *feels* it touched), by Monte Carlo.
+
+    For a robot that feels its fingertip at ``felt`` (n, 2), the finger truly is at the forward
+    kinematics of the encoder readings minus their bias and noise, and the pad hears it anywhere in
+    the finger's contact disc: draw ``samples`` such touches per point (the keyboard at its
+    reference pose). What a model of p(sound | action) should predict, where the action is the felt
+    position (the robot never knows better). For an arm that senses exactly, every draw is the key
+    under ``felt`` and no random number is used.
+
+    Returns
+    -------
+    (n, samples) int ndarray
+        Key index of each draw, -1 for silence.
+    """
+    f = np.asarray(felt, float).reshape(-1, 2)
+    n = len(f)
+    if cfg.arm.senses_exactly:
+        return np.repeat(keyboard.key_at(f)[:, None], samples, axis=1)
+    arm = cfg.arm
+    q = inverse_kinematics(cfg, f)[:, None, :] - np.asarray(arm.proprio_bias)
+    if arm.proprio_noise > 0:
+        q = q + rng.normal(0.0, arm.proprio_noise, size=(n, samples, 2))
+    else:
+        q = np.broadcast_to(q, (n, samples, 2))
+    landed = forward_kinematics(cfg, q.reshape(-1, 2))
+    contact = contact_points(cfg, landed, rng)
+    return keyboard.key_at(contact).reshape(n, samples)
 
 
 def make_reacher(cfg: SimConfig):
@@ -170,7 +282,9 @@ class World:
     """The keyboard at its true pose, an arm and a perception channel.
 
     ``touch`` is all the robot side may call: it reaches for the actions and returns where the
-    finger landed (proprioception) and the perceived sound features (NaN rows for silence).
+    robot *feels* its finger landed (proprioception) and the perceived sound features (NaN rows
+    for silence). The pad hears at the finger's contact point (:func:`contact_points`). Where the
+    finger truly landed stays on the world's side (``last_landed``), for evaluation only.
     """
 
     keyboard: Keyboard
@@ -178,10 +292,15 @@ class World:
     pose: np.ndarray | None = None
     family: str = "translation"
     touches: int = field(default=0, init=False)
+    last_landed: np.ndarray = field(default_factory=lambda: np.empty((0, 2)), init=False)
 
     def touch(self, actions: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """(n, 2) actions -> landed (n, 2), perceived features (n, D)."""
+        """(n, 2) actions -> felt landing positions (n, 2), perceived features (n, D)."""
         landed = self.reacher.reach(np.asarray(actions, float).reshape(-1, 2), rng)
         self.touches += len(landed)
-        heard = self.keyboard.perceive(landed, self.pose, self.family, rng=rng)
-        return landed, heard
+        self.last_landed = landed
+        cfg = getattr(self.reacher, "cfg", None)
+        contact = landed if cfg is None else contact_points(cfg, landed, rng)
+        heard = self.keyboard.perceive(contact, self.pose, self.family, rng=rng)
+        felt = getattr(self.reacher, "last_felt", None)
+        return (landed if felt is None or len(felt) != len(landed) else felt), heard

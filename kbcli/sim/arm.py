@@ -16,6 +16,17 @@ forearm's end. A reach to a target point on the pad:
 5. steps the physics until the fingertip settles (joint errors and speeds below tolerance, or
    ``MAX_STEPS``) and returns where the fingertip actually is, read from the simulated bodies.
 
+With an arm preset that has finite servo gains (``ArmConfig.kp``, :mod:`kbcli.sim.arms`), step 4
+is replaced by a torque-level PD servo ``tau = kp * e - kd * w`` (bounded by ``max_torque``,
+applied as body torques, the elbow's reaction on the upper arm included) against joint friction:
+the two ``SimpleMotor`` constraints are kept at rate 0 with ``max_force = friction``, the way
+pymunk models rotational friction, so a joint sticks once the servo torque no longer beats it and
+stops short of its target by up to ``friction / kp`` rad, on the side it came from. The servo
+drives the joints' *measured* angles (true + ``proprio_bias``) to their targets, so an encoder
+bias moves the landing; the reach ends when both joints are still, or after ``settle_time``.
+Where the robot feels it landed is the forward kinematics of its encoder readings at the end
+(:func:`kbcli.sim.felt_positions`).
+
 Each reach starts from the pose the previous one ended in (a real arm does not teleport); the start
 joint angles of the last batch are kept in :attr:`DynamicsReacher.last_start_angles`, and
 :meth:`DynamicsReacher.reset` puts the arm back in a given pose, so a run is reproducible from its
@@ -34,7 +45,16 @@ import numpy as np
 import pymunk
 
 from kbcli.errors import OutOfReachError
-from kbcli.sim import SimConfig, workspace_check
+from kbcli.sim import (
+    SimConfig,
+    felt_positions,
+    forward_kinematics,
+    inverse_kinematics,
+    workspace_check,
+)
+
+__all__ = ["DynamicsReacher", "inverse_kinematics", "forward_kinematics", "jacobian",
+           "check_reachable"]
 
 DT = 1.0 / 240.0  # physics time step, s
 KP = 40.0  # proportional gain of the servo, 1/s
@@ -43,40 +63,10 @@ MAX_TORQUE = 5e8  # motor torque bound (px^2 * mass / s^2)
 ANGLE_TOL = 2e-5  # joint-angle error at which a joint counts as settled, rad
 SPEED_TOL = 2e-3  # joint speed below which a joint counts as still, rad/s
 MAX_STEPS = 2000  # give up settling after this many steps (8.3 s of simulated time)
+SETTLE_STEPS = 12  # torque servo: a reach ends after this many steps with both joints still
 LINK_MASS = (2.0, 1.5)  # upper arm, forearm
 # pivots: share of a joint's drift left after 1 s (pymunk's default is 0.9**60)
 JOINT_ERROR_BIAS = 0.5**240
-
-
-def inverse_kinematics(cfg: SimConfig, targets: np.ndarray) -> np.ndarray:
-    """Joint angles (shoulder q1, elbow q2 > 0) that put the fingertip on each target.
-
-    Parameters
-    ----------
-    targets : (n, 2) ndarray
-        Pad points inside the workspace.
-
-    Returns
-    -------
-    (n, 2) ndarray
-        q1 is the upper arm's angle from the pad's x axis, q2 the forearm's angle relative to it.
-    """
-    p = np.asarray(targets, float).reshape(-1, 2) - np.asarray(cfg.base)
-    l1, l2 = cfg.link_lengths
-    c2 = (np.sum(p * p, axis=1) - l1 * l1 - l2 * l2) / (2 * l1 * l2)
-    q2 = np.arccos(np.clip(c2, -1.0, 1.0))
-    q1 = np.arctan2(p[:, 1], p[:, 0]) - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
-    return np.column_stack([q1, q2])
-
-
-def forward_kinematics(cfg: SimConfig, angles: np.ndarray) -> np.ndarray:
-    """(n, 2) joint angles -> (n, 2) fingertip positions on the pad."""
-    q = np.asarray(angles, float).reshape(-1, 2)
-    l1, l2 = cfg.link_lengths
-    a = q[:, 0] + q[:, 1]
-    return np.asarray(cfg.base) + np.column_stack(
-        [l1 * np.cos(q[:, 0]) + l2 * np.cos(a), l1 * np.sin(q[:, 0]) + l2 * np.sin(a)]
-    )
 
 
 def jacobian(cfg: SimConfig, angles: np.ndarray) -> np.ndarray:
@@ -124,6 +114,11 @@ class DynamicsReacher:
         Joint angles (q1, q2) the arm started each reach of the last :meth:`reach` call from.
     last_steps : (n,) int ndarray
         Physics steps each reach of the last call took to settle.
+    last_angles : (n, 2) ndarray
+        True joint angles at the end of each reach of the last call.
+    last_felt : (n, 2) ndarray
+        Where the robot felt its fingertip at the end of each reach (the true fingertip for an arm
+        with exact proprioception).
     last_end_angles : (n, 2) ndarray
         Joint angles each reach of the last call ended in (the pose at the touch).
     """
@@ -143,14 +138,19 @@ class DynamicsReacher:
         self._elbow_joint = pymunk.PivotJoint(self.upper, self.fore, (l1 / 2, 0), (-l2 / 2, 0))
         self.m1 = pymunk.SimpleMotor(space.static_body, self.upper, 0.0)
         self.m2 = pymunk.SimpleMotor(self.upper, self.fore, 0.0)
+        arm = cfg.arm
+        self._torque = not arm.exact_servo
         for m in (self.m1, self.m2):
-            m.max_force = MAX_TORQUE
+            # exact servo: velocity motors; torque servo: rate-0 motors as joint friction
+            m.max_force = arm.friction if self._torque else MAX_TORQUE
         for j in (shoulder, self._elbow_joint):
             j.error_bias = JOINT_ERROR_BIAS
         space.add(shoulder, self._elbow_joint, self.m1, self.m2)
         self.home = inverse_kinematics(cfg, np.array(cfg.base) + (0.0, 0.7 * (l1 + l2)))[0]
         self.last_start_angles = np.empty((0, 2))
         self.last_steps = np.empty(0, dtype=np.int64)
+        self.last_angles = np.empty((0, 2))
+        self.last_felt = np.empty((0, 2))
         self.last_end_angles = np.empty((0, 2))
         self.reset(self.home)
 
@@ -213,6 +213,37 @@ class DynamicsReacher:
                 return n
         return MAX_STEPS
 
+    def _drive_torque(self, q1t: float, q2t: float) -> int:
+        """Torque PD servo of both joints against friction until still; return the steps taken.
+
+        ``q1t, q2t`` are targets of the *measured* joint angles (true + encoder bias).
+        """
+        arm = self.cfg.arm
+        kp, kd, tmax = float(arm.kp), float(arm.kd), float(arm.max_torque)
+        b1, b2 = arm.proprio_bias
+        up, fo, step = self.upper, self.fore, self.space.step
+        max_steps = max(1, int(round(arm.settle_time / DT)))
+        still = 0
+        for n in range(1, max_steps + 1):
+            a1 = up.angle
+            w1 = up.angular_velocity
+            w2 = fo.angular_velocity - w1
+            e1 = _wrap(q1t - (a1 + b1))
+            e2 = _wrap(q2t - (fo.angle - a1 + b2))
+            t1 = min(tmax, max(-tmax, kp * e1 - kd * w1))
+            t2 = min(tmax, max(-tmax, kp * e2 - kd * w2))
+            up.torque = t1 - t2  # pymunk resets body torques after every step
+            fo.torque = t2
+            step(DT)
+            if abs(up.angular_velocity) < SPEED_TOL and abs(
+                    fo.angular_velocity - up.angular_velocity) < SPEED_TOL:
+                still += 1
+                if still >= SETTLE_STEPS:
+                    return n
+            else:
+                still = 0
+        return max_steps
+
     def reach(self, targets: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Reach for each target in turn; return where the fingertip ended.
 
@@ -242,12 +273,19 @@ class DynamicsReacher:
         steps = np.empty(len(t), dtype=np.int64)
         landed = np.empty((len(t), 2))
         ends = np.empty((len(t), 2))
+        drive = self._drive_torque if self._torque else self._drive
         for i in range(len(t)):  # reaches are sequential in time: each starts where the last ended
             starts[i] = self.angles
-            steps[i] = self._drive(float(q[i, 0]), float(q[i, 1]))
+            steps[i] = drive(float(q[i, 0]), float(q[i, 1]))
             landed[i] = self.fingertip()
             ends[i] = self.angles
         self.last_start_angles = starts
         self.last_steps = steps
+        self.last_angles = ends
+        arm = self.cfg.arm
+        if arm.proprio_noise > 0 or arm.proprio_bias != (0.0, 0.0):
+            self.last_felt = felt_positions(self.cfg, ends, rng)
+        else:
+            self.last_felt = landed.copy()
         self.last_end_angles = ends
         return landed

@@ -52,6 +52,7 @@ from kbcli.core.play import MATCH, replay
 from kbcli.core.posterior import ActionSamples, LikelihoodTable
 from kbcli.errors import ArtifactError, ConfigError, KbcliError
 from kbcli.sim import MODES, SimConfig, World, make_reacher
+from kbcli.sim.arms import PRESETS, ArmConfig, arm_config
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages.artifact import Artifact, ref
 from kbcli.stages.models import load_model
@@ -61,7 +62,7 @@ DEFAULT_SNAPSHOTS = (0, 1, 2, 3, 5, 10, 20, 40)
 
 
 #: The world-side and loop options of :class:`AdaptConfig` (everything else is the robot's).
-LOOP_FIELDS = ("mode", "reach_noise", "feedback", "max_steps", "stop")
+LOOP_FIELDS = ("mode", "reach_noise", "arm", "feedback", "max_steps", "stop")
 
 
 @dataclass(frozen=True, kw_only=True, init=False)
@@ -78,6 +79,9 @@ class AdaptConfig:
         ``ideal`` or ``dynamics`` (:class:`kbcli.sim.SimConfig`).
     reach_noise : float
         Landing scatter of the arm, px.
+    arm : ArmConfig
+        How the simulated arm errs (:mod:`kbcli.sim.arms`; a preset name or a table is accepted):
+        its landing error, its finger and how well it feels where it landed.
     feedback : str
         ``landed``: the robot observes where its finger landed (proprioception); ``aim``: only where
         it aimed, and blurs its likelihood by ``reach_noise`` (``robot.blur`` is then set to it).
@@ -96,13 +100,15 @@ class AdaptConfig:
     robot: AdapterConfig = field(default_factory=AdapterConfig)
     mode: str = "ideal"
     reach_noise: float = 0.0
+    arm: ArmConfig = PRESETS["ideal"]
     feedback: str = "landed"
     max_steps: int = 40
     stop: bool = False
 
     def __init__(self, *, robot: AdapterConfig | None = None, mode: str = "ideal",
-                 reach_noise: float = 0.0, feedback: str = "landed", max_steps: int = 40,
-                 stop: bool = False, **robot_options) -> None:
+                 reach_noise: float = 0.0, arm: ArmConfig | str | dict = "ideal",
+                 feedback: str = "landed", max_steps: int = 40, stop: bool = False,
+                 **robot_options) -> None:
         # robot options given flat (``AdaptConfig(strategy="random")``, the layout before the
         # composition) still work: they override ``robot``'s
         unknown = sorted(set(robot_options) - set(AdapterConfig.__dataclass_fields__))
@@ -115,7 +121,8 @@ class AdaptConfig:
                 raise ConfigError(f"robot must be an AdapterConfig, got {type(robot).__name__}")
             robot = replace(robot, **robot_options)
         for k, v in (("robot", robot), ("mode", mode), ("reach_noise", reach_noise),
-                     ("feedback", feedback), ("max_steps", max_steps), ("stop", stop)):
+                     ("arm", arm_config(arm)), ("feedback", feedback), ("max_steps", max_steps),
+                     ("stop", stop)):
             object.__setattr__(self, k, v)
         self.__post_init__()
 
@@ -131,6 +138,7 @@ class AdaptConfig:
             raise ConfigError(f"max_steps must be a whole number >= 1, got {self.max_steps!r}")
         if not isinstance(self.stop, bool):
             raise ConfigError(f"stop must be true or false, got {self.stop!r}")
+        object.__setattr__(self, "arm", arm_config(self.arm))
         self.sim_config()
         self.adapter_config()
 
@@ -150,7 +158,7 @@ class AdaptConfig:
         return replace(self, robot=replace(self.robot, **changes))
 
     def sim_config(self) -> SimConfig:
-        return SimConfig(mode=self.mode, reach_noise=self.reach_noise)
+        return SimConfig(mode=self.mode, reach_noise=self.reach_noise, arm=self.arm)
 
     def adapter_config(self) -> AdapterConfig:
         """The robot-side config (``blur`` is the reach noise under ``aim`` feedback)."""
@@ -161,6 +169,7 @@ class AdaptConfig:
     def to_dict(self) -> dict:
         """Every resolved option, the robot's nested under ``robot``."""
         d = {k: getattr(self, k) for k in LOOP_FIELDS}
+        d["arm"] = self.arm.to_dict()
         return {"robot": self.robot.to_dict(), **d}
 
     @classmethod
@@ -278,6 +287,7 @@ class Recorder:
         self.snaps = {int(s) for s in snapshot_steps if int(s) >= 0}
         self.rec: dict[str, list] = {k: [] for k in RECORDS}
         self.joint_angles: list[np.ndarray] = []
+        self.model_error: list[tuple[float, float]] = []
         self.snap_t: list[int] = []
         self.snap_log: list[np.ndarray] = []
         self.snap_ang: list[np.ndarray] = []
@@ -307,6 +317,9 @@ class Recorder:
             self.rec[k].append(v)
         if joint_angles is not None:
             self.joint_angles.append(np.asarray(joint_angles, float).reshape(2))
+        robust = getattr(self.adapter, "robust", None)
+        if robust is not None:
+            self.model_error.append((robust.blur_mean(), robust.outlier_mean()))
         if st.t in self.snaps:
             self.snapshot(st.t)
 
@@ -324,6 +337,9 @@ class Recorder:
         out["stop"] = out["stop"].astype(bool)
         if self.joint_angles and len(self.joint_angles) == len(self):
             out["joint_angles"] = np.stack(self.joint_angles)
+        if self.model_error and len(self.model_error) == len(self):
+            me = np.asarray(self.model_error, float)
+            out["blur_mean"], out["outlier_mean"] = me[:, 0], me[:, 1]
         out.update(dx=g.dx, dy=g.dy, angles=g.angles,
                    snapshot_steps=np.asarray(self.snap_t, np.int64))
         if self.snap_t:
@@ -377,7 +393,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     Returns
     -------
     dict of ndarrays, per step t = 1..T (T = ``max_steps``, fewer when ``cfg.stop`` ends early)
-        ``actions`` (T, 2), ``landed`` (T, 2), ``perceived`` (T, D), ``classes`` (T,),
+        ``actions`` (T, 2), ``landed`` (T, 2) where the robot felt it landed, ``true_landed``
+        (T, 2) where it did (world side), ``perceived`` (T, D), ``classes`` (T,),
         ``estimates`` (T, P) maximum-likelihood cell, ``means`` (T, P) posterior mean,
         ``errors`` (T,) px error of the estimate (``cfg.robot.estimator``) vs truth, ``ml_errors`` (T,),
         ``angle_errors`` (T,) deg, ``entropy`` (T,) nats, ``ml_prob`` (T,), ``mass`` (T,),
@@ -394,12 +411,15 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     world = World(keyboard, make_reacher(cfg.sim_config()), truth, world_family)
     poses: list[np.ndarray] = []
 
+    true_landed: list[np.ndarray] = []
+
     def touch(action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        landed, heard = world.touch(action[None, :], world_rng)
+        felt, heard = world.touch(action[None, :], world_rng)
+        true_landed.append(world.last_landed[0])
         ang = end_angles(world.reacher)
         if ang is not None and len(ang):
             poses.append(ang[-1])
-        return landed[0], heard[0]
+        return felt[0], heard[0]
 
     snaps = [s for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps]
     rec = Recorder(adapter, snaps)
@@ -411,6 +431,7 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         if on_step is not None:
             on_step(st.t)
     out = rec.arrays()
+    out["true_landed"] = np.asarray(true_landed, float).reshape(-1, 2)
     if play is not None:
         final = out["means"][-1] if cfg.robot.estimator == "mean" else out["estimates"][-1]
         if world_family != cfg.robot.family:  # correct in the world's parameters

@@ -17,7 +17,7 @@ from kbcli import __version__
 #: Current schema version of every artifact kind. Bump a kind's version when its layout changes.
 SCHEMA_VERSIONS: dict[str, int] = {
     "keyboard": 2,
-    "model": 2,
+    "model": 3,
     "scene": 1,
     "history": 1,
     "detection": 1,
@@ -25,6 +25,7 @@ SCHEMA_VERSIONS: dict[str, int] = {
     #            3: the adapt config holds the robot's options under "robot" (2 still read)
     "closed_loop": 3,  # 2: steps/joint_angles, steps/estimate, the adaptation posteriors; 3: likewise
     "evaluation": 2,  # 2: named methods, measured playing success, tie-corrected tests
+    "model_quality": 1,
 }
 
 

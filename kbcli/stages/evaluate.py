@@ -67,7 +67,7 @@ EXPERIMENT = "kbcli.stages.adapt:experiment"
 #: Strategies known when the adapt stage cannot be imported to ask it.
 DEFAULT_STRATEGIES = ("random", "active", "infogain")
 #: Adapt options the protocol sets per experiment (not in a method's table).
-PER_EXPERIMENT = ("strategy", "mode", "max_steps", "family", "reach_noise")
+PER_EXPERIMENT = ("strategy", "mode", "max_steps", "family", "reach_noise", "arm")
 #: Keys of a method's table that are not adapt options.
 METHOD_KEYS = ("strategies", "modes", "categories", "description")
 #: What an example run keeps beyond its per-step arrays (Fig. 5).
@@ -237,7 +237,7 @@ class Method:
         if fixed:
             raise ConfigError(
                 f"{where}.{fixed[0]} is set per experiment by the protocol: use strategies, "
-                "modes, max_steps, family and reach_noise of [evaluate] instead"
+                "modes, max_steps, family, reach_noise and arm of [evaluate] instead"
             )
         object.__setattr__(self, "options", MappingProxyType(opts))
 
@@ -307,6 +307,9 @@ class EvaluateConfig:
     reach_noise : mapping
         Landing scatter of the arm (px) in each mode: ``ideal`` lands exactly (0, the paper's
         idealised problem); ``dynamics`` adds motor noise to the simulated arm.
+    arm : mapping
+        Arm of each mode: a preset name (``ideal``, ``servo``, ``realistic``) or a table
+        (:mod:`kbcli.sim.arms`); missing modes get ``ideal``.
     categories : tuple of Category
         Displacement categories, in order.
     play_notes : int
@@ -327,6 +330,7 @@ class EvaluateConfig:
     example: str = "small"
     snapshot_steps: tuple[int, ...] = (1, 2, 3, 5, 10, 20)
     reach_noise: Any = field(default_factory=lambda: {"ideal": 0.0, "dynamics": 2.0})
+    arm: Any = field(default_factory=lambda: {"ideal": "ideal", "dynamics": "ideal"})
     categories: tuple[Category, ...] = field(default_factory=_paper_categories)
     play_notes: int = 200
     melody: str = DEFAULT_MELODY
@@ -409,6 +413,16 @@ class EvaluateConfig:
                 raise ConfigError(f"reach_noise.{m} must be >= 0 px, got {v!r}")
         object.__setattr__(self, "reach_noise", MappingProxyType(
             {m: float(noise.get(m, 0.0)) for m in MODES}))
+        if not isinstance(self.arm, (dict, MappingProxyType)):
+            raise ConfigError("arm must be a table of mode = preset name (or table)")
+        from kbcli.sim.arms import arm_config
+
+        arms = dict(self.arm)
+        for m in arms:
+            if m not in MODES:
+                raise ConfigError(f"arm: unknown mode {m!r}; valid: {', '.join(MODES)}")
+        object.__setattr__(self, "arm", MappingProxyType(
+            {m: arm_config(arms.get(m)).to_dict() for m in MODES}))
         for meth in methods:  # let the adapt stage check each method's options
             for s in meth.strategies:
                 for m in self.modes:
@@ -446,6 +460,7 @@ class EvaluateConfig:
             "example": self.example,
             "snapshot_steps": list(self.snapshot_steps),
             "reach_noise": dict(self.reach_noise),
+            "arm": {m: dict(v) for m, v in self.arm.items()},
             "categories": {c.name: c.to_dict() for c in self.categories},
             "play_notes": self.play_notes,
             "melody": self.melody,
@@ -551,7 +566,7 @@ def adapt_config(cfg: EvaluateConfig, method: str, strategy: str, mode: str):
         return None
     values = {**cfg.method(method).options, "strategy": strategy, "mode": mode,
               "max_steps": cfg.max_steps, "family": cfg.family,
-              "reach_noise": cfg.reach_noise[mode]}
+              "reach_noise": cfg.reach_noise[mode], "arm": dict(cfg.arm[mode])}
     if isinstance(values.get("robot"), (dict, MappingProxyType)):
         values["robot"] = dict(values["robot"])
     return adapt.AdaptConfig.from_dict(values)

@@ -21,9 +21,11 @@ class reads them), ``curve/{reaches,accuracy}`` and ``evaluation/predicted_keys`
 predicts in each 1 px cell of the working area, -1 silence, -2 a sound that is no key; row i is y,
 from ``evaluation/origin``). Its attrs hold the final ``accuracy``, ``boundary_error_px``,
 ``reaches_to_97`` and ``reaches_to_99`` (first curve point at or above 97 % / 99 %, or None), the
-``model_class`` and ``n_classes`` (the fit time is measured by ``kbcli bench learn``, not stored:
-identical runs give identical files). Schema 2 (schema 1:
-``lines`` only, no ``model_class``).
+``model_class``, ``n_classes`` and ``reliability``: what the model estimates of itself from its
+samples alone (cross-validated mislabel rate, log loss, calibration error and boundary error, and
+the calibration it chose; :mod:`kbcli.core.reliability`). The final model is calibrated that way.
+The fit time is measured by ``kbcli bench learn``, not stored: identical runs give identical files.
+Schema 3 (schema 2: ``lines`` only, calibrated; schema 1: ``lines``, uncalibrated).
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kbcli.core import accuracy as scoring
+from kbcli.core import reliability
 from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.model import grid_points
@@ -49,6 +52,8 @@ CURVE_STEP = 2.0  # px, grid of the learning curve's accuracy
 EVAL_STEP = 1.0  # px, grid of the final accuracy and boundary error
 TARGET_ACCURACY = 0.99
 LEVELS = (0.97, 0.99)  # accuracies whose first crossing the artifact records
+#: Spawn key of the generator that assigns samples to cross-validation folds.
+RELIABILITY_KEY = 9
 
 
 def model_classes() -> tuple[str, ...]:
@@ -177,13 +182,21 @@ class Learning:
             self.curve_accuracy.append(scoring.accuracy(step.model, self.keyboard, CURVE_STEP))
         return n
 
+    def reliability(self):
+        """The final model, calibrated, and its own estimate of how good it is, from its samples
+        alone (:func:`kbcli.core.reliability.assess`: 5-fold cross-validation)."""
+        ex = self.exploration
+        seed = 0 if self.seed is None else int(self.seed)
+        rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(RELIABILITY_KEY,)))
+        return reliability.assess(ex.refit, ex.model, ex.landed, ex.perceived, rng=rng)
+
     def artifact(self) -> Artifact:
         """The ``model`` artifact (after the last batch)."""
         ex = self.exploration
         if len(ex.targets) < self.cfg.budget:
             raise RuntimeError("learning is not finished: iterate to the end first")
         kb = self.keyboard
-        model = ex.model
+        model, rel = self.reliability()
         pred, true = scoring.key_maps(model, kb, EVAL_STEP)
         acc = scoring.accuracy_from_maps(pred, true)
         berr = scoring.boundary_error(pred, true, EVAL_STEP)
@@ -227,6 +240,7 @@ class Learning:
                 "boundary_error_px": berr,
                 "reaches_to_97": first[0.97],
                 "reaches_to_99": first[0.99],
+                "reliability": rel.to_dict(),
             },
             inputs={"keyboard": ref(self.keyboard_art)},
         )

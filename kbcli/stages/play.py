@@ -22,6 +22,7 @@ from kbcli.core.melody import DEFAULT_MELODY, parse_melody
 from kbcli.core.play import NO_MATCH, PlayStep, play
 from kbcli.errors import ConfigError
 from kbcli.sim import MODES, SimConfig, World, make_reacher
+from kbcli.sim.arms import PRESETS, ArmConfig, arm_config
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import perturb as perturb_stage
 from kbcli.stages.artifact import Artifact, ref
@@ -45,6 +46,8 @@ class PlayConfig:
         ``ideal`` or ``dynamics`` reaching (:class:`kbcli.sim.SimConfig`).
     reach_noise : float
         Landing scatter of the arm, px.
+    arm : ArmConfig
+        How the arm errs (:mod:`kbcli.sim.arms`; a preset name or table is accepted).
     """
 
     melody: str = DEFAULT_MELODY
@@ -52,6 +55,7 @@ class PlayConfig:
     perturb_at: int | None = None
     mode: str = "ideal"
     reach_noise: float = 0.0
+    arm: ArmConfig = PRESETS["ideal"]
 
     def __post_init__(self) -> None:
         if not isinstance(self.steps, int) or isinstance(self.steps, bool) or self.steps < 1:
@@ -66,6 +70,7 @@ class PlayConfig:
             raise ConfigError(f"unknown mode {self.mode!r}; valid: {', '.join(MODES)}")
         if not (math.isfinite(self.reach_noise) and self.reach_noise >= 0):
             raise ConfigError(f"reach_noise must be >= 0 px, got {self.reach_noise!r}")
+        object.__setattr__(self, "arm", arm_config(self.arm))
 
     def to_dict(self) -> dict:
         return {
@@ -74,6 +79,7 @@ class PlayConfig:
             "perturb_at": self.perturb_at,
             "mode": self.mode,
             "reach_noise": self.reach_noise,
+            "arm": self.arm.to_dict(),
         }
 
 
@@ -120,7 +126,7 @@ class Session:
             if cfg.perturb_at is not None:
                 raise ConfigError("perturb_at needs a scene (kbcli perturb) to move the keyboard to")
             self.family, self.params, self.perturb_at = "translation", None, None
-        self.sim = SimConfig(mode=cfg.mode, reach_noise=cfg.reach_noise)
+        self.sim = SimConfig(mode=cfg.mode, reach_noise=cfg.reach_noise, arm=cfg.arm)
         self.world = World(keyboard=kb, reacher=make_reacher(self.sim))
         robot_rng, world_rng = rng.spawn(2)
 

@@ -515,18 +515,22 @@ def _methods_table(art: Artifact) -> list[str]:
         for mode, by_s in info[x]["options"].items():
             for d in by_s.values():
                 for k, v in d.items():
-                    if k in ("robot", "mode", "reach_noise"):
+                    if k in ("robot", "mode", "reach_noise", "arm"):
                         continue
                     loop.setdefault(k, {})[x] = v
                 loop.setdefault("reach_noise (px)", {}).setdefault(x, {})[mode] = d.get(
                     "reach_noise")
+                arm = d.get("arm")
+                loop.setdefault("arm (preset)", {}).setdefault(x, {})[mode] = (
+                    arm.get("preset", "?") if isinstance(arm, dict) else "ideal")
                 break
     for k, by_x in loop.items():
         vals = []
         for x in meths:
             v = by_x.get(x, "")
             if isinstance(v, dict):
-                v = ", ".join(f"{m} {n:g}" for m, n in v.items() if n is not None)
+                v = ", ".join(f"{m} {n:g}" if isinstance(n, (int, float)) else f"{m} {n}"
+                              for m, n in v.items() if n is not None)
             vals.append(str(v))
         lines.append(f"| {k} | " + " | ".join(vals) + " |")
     return lines

@@ -134,7 +134,10 @@ def load_replay(art: Artifact) -> Replay:
         actions = np.asarray(d["actions"], float).reshape(-1, 2)
         landed = np.asarray(d["landed"], float).reshape(-1, 2)
         landed = np.where(np.isfinite(landed), landed, actions)  # no felt position: the aim
-        perceived = np.asarray(d["perceived"], float).reshape(len(actions), -1)
+        if "perceived" in d:  # optional in a run (schema 1): without it, no sound is named
+            perceived = np.asarray(d["perceived"], float).reshape(len(actions), -1)
+        else:
+            perceived = np.full((len(actions), 2), np.nan)
         family = a.get("family", "translation")
         adapt_cfg = art.config.get("adapt") or {}
         # run schema 3 nests the robot's options under "robot"; sessions and schema <= 2: flat

@@ -5,7 +5,9 @@ its uncertainty (the confusion factor 1 - (p1 - p2), Sect. III-E) shaded dark wi
 the fitted boundary lines thin, and the explored points (where the finger landed) as dots; cells
 whose predicted key is wrong are red; a legend names each. Middle: the true layout. Right: the
 learning curve (accuracy on a 2 px grid against reaches), with the 99 % level dashed and labelled.
-An exact-model artifact shows its map and the layout, titled as such.
+The model's own estimate of its reliability (cross-validated, :mod:`kbcli.core.reliability`)
+sits beside the measured values. An exact-model artifact shows its map and the layout, titled as
+such.
 """
 
 from __future__ import annotations
@@ -126,5 +128,17 @@ def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> N
                                            else "99 % not reached"), fontsize=9)
         ax.legend(fontsize=7.5, loc="lower right")
         ax.grid(alpha=0.3)
+        rel = art.attrs.get("reliability")
+        if rel:  # what the model estimates of itself from its samples (model schema 2)
+            cal = ", ".join(f"{k} {v:g}" for k, v in sorted(rel.get("calibration", {}).items()))
+            ax.text(0.97, 0.20,
+                    f"the model's own estimate ({rel['folds']}-fold cross-validation):\n"
+                    f"boundary error ~{rel['boundary_error']:.2f} px "
+                    f"(measured {a.get('boundary_error_px', np.nan):.2f})\n"
+                    f"mislabel rate {100 * rel['cv_error']:.1f} % "
+                    f"(measured {100 * (1 - a.get('accuracy', np.nan)):.1f})\n"
+                    f"calibration error {rel['cv_ece']:.3f}" + (f"; {cal}" if cal else ""),
+                    transform=ax.transAxes, ha="right", va="bottom", fontsize=7,
+                    bbox={"boxstyle": "round", "fc": "white", "ec": "0.7", "alpha": 0.9})
     fig.tight_layout()
     save(fig, path)

@@ -1,0 +1,164 @@
+"""``kbcli quality``: the model-quality sweep (issue 9; the paper's Sect. IV-C hypothesis)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from kbcli.cli.app import check_io, command, err, out, progress
+from kbcli.errors import ConfigError, KbcliError
+from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.io.config import load_toml
+from kbcli.io.paths import Output
+from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
+from kbcli.stages import quality as stage
+
+DEFAULT_CONFIG = Path("pipelines/model-quality.toml")
+DEFAULT_KEYBOARD = Path("data/keyboard.h5")
+
+
+def _budgets(text: str | None) -> tuple[int, ...] | None:
+    if text is None:
+        return None
+    try:
+        return tuple(int(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise ConfigError(f"--budgets must be whole numbers separated by commas, got {text!r}") \
+            from None
+
+
+@command(name="quality")
+def quality_cmd(
+    output: Annotated[Path, typer.Option("-o", "--output", help="model_quality artifact to write (.h5).")],
+    config: Annotated[Path, typer.Option("--config", help="TOML with a [quality] table.")] = DEFAULT_CONFIG,
+    keyboard: Annotated[Path, typer.Option("--keyboard", help="Keyboard artifact the models are learned on.")] = DEFAULT_KEYBOARD,
+    experiments: Annotated[int | None, typer.Option(
+        "--experiments", help="Repetitions per displacement, model and row (overrides the config).")] = None,
+    budgets: Annotated[str | None, typer.Option(
+        "--budgets", help="Reach budgets of the models, comma-separated (overrides the config).")] = None,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Local worker processes (joblib/loky).")] = 1,
+    scheduler: Annotated[str | None, typer.Option(
+        "--scheduler", help="Run on a Dask cluster: address of its scheduler, tcp://HOST:PORT.")] = None,
+    resume: Annotated[bool, typer.Option(
+        "--resume", help="Continue an interrupted sweep from OUTPUT.ckpt/.")] = False,
+    models_dir: Annotated[Path | None, typer.Option(
+        "--models", help="Also keep every learned model artifact in this folder.")] = None,
+) -> None:
+    """Test the paper's Sect. IV-C hypothesis: learn models of every budget and exploration, adapt
+    with each, and measure how the strategies' advantage depends on the model's quality.
+
+    Reads the TOML config and KEYBOARD. Writes OUTPUT (kind 'model_quality': every run's error per
+    touch; per model, category and row the final error, touches to the model's threshold, the
+    advantage over the baseline and its Wilcoxon signed-rank p-value). Learned models and finished
+    adaptations are kept in OUTPUT.ckpt/ while it runs (--resume continues from there). Prints a
+    progress bar per phase and a table of the advantage per model; `kbcli report OUTPUT` draws it.
+    """
+    if config == DEFAULT_CONFIG and not config.is_file():
+        raise KbcliError(f"{config}: no such config file here; run from the kbcli checkout or pass "
+                         "--config FILE")
+    ckpt_dir = Checkpoint.beside(output)
+    cfg = stage.QualityConfig.from_dict(dict(load_toml(config, "quality")))
+    cfg = cfg.with_overrides(experiments=experiments, budgets=_budgets(budgets))
+    names = tuple(f"{n}.h5" for n, _, _ in stage.model_names(cfg))
+    check_io({"--config": config, "--keyboard": keyboard}, ("--output", output),
+             Output(ckpt_dir, "checkpoint folder", folder=True, removes=True),
+             *((Output(models_dir, "--models folder", folder=True, files=names),)
+               if models_dir is not None else ()))
+    if jobs < 1:
+        raise ConfigError(f"--jobs must be >= 1, got {jobs}")
+    if scheduler is not None:
+        if jobs != 1:
+            raise ConfigError("--jobs and --scheduler exclude each other")
+        check_scheduler_address(scheduler)
+    kb_art = read_artifact(keyboard, "keyboard")
+    if models_dir is not None and not models_dir.is_dir():
+        raise KbcliError(f"{models_dir}: no such folder (for --models)")
+    fp = {**stage.fingerprint(cfg, kb_art), "source_code": source_digest()}
+    ckpt = Checkpoint(ckpt_dir, fp, every=20)
+    done = ckpt.load(resume)
+    started = time.perf_counter()
+
+    # phase 1: the models (kept as artifacts in the checkpoint folder)
+    model_dir = ckpt_dir / "models"
+    ltasks = stage.learn_tasks(cfg)
+    models = {}
+    for t in ltasks:
+        f = model_dir / f"{t.name}.h5"
+        if resume and f.is_file():
+            models[t.name] = read_artifact(f, "model")
+    todo = [i for i, t in enumerate(ltasks) if t.name not in models]
+    if todo:
+        ckpt.start()
+        model_dir.mkdir(exist_ok=True)
+    ctx = {"keyboard": kb_art, "quality": cfg.to_dict()}
+    job = Job(setup="kbcli.stages.quality:learn_setup", run="kbcli.stages.quality:learn_one",
+              context=ctx, context_key=f"learn-{kb_art.sha256}", tasks=tuple(ltasks))
+    try:
+        for i, res in progress(execute(job, todo, jobs=jobs, scheduler=scheduler), len(todo),
+                               "learning models"):
+            art = res["artifact"]
+            write_artifact(art, model_dir / f"{ltasks[i].name}.h5")
+            models[ltasks[i].name] = art
+    except KeyboardInterrupt:
+        err.print(f"kbcli: interrupted; {len(models)} of {len(ltasks)} models kept in {model_dir}: "
+                  "rerun with --resume to continue", markup=False)
+        raise typer.Exit(130) from None
+    learned_s = time.perf_counter() - started
+
+    # phase 2: the adaptations
+    tasks = stage.plan(cfg)
+    ctx = {"models": models, "quality": cfg.to_dict()}
+    key = "adapt-" + "-".join(str(models[n].sha256)[:12] for n, _, _ in stage.model_names(cfg))
+    job = Job(setup="kbcli.stages.quality:adapt_setup", run="kbcli.stages.quality:adapt_one",
+              context=ctx, context_key=key, tasks=tuple(tasks))
+    todo = [t.row for t in tasks if t.row not in done]
+    if done:
+        err.print(f"resuming: {len(done)} of {len(tasks)} adaptations already done", markup=False)
+    fresh: dict[int, dict] = {}
+    try:
+        for i, res in progress(execute(job, todo, jobs=jobs, scheduler=scheduler), len(todo),
+                               "adaptations"):
+            ckpt.add(i, res)
+            fresh[i] = res
+    except KeyboardInterrupt:
+        ckpt.flush()
+        err.print(f"kbcli: interrupted; {len(done) + len(fresh)} of {len(tasks)} adaptations kept "
+                  f"in {ckpt_dir}: rerun with --resume to continue", markup=False)
+        raise typer.Exit(130) from None
+    finally:
+        ckpt.flush()
+    results = {**done, **fresh}
+    art = stage.assemble(cfg, models, tasks, results, kb_art)
+    write_artifact(art, output)
+    if models_dir is not None:
+        for name, m in models.items():
+            write_artifact(m, models_dir / f"{name}.h5")
+    ckpt.remove()
+    elapsed = time.perf_counter() - started
+    out.print(f"wrote {output}: {len(models)} models, {len(tasks)} adaptations "
+              f"({learned_s:.0f} s learning, {elapsed - learned_s:.0f} s adapting)")
+    _summary(art)
+
+
+def _summary(art) -> None:
+    from rich.table import Table
+
+    a = art.attrs
+    rows = [r for r in a["rows"] if r != a["baseline"]]
+    t = Table(title=f"advantage over {a['baseline']} (touches saved to tau, all categories; p)",
+              title_justify="left")
+    for col in ("model", "accuracy", "boundary err", *rows):
+        t.add_column(col, justify="left" if col == "model" else "right")
+    for m, mi in a["models"].items():
+        cells = []
+        for r in rows:
+            s = a["summary"][m]["all"][r]
+            cells.append(f"{s['advantage']:+g} ({s['pvalue']:.0e})")
+        t.add_row(m, f"{100 * mi['accuracy']:.1f} %", f"{mi['boundary_error']:.2f} px", *cells)
+    out.print(t)
+    for r in rows:
+        out.print(f"{r}: the paper's explanation {stage.verdict(stage.hypothesis(art, r))}",
+                  soft_wrap=True)

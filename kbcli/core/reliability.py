@@ -1,0 +1,236 @@
+"""How good a learned model is, estimated from its own samples; and its calibration (issue 9).
+
+The robot cannot compare its model with the instrument (it never sees the keys), but it can ask
+how well the model predicts touches it has not been fitted on. With ``K``-fold cross-validation
+over the exploration samples (each fold's model fitted on the other folds), this module estimates
+
+- ``cv_error``: the **mislabel rate**, the share of held-out touches whose sound is not the one
+  the fold's model finds most probable;
+- ``cv_log_loss``: the mean ``-log p(heard sound | touch)`` of held-out touches (nats);
+- ``cv_ece``: the expected calibration error of the held-out predictions (15 equal-width bins of
+  the top probability: ``sum_b n_b / n |accuracy_b - confidence_b|``);
+- ``boundary_error``: the **cross-validated boundary error** (px): the symmetric mean distance
+  (:func:`kbcli.core.accuracy.boundary_error`) between the sound boundaries of each fold's model
+  and those of the model fitted on every sample, on a 2 px grid over the working area, averaged
+  over folds: how far the boundaries move when a fifth of the touches is left out, a stand-in for
+  how far they are from the truth;
+
+and **calibrates** p(sound | action): among a few values of the model's calibration parameters
+(for the line model: ``sd_scale`` on its boundary uncertainty, ``noise_sd`` for label noise near
+boundaries, ``floor`` spread evenly over all sounds), it keeps those that maximise the held-out
+likelihood. A model whose probabilities match how often it is right is what lets the adapter weigh
+a touch by what it can really say.
+
+Active exploration puts most touches near boundaries, so a held-out touch is harder than a random
+point of the pad: every held-out touch is weighted by the area it stands for (the squared distance
+to its 6th nearest sample, an inverse density), so the estimates describe the working area as a
+uniform grid would (``kbcli bench reliability`` prints them against the truth).
+
+Any model class works that follows the model interface and exposes ``calibration_grid()`` (a dict
+of parameter name -> candidate values read at prediction time, applied with ``setattr`` on a
+copy) and ``fit_grid()`` (parameters of the fit itself, such as the line model's label-noise
+tolerance: the model is refitted with each) — or neither (then only the reliability is estimated).
+"""
+
+from __future__ import annotations
+
+import copy
+import itertools
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from kbcli.core.accuracy import boundary_error as _boundary_error
+from kbcli.core.model import classify_features, grid_points
+
+#: Folds of the cross-validation.
+FOLDS = 5
+#: Cell (px) of the grid on which fold boundaries are compared.
+BOUNDARY_STEP = 2.0
+ECE_BINS = 15
+
+
+@dataclass(frozen=True)
+class Reliability:
+    """A model's own estimate of how good it is (see the module docstring)."""
+
+    folds: int
+    samples: int
+    cv_error: float
+    cv_log_loss: float
+    cv_ece: float
+    boundary_error: float
+    calibration: dict
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _area_weights(x: np.ndarray, k: int = 6) -> np.ndarray:
+    """(n,) weights summing to one that make the samples stand for the working area evenly.
+
+    Active exploration puts most touches near boundaries; a held-out touch there is harder than a
+    random point of the pad. Weighting each sample by the area it stands for (the squared distance
+    to its ``k``-th nearest neighbour, an inverse density) removes that bias from the estimates.
+    """
+    from scipy.spatial import cKDTree
+
+    n = len(x)
+    if n <= k:
+        return np.full(n, 1.0 / max(n, 1))
+    d, _ = cKDTree(x).query(x, k=k + 1)
+    w = d[:, -1] ** 2
+    w = np.maximum(w, 1e-12)
+    return w / w.sum()
+
+
+def expected_calibration_error(probs: np.ndarray, hit: np.ndarray, bins: int = ECE_BINS,
+                               weights: np.ndarray | None = None) -> float:
+    """Top-label expected calibration error.
+
+    Parameters
+    ----------
+    probs : (n, C) ndarray
+        Predicted distributions.
+    hit : (n,) or (n, C) ndarray
+        Whether (or how often) the most probable class was right: (n,) values in [0, 1], or an
+        (n, C) true distribution of the outcome (its entry at the predicted class is taken).
+
+    weights : (n,) ndarray, optional
+        Weight of each prediction (default: equal).
+
+    Returns
+    -------
+    float
+        ``sum_b n_b / n |mean(hit)_b - mean(confidence)_b|`` over ``bins`` equal-width bins of the
+        top probability (``n_b`` the weight in bin ``b``).
+    """
+    p = np.asarray(probs, float)
+    conf = p.max(axis=1)
+    h = np.asarray(hit, float)
+    if h.ndim == 2:
+        h = h[np.arange(len(p)), p.argmax(axis=1)]
+    w = np.ones(len(p)) if weights is None else np.asarray(weights, float)
+    idx = np.minimum((conf * bins).astype(np.int64), bins - 1)
+    sum_c = np.bincount(idx, weights=w * conf, minlength=bins)
+    sum_h = np.bincount(idx, weights=w * h, minlength=bins)
+    total = float(w.sum())
+    return float(np.abs(sum_h - sum_c).sum() / total) if total > 0 else float("nan")
+
+
+def _fold_ids(n: int, folds: int, rng: np.random.Generator) -> np.ndarray:
+    return rng.permutation(np.arange(n) % folds)
+
+
+def _class_map(fold_features: np.ndarray, full_features: np.ndarray, threshold: float) -> np.ndarray:
+    """(C_fold,) the full model's class of each of a fold model's classes (-1: none matches)."""
+    out = classify_features(fold_features, full_features, threshold)
+    out[0] = 0  # silence is silence
+    return out
+
+
+def _held_out_probs(model, x: np.ndarray, cmap: np.ndarray, n_full: int) -> np.ndarray:
+    """(n, n_full) a fold model's predictions in the full model's classes."""
+    p = model.predict_proba(x)
+    out = np.zeros((len(x), n_full))
+    ok = cmap >= 0
+    np.add.at(out.T, cmap[ok], p[:, ok].T)
+    return out
+
+
+def assess(fit: Callable[..., object], full_model, actions: np.ndarray,
+           perceived: np.ndarray, *, rng: np.random.Generator, folds: int = FOLDS,
+           calibrate: bool = True) -> tuple[object, Reliability]:
+    """Cross-validate a model class on its samples, calibrate it, and estimate its reliability.
+
+    Parameters
+    ----------
+    fit : callable
+        ``fit(actions, perceived, **fit_params) -> fitted model`` (a fresh model of the class, same
+        settings; ``fit_params`` from the class's ``fit_grid()``, if it has one).
+    full_model : SoundModel
+        The model fitted on every sample (``fit(actions, perceived)``).
+    actions, perceived : (n, 2), (n, D) ndarrays
+        The samples (where the robot felt it touched, what it heard).
+    rng : numpy.random.Generator
+        Assigns samples to folds.
+    calibrate : bool
+        Choose the calibration parameters by held-out likelihood (if the model has any): those
+        read at prediction time (``calibration_grid()``, set on a copy) and those of the fit
+        (``fit_grid()``, the model is refitted with the chosen values).
+
+    Returns
+    -------
+    model : SoundModel
+        ``full_model`` with the chosen calibration (a copy or a refit; ``full_model`` itself is
+        unchanged).
+    reliability : Reliability
+    """
+    x = np.asarray(actions, float).reshape(-1, 2)
+    s = np.asarray(perceived, float).reshape(len(x), -1)
+    n = len(x)
+    labels = full_model.classify(s)
+    c_full = full_model.n_classes
+    thr = full_model.match_threshold
+    k = int(min(folds, n))
+    grid_cands = getattr(full_model, "calibration_grid", lambda: {})() if calibrate else {}
+    names = sorted(grid_cands)
+    combos = list(itertools.product(*(grid_cands[nm] for nm in names))) or [()]
+    fit_cands = getattr(full_model, "fit_grid", lambda: {})() if calibrate else {}
+    fit_names = sorted(fit_cands)
+    fit_combos = list(itertools.product(*(fit_cands[nm] for nm in fit_names))) or [()]
+    fold = _fold_ids(n, k, rng)
+    _, pts = grid_points(tuple(float(v) for v in full_model.area), BOUNDARY_STEP)
+    flat = pts.reshape(-1, 2)
+    held = np.zeros((len(fit_combos), len(combos), n, c_full))
+    berr: list[list[float]] = []
+    fulls = []
+    for j, fc in enumerate(fit_combos):  # F x (K + 1) fits
+        fp = dict(zip(fit_names, fc, strict=True))
+        full_j = fit(x, s, **fp) if fp else full_model
+        fulls.append(full_j)
+        cmap_full = _class_map(full_j.class_features_, full_model.class_features_, thr)
+        full_map = cmap_full[full_j.predict_class(flat)].reshape(pts.shape[:2])
+        berr.append([])
+        for f in range(k):
+            test = fold == f
+            if test.all() or not test.any():
+                continue
+            m = fit(x[~test], s[~test], **fp)
+            cmap = _class_map(m.class_features_, full_model.class_features_, thr)
+            fold_map = cmap[m.predict_class(flat)].reshape(pts.shape[:2])
+            berr[j].append(_boundary_error(fold_map, full_map, BOUNDARY_STEP))
+            for i, combo in enumerate(combos):
+                mc = copy.copy(m)
+                for nm, v in zip(names, combo, strict=True):
+                    setattr(mc, nm, v)
+                held[j, i, test] = _held_out_probs(mc, x[test], cmap, c_full)
+    known = labels >= 0
+    w = _area_weights(x)[known]
+    p_true = held[:, :, known, :][:, :, np.arange(known.sum()), labels[known]]  # (F, P, n_known)
+    nll = -(np.log(np.maximum(p_true, 1e-12)) @ w)  # (F, P)
+    bj, bi = np.unravel_index(int(np.argmin(nll)), nll.shape)
+    chosen = {**dict(zip(fit_names, fit_combos[bj], strict=True)),
+              **dict(zip(names, combos[bi], strict=True))}
+    model = copy.copy(fulls[bj])
+    for nm, v in zip(names, combos[bi], strict=True):
+        setattr(model, nm, v)
+    hp = held[bj, bi, known]
+    pred = hp.argmax(axis=1)
+    hit = pred == labels[known]
+    finite = [b for b in berr[bj] if np.isfinite(b)]
+    rel = Reliability(
+        folds=k,
+        samples=n,
+        cv_error=float(1.0 - hit @ w) if len(hit) else float("nan"),
+        cv_log_loss=float(nll[bj, bi]),
+        cv_ece=expected_calibration_error(hp, hit.astype(float), weights=w) if len(hit)
+        else float("nan"),
+        boundary_error=float(np.mean(finite)) if finite else float("inf"),
+        calibration={nm: float(v) for nm, v in chosen.items()},
+    )
+    return model, rel
+
+
+__all__ = ["Reliability", "assess", "expected_calibration_error", "FOLDS"]

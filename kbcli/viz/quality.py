@@ -1,0 +1,79 @@
+"""Figure of a model-quality sweep: each strategy's advantage over random against the model's
+boundary error, and the final error against it (the paper's Sect. IV-C hypothesis, issue 9)."""
+
+from __future__ import annotations
+
+import os
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from kbcli.stages.artifact import Artifact  # noqa: E402
+from kbcli.viz.common import save  # noqa: E402
+
+MARKERS = {"active": "o", "random": "s"}
+
+
+def plot_advantage(art: Artifact, path: str | os.PathLike) -> None:
+    """Left panels: touches saved over the baseline (median of paired differences, all categories)
+    against the model's boundary error, one panel per row; filled markers: p < 0.01. Right panel:
+    the median final error of every row against the boundary error, with the line y = max(1, x)."""
+    a = art.attrs
+    info, summ, base = a["models"], a["summary"], a["baseline"]
+    rows = [r for r in a["rows"] if r != base]
+    fig, axes = plt.subplots(1, len(rows) + 1, figsize=(4.4 * (len(rows) + 1), 4.0))
+    axes = np.atleast_1d(axes)
+    names = list(info)
+    berr = np.array([info[m]["boundary_error"] for m in names])
+    x_lo, x_hi = max(0.05, berr.min() / 1.5), berr.max() * 1.5
+    for ax, r in zip(axes[:-1], rows, strict=True):
+        for explo, mk in MARKERS.items():
+            sel = [i for i, m in enumerate(names) if info[m]["exploration"] == explo]
+            if not sel:
+                continue
+            adv = np.array([summ[names[i]]["all"][r]["advantage"] for i in sel])
+            p = np.array([summ[names[i]]["all"][r]["pvalue"] for i in sel])
+            xb = berr[sel]
+            order = np.argsort(xb)
+            ax.plot(xb[order], adv[order], "-", color="0.7", lw=0.8, zorder=1)
+            sig = p < 0.01
+            ax.scatter(xb[sig], adv[sig], marker=mk, s=42, color="tab:blue", zorder=3,
+                       label=f"{explo} exploration, p < 0.01")
+            ax.scatter(xb[~sig], adv[~sig], marker=mk, s=42, facecolors="white",
+                       edgecolors="tab:blue", zorder=3, label=f"{explo} exploration, p >= 0.01")
+            for i in sel:
+                ax.annotate(str(info[names[i]]["budget"]), (berr[i], summ[names[i]]["all"][r]
+                                                           ["advantage"]),
+                            textcoords="offset points", xytext=(4, 4), fontsize=6.5, color="0.3")
+        ax.axhline(0, color="black", lw=0.8)
+        ax.set_xscale("log")
+        ax.set_xlim(x_lo, x_hi)
+        ax.set_xlabel("model's boundary error (px, log scale)")
+        ax.set_ylabel(f"touches saved over {base} (median of pairs)")
+        ax.set_title(f"{r} vs {base}", fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7, loc="best")
+    ax = axes[-1]
+    colours = plt.get_cmap("tab10")
+    for j, r in enumerate(a["rows"]):
+        fin = np.array([summ[m]["all"][r]["final_median"] for m in names])
+        order = np.argsort(berr)
+        ax.plot(berr[order], fin[order], "o-", ms=3.5, lw=1, color=colours(j), label=r)
+    xs = np.geomspace(x_lo, x_hi, 50)
+    ax.plot(xs, np.maximum(1.0, xs), "--", color="black", lw=1, label="max(1 px, boundary error)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlim(x_lo, x_hi)
+    ax.set_xlabel("model's boundary error (px, log scale)")
+    ax.set_ylabel(f"final error after {a['max_steps']} touches (median px)")
+    ax.set_title("final error against model quality", fontsize=10)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    fig.suptitle(f"{a['n_experiments']} adaptations, {art.config['mode']} mode, arm "
+                 f"{art.config['arm']['preset']}: does a better model make active adaptation pay?",
+                 fontsize=10)
+    fig.tight_layout()
+    save(fig, path)

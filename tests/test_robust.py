@@ -1,0 +1,217 @@
+"""The robust posterior, the model's reliability and its calibration (issue 9)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.special import logsumexp
+
+from kbcli.core import accuracy as scoring
+from kbcli.core.adapt import Adapter, AdapterConfig, adapt
+from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.learned import LearnedModel
+from kbcli.core.model import ExactModel, grid_points
+from kbcli.core.posterior import HypothesisGrid, LikelihoodTable, Posterior, likelihood_term
+from kbcli.core.reliability import assess, expected_calibration_error
+from kbcli.core.robust import Nuisance, RobustPosterior, blurred_map, raw_prob, robust_terms
+from kbcli.errors import ConfigError
+from kbcli.sim import SimConfig, World, keys_heard_when_felt, make_reacher
+
+KB = Keyboard(KeyboardConfig(rows=2, cols=4))
+EXACT = ExactModel(KB)
+
+
+def _touch(world, rng):
+    def touch(a):
+        f, h = world.touch(a[None], rng)
+        return f[0], h[0]
+    return touch
+
+
+# -- the calibration error ------------------------------------------------------------------------
+def test_expected_calibration_error_known_answers():
+    # always 90 % sure and right 9 times in 10: calibrated
+    p = np.tile([[0.9, 0.1]], (10, 1))
+    hit = np.array([1] * 9 + [0], float)
+    assert expected_calibration_error(p, hit) == pytest.approx(0.0)
+    # always sure, right half the time: off by 0.5
+    assert expected_calibration_error(np.tile([[1.0, 0.0]], (4, 1)),
+                                      np.array([1, 0, 1, 0.0])) == pytest.approx(0.5)
+    # an (n, C) outcome distribution: its entry at the predicted class is the hit rate
+    out = np.array([[0.7, 0.3], [0.2, 0.8]])
+    got = expected_calibration_error(np.array([[0.7, 0.3], [0.2, 0.8]]), out)
+    assert got == pytest.approx(0.0)
+    # weights: a weightless bad bin does not count
+    assert expected_calibration_error(np.array([[1.0, 0.0], [0.9, 0.1]]), np.array([0.0, 0.9]),
+                                      weights=np.array([0.0, 1.0])) == pytest.approx(0.0)
+
+
+# -- the robust posterior: exact marginalisation -------------------------------------------------
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), k=st.integers(1, 4))
+def test_robust_marginal_is_the_exact_mixture(seed, k):
+    rng = np.random.default_rng(seed)
+    grid = HypothesisGrid.build("translation", prior_halfwidth=3.0, resolution=1.0,
+                                centre=np.zeros(2))
+    nz = Nuisance.build(blurs=tuple(range(k)), outliers=(0.01, 0.2))
+    post = RobustPosterior(grid, nz)
+    terms_all = []
+    for _ in range(3):
+        terms = np.log(rng.uniform(0.01, 1, size=(nz.size,) + grid.shape)).astype(np.float32)
+        terms_all.append(terms)
+        post = post.update(terms)
+    total = np.sum(terms_all, axis=0) + nz.log_prior.reshape(-1, 1, 1)
+    want = logsumexp(total, axis=0)
+    want -= logsumexp(want)
+    np.testing.assert_allclose(post.marginal().logp, want, atol=1e-4)
+    ev = logsumexp(total.reshape(nz.size, -1), axis=1)
+    np.testing.assert_allclose(post.weights().ravel(), np.exp(ev - logsumexp(ev)), atol=1e-5)
+    assert post.weights().sum() == pytest.approx(1.0)
+
+
+def test_one_nuisance_value_is_the_plain_likelihood_posterior():
+    grid = HypothesisGrid.build("translation", prior_halfwidth=10.0, resolution=0.5,
+                                centre=KB.centre)
+    table = LikelihoodTable.from_model(EXACT, 0.5, eps=0.02)
+    nz = Nuisance.build(blurs=(0.0,), outliers=(0.02,))
+    rng = np.random.default_rng(3)
+    plain, robust = Posterior.uniform(grid), RobustPosterior(grid, nz)
+    for _ in range(6):
+        a = rng.uniform(KB.area[:2], KB.area[2:])
+        cls = int(EXACT.predict_class(a[None])[0])
+        plain = plain.update(likelihood_term(grid, table, a, cls))
+        robust = robust.update(robust_terms(grid, table, a, cls, nz))
+    np.testing.assert_allclose(robust.marginal().probs, plain.probs, atol=1e-6)
+
+
+def test_blurred_maps_match_a_blur_of_the_whole_raster():
+    table = LikelihoodTable.from_model(EXACT, 0.5, eps=1e-9)
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(KB.area[:2], KB.area[2:], size=(3000, 2))
+    for blur in (1.0, 3.0):
+        ref = LikelihoodTable.from_model(EXACT, 0.5, eps=1e-9, blur=blur)
+        b = blurred_map(table, blur)
+        for cls in (0, 3):
+            got = raw_prob(b, pts[:, 0], pts[:, 1], cls)
+            want = np.exp(ref.log_prob(pts[:, 0], pts[:, 1], cls))
+            assert np.abs(got - want).mean() < 5e-3
+            assert np.abs(got - want).max() < 0.1  # wide blurs read coarser cells
+
+
+def test_robust_config_is_validated():
+    for bad in ({"robust_blurs": []}, {"robust_blurs": [-1.0]}, {"robust_outliers": [0.0]},
+                {"robust_outliers": [1.5]}, {"robust": "yes"}):
+        with pytest.raises(ConfigError):
+            AdapterConfig(**bad)
+
+
+def test_the_robust_posterior_learns_a_blurred_instrument():
+    """Touches on an instrument whose edges are 3 px softer than the model says: the evidence
+    moves to the blurred components and the estimate still lands near the truth."""
+    truth = np.array([4.3, -2.6])
+    cfg = AdapterConfig(strategy="infogain", prior_halfwidth=12.0)
+    ad = Adapter(EXACT, cfg, rng=np.random.default_rng(1))
+    jitter = np.random.default_rng(2)
+
+    def touch(a):  # the key under a point jittered by 3 px: a soft-edged instrument
+        return a, KB.perceive((a + jitter.normal(0, 3.0, 2))[None], truth, rng=jitter)[0]
+
+    steps = list(adapt(ad, touch, 40))
+    assert ad.robust.blur_mean() > 1.5
+    assert np.hypot(*(steps[-1].estimate - truth)) < 2.0
+
+
+class _Shrunk(ExactModel):
+    """The exact map with every key boundary moved 3 px inwards (silence between the keys)."""
+
+    def predict_class(self, points):
+        p = np.asarray(points, float).reshape(-1, 2)
+        c = self.keyboard.config
+        f = (p - np.asarray(c.origin)) % c.key_size
+        inner = ((f >= 3.0) & (f < c.key_size - 3.0)).all(axis=1)
+        return np.where(inner, self.keyboard.key_at(p), -1) + 1
+
+
+def test_shifted_boundaries_are_absorbed_by_the_robust_posterior_not_by_the_plain_one():
+    model = _Shrunk(KB)
+    final = {}
+    for robust in (False, True):
+        errs = []
+        for seed in range(6):
+            truth = np.random.default_rng(seed).uniform(-6, 6, 2)
+            cfg = AdapterConfig(strategy="infogain", prior_halfwidth=12.0, robust=robust,
+                                model_blur=None if robust else 0.0)
+            ad = Adapter(model, cfg, rng=np.random.default_rng(seed))
+            rng = np.random.default_rng(100 + seed)
+            steps = list(adapt(ad, lambda a, t=truth, r=rng: (a, KB.perceive(a[None], t, rng=r)[0]),
+                               30))
+            errs.append(np.hypot(*(steps[-1].estimate - truth)))
+        final[robust] = np.array(errs)
+    assert np.max(final[True]) < 1.5  # every robust run ends within 1.5 px
+    assert np.median(final[False]) > 2.0  # the plain posterior is dragged off by the wrong edges
+    assert np.median(final[True]) < 0.5 * np.median(final[False])
+
+
+# -- reliability and calibration --------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def random_samples():
+    world = World(KB, make_reacher(SimConfig()))
+    rng = np.random.default_rng(11)
+    x0, y0, x1, y1 = KB.area
+    t = rng.uniform((x0, y0), (x1, y1), size=(220, 2))
+    landed, heard = world.touch(t, rng)
+    return landed, heard
+
+
+def _fit(a, s, **params):
+    return LearnedModel(match_threshold=KB.config.match_threshold, area=KB.area,
+                        **params).fit(a, s)
+
+
+def test_reliability_estimates_match_the_measured_ones_on_random_exploration(random_samples):
+    x, s = random_samples
+    full = _fit(x, s)
+    model, rel = assess(_fit, full, x, s, rng=np.random.default_rng(0))
+    pred, true = scoring.key_maps(model, KB, 1.0)
+    error_rate = 1 - scoring.accuracy_from_maps(pred, true)
+    # the cross-validated mislabel rate estimates the error rate on the pad
+    assert abs(rel.cv_error - error_rate) < 0.05
+    # and the estimated calibration error the measured one (dense grid against the simulator)
+    _, pts = grid_points(KB.area, 2.0)
+    pts = pts.reshape(-1, 2)
+    keys = keys_heard_when_felt(SimConfig(), KB, pts, 1, np.random.default_rng(0))[:, 0]
+    probs = model.predict_proba(pts)
+    ck = scoring.class_keys(model.class_features_, KB)
+    hit = (ck[probs.argmax(axis=1)] == keys).astype(float)
+    measured = expected_calibration_error(probs, hit)
+    assert measured < 0.05
+    assert abs(rel.cv_ece - measured) < 0.05
+    assert rel.boundary_error > 0 and np.isfinite(rel.boundary_error)
+    assert set(rel.calibration) == set(LearnedModel.calibration_grid()) | set(
+        LearnedModel.fit_grid())
+    assert rel.folds == 5 and rel.samples == len(x)
+
+
+def test_calibration_is_chosen_from_the_grid_and_applied_to_a_copy(random_samples):
+    x, s = random_samples
+    full = _fit(x, s)
+    model, rel = assess(_fit, full, x, s, rng=np.random.default_rng(0))
+    grid = {**LearnedModel.calibration_grid(), **LearnedModel.fit_grid()}
+    for k, v in rel.calibration.items():
+        assert v in grid[k] and getattr(model, k) == v
+    assert full.noise_sd == 0.0 and full.floor == 0.0  # the input model is unchanged
+    again = assess(_fit, full, x, s, rng=np.random.default_rng(0))[1]
+    assert again == rel  # same inputs and seed, same numbers
+
+
+def test_noisy_labels_are_calibrated_with_label_noise():
+    """Samples whose labels flip within a few px of the boundaries: calibration picks label noise."""
+    rng = np.random.default_rng(5)
+    x0, y0, x1, y1 = KB.area
+    x = rng.uniform((x0, y0), (x1, y1), size=(500, 2))
+    heard = KB.perceive(x + rng.normal(0, 2.0, x.shape), rng=rng)
+    full = _fit(x, heard)
+    _, rel = assess(_fit, full, x, heard, rng=np.random.default_rng(1))
+    assert rel.calibration["noise_sd"] >= 1.0
