@@ -29,7 +29,11 @@ def load_model(art: Artifact):
         return ExactModel(kb)
     from kbcli.core.learned import LearnedModel
 
-    return LearnedModel.from_arrays(art.data["model"])
+    model = LearnedModel.from_arrays(art.data["model"])
+    rel = art.attrs.get("reliability")
+    #: the model's own estimate of its quality (model schema 2; None before)
+    model.reliability_ = dict(rel) if isinstance(rel, dict) else None
+    return model
 
 
 #: The embedded default model (learned in dynamics mode by ``make data``), relative to a checkout.
