@@ -9,7 +9,14 @@ from hypothesis import strategies as st
 from scipy.special import logsumexp
 
 from kbcli.core import accuracy as scoring
-from kbcli.core.adapt import Adapter, AdapterConfig, adapt
+from kbcli.core.adapt import (
+    REDUNDANCY_FACTOR,
+    Adapter,
+    AdapterConfig,
+    adapt,
+    redundancy_radius,
+    spot_count,
+)
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.learned import LearnedModel
 from kbcli.core.model import ExactModel, grid_points
@@ -215,3 +222,84 @@ def test_noisy_labels_are_calibrated_with_label_noise():
     full = _fit(x, heard)
     _, rel = assess(_fit, full, x, heard, rng=np.random.default_rng(1))
     assert rel.calibration["noise_sd"] >= 1.0
+
+
+# -- one doubtful spot counts once ------------------------------------------------------------------
+def test_spot_count_known_answers():
+    touched = np.array([[0.0, 0.0], [3.0, 4.0], [10.0, 0.0]])
+    pts = np.array([[0.0, 0.0], [1.0, 1.0], [20.0, 20.0]])
+    assert spot_count(pts, touched, 5.0).tolist() == [2, 2, 0]
+    assert spot_count(pts, touched, 0.0).tolist() == [0, 0, 0]
+    assert spot_count(pts, np.empty((0, 2)), 5.0).tolist() == [0, 0, 0]
+
+
+def test_the_kth_touch_at_a_spot_weighs_one_kth():
+    """Three identical touches: weights 1, 1/2, 1/3 with a redundancy radius; 1, 1, 1 without."""
+    a, cls = np.array([255.0, 300.0]), 1
+    single = None
+    for radius, total in ((0.0, 3.0), (2.0, 1 + 1 / 2 + 1 / 3)):
+        ad = Adapter(EXACT, AdapterConfig(prior_halfwidth=10.0, redundancy_radius=radius),
+                     rng=np.random.default_rng(0))
+        ad.observe_class(a, cls)
+        if single is None:
+            single = ad.robust.loglik.astype(np.float64)
+        for _ in range(2):
+            ad.observe_class(a, cls)
+        np.testing.assert_allclose(ad.robust.loglik, total * single, rtol=1e-4, atol=1e-3)
+
+
+def test_redundancy_radius_is_resolved_from_the_model_reliability():
+    cfg = AdapterConfig(prior_halfwidth=10.0)
+    assert redundancy_radius(EXACT, cfg) == 0.0  # no estimate of its own: no discount
+
+    class Rated(ExactModel):
+        reliability_ = {"boundary_error": 1.5}
+
+    assert redundancy_radius(Rated(KB), cfg) == pytest.approx(REDUNDANCY_FACTOR * 1.5)
+    assert redundancy_radius(Rated(KB), AdapterConfig(redundancy_radius=3.0)) == 3.0
+    plain = Adapter(Rated(KB), AdapterConfig(prior_halfwidth=10.0, robust=False),
+                    rng=np.random.default_rng(0))
+    assert plain.redundancy_radius == 0.0  # the plain posterior reads the map as the truth
+    for bad in (-1.0, float("nan"), "far"):
+        with pytest.raises(ConfigError):
+            AdapterConfig(redundancy_radius=bad)
+
+
+class _OneEdgeOff(ExactModel):
+    """The exact map with the edge between the first two key columns 12 px too far right: a
+    model that is right almost everywhere and confidently wrong along one edge."""
+
+    def predict_class(self, points):
+        p = np.asarray(points, float).reshape(-1, 2)
+        c = self.keyboard.config
+        edge = c.origin[0] + c.key_size
+        q = p.copy()
+        near = (p[:, 0] >= edge) & (p[:, 0] < edge + 12.0)
+        q[near, 0] = edge - 1e-6  # the first column reaches 12 px further
+        return self.keyboard.key_at(q) + 1
+
+
+def test_one_wrong_edge_is_not_asked_again_and_again():
+    """Infogain on a model with one edge 12 px off, a noisy arm: counting repeated touches at a
+    spot once keeps the estimate off that edge's pull."""
+    model = _OneEdgeOff(KB)
+    final = {}
+    for radius in (0.0, 12.0):
+        errs = []
+        for seed in range(8):
+            truth = np.random.default_rng(seed).uniform(-8, 8, 2)
+            cfg = AdapterConfig(strategy="infogain", prior_halfwidth=15.0,
+                                redundancy_radius=radius)
+            ad = Adapter(model, cfg, rng=np.random.default_rng(seed))
+            rng = np.random.default_rng(100 + seed)
+
+            def touch(a, t=truth, r=rng):  # lands within about 1.5 px of the aim, felt exactly
+                landed = a + r.normal(0, 1.5, 2)
+                return landed, KB.perceive(landed[None], t, rng=r)[0]
+
+            steps = list(adapt(ad, touch, 30))
+            errs.append(np.hypot(*(steps[-1].estimate - truth)))
+        final[radius] = np.array(errs)
+    assert np.median(final[0.0]) > 2.0  # every touch at the wrong edge counted: dragged off
+    assert np.max(final[12.0]) < 2.0
+    assert np.median(final[12.0]) < 0.5 * np.median(final[0.0])

@@ -77,3 +77,32 @@ def run(model, keyboard, *, experiments: int = 30, max_steps: int = 30, seed: in
                                     float(np.percentile(fin, 90)), float(np.median(wall)),
                                     float(np.median(cpu))))
     return rows
+
+
+def step_time(model, keyboard, *, runs: int = 10, steps: int = 30, seed: int = 0) -> dict:
+    """CPU ms of one translation step of the posterior alone (update with a touch, then the
+    estimate; no decision, no reaching), median and 90th percentile over ``runs`` x ``steps``
+    touches of the ideal arm at random actions, for the robust and the plain posterior. Run it with
+    one thread (``OMP_NUM_THREADS=1``) for a one-core figure."""
+    from kbcli.core.adapt import Adapter, AdapterConfig, build_table
+    from kbcli.sim import SimConfig, World, make_reacher
+
+    out = {}
+    for post in POSTERIORS:
+        cfg = AdapterConfig(strategy="random", robust=post == "robust")
+        table = build_table(model, cfg)
+        ms = []
+        for r in range(runs):
+            rng = np.random.default_rng([seed, 11, r])
+            ad = Adapter(model, cfg, rng=rng, table=table)
+            world = World(keyboard, make_reacher(SimConfig()), rng.uniform(-20, 20, 2),
+                          "translation")
+            for _ in range(steps):
+                a = ad.suggest()
+                felt, heard = world.touch(a[None], rng)
+                c0 = time.process_time()
+                ad.observe(a, heard[0], felt_position=felt[0])
+                ad.estimate()
+                ms.append(1e3 * (time.process_time() - c0))
+        out[post] = (float(np.median(ms)), float(np.percentile(ms, 90)))
+    return out

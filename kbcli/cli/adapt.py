@@ -338,7 +338,8 @@ def bench_robust_cmd(
     Reads MODEL (default: the embedded default model). Writes nothing. Prints, for the ideal arm in
     ideal mode and the realistic arm in dynamics mode, per strategy, posterior and category: the
     median touches to an error below 1 px, the median and 90th percentile of the final error, and
-    the median milliseconds per step (wall clock and CPU).
+    the median milliseconds per step (wall clock and CPU, the decision and the reach included);
+    then the CPU time of one translation step of the posterior alone.
     """
     from kbcli.bench import robust as bench
     from kbcli.stages import keyboard as keyboard_stage
@@ -366,3 +367,8 @@ def bench_robust_cmd(
                   f"{r.ms_cpu:.1f}")
     con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
     con.print(t)
+    st = bench.step_time(m, kb, seed=seed)
+    con.print("translation step of the posterior alone (update + estimate, CPU ms, median / 90th "
+              "percentile of 300 touches; one core with OMP_NUM_THREADS=1): "
+              + "; ".join(f"{p} {a:.2f} / {b:.2f}" for p, (a, b) in st.items()) + " (target: robust "
+              "<= 5 ms)")

@@ -76,6 +76,9 @@ from kbcli.errors import ConfigError, ObservationError
 POSTERIORS = ("likelihood", "kde")
 #: Default softening (px) of a learned model's map (``AdapterConfig.model_blur``).
 LEARNED_BLUR = 1.0
+#: Radius (px) within which touches count as one spot, as a multiple of the model's own
+#: cross-validated boundary error (``AdapterConfig.redundancy_radius`` None).
+REDUNDANCY_FACTOR = 4.0
 ESTIMATORS = ("mean", "ml")
 
 
@@ -124,6 +127,15 @@ class AdapterConfig:
     robust_outliers : tuple of float or None
         Outlier rates the robust posterior weighs; None: 0.001, 0.02 and 0.1 (translation),
         0.001 and 0.05 (rigid).
+    redundancy_radius : float or None
+        A learned model's errors are not independent from touch to touch: where its boundary is
+        wrong, every touch there is wrong the same way. With ``robust``, touches within this
+        radius (px) of earlier ones count as one spot: the ``k``-th touch at a spot enters the
+        posterior with weight ``1 / k`` (a coarsened likelihood), and infogain divides a
+        candidate's expected gain by the same ``k``, so it seeks new evidence instead of asking one
+        doubtful spot again. None: ``REDUNDANCY_FACTOR`` (4) times the model's own cross-validated
+        boundary error (its ``reliability``; 0, no discount, for the exact model or a model that
+        has no estimate). 0: off.
     model_blur : float or None
         Override: softening (px, a Gaussian) of the model's map. With ``robust``, the blur is fixed
         to it instead of being learned. Without, None means ``LEARNED_BLUR`` (1 px) for a learned
@@ -172,6 +184,7 @@ class AdapterConfig:
     robust: bool = True
     robust_blurs: tuple[float, ...] | None = None
     robust_outliers: tuple[float, ...] | None = None
+    redundancy_radius: float | None = None
     model_blur: float | None = None
     cell_average: bool = True
     raster_step: float | None = None
@@ -206,6 +219,8 @@ class AdapterConfig:
         _num("blur", self.blur, strict=False)
         if self.model_blur is not None:
             _num("model_blur", self.model_blur, strict=False)
+        if self.redundancy_radius is not None:
+            _num("redundancy_radius", self.redundancy_radius, strict=False)
         if not isinstance(self.robust, bool):
             raise ConfigError(f"robust must be true or false, got {self.robust!r}")
         rigid = self.family == "rigid"
@@ -275,6 +290,28 @@ class AdapterConfig:
     def from_dict(cls, d: dict) -> AdapterConfig:
         check_known(cls, d, "adapt")
         return cls(**d)
+
+
+def redundancy_radius(model, cfg: AdapterConfig) -> float:
+    """The resolved ``cfg.redundancy_radius`` (px) for ``model`` (see :class:`AdapterConfig`)."""
+    if cfg.redundancy_radius is not None:
+        return float(cfg.redundancy_radius)
+    rel = getattr(model, "reliability_", None) or {}
+    berr = rel.get("boundary_error") if isinstance(rel, dict) else None
+    if berr is None or not np.isfinite(berr):
+        return 0.0
+    return REDUNDANCY_FACTOR * float(berr)
+
+
+def spot_count(points: np.ndarray, touched: np.ndarray, radius: float) -> np.ndarray:
+    """(n,) how many of ``touched`` (k, 2) lie within ``radius`` px of each of ``points`` (n, 2)
+    (0 throughout when ``radius`` is 0 or nothing was touched)."""
+    points = np.asarray(points, float).reshape(-1, 2)
+    touched = np.asarray(touched, float).reshape(-1, 2)
+    if radius <= 0 or len(touched) == 0:
+        return np.zeros(len(points), np.int64)
+    d2 = ((points[:, None, :] - touched[None, :, :]) ** 2).sum(axis=2)
+    return (d2 <= radius * radius).sum(axis=1)
 
 
 def _size(nbytes: float) -> str:
@@ -400,6 +437,10 @@ class Adapter:
         self.robust: RobustPosterior | None = (
             RobustPosterior(self.grid, cfg.nuisance()) if cfg.is_robust else None)
         self._strategy = get_strategy(cfg.strategy)
+        #: px: touches this close count as one spot (robust posterior; see AdapterConfig)
+        self.redundancy_radius = redundancy_radius(model, cfg) if cfg.is_robust else 0.0
+        #: where each observed touch was read (felt position, or the aim)
+        self.points: list[np.ndarray] = []
         self._edges: np.ndarray | None = None
         self._corners: np.ndarray | None = None
         self.bandwidths: list[float] = []
@@ -465,7 +506,17 @@ class Adapter:
         if self._edges is None:
             self._edges, self._corners = self.table.boundary_points()
         return Context(self.posterior, self.planning_table(), self.area, self._edges,
-                       self._corners, self.cfg)
+                       self._corners, self.cfg, touched=self.touched(),
+                       redundancy_radius=self.redundancy_radius)
+
+    def touched(self) -> np.ndarray:
+        """(k, 2) where the observed touches were read (felt positions, or the aims)."""
+        return np.asarray(self.points, float).reshape(-1, 2)
+
+    def spot_count(self, points: np.ndarray) -> np.ndarray:
+        """(n,) for each point, how many observed touches lie within ``redundancy_radius``."""
+        pts = np.asarray(points, float).reshape(-1, 2)
+        return spot_count(pts, self.touched(), self.redundancy_radius)
 
     def suggest(self) -> np.ndarray:
         """(2,) the next action (pad px) chosen by the strategy."""
@@ -550,6 +601,10 @@ class Adapter:
         elif self.robust is not None:
             sigma = cell_sigma(self.grid, a) if self.cfg.cell_average and self.grid.rigid else 0.0
             terms = robust_terms(self.grid, self.table, a, cls, self.robust.nuisance, sigma)
+            k = int(self.spot_count(a)[0])
+            if k:  # the (k + 1)-th touch at one spot: weight 1 / (k + 1)
+                terms = terms * np.float32(1.0 / (k + 1))
+            self.points.append(a)
             self.robust = self.robust.update(terms)
             self.posterior = self.robust.marginal()
             return

@@ -34,7 +34,7 @@ edge), and the conditional entropy comes from a precomputed per-cell entropy map
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -85,6 +85,10 @@ class Context:
         The model's class boundaries in the reference frame (:meth:`LikelihoodTable.boundary_points`).
     cfg : Any
         The adapter config (``candidates``, ``hypotheses``, ``active_keep``, ``active_hypotheses``).
+    touched : (k, 2) ndarray
+        Where the touches so far were read (felt positions).
+    redundancy_radius : float
+        Touches within this radius (px) count as one spot (0: off; ``AdapterConfig``).
     """
 
     posterior: Posterior
@@ -93,6 +97,8 @@ class Context:
     edges: np.ndarray
     corners: np.ndarray
     cfg: Any
+    touched: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    redundancy_radius: float = 0.0
 
     @property
     def family(self) -> str:
@@ -250,4 +256,9 @@ def infogain_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     ])
     pred, cond = outcome_distribution(ctx.table, ctx.family, hyp, w, cands, ctx.centre)
     gain = entropy_rows(pred) - cond
+    if ctx.redundancy_radius > 0 and len(ctx.touched):
+        # the (k + 1)-th touch at a spot enters the posterior with weight 1 / (k + 1): so does
+        # its gain (a model wrong at a spot is wrong there every time)
+        d2 = ((cands[:, None, :] - ctx.touched[None, :, :]) ** 2).sum(axis=2)
+        gain = gain / (1 + (d2 <= ctx.redundancy_radius ** 2).sum(axis=1))
     return cands[int(np.argmax(gain))]

@@ -347,6 +347,7 @@ class Recorder:
             out["snapshot_angles"] = np.stack(self.snap_ang)
         if self.adapter.cfg.posterior == "kde":
             out["bandwidths"] = np.asarray(self.adapter.bandwidths, float)
+        out["redundancy_radius"] = np.float64(getattr(self.adapter, "redundancy_radius", 0.0))
         return out
 
 
@@ -575,12 +576,14 @@ def run_attrs(res: dict[str, np.ndarray], acfg: AdapterConfig, *, truth: np.ndar
         {k: float(v) for k, v in zip(transforms.FAMILIES[wf], truth, strict=True)},
         "grid_cells": acfg.grid_cells,
         "median_step_ms": float(np.median(res["step_ms"])) if n else None,
+        # resolved from the model's own reliability when the config leaves it None
+        "redundancy_radius": float(res["redundancy_radius"]) if "redundancy_radius" in res else None,
     }
 
 
 def run_data(res: dict[str, np.ndarray]) -> dict:
     """The datasets of a ``run`` artifact: the records, with the wall-clock times in ``timing/``."""
-    data = {k: v for k, v in res.items() if k != "step_ms"}
+    data = {k: v for k, v in res.items() if k not in ("step_ms", "redundancy_radius")}
     data["timing"] = {"step_ms": res["step_ms"]}
     return data
 

@@ -32,7 +32,11 @@ def load_model(art: Artifact):
         return ExactModel(kb)
     from kbcli.core.model_classes import model_from_arrays
 
-    return model_from_arrays(art.data["model"], art.config.get("model_class"))
+    model = model_from_arrays(art.data["model"], art.config.get("model_class"))
+    rel = art.attrs.get("reliability")
+    #: the model's own estimate of its quality (model schema 2; None before)
+    model.reliability_ = dict(rel) if isinstance(rel, dict) else None
+    return model
 
 
 #: The embedded default model (learned in dynamics mode by ``make data``), relative to a checkout.

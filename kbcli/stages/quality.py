@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 from scipy import stats as sps
 
+from kbcli.core.adapt import REDUNDANCY_FACTOR
 from kbcli.core.config import check_known
 from kbcli.errors import ConfigError
 from kbcli.sim import MODES
@@ -370,7 +371,10 @@ def assemble(cfg: QualityConfig, models: dict[str, Artifact], tasks: list[Task],
         model_info[name] = {"exploration": e, "budget": b, "accuracy": float(a["accuracy"]),
                             "boundary_error": berr, "threshold": tau,
                             "estimated_boundary_error": rel.get("boundary_error"),
-                            "estimated_mislabel_rate": rel.get("cv_error")}
+                            "estimated_mislabel_rate": rel.get("cv_error"),
+                            "redundancy_radius": (REDUNDANCY_FACTOR * float(rel["boundary_error"])
+                                                  if rel.get("boundary_error") is not None
+                                                  else None)}
         per: dict[str, Any] = {}
         for group in [*[c.name for c in cfg.categories], "all"]:
             sel_m = (model == name) & ((cat == group) if group != "all" else True)
@@ -466,7 +470,7 @@ def targets(art: Artifact, row: str = "infogain") -> list[dict]:
     info, summ = art.attrs["models"], art.attrs["summary"]
     base = art.attrs["baseline"]
     out = []
-    for m, mi in info.items():
+    for m, mi in _ordered(info):
         for c in art.attrs["categories"]:
             s, b = summ[m][c].get(row), summ[m][c][base]
             if s is None:
@@ -525,22 +529,24 @@ def report(art: Artifact) -> str:
         lines.append(f"| {r} | {h['rho']:.2f} | {h['p']:.1e} | {h['significant_good']} of "
                      f"{h['good']} | {h['significant_bad']} of {h['bad']} | {verdict(h)} |")
     lines += ["", "## Models", "",
-              "| model | accuracy | boundary error (px) | self-estimated (px) | mislabel rate: measured / self-estimated | tau (px) |",
-              "|---|---|---|---|---|---|"]
-    for m, mi in a["models"].items():
+              "| model | accuracy | boundary error (px) | self-estimated (px) | mislabel rate: measured / self-estimated | tau (px) | spot radius (px) |",
+              "|---|---|---|---|---|---|---|"]
+    for m, mi in _ordered(a["models"]):
         est = mi.get("estimated_boundary_error")
         mis = mi.get("estimated_mislabel_rate")
         lines.append(f"| {m} | {100 * mi['accuracy']:.1f} % | {mi['boundary_error']:.2f} | "
                      + (f"{est:.2f}" if est is not None else "n/a") + " | "
                      f"{100 * (1 - mi['accuracy']):.1f} % / "
                      + (f"{100 * mis:.1f} %" if mis is not None else "n/a")
-                     + f" | {mi['threshold']:.2f} |")
+                     + f" | {mi['threshold']:.2f} | "
+                     + (f"{mi['redundancy_radius']:.1f}" if mi.get("redundancy_radius") is not None
+                        else "n/a") + " |")
     lines += ["", "## Per model and category", "",
               "Final error (median px after the last touch), touches to tau (median), advantage "
               "over the baseline and its p-value.", "",
               "| model | category | " + " | ".join(a["rows"]) + " |",
               "|---|---|" + "---|" * len(a["rows"])]
-    for m in a["models"]:
+    for m, _ in _ordered(a["models"]):
         for c in [*a["categories"], "all"]:
             cells = []
             for r in a["rows"]:
@@ -576,3 +582,9 @@ def report(art: Artifact) -> str:
 
 __all__ = ["QualityConfig", "plan", "learn_tasks", "assemble", "report", "hypothesis", "verdict",
            "targets", "threshold", "touches_to", "paired_test"]
+
+
+def _ordered(models: dict) -> list[tuple[str, dict]]:
+    """The models' (name, info) by exploration, then budget (not by name: 1600 after 800)."""
+    return sorted(models.items(), key=lambda kv: (str(kv[1].get("exploration", "")),
+                                                  float(kv[1].get("budget", 0)), kv[0]))

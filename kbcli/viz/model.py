@@ -86,8 +86,8 @@ def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> N
         a = art.attrs
         title = (f"learned {art.config.get('model_class', 'lines')} model: {a.get('strategy')} "
                  f"exploration, {a.get('mode')} mode, "
-                 f"{a.get('n_reaches')} reaches\naccuracy {100 * a.get('accuracy', np.nan):.2f} %, "
-                 f"boundary error {a.get('boundary_error_px', np.nan):.2f} px")
+                 f"{a.get('n_reaches')} reaches\naccuracy {100 * _num(a.get('accuracy')):.2f} %, "
+                 f"boundary error {_num(a.get('boundary_error_px')):.2f} px")
     else:
         title = "exact model: the keyboard's own geometry\n(no learning; predicted key per 2 px cell)"
     ax.set_title(title, fontsize=9)
@@ -132,13 +132,18 @@ def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> N
         if rel:  # what the model estimates of itself from its samples (model schema 2)
             cal = ", ".join(f"{k} {v:g}" for k, v in sorted(rel.get("calibration", {}).items()))
             ax.text(0.97, 0.20,
-                    f"the model's own estimate ({rel['folds']}-fold cross-validation):\n"
+                    f"the model's own estimate ({rel.get('folds', 'k')}-fold cross-validation):\n"
                     f"boundary error ~{rel['boundary_error']:.2f} px "
-                    f"(measured {a.get('boundary_error_px', np.nan):.2f})\n"
+                    f"(measured {_num(a.get('boundary_error_px')):.2f})\n"
                     f"mislabel rate {100 * rel['cv_error']:.1f} % "
-                    f"(measured {100 * (1 - a.get('accuracy', np.nan)):.1f})\n"
+                    f"(measured {100 * (1 - _num(a.get('accuracy'))):.1f})\n"
                     f"calibration error {rel['cv_ece']:.3f}" + (f"; {cal}" if cal else ""),
                     transform=ax.transAxes, ha="right", va="bottom", fontsize=7,
                     bbox={"boxstyle": "round", "fc": "white", "ec": "0.7", "alpha": 0.9})
     fig.tight_layout()
     save(fig, path)
+
+
+def _num(v) -> float:
+    """A summary number, NaN when it was not recorded (None)."""
+    return np.nan if v is None else float(v)
