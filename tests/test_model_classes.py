@@ -189,7 +189,9 @@ def test_learn_cli_model_class_and_bad_names(runner, tmp_path):
     assert r.exit_code == 0, r.output
     assert "svc model" in " ".join(r.output.split())
     art = read_artifact(out, "model")
-    assert art.schema_version == 2 and art.config["model_class"] == "svc"
+    assert art.schema_version == 3 and art.config["model_class"] == "svc"
+    rel = art.attrs["reliability"]  # every class estimates its own quality; svc has no calibration
+    assert 0 <= rel["cv_error"] <= 1 and rel["boundary_error"] >= 0 and rel["calibration"] == {}
     assert isinstance(load_model(art), SVCModel)
     r = runner.invoke(app, ["plot", "model", str(out), "-o", str(tmp_path / "m.png")])
     assert r.exit_code == 0, r.output
@@ -200,9 +202,10 @@ def test_learn_cli_model_class_and_bad_names(runner, tmp_path):
     assert not bad.exists()
 
 
-def test_schema_1_model_artifact_still_loads():
-    art = read_artifact("data/schema/v1/model.h5", "model")
-    assert art.schema_version == 1 and "model_class" not in art.config
+@pytest.mark.parametrize("version", [1, 2])
+def test_models_of_schema_1_and_2_still_load_as_lines(version):
+    art = read_artifact(f"data/schema/v{version}/model.h5", "model")
+    assert art.schema_version == version and "model_class" not in art.config
     model = load_model(art)
     assert type(model).__name__ == "LearnedModel" and model.n_classes == 33
 
