@@ -10,6 +10,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.ticker import FixedLocator, NullFormatter, ScalarFormatter  # noqa: E402
 
 from kbcli.stages.artifact import Artifact  # noqa: E402
 from kbcli.viz.common import save  # noqa: E402
@@ -24,8 +25,14 @@ def plot_advantage(art: Artifact, path: str | os.PathLike) -> None:
     a = art.attrs
     info, summ, base = a["models"], a["summary"], a["baseline"]
     rows = [r for r in a["rows"] if r != base]
-    fig, axes = plt.subplots(1, len(rows) + 1, figsize=(4.4 * (len(rows) + 1), 4.0))
-    axes = np.atleast_1d(axes)
+    n = len(rows) + 1
+    ncol = min(n, 3)
+    nrow = -(-n // ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(5.0 * ncol, 4.2 * nrow), squeeze=False)
+    axes = axes.ravel()
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    axes = axes[:n]
     names = list(info)
     berr = np.array([info[m]["boundary_error"] for m in names])
     x_lo, x_hi = max(0.05, berr.min() / 1.5), berr.max() * 1.5
@@ -49,8 +56,7 @@ def plot_advantage(art: Artifact, path: str | os.PathLike) -> None:
                                                            ["advantage"]),
                             textcoords="offset points", xytext=(4, 4), fontsize=6.5, color="0.3")
         ax.axhline(0, color="black", lw=0.8)
-        ax.set_xscale("log")
-        ax.set_xlim(x_lo, x_hi)
+        _px_axis(ax, x_lo, x_hi)
         ax.set_xlabel("model's boundary error (px, log scale)")
         ax.set_ylabel(f"touches saved over {base} (median of pairs)")
         ax.set_title(f"{r} vs {base}", fontsize=10)
@@ -64,9 +70,11 @@ def plot_advantage(art: Artifact, path: str | os.PathLike) -> None:
         ax.plot(berr[order], fin[order], "o-", ms=3.5, lw=1, color=colours(j), label=r)
     xs = np.geomspace(x_lo, x_hi, 50)
     ax.plot(xs, np.maximum(1.0, xs), "--", color="black", lw=1, label="max(1 px, boundary error)")
-    ax.set_xscale("log")
+    _px_axis(ax, x_lo, x_hi)
     ax.set_yscale("log")
-    ax.set_xlim(x_lo, x_hi)
+    ax.yaxis.set_major_locator(FixedLocator([0.2, 0.5, 1, 2, 3, 5, 10, 20, 50, 100]))
+    ax.yaxis.set_major_formatter(ScalarFormatter())
+    ax.yaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("model's boundary error (px, log scale)")
     ax.set_ylabel(f"final error after {a['max_steps']} touches (median px)")
     ax.set_title("final error against model quality", fontsize=10)
@@ -77,3 +85,13 @@ def plot_advantage(art: Artifact, path: str | os.PathLike) -> None:
                  fontsize=10)
     fig.tight_layout()
     save(fig, path)
+
+
+def _px_axis(ax, lo: float, hi: float) -> None:
+    """A log-scale px axis from ``lo`` to ``hi`` labelled at 0.5, 1, 2, 3, 5, 10, 20... px."""
+    ax.set_xscale("log")
+    ax.set_xlim(lo, hi)
+    ticks = [t for t in (0.1, 0.2, 0.5, 1, 2, 3, 5, 10, 20, 30, 50, 100) if lo <= t <= hi]
+    ax.xaxis.set_major_locator(FixedLocator(ticks))
+    ax.xaxis.set_major_formatter(ScalarFormatter())
+    ax.xaxis.set_minor_formatter(NullFormatter())
