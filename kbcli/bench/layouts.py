@@ -75,6 +75,8 @@ class LayoutsConfig:
     rigid_experiments: int = 10
     rigid_strategies: tuple[str, ...] = ("random", "infogain")
     max_steps: int = 40
+    #: the TOML file it was read from (named in the report)
+    source: str = "pipelines/layouts.toml"
 
     def __post_init__(self) -> None:
         for name in self.layouts:
@@ -135,7 +137,7 @@ class LayoutsConfig:
             if name in kw:
                 kw[name] = _tuple(kw[name], name)
         check_known(cls, kw, "layouts")
-        return cls(**kw)
+        return cls(**kw, source=str(path))
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -402,8 +404,10 @@ def render(cfg: LayoutsConfig, results: dict[str, LayoutResult]) -> str:
     """The report's Markdown."""
     lc = cfg.learn_config()
     md = [f"# Learning and adapting on every layout (kbcli {__version__})", "",
-          "Made by `kbcli bench layouts --config pipelines/layouts.toml` (`make reproduce-layouts`). "
-          "Every number below is measured by that run; the targets are issue 11's.", ""]
+          f"Made by `kbcli bench layouts --config {cfg.source}`"
+          + (" (`make reproduce-layouts`)" if cfg.source == "pipelines/layouts.toml" else "")
+          + " with the settings at the end. Every number below is measured by that run; the "
+          "targets are issue 11's.", ""]
     md += ["## Targets", ""]
     rows = []
     for name, res in results.items():
