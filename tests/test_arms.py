@@ -52,7 +52,7 @@ def test_realistic_preset_feels_one_to_three_px_off():
     for mode in ("ideal", "dynamics"):
         s = bench.landing_statistics(SimConfig(mode=mode, arm="realistic"), t,
                                      np.random.default_rng(1))
-        assert 1.0 <= np.median(s["felt"]) <= 3.0
+        assert np.median(s["felt"]) >= 1.0 and np.median(s["felt"]) <= 3.0
         r = PRESETS["realistic"].finger_radius
         assert np.max(s["contact"]) <= r + 1e-9
         # uniform in the disc: the median distance is r / sqrt(2)

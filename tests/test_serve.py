@@ -330,6 +330,6 @@ def test_example_robot_end_to_end(tmp_path):
     assert "done after" in r.stdout
     art = read_artifact(out, "run")
     est = np.array([art.attrs["estimate"]["dx"], art.attrs["estimate"]["dy"]])
-    assert 1 <= art.attrs["steps"] <= 25 and art.attrs["ended"] == "end"
+    assert art.attrs["steps"] >= 1 and art.attrs["steps"] <= 25 and art.attrs["ended"] == "end"
     assert np.hypot(*(est - [12.0, -7.0])) < 1.0
     assert np.isfinite(art.data["landed"]).all()  # the robot sent where it felt it landed
