@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import one_line_error as _one_line_error
 
 from kbcli.cli import app
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
@@ -32,14 +33,6 @@ def files(tmp_path):
     write_artifact(perturb_run(PerturbConfig(params=(3.0, 3.0)), other, rng=rng),
                    tmp_path / "other_scene.h5")
     return tmp_path
-
-
-def _one_line_error(result, *fragments):
-    assert result.exit_code == 1, result.output
-    lines = [ln for ln in result.output.strip().splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("kbcli: error:"), result.output
-    for f in fragments:
-        assert f in lines[0], lines[0]
 
 
 def _adapt(runner, files, *extra, out="run.h5", scene="scene.h5", model="model.h5"):

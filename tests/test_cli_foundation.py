@@ -8,17 +8,9 @@ import subprocess
 import sys
 
 import pytest
+from helpers import one_line_error as _one_line_error
 
 from kbcli.cli import app
-
-
-def _one_line_error(result, *fragments):
-    assert result.exit_code == 1, result.output
-    lines = [ln for ln in result.output.strip().splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("kbcli: error:"), result.output
-    for f in fragments:
-        assert f in lines[0], lines[0]
-    assert "Traceback" not in result.output
 
 
 def test_help_lists_every_stage(runner):

@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 import pytest
+from helpers import one_line_error as _one_line_error
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -438,14 +439,6 @@ def test_checkpoint_round_trip_and_mismatch(tmp_path):
 
 
 # -- the CLI --------------------------------------------------------------------------------------
-def _one_line_error(result, *fragments):
-    assert result.exit_code == 1, result.output
-    lines = [ln for ln in result.output.strip().splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("kbcli: error:"), result.output
-    for f in fragments:
-        assert f in lines[0], lines[0]
-
-
 def test_cli_serial_jobs_resume_identical(runner, tmp_path, model_path, fake, monkeypatch):
     """The artifact is byte-identical whatever the backend, and after an interrupted run resumed."""
     conf = write_config(tmp_path / "e.toml")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import one_line_error as _one_line_error
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -29,14 +30,6 @@ from kbcli.stages import perturb
 LAYOUT_NAMES = tuple(LAYOUTS)
 BOARDS = {name: Keyboard(KeyboardConfig(layout=name, **example_config_fields(name)))
           for name in LAYOUT_NAMES}
-
-
-def _one_line_error(result, *fragments):
-    assert result.exit_code == 1, result.output
-    lines = [ln for ln in result.output.strip().splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("kbcli: error:"), result.output
-    for f in fragments:
-        assert f in lines[0], lines[0]
 
 
 # -- the geometry ---------------------------------------------------------------------------------

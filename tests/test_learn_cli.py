@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import one_line_error as _one_line_error
 
 from kbcli.cli import app
 from kbcli.core.keyboard import KeyboardConfig
@@ -15,15 +16,6 @@ from kbcli.sim import SimConfig
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import learn as stage
 from kbcli.stages.models import load_model
-
-
-def _one_line_error(result, *fragments):
-    assert result.exit_code == 1, result.output
-    lines = [ln for ln in result.output.strip().splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("kbcli: error:"), result.output
-    for f in fragments:
-        assert f in lines[0], lines[0]
-    assert "Traceback" not in result.output
 
 
 @pytest.fixture
