@@ -100,6 +100,31 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2 * math.pi) - math.pi
 
 
+def _chipmunk(reacher: DynamicsReacher):
+    """(lib, upper, forearm, space) as chipmunk handles, or None when pymunk does not expose them.
+
+    The torque servo's loop reads four numbers, writes two and steps the space hundreds of times
+    per reach; through pymunk's properties (``TypingAttrMixing.__setattr__``, ``Space.step``'s
+    bookkeeping) that costs about twice the physics. The arm never adds, removes or collides
+    anything while it reaches, so ``cpSpaceStep`` does exactly what ``Space.step`` would.
+    ``pymunk._chipmunk_cffi`` and ``Body._body`` are private: a pymunk without them falls back to
+    the public API.
+    """
+    try:
+        from pymunk._chipmunk_cffi import lib
+
+        handles = (lib, reacher.upper._body, reacher.fore._body, reacher.space._space)
+        for name in ("cpBodyGetAngle", "cpBodyGetAngularVelocity", "cpBodySetTorque",
+                     "cpSpaceStep"):
+            getattr(lib, name)
+    except (ImportError, AttributeError):
+        return None
+    if reacher.space._add_later or reacher.space._remove_later or \
+            reacher.space._post_step_callbacks or reacher.space.threaded:
+        return None
+    return handles
+
+
 class DynamicsReacher:
     """A pymunk two-link arm driven by servo motors.
 
@@ -216,8 +241,48 @@ class DynamicsReacher:
     def _drive_torque(self, q1t: float, q2t: float) -> int:
         """Torque PD servo of both joints against friction until still; return the steps taken.
 
-        ``q1t, q2t`` are targets of the *measured* joint angles (true + encoder bias).
+        ``q1t, q2t`` are targets of the *measured* joint angles (true + encoder bias). Runs on
+        chipmunk directly when pymunk exposes it (:func:`_chipmunk`), else through pymunk's
+        public API (:meth:`_drive_torque_public`); both take the same steps, to the bit.
         """
+        cm = _chipmunk(self)
+        if cm is None:
+            return self._drive_torque_public(q1t, q2t)
+        lib, up, fo, space = cm
+        get_a, get_w, set_t, step = (lib.cpBodyGetAngle, lib.cpBodyGetAngularVelocity,
+                                     lib.cpBodySetTorque, lib.cpSpaceStep)
+        arm = self.cfg.arm
+        kp, kd, tmax = float(arm.kp), float(arm.kd), float(arm.max_torque)
+        b1, b2 = arm.proprio_bias
+        pi, tau = math.pi, 2.0 * math.pi
+        max_steps = max(1, int(round(arm.settle_time / DT)))
+        still = 0
+        w1 = get_w(up)
+        w2 = get_w(fo) - w1
+        for n in range(1, max_steps + 1):
+            a1 = get_a(up)
+            e1 = (q1t - (a1 + b1) + pi) % tau - pi  # _wrap, inlined: this loop is the hot path
+            e2 = (q2t - (get_a(fo) - a1 + b2) + pi) % tau - pi
+            t1 = kp * e1 - kd * w1
+            t1 = tmax if t1 > tmax else (-tmax if t1 < -tmax else t1)
+            t2 = kp * e2 - kd * w2
+            t2 = tmax if t2 > tmax else (-tmax if t2 < -tmax else t2)
+            set_t(up, t1 - t2)  # chipmunk resets body torques after every step
+            set_t(fo, t2)
+            step(space, DT)
+            w1 = get_w(up)
+            w2 = get_w(fo) - w1
+            if abs(w1) < SPEED_TOL and abs(w2) < SPEED_TOL:
+                still += 1
+                if still >= SETTLE_STEPS:
+                    return n
+            else:
+                still = 0
+        return max_steps
+
+    def _drive_torque_public(self, q1t: float, q2t: float) -> int:
+        """:meth:`_drive_torque` through pymunk's public API (the reference the fast path is
+        tested against)."""
         arm = self.cfg.arm
         kp, kd, tmax = float(arm.kp), float(arm.kd), float(arm.max_torque)
         b1, b2 = arm.proprio_bias
