@@ -122,20 +122,23 @@ def test_arm_from_a_toml_table_is_recorded_in_the_model(runner, kb_path, tmp_pat
     assert arm["preset"] == "custom" and arm["finger_radius"] == 1.5
 
 
-def test_torque_servo_on_chipmunk_takes_the_same_steps_as_through_pymunk():
-    """The fast path of the torque servo (chipmunk called directly) is the public-API loop, to the
-    bit: same landings, same step counts, same felt positions."""
+@pytest.mark.parametrize("arm", ["ideal", "realistic"])
+def test_servo_on_chipmunk_takes_the_same_steps_as_through_pymunk(arm):
+    """The fast path of each servo (chipmunk called directly: the velocity servo of the ideal arm,
+    the torque servo of the realistic one) is its public-API loop, to the bit: same landings, same
+    step counts, same felt positions."""
     from kbcli.sim.arm import DynamicsReacher, _chipmunk
 
-    cfg = SimConfig(mode="dynamics", arm="realistic")
+    cfg = SimConfig(mode="dynamics", arm=arm, reach_noise=1.0)
     rng = np.random.default_rng(3)
     targets = np.column_stack([rng.uniform(200, 600, 25), rng.uniform(250, 450, 25)])
     fast, public = DynamicsReacher(cfg), DynamicsReacher(cfg)
     assert _chipmunk(fast) is not None  # the pymunk we pin exposes chipmunk
+    public._drive = public._drive_public
     public._drive_torque = public._drive_torque_public
     a = fast.reach(targets, np.random.default_rng(4))
     b = public.reach(targets, np.random.default_rng(4))
     assert np.array_equal(a, b)
     assert np.array_equal(fast.last_steps, public.last_steps)
     assert np.array_equal(fast.last_felt, public.last_felt)
-    assert fast.last_steps.min() > 12  # every reach moved and settled (SETTLE_STEPS still steps)
+    assert fast.last_steps.min() > 12  # every reach moved and settled

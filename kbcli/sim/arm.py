@@ -217,7 +217,40 @@ class DynamicsReacher:
 
     # -- reaching -------------------------------------------------------------------------------
     def _drive(self, q1t: float, q2t: float) -> int:
-        """Servo both joints to (q1t, q2t) until settled; return the number of steps."""
+        """Servo both joints to (q1t, q2t) until settled; return the number of steps.
+
+        Runs on chipmunk directly when pymunk exposes it (:func:`_chipmunk`), else through
+        pymunk's public API (:meth:`_drive_public`); both take the same steps, to the bit.
+        """
+        cm = _chipmunk(self)
+        if cm is None:
+            return self._drive_public(q1t, q2t)
+        lib, up, fo, space = cm
+        get_a, get_w, set_rate, step = (lib.cpBodyGetAngle, lib.cpBodyGetAngularVelocity,
+                                        lib.cpSimpleMotorSetRate, lib.cpSpaceStep)
+        m1, m2 = self.m1._constraint, self.m2._constraint
+        pi, tau = math.pi, 2.0 * math.pi
+        for n in range(1, MAX_STEPS + 1):
+            a1 = get_a(up)
+            e1 = (q1t - a1 + pi) % tau - pi  # _wrap, inlined: this loop is the hot path
+            e2 = (q2t - (get_a(fo) - a1) + pi) % tau - pi
+            w1 = KP * e1
+            w1 = MAX_RATE if w1 > MAX_RATE else (-MAX_RATE if w1 < -MAX_RATE else w1)
+            w2 = KP * e2
+            w2 = MAX_RATE if w2 > MAX_RATE else (-MAX_RATE if w2 < -MAX_RATE else w2)
+            # SimpleMotor(a, b) keeps a.w - b.w == rate: static.w - upper.w = -w1, and so on.
+            set_rate(m1, -w1)
+            set_rate(m2, -w2)
+            step(space, DT)
+            if abs(e1) < ANGLE_TOL and abs(e2) < ANGLE_TOL:
+                v1 = get_w(up)
+                if abs(v1) < SPEED_TOL and abs(get_w(fo) - v1) < SPEED_TOL:
+                    return n
+        return MAX_STEPS
+
+    def _drive_public(self, q1t: float, q2t: float) -> int:
+        """:meth:`_drive` through pymunk's public API (the reference the fast path is tested
+        against)."""
         up, fo, m1, m2, step = self.upper, self.fore, self.m1, self.m2, self.space.step
         for n in range(1, MAX_STEPS + 1):
             a1 = up.angle
