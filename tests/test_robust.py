@@ -11,10 +11,12 @@ from scipy.special import logsumexp
 from kbcli.core import accuracy as scoring
 from kbcli.core.adapt import (
     REDUNDANCY_FACTOR,
+    WIDE_BLUR_FACTOR,
     Adapter,
     AdapterConfig,
     adapt,
     redundancy_radius,
+    robust_blurs,
     spot_count,
 )
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
@@ -263,6 +265,28 @@ def test_redundancy_radius_is_resolved_from_the_model_reliability():
     for bad in (-1.0, float("nan"), "far"):
         with pytest.raises(ConfigError):
             AdapterConfig(redundancy_radius=bad)
+
+
+def test_the_blur_grid_widens_for_a_model_that_says_it_is_weak():
+    """A model whose own boundary error is 4 px also has a blur of 2 x 4 = 8 px weighed; a good
+    model (1.5 px), the exact one (no estimate) and the rigid family keep their grids; an explicit
+    grid or model_blur wins."""
+    from kbcli.core.robust import DEFAULT_BLURS, RIGID_BLURS
+
+    class Rated(ExactModel):
+        def __init__(self, kb, berr):
+            super().__init__(kb)
+            self.reliability_ = {"boundary_error": berr}
+
+    cfg = AdapterConfig(prior_halfwidth=10.0)
+    assert robust_blurs(EXACT, cfg) == DEFAULT_BLURS
+    assert robust_blurs(Rated(KB, 1.5), cfg) == DEFAULT_BLURS
+    assert robust_blurs(Rated(KB, 4.0), cfg) == (*DEFAULT_BLURS, WIDE_BLUR_FACTOR * 4.0)
+    assert robust_blurs(Rated(KB, 4.0), AdapterConfig(family="rigid")) == RIGID_BLURS
+    assert robust_blurs(Rated(KB, 4.0), AdapterConfig(robust_blurs=(0.0, 3.0))) == (0.0, 3.0)
+    assert robust_blurs(Rated(KB, 4.0), AdapterConfig(model_blur=2.0)) == (2.0,)
+    ad = Adapter(Rated(KB, 4.0), cfg, rng=np.random.default_rng(0))
+    assert list(ad.robust.nuisance.blurs) == [*DEFAULT_BLURS, 8.0]
 
 
 class _OneEdgeOff(ExactModel):

@@ -185,6 +185,7 @@ class _SoftWrapper:
 
 def test_the_plain_posterior_softens_learned_models_and_the_robust_one_learns_the_blur():
     from kbcli.core.adapt import LEARNED_BLUR, total_blur
+    from kbcli.core.robust import DEFAULT_BLURS
 
     soft = _SoftWrapper(MODEL)
     plain = AdapterConfig(prior_halfwidth=10.0, raster_step=1.0, robust=False)
@@ -194,7 +195,9 @@ def test_the_plain_posterior_softens_learned_models_and_the_robust_one_learns_th
     # aim-only feedback's blur, and model_blur, when given, fixes the blur it weighs
     robust = AdapterConfig(prior_halfwidth=10.0, raster_step=1.0, blur=1.5)
     assert total_blur(soft, robust) == 1.5
-    assert list(robust.nuisance().blurs) == sorted(robust.robust_blurs)
+    assert robust.robust_blurs is None  # resolved with the model (robust_blurs())
+    assert list(robust.nuisance().blurs) == sorted(DEFAULT_BLURS)
+    assert list(AdapterConfig(robust_blurs=(2.0, 0.0)).nuisance().blurs) == [0.0, 2.0]
     assert list(AdapterConfig(model_blur=3.0).nuisance().blurs) == [3.0]
     cfg = plain
     with pytest.raises(ConfigError, match="model_blur"):

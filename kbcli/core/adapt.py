@@ -79,6 +79,10 @@ LEARNED_BLUR = 1.0
 #: Radius (px) within which touches count as one spot, as a multiple of the model's own
 #: cross-validated boundary error (``AdapterConfig.redundancy_radius`` None).
 REDUNDANCY_FACTOR = 4.0
+#: A weak model's boundaries can sit further off than the default blur grid reaches: the robust
+#: posterior then also weighs a blur of this many times the model's own cross-validated boundary
+#: error (``AdapterConfig.robust_blurs`` None, translation family), when that exceeds the grid.
+WIDE_BLUR_FACTOR = 2.0
 ESTIMATORS = ("mean", "ml")
 
 
@@ -123,6 +127,8 @@ class AdapterConfig:
         only. False: the plain posterior, which reads the map as the truth.
     robust_blurs : tuple of float or None
         Boundary blurs (px) the robust posterior weighs; None: 0, 1, 2.5 and 5 px (translation),
+        and ``WIDE_BLUR_FACTOR`` (2) times the model's own cross-validated boundary error when that
+        is wider (a weak model: its edges can sit further off than 5 px; :func:`robust_blurs`);
         0 px only (rigid, whose grid is 41 times larger: outliers only).
     robust_outliers : tuple of float or None
         Outlier rates the robust posterior weighs; None: 0.001, 0.02 and 0.1 (translation),
@@ -224,13 +230,13 @@ class AdapterConfig:
         if not isinstance(self.robust, bool):
             raise ConfigError(f"robust must be true or false, got {self.robust!r}")
         rigid = self.family == "rigid"
-        if self.robust_blurs is None:
-            object.__setattr__(self, "robust_blurs", RIGID_BLURS if rigid else DEFAULT_BLURS)
         if self.robust_outliers is None:
             object.__setattr__(self, "robust_outliers",
                                RIGID_OUTLIERS if rigid else DEFAULT_OUTLIERS)
         for name in ("robust_blurs", "robust_outliers"):
             v = getattr(self, name)
+            if v is None:  # robust_blurs: resolved with the model (robust_blurs())
+                continue
             if isinstance(v, (str, bytes)) or not hasattr(v, "__len__") or len(v) == 0:
                 raise ConfigError(f"{name} must be a non-empty list of numbers, got {v!r}")
             for x in v:
@@ -275,14 +281,14 @@ class AdapterConfig:
         """Whether the robust posterior is used (asked for, with the likelihood posterior)."""
         return self.robust and self.posterior == "likelihood"
 
-    def nuisance(self) -> Nuisance:
-        """The blurs and outlier rates the robust posterior marginalises."""
-        blurs = self.robust_blurs if self.model_blur is None else (self.model_blur,)
-        return Nuisance.build(blurs, self.robust_outliers)
+    def nuisance(self, model=None) -> Nuisance:
+        """The blurs (:func:`robust_blurs` for ``model``) and outlier rates the robust posterior
+        marginalises."""
+        return Nuisance.build(robust_blurs(model, self), self.robust_outliers)
 
     def to_dict(self) -> dict:
         d = asdict(self)
-        d["robust_blurs"] = list(self.robust_blurs)
+        d["robust_blurs"] = None if self.robust_blurs is None else list(self.robust_blurs)
         d["robust_outliers"] = list(self.robust_outliers)
         return d
 
@@ -292,15 +298,43 @@ class AdapterConfig:
         return cls(**d)
 
 
+def _boundary_error(model) -> float | None:
+    """The model's own cross-validated boundary error (px), or None when it has no estimate."""
+    rel = getattr(model, "reliability_", None) or {}
+    berr = rel.get("boundary_error") if isinstance(rel, dict) else None
+    return float(berr) if berr is not None and np.isfinite(berr) else None
+
+
+def robust_blurs(model, cfg: AdapterConfig) -> tuple[float, ...]:
+    """The boundary blurs (px) the robust posterior weighs for ``model`` (see
+    :class:`AdapterConfig`): ``cfg.model_blur`` alone when set, ``cfg.robust_blurs`` when given,
+    else the family's grid, widened for a translation by ``WIDE_BLUR_FACTOR`` times the model's
+    own boundary error when that lies beyond it."""
+    if cfg.model_blur is not None:
+        return (float(cfg.model_blur),)
+    if cfg.robust_blurs is not None:
+        return tuple(cfg.robust_blurs)
+    if cfg.family == "rigid":
+        return RIGID_BLURS
+    return blur_grid(_boundary_error(model))
+
+
+def blur_grid(boundary_error: float | None) -> tuple[float, ...]:
+    """The translation family's default blur grid for a model whose own cross-validated boundary
+    error is ``boundary_error`` px (None: no estimate): ``DEFAULT_BLURS``, and
+    ``WIDE_BLUR_FACTOR * boundary_error`` when that lies beyond them."""
+    wide = WIDE_BLUR_FACTOR * boundary_error if boundary_error is not None else 0.0
+    if wide > max(DEFAULT_BLURS):
+        return (*DEFAULT_BLURS, round(wide, 2))
+    return DEFAULT_BLURS
+
+
 def redundancy_radius(model, cfg: AdapterConfig) -> float:
     """The resolved ``cfg.redundancy_radius`` (px) for ``model`` (see :class:`AdapterConfig`)."""
     if cfg.redundancy_radius is not None:
         return float(cfg.redundancy_radius)
-    rel = getattr(model, "reliability_", None) or {}
-    berr = rel.get("boundary_error") if isinstance(rel, dict) else None
-    if berr is None or not np.isfinite(berr):
-        return 0.0
-    return REDUNDANCY_FACTOR * float(berr)
+    berr = _boundary_error(model)
+    return 0.0 if berr is None else REDUNDANCY_FACTOR * berr
 
 
 def spot_count(points: np.ndarray, touched: np.ndarray, radius: float) -> np.ndarray:
@@ -435,7 +469,7 @@ class Adapter:
         self.posterior = Posterior.uniform(self.grid)
         #: the robust posterior (None with the plain one); ``posterior`` is then its marginal
         self.robust: RobustPosterior | None = (
-            RobustPosterior(self.grid, cfg.nuisance()) if cfg.is_robust else None)
+            RobustPosterior(self.grid, cfg.nuisance(model)) if cfg.is_robust else None)
         self._strategy = get_strategy(cfg.strategy)
         #: px: touches this close count as one spot (robust posterior; see AdapterConfig)
         self.redundancy_radius = redundancy_radius(model, cfg) if cfg.is_robust else 0.0

@@ -348,6 +348,9 @@ class Recorder:
         if self.adapter.cfg.posterior == "kde":
             out["bandwidths"] = np.asarray(self.adapter.bandwidths, float)
         out["redundancy_radius"] = np.float64(getattr(self.adapter, "redundancy_radius", 0.0))
+        rob = getattr(self.adapter, "robust", None)
+        out["robust_blurs"] = (np.asarray(rob.nuisance.blurs, float) if rob is not None
+                               else np.empty(0))
         return out
 
 
@@ -578,12 +581,16 @@ def run_attrs(res: dict[str, np.ndarray], acfg: AdapterConfig, *, truth: np.ndar
         "median_step_ms": float(np.median(res["step_ms"])) if n else None,
         # resolved from the model's own reliability when the config leaves it None
         "redundancy_radius": float(res["redundancy_radius"]) if "redundancy_radius" in res else None,
+        # the boundary blurs the robust posterior weighed (widened for a weak model; [] if plain)
+        "robust_blurs": ([float(v) for v in res["robust_blurs"]] if "robust_blurs" in res
+                         else None),
     }
 
 
 def run_data(res: dict[str, np.ndarray]) -> dict:
     """The datasets of a ``run`` artifact: the records, with the wall-clock times in ``timing/``."""
-    data = {k: v for k, v in res.items() if k not in ("step_ms", "redundancy_radius")}
+    data = {k: v for k, v in res.items()
+            if k not in ("step_ms", "redundancy_radius", "robust_blurs")}
     data["timing"] = {"step_ms": res["step_ms"]}
     return data
 

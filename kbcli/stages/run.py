@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kbcli.core import transforms
-from kbcli.core.adapt import build_table, redundancy_radius
+from kbcli.core.adapt import build_table, redundancy_radius, robust_blurs
 from kbcli.core.detect import DetectorConfig
 from kbcli.core.loop import ADAPT, PLAY, LoopStep, closed_loop
 from kbcli.core.melody import DEFAULT_MELODY, parse_melody
@@ -192,6 +192,9 @@ class LoopSession:
             # resolved from the model's own reliability when the config leaves it None
             "redundancy_radius": (redundancy_radius(self.model, self.cfg.adapt.adapter_config())
                                   if self.cfg.adapt.adapter_config().is_robust else 0.0),
+            "robust_blurs": ([float(v) for v in robust_blurs(self.model,
+                                                             self.cfg.adapt.adapter_config())]
+                             if self.cfg.adapt.adapter_config().is_robust else []),
         }
 
     def artifact(self) -> Artifact:
