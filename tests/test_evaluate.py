@@ -288,6 +288,17 @@ def test_paper_config_parses_and_plans():
     resolved = stage.resolved_methods(cfg)
     assert resolved["paper"]["options"]["ideal"]["active"]["robot"]["kde_samples"] == 10000
     assert resolved["paper-likelihood"]["modes"] == ["ideal"]
+    # options left to the model are resolved with it: a model that rates its boundaries 4 px off
+    # gets a 16 px spot radius and a blur grid up to 8 px on the robust posterior, none on the KDE
+    from kbcli.core.model import ExactModel
+
+    weak = ExactModel(Keyboard(KeyboardConfig()))
+    weak.reliability_ = {"boundary_error": 4.0}
+    by_model = stage.resolved_methods(cfg, weak)
+    assert by_model["kbcli"]["from_model"] == {"redundancy_radius": 16.0,
+                                               "robust_blurs": [0.0, 1.0, 2.5, 5.0, 8.0]}
+    assert by_model["paper"]["from_model"] == {"redundancy_radius": 0.0, "robust_blurs": []}
+    assert resolved["kbcli"]["from_model"] == {}
     assert cfg == stage.EvaluateConfig.from_dict(cfg.to_dict())
     import pickle
 

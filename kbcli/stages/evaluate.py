@@ -572,13 +572,21 @@ def adapt_config(cfg: EvaluateConfig, method: str, strategy: str, mode: str):
     return adapt.AdaptConfig.from_dict(values)
 
 
-def resolved_methods(cfg: EvaluateConfig) -> dict:
+def resolved_methods(cfg: EvaluateConfig, model=None) -> dict:
     """Every option each method resolves to, defaults included: ``{method: {"strategies": [...],
     "description": str, "modes": [...], "categories": [...], "options": {mode: {strategy:
-    AdaptConfig.to_dict()}}}}`` (for the artifact and the report)."""
+    AdaptConfig.to_dict()}}, "from_model": {...}}}`` (for the artifact and the report).
+
+    ``from_model``: the options a config leaves to the model (None there), as resolved for
+    ``model``: the robust posterior's ``redundancy_radius`` (px) and ``robust_blurs`` (px); 0 and
+    [] with the plain or KDE posterior. Empty without a model.
+    """
+    from kbcli.core.adapt import redundancy_radius, robust_blurs
+
     out = {}
     for m in cfg.methods:
         opts = {}
+        from_model: dict = {}
         for mode in cfg.modes:
             if m.modes is not None and mode not in m.modes:
                 continue
@@ -586,11 +594,16 @@ def resolved_methods(cfg: EvaluateConfig) -> dict:
             for s in m.strategies:
                 acfg = adapt_config(cfg, m.name, s, mode)
                 opts[mode][s] = acfg.to_dict() if acfg is not None else {}
+                if acfg is not None and model is not None and not from_model:
+                    r = acfg.adapter_config()
+                    from_model = {
+                        "redundancy_radius": redundancy_radius(model, r) if r.is_robust else 0.0,
+                        "robust_blurs": list(robust_blurs(model, r)) if r.is_robust else []}
         out[m.name] = {"strategies": list(m.strategies), "description": m.description,
                        "modes": [x for x in cfg.modes if m.modes is None or x in m.modes],
                        "categories": [c.name for c in cfg.categories
                                       if m.categories is None or c.name in m.categories],
-                       "options": opts}
+                       "options": opts, "from_model": from_model}
     return out
 
 
@@ -938,7 +951,7 @@ def assemble(cfg: EvaluateConfig, tasks: list[Task], results: dict[int, dict],
         "n_experiments": n,
         "modes": list(cfg.modes),
         "categories": [c.name for c in cfg.categories],
-        "methods": resolved_methods(cfg),
+        "methods": resolved_methods(cfg, _load_model(model_art)),
         "method_order": [m.name for m in cfg.methods],
         "judged": cfg.judged,
         "strategies": list(cfg.strategies),
@@ -956,6 +969,13 @@ def timing(results: dict[int, dict]) -> np.ndarray:
     """All per-step wall times (ms) of ``results``, for the CLI's summary."""
     parts = [np.ravel(r[TIME_KEY]) for r in results.values() if TIME_KEY in r]
     return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def _load_model(model_art: Artifact):
+    """The model stored in ``model_art``."""
+    from kbcli.stages.models import load_model
+
+    return load_model(model_art)
 
 
 def fingerprint(cfg: EvaluateConfig, model_art: Artifact, experiment: str = EXPERIMENT) -> dict:
