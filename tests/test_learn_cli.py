@@ -167,3 +167,24 @@ def test_bench_learn_small(runner):
     assert "reaches/s" in r.output and "kbcli learn" in r.output
     r = runner.invoke(app, ["bench", "learn", "--budgets", "0,x"])
     _one_line_error(r, "--budgets")
+
+
+def test_bench_reliability_summary_is_the_median_over_seeds():
+    from kbcli.bench.reliability import Row, summarise
+
+    def row(e, seed, ece):
+        return Row(e, 150, seed, 0.9, 4.0, ece, 0.05, 0.1, 0.2, 3.0, {"floor": float(seed)}, 1.0)
+
+    rows = [row("active", 0, 0.05), row("active", 1, 0.01), row("active", 2, 0.02),
+            row("random", 0, 0.04)]
+    active, random = summarise(rows)
+    assert (active.exploration, active.seeds, random.seeds) == ("active", 3, 1)
+    assert active.ece == 0.02 and (active.ece_min, active.ece_max) == (0.01, 0.05)
+    assert active.calibration == {"floor": 0.0}  # the first seed's
+    assert random.ece == random.ece_min == random.ece_max == 0.04
+
+
+def test_bench_reliability_refuses_zero_seeds(runner):
+    r = runner.invoke(app, ["bench", "reliability", "--seeds", "0"])
+    assert r.exit_code == 2
+    assert "--seeds" in r.output

@@ -327,3 +327,23 @@ def test_one_wrong_edge_is_not_asked_again_and_again():
     assert np.median(final[0.0]) > 2.0  # every touch at the wrong edge counted: dragged off
     assert np.max(final[12.0]) < 2.0
     assert np.median(final[12.0]) < 0.5 * np.median(final[0.0])
+
+
+def test_distance_weights_give_held_out_touches_the_areas_distance_profile():
+    from kbcli.core.reliability import _distance_weights
+
+    rng = np.random.default_rng(3)
+    # pairs of samples 2 px apart, every pair far from the others: a held-out touch whose partner
+    # stayed in is 2 px from the fold's samples, one whose partner left too is much further
+    centres = rng.uniform((0, 0), (400, 400), size=(60, 2))
+    x = np.vstack([centres, centres + (2.0, 0.0)])
+    fold = rng.integers(0, 5, size=len(x))
+    _, grid = grid_points((0.0, 0.0, 400.0, 400.0), 4.0)
+    w = _distance_weights(x, fold, grid.reshape(-1, 2))
+    assert w.shape == (len(x),) and (w >= 0).all() and np.isclose(w.sum(), 1.0)
+    partner_in = np.r_[fold[60:] != fold[:60], fold[:60] != fold[60:]]
+    # grid points are mostly far from every sample: the far held-out touches stand for them
+    assert w[~partner_in].mean() > w[partner_in].mean()
+    # one fold: nothing is held out against the others, equal weights
+    assert np.allclose(_distance_weights(x, np.zeros(len(x), int), grid.reshape(-1, 2)),
+                       1 / len(x))

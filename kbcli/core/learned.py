@@ -636,14 +636,14 @@ class LearnedModel:
     def fit_grid() -> dict[str, tuple[float, ...]]:
         """Candidate values of the fit's own calibration parameter, the label-noise tolerance
         (px; :func:`kbcli.core.reliability.assess` refits with each and keeps the best held-out
-        likelihood: 0 for an arm that feels exactly where it touched, more for a noisy one)."""
+        score: 0 for an arm that feels exactly where it touched, more for a noisy one)."""
         return {"noise_tol": (0.0, 2.0, 4.0)}
 
     @staticmethod
     def calibration_grid() -> dict[str, tuple[float, ...]]:
         """Candidate values of the calibration parameters (read at prediction time, so a fitted
         model is recalibrated by setting them; :func:`kbcli.core.reliability.assess` picks them by
-        held-out likelihood)."""
+        held-out Brier score, weighted for the distance to the samples)."""
         return {"noise_sd": (0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.5, 6.0), "floor": (0.0, 0.002, 0.01)}
 
     # -- fitting --------------------------------------------------------------------------------
