@@ -296,8 +296,10 @@ def test_paper_config_parses_and_plans():
     weak.reliability_ = {"boundary_error": 4.0}
     by_model = stage.resolved_methods(cfg, weak)
     assert by_model["kbcli"]["from_model"] == {"redundancy_radius": 16.0,
-                                               "robust_blurs": [0.0, 1.0, 2.5, 5.0, 8.0]}
-    assert by_model["paper"]["from_model"] == {"redundancy_radius": 0.0, "robust_blurs": []}
+                                               "robust_blurs": [0.0, 1.0, 2.5, 5.0, 8.0],
+                                               "robust_eta": 0.141}  # (1.5 / 4)^2
+    assert by_model["paper"]["from_model"] == {"redundancy_radius": 0.0, "robust_blurs": [],
+                                               "robust_eta": 1.0}
     assert resolved["kbcli"]["from_model"] == {}
     assert cfg == stage.EvaluateConfig.from_dict(cfg.to_dict())
     import pickle

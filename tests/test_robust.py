@@ -289,6 +289,61 @@ def test_the_blur_grid_widens_for_a_model_that_says_it_is_weak():
     assert list(ad.robust.nuisance.blurs) == [*DEFAULT_BLURS, 8.0]
 
 
+def test_the_learning_rate_tempers_a_model_that_says_it_is_weak():
+    """eta = min(1, (1.5 px / b)^2) for a model rating its boundaries b px off: 1 up to 1.5 px and
+    for the exact model, 0.25 at 3 px; an explicit robust_eta wins; the rigid family and the plain
+    posterior are untouched; bad values are rejected."""
+    from kbcli.core.adapt import learning_rate, temper
+    from kbcli.core.robust import TEMPER_PX
+
+    class Rated(ExactModel):
+        def __init__(self, kb, berr):
+            super().__init__(kb)
+            self.reliability_ = {"boundary_error": berr}
+
+    cfg = AdapterConfig(prior_halfwidth=10.0)
+    assert temper(None) == 1.0 and temper(0.0) == 1.0 and temper(TEMPER_PX) == 1.0
+    assert temper(2 * TEMPER_PX) == pytest.approx(0.25)
+    assert learning_rate(EXACT, cfg) == 1.0
+    assert learning_rate(Rated(KB, 1.06), cfg) == 1.0
+    assert learning_rate(Rated(KB, 6.0), cfg) == pytest.approx((1.5 / 6.0) ** 2, abs=1e-3)
+    assert learning_rate(Rated(KB, 6.0), AdapterConfig(robust_eta=0.5)) == 0.5
+    ad = Adapter(Rated(KB, 3.0), cfg, rng=np.random.default_rng(0))
+    assert ad.robust.eta == pytest.approx(0.25)
+    for bad in (0.0, -0.5, 1.5, float("nan"), "half"):
+        with pytest.raises(ConfigError):
+            AdapterConfig(robust_eta=bad)
+
+
+@settings(max_examples=20, deadline=None)
+@given(eta=st.floats(0.05, 1.0), seed=st.integers(0, 2**16))
+def test_a_tempered_posterior_is_the_plain_one_raised_to_eta(eta, seed):
+    """Tempering by eta is Bayes with every log-likelihood term multiplied by eta: the marginal
+    equals the untempered posterior of the scaled terms, and eta = 1 changes nothing."""
+    grid = HypothesisGrid.build("translation", prior_halfwidth=6.0, resolution=1.0,
+                                centre=np.array([300.0, 300.0]))
+    nz = Nuisance.build((0.0, 2.5), (0.001, 0.1))
+    table = LikelihoodTable.from_model(EXACT, 0.5, eps=1e-3)
+    rng = np.random.default_rng(seed)
+    tempered, plain, scaled = (RobustPosterior(grid, nz, eta=eta), RobustPosterior(grid, nz),
+                               RobustPosterior(grid, nz))
+    x0, y0, x1, y1 = EXACT.area
+    for _ in range(4):
+        a = rng.uniform((x0 + 20, y0 + 20), (x1 - 20, y1 - 20))
+        cls = int(EXACT.predict_class(a[None])[0])
+        terms = robust_terms(grid, table, a, cls, nz)
+        tempered = tempered.update(terms)
+        plain = plain.update(terms)
+        scaled = scaled.update(terms * np.float32(eta))
+    np.testing.assert_allclose(tempered.marginal().logp, scaled.marginal().logp,
+                               rtol=1e-5, atol=1e-4)
+    np.testing.assert_allclose(tempered.weights(), scaled.weights(), rtol=1e-5, atol=1e-6)
+    if eta == 1.0:
+        np.testing.assert_array_equal(tempered.loglik, plain.loglik)
+    with pytest.raises(ValueError):
+        RobustPosterior(grid, nz, eta=0.0)
+
+
 class _OneEdgeOff(ExactModel):
     """The exact map with the edge between the first two key columns 12 px too far right: a
     model that is right almost everywhere and confidently wrong along one edge."""

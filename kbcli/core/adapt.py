@@ -65,6 +65,7 @@ from kbcli.core.robust import (
     DEFAULT_OUTLIERS,
     RIGID_BLURS,
     RIGID_OUTLIERS,
+    TEMPER_PX,
     Nuisance,
     RobustPosterior,
     planning_table,
@@ -133,6 +134,12 @@ class AdapterConfig:
     robust_outliers : tuple of float or None
         Outlier rates the robust posterior weighs; None: 0.001, 0.02 and 0.1 (translation),
         0.001 and 0.05 (rigid).
+    robust_eta : float or None
+        Learning rate in (0, 1] the robust posterior tempers each touch's log-likelihood with (a
+        fractional posterior: :mod:`kbcli.core.robust`). None: resolved with the model,
+        ``min(1, (TEMPER_PX / b)^2)`` for its own cross-validated boundary error ``b`` px
+        (``TEMPER_PX`` 1.5; 1 for the exact model or a model without an estimate;
+        :func:`learning_rate`). 1: untempered.
     redundancy_radius : float or None
         A learned model's errors are not independent from touch to touch: where its boundary is
         wrong, every touch there is wrong the same way. With ``robust``, touches within this
@@ -190,6 +197,7 @@ class AdapterConfig:
     robust: bool = True
     robust_blurs: tuple[float, ...] | None = None
     robust_outliers: tuple[float, ...] | None = None
+    robust_eta: float | None = None
     redundancy_radius: float | None = None
     model_blur: float | None = None
     cell_average: bool = True
@@ -225,6 +233,10 @@ class AdapterConfig:
         _num("blur", self.blur, strict=False)
         if self.model_blur is not None:
             _num("model_blur", self.model_blur, strict=False)
+        if self.robust_eta is not None:
+            _num("robust_eta", self.robust_eta)
+            if self.robust_eta > 1:
+                raise ConfigError(f"robust_eta must lie in (0, 1], got {self.robust_eta!r}")
         if self.redundancy_radius is not None:
             _num("redundancy_radius", self.redundancy_radius, strict=False)
         if not isinstance(self.robust, bool):
@@ -327,6 +339,21 @@ def blur_grid(boundary_error: float | None) -> tuple[float, ...]:
     if wide > max(DEFAULT_BLURS):
         return (*DEFAULT_BLURS, round(wide, 2))
     return DEFAULT_BLURS
+
+
+def learning_rate(model, cfg: AdapterConfig) -> float:
+    """The resolved ``cfg.robust_eta`` for ``model``: ``min(1, (TEMPER_PX / b)^2)`` for its own
+    cross-validated boundary error ``b`` px, 1 without an estimate (see :class:`AdapterConfig`)."""
+    if cfg.robust_eta is not None:
+        return float(cfg.robust_eta)
+    return temper(_boundary_error(model))
+
+
+def temper(boundary_error: float | None) -> float:
+    """``min(1, (TEMPER_PX / boundary_error)^2)`` (1 for None or 0), rounded to 3 decimals."""
+    if boundary_error is None or boundary_error <= TEMPER_PX:
+        return 1.0
+    return round(min(1.0, (TEMPER_PX / float(boundary_error)) ** 2), 3)
 
 
 def redundancy_radius(model, cfg: AdapterConfig) -> float:
@@ -469,7 +496,8 @@ class Adapter:
         self.posterior = Posterior.uniform(self.grid)
         #: the robust posterior (None with the plain one); ``posterior`` is then its marginal
         self.robust: RobustPosterior | None = (
-            RobustPosterior(self.grid, cfg.nuisance(model)) if cfg.is_robust else None)
+            RobustPosterior(self.grid, cfg.nuisance(model), eta=learning_rate(model, cfg))
+            if cfg.is_robust else None)
         self._strategy = get_strategy(cfg.strategy)
         #: px: touches this close count as one spot (robust posterior; see AdapterConfig)
         self.redundancy_radius = redundancy_radius(model, cfg) if cfg.is_robust else 0.0

@@ -351,6 +351,7 @@ class Recorder:
         rob = getattr(self.adapter, "robust", None)
         out["robust_blurs"] = (np.asarray(rob.nuisance.blurs, float) if rob is not None
                                else np.empty(0))
+        out["robust_eta"] = np.float64(rob.eta if rob is not None else 1.0)
         return out
 
 
@@ -584,13 +585,15 @@ def run_attrs(res: dict[str, np.ndarray], acfg: AdapterConfig, *, truth: np.ndar
         # the boundary blurs the robust posterior weighed (widened for a weak model; [] if plain)
         "robust_blurs": ([float(v) for v in res["robust_blurs"]] if "robust_blurs" in res
                          else None),
+        # the learning rate the robust posterior tempered each touch with (1: untempered)
+        "robust_eta": float(res["robust_eta"]) if "robust_eta" in res else None,
     }
 
 
 def run_data(res: dict[str, np.ndarray]) -> dict:
     """The datasets of a ``run`` artifact: the records, with the wall-clock times in ``timing/``."""
     data = {k: v for k, v in res.items()
-            if k not in ("step_ms", "redundancy_radius", "robust_blurs")}
+            if k not in ("step_ms", "redundancy_radius", "robust_blurs", "robust_eta")}
     data["timing"] = {"step_ms": res["step_ms"]}
     return data
 

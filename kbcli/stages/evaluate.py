@@ -578,10 +578,10 @@ def resolved_methods(cfg: EvaluateConfig, model=None) -> dict:
     AdaptConfig.to_dict()}}, "from_model": {...}}}`` (for the artifact and the report).
 
     ``from_model``: the options a config leaves to the model (None there), as resolved for
-    ``model``: the robust posterior's ``redundancy_radius`` (px) and ``robust_blurs`` (px); 0 and
-    [] with the plain or KDE posterior. Empty without a model.
+    ``model``: the robust posterior's ``redundancy_radius`` (px), ``robust_blurs`` (px) and
+    ``robust_eta`` (its learning rate); 0, [] and 1 with the plain or KDE posterior. Empty without a model.
     """
-    from kbcli.core.adapt import redundancy_radius, robust_blurs
+    from kbcli.core.adapt import learning_rate, redundancy_radius, robust_blurs
 
     out = {}
     for m in cfg.methods:
@@ -598,7 +598,8 @@ def resolved_methods(cfg: EvaluateConfig, model=None) -> dict:
                     r = acfg.adapter_config()
                     from_model = {
                         "redundancy_radius": redundancy_radius(model, r) if r.is_robust else 0.0,
-                        "robust_blurs": list(robust_blurs(model, r)) if r.is_robust else []}
+                        "robust_blurs": list(robust_blurs(model, r)) if r.is_robust else [],
+                        "robust_eta": learning_rate(model, r) if r.is_robust else 1.0}
         out[m.name] = {"strategies": list(m.strategies), "description": m.description,
                        "modes": [x for x in cfg.modes if m.modes is None or x in m.modes],
                        "categories": [c.name for c in cfg.categories

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from scipy import stats as sps
 
-from kbcli.core.adapt import REDUNDANCY_FACTOR, blur_grid
+from kbcli.core.adapt import REDUNDANCY_FACTOR, blur_grid, temper
 from kbcli.core.config import check_known
 from kbcli.errors import ConfigError
 from kbcli.sim import MODES
@@ -376,7 +376,9 @@ def assemble(cfg: QualityConfig, models: dict[str, Artifact], tasks: list[Task],
                                                   if rel.get("boundary_error") is not None
                                                   else None),
                             # the widest boundary blur the robust posterior weighs by default
-                            "widest_blur": max(blur_grid(rel.get("boundary_error")))}
+                            "widest_blur": max(blur_grid(rel.get("boundary_error"))),
+                            # the learning rate the robust posterior tempers touches with
+                            "learning_rate": temper(rel.get("boundary_error"))}
         per: dict[str, Any] = {}
         for group in [*[c.name for c in cfg.categories], "all"]:
             sel_m = (model == name) & ((cat == group) if group != "all" else True)
@@ -531,8 +533,8 @@ def report(art: Artifact) -> str:
         lines.append(f"| {r} | {h['rho']:.2f} | {h['p']:.1e} | {h['significant_good']} of "
                      f"{h['good']} | {h['significant_bad']} of {h['bad']} | {verdict(h)} |")
     lines += ["", "## Models", "",
-              "| model | accuracy | boundary error (px) | self-estimated (px) | mislabel rate: measured / self-estimated | tau (px) | spot radius (px) | widest blur (px) |",
-              "|---|---|---|---|---|---|---|---|"]
+              "| model | accuracy | boundary error (px) | self-estimated (px) | mislabel rate: measured / self-estimated | tau (px) | spot radius (px) | widest blur (px) | learning rate |",
+              "|---|---|---|---|---|---|---|---|---|"]
     for m, mi in _ordered(a["models"]):
         est = mi.get("estimated_boundary_error")
         mis = mi.get("estimated_mislabel_rate")
@@ -544,6 +546,8 @@ def report(art: Artifact) -> str:
                      + (f"{mi['redundancy_radius']:.1f}" if mi.get("redundancy_radius") is not None
                         else "n/a") + " | "
                      + (f"{mi['widest_blur']:.1f}" if mi.get("widest_blur") is not None
+                        else "n/a") + " | "
+                     + (f"{mi['learning_rate']:.3g}" if mi.get("learning_rate") is not None
                         else "n/a") + " |")
     lines += ["", "## Per model and category", "",
               "Final error (median px after the last touch), touches to tau (median), advantage "

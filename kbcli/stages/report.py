@@ -524,13 +524,14 @@ def _methods_table(art: Artifact) -> list[str]:
                 loop.setdefault("arm (preset)", {}).setdefault(x, {})[mode] = (
                     arm.get("preset", "?") if isinstance(arm, dict) else "ideal")
                 break
-    for k in ("redundancy_radius", "robust_blurs"):  # left to the model: as it resolved them
+    for k in ("redundancy_radius", "robust_blurs", "robust_eta"):  # as the model resolved them
         if any(k in info[x].get("from_model", {}) for x in meths):
             vals = [info[x].get("from_model", {}).get(k, "") for x in meths]
             vals = [(", ".join(f"{v:g}" for v in val) or "none (not robust)")
                     if isinstance(val, list) else
                     (f"{val:.2f}" if isinstance(val, float) else str(val)) for val in vals]
-            lines.append(f"| {k}, resolved from the model (px) | " + " | ".join(vals) + " |")
+            unit = "" if k == "robust_eta" else " (px)"
+            lines.append(f"| {k}, resolved from the model{unit} | " + " | ".join(vals) + " |")
     for k, by_x in loop.items():
         vals = []
         for x in meths:

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kbcli.core import transforms
-from kbcli.core.adapt import build_table, redundancy_radius, robust_blurs
+from kbcli.core.adapt import build_table, learning_rate, redundancy_radius, robust_blurs
 from kbcli.core.detect import DetectorConfig
 from kbcli.core.loop import ADAPT, PLAY, LoopStep, closed_loop
 from kbcli.core.melody import DEFAULT_MELODY, parse_melody
@@ -195,6 +195,8 @@ class LoopSession:
             "robust_blurs": ([float(v) for v in robust_blurs(self.model,
                                                              self.cfg.adapt.adapter_config())]
                              if self.cfg.adapt.adapter_config().is_robust else []),
+            "robust_eta": (learning_rate(self.model, self.cfg.adapt.adapter_config())
+                           if self.cfg.adapt.adapter_config().is_robust else 1.0),
         }
 
     def artifact(self) -> Artifact:
