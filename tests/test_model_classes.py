@@ -6,6 +6,7 @@ from __future__ import annotations
 import h5py
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 from sklearn.exceptions import NotFittedError
 
 from kbcli.cli import app
@@ -109,7 +110,12 @@ def test_svc_probabilities_come_from_the_margin(pads_svc):
     model = pads_svc.model
     cx, cy = PADS.key_centres()[0]
     r = PADS.config.pad_radius
-    pts = np.array([[cx, cy], [cx + r, cy], [cx + 25.0, cy + 25.0]])  # the last between 4 pads
+    # on the edge: the point of the pad's circle furthest from every sample (a sample landed
+    # right on the edge tells its sound there)
+    th = np.linspace(0.0, 2 * np.pi, 360, endpoint=False)
+    circle = np.column_stack([cx + r * np.cos(th), cy + r * np.sin(th)])
+    edge = circle[np.argmax(cKDTree(model.actions_).query(circle)[0])]
+    pts = np.array([[cx, cy], edge, [cx + 25.0, cy + 25.0]])  # the last between 4 pads
     p = model.predict_proba(pts)
     cls = scoring.class_keys(model.class_features_, PADS)
     k = int(np.flatnonzero(cls == 0)[0])
@@ -137,6 +143,48 @@ def test_svc_storage_has_no_pickle_and_refits_exactly(pads_svc, tmp_path):
         SVCModel.from_arrays({"actions": np.zeros((2, 2))})
     with pytest.raises(ConfigError, match="length_scale"):
         SVCModel(length_scale=0.0).fit(np.zeros((2, 2)), np.full((2, 2), np.nan))
+    with pytest.raises(ConfigError, match="linear_pairs must be True or False"):
+        make_model("svc", match_threshold=1.5, area=PADS.area, linear_pairs="no").fit(
+            np.zeros((2, 2)), np.full((2, 2), np.nan))
+
+
+def _two_sounds(inside) -> tuple[np.ndarray, np.ndarray]:
+    """Samples on a 10 px lattice, heard as sound A where ``inside(points)`` else as sound B."""
+    g = np.stack(np.meshgrid(np.arange(305.0, 500.0, 10.0), np.arange(255.0, 450.0, 10.0)), -1)
+    x = g.reshape(-1, 2)
+    heard = np.where(inside(x)[:, None], [[1.0, 1.0]], [[5.0, 5.0]])
+    return x, heard
+
+
+def test_svc_pairs_that_a_line_separates_get_a_straight_boundary():
+    """Two sounds either side of x = 400: the pair's machine is linear (hard margin), so its
+    boundary is the straight line midway between the nearest samples, +-1 on them."""
+    x, heard = _two_sounds(lambda p: p[:, 0] < 400.0)
+    model = SVCModel(area=PADS.area).fit(x, heard)
+    ((code, svm),) = model._svms.items()
+    assert svm.kernel == "linear"
+    y = np.linspace(270.0, 430.0, 9)
+    side = 1.0 if model.predict_class(np.array([[450.0, 350.0]]))[0] > 1 else -1.0
+    for bx, f in ((400.0, 0.0), (395.0, -side), (405.0, side)):
+        np.testing.assert_allclose(model._decision(code, np.column_stack([np.full(9, bx), y])),
+                                   f, atol=1e-3)
+    # a disc of one sound inside the other: no line separates them, the RBF machine bends
+    disc = SVCModel(area=PADS.area).fit(*_two_sounds(
+        lambda p: np.hypot(p[:, 0] - 400.0, p[:, 1] - 350.0) < 40.0))
+    (svm,) = disc._svms.values()
+    assert svm.kernel == "rbf"
+    inner, outer = disc.predict_class(np.array([[400.0, 350.0], [400.0, 420.0]]))
+    assert inner != outer
+    # the RBF-only machine of models stored before linear pairs: what such a stored model loads as
+    rbf = SVCModel(area=PADS.area, linear_pairs=False).fit(x, heard)
+    assert next(iter(rbf._svms.values())).kernel == "rbf"
+    old = {k: v for k, v in model.to_arrays().items() if k != "linear_pairs"}
+    back = SVCModel.from_arrays(old)
+    assert back.linear_pairs is False
+    q = np.random.default_rng(3).uniform(PADS.area[:2], PADS.area[2:], size=(500, 2))
+    np.testing.assert_array_equal(back.predict_proba(q), rbf.predict_proba(q))
+    np.testing.assert_array_equal(SVCModel.from_arrays(model.to_arrays()).predict_proba(q),
+                                  model.predict_proba(q))
 
 
 def test_svc_exploration_beats_random_on_pads():

@@ -59,7 +59,8 @@ def learn_cmd(
         "--curve-every", help="Reaches between learning-curve points.")] = 50,
     model_class: Annotated[str, typer.Option(
         "--model-class", help="lines (straight key edges: the grid and other polygon keys) or svc "
-        "(scikit-learn RBF SVMs per pair of neighbouring sounds: any key shape, pads included).")
+        "(scikit-learn SVMs per pair of neighbouring sounds, straight where a line separates "
+        "them, RBF elsewhere: any key shape, pads included).")
     ] = "lines",
 ) -> None:
     """Learn the instrument model by exploring the pad with the simulated arm.

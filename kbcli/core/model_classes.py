@@ -22,8 +22,9 @@ Registered (:data:`MODEL_CLASSES`):
     Keys bounded by straight lines shared across keys: exact and sample-efficient for polygon keys
     (grid, hex, piano, polygons); it cannot bend around a round pad.
 ``svc`` (:class:`~kbcli.core.svc_model.SVCModel`)
-    One scikit-learn RBF support-vector machine per pair of neighbouring sounds, probabilities from
-    the margin: any key shape, curved boundaries included.
+    One scikit-learn support-vector machine per pair of neighbouring sounds (linear where a
+    straight line separates the pair's samples, RBF elsewhere), probabilities from the margin: any
+    key shape, curved boundaries included.
 
 Adding a class is adding an entry with :func:`register`: a factory taking ``match_threshold``,
 ``area`` and the class's own keyword parameters, and a ``from_arrays``. Fitting goes through
@@ -131,5 +132,5 @@ def _svc_from(d: dict):
 register("lines", "straight key edges shared across keys (polygon keys)", _lines, _lines_from,
          ("n_neighbors", "min_sd", "max_sd", "extrapolation", "merge_angle", "merge_offset",
           "piece_reach", "sd_scale", "noise_sd", "floor", "noise_tol"))
-register("svc", "scikit-learn RBF SVMs per pair of neighbouring sounds (any key shape)", _svc,
-         _svc_from, ("length_scale", "C", "local_radius", "n_neighbors"))
+register("svc", "scikit-learn SVMs per pair of neighbouring sounds, linear or RBF (any key shape)",
+         _svc, _svc_from, ("length_scale", "C", "local_radius", "n_neighbors", "linear_pairs"))
