@@ -317,16 +317,18 @@ def test_the_learning_rate_tempers_a_model_that_says_it_is_weak():
 
 @settings(max_examples=20, deadline=None)
 @given(eta=st.floats(0.05, 1.0), seed=st.integers(0, 2**16))
-def test_a_tempered_posterior_is_the_plain_one_raised_to_eta(eta, seed):
-    """Tempering by eta is Bayes with every log-likelihood term multiplied by eta: the marginal
-    equals the untempered posterior of the scaled terms, and eta = 1 changes nothing."""
+def test_a_tempered_posterior_is_the_plain_one_raised_to_its_rate(eta, seed):
+    """After n touches the coarsened posterior is Bayes with the log-likelihood multiplied by
+    zeta_n = alpha / (alpha + n), alpha = 30 eta / (1 - eta): zeta falls from about 1 and reaches
+    eta at 30 touches; eta = 1 changes nothing."""
+    from kbcli.core.robust import HORIZON
+
     grid = HypothesisGrid.build("translation", prior_halfwidth=6.0, resolution=1.0,
                                 centre=np.array([300.0, 300.0]))
     nz = Nuisance.build((0.0, 2.5), (0.001, 0.1))
     table = LikelihoodTable.from_model(EXACT, 0.5, eps=1e-3)
     rng = np.random.default_rng(seed)
-    tempered, plain, scaled = (RobustPosterior(grid, nz, eta=eta), RobustPosterior(grid, nz),
-                               RobustPosterior(grid, nz))
+    tempered, plain = RobustPosterior(grid, nz, eta=eta), RobustPosterior(grid, nz)
     x0, y0, x1, y1 = EXACT.area
     for _ in range(4):
         a = rng.uniform((x0 + 20, y0 + 20), (x1 - 20, y1 - 20))
@@ -334,12 +336,18 @@ def test_a_tempered_posterior_is_the_plain_one_raised_to_eta(eta, seed):
         terms = robust_terms(grid, table, a, cls, nz)
         tempered = tempered.update(terms)
         plain = plain.update(terms)
-        scaled = scaled.update(terms * np.float32(eta))
+    zeta = tempered.rate
+    if eta < 1:
+        alpha = HORIZON * eta / (1 - eta)
+        assert zeta == pytest.approx(alpha / (alpha + 4))
+        assert RobustPosterior(grid, nz, n_obs=int(HORIZON), eta=eta).rate == pytest.approx(eta)
+    else:
+        assert zeta == 1.0
+    scaled = RobustPosterior(grid, nz, (plain.loglik * np.float32(zeta)).astype(np.float32), 4)
     np.testing.assert_allclose(tempered.marginal().logp, scaled.marginal().logp,
                                rtol=1e-5, atol=1e-4)
     np.testing.assert_allclose(tempered.weights(), scaled.weights(), rtol=1e-5, atol=1e-6)
-    if eta == 1.0:
-        np.testing.assert_array_equal(tempered.loglik, plain.loglik)
+    np.testing.assert_array_equal(tempered.loglik, plain.loglik)  # kept untempered
     with pytest.raises(ValueError):
         RobustPosterior(grid, nz, eta=0.0)
 

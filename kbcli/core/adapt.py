@@ -135,8 +135,10 @@ class AdapterConfig:
         Outlier rates the robust posterior weighs; None: 0.001, 0.02 and 0.1 (translation),
         0.001 and 0.05 (rigid).
     robust_eta : float or None
-        Learning rate in (0, 1] the robust posterior tempers each touch's log-likelihood with (a
-        fractional posterior: :mod:`kbcli.core.robust`). None: resolved with the model,
+        Learning rate in (0, 1] the robust posterior tempers the log-likelihood with after 30
+        touches (a coarsened posterior: after ``n`` touches the rate is ``alpha / (alpha + n)``,
+        ``alpha = 30 eta / (1 - eta)``, so the first touches count almost in full;
+        :mod:`kbcli.core.robust`). None: resolved with the model,
         ``min(1, (TEMPER_PX / b)^2)`` for its own cross-validated boundary error ``b`` px
         (``TEMPER_PX`` 1.5; 1 for the exact model or a model without an estimate;
         :func:`learning_rate`). 1: untempered.
