@@ -355,7 +355,7 @@ def temper(boundary_error: float | None) -> float:
     """``min(1, (TEMPER_PX / boundary_error)^2)`` (1 for None or 0), rounded to 3 decimals."""
     if boundary_error is None or boundary_error <= TEMPER_PX:
         return 1.0
-    return round(min(1.0, (TEMPER_PX / float(boundary_error)) ** 2), 3)
+    return round((TEMPER_PX / float(boundary_error)) ** 2, 3)
 
 
 def redundancy_radius(model, cfg: AdapterConfig) -> float:
