@@ -45,14 +45,17 @@ def test_the_default_pipeline_config_is_valid():
     assert cfg.arm["preset"] == "realistic" and cfg.mode == "dynamics"
     assert min(cfg.budgets) <= 150 and max(cfg.budgets) >= 1600
     assert cfg.experiments * 4 >= 30  # 30 runs or more per (model, category, row) cell
+    assert cfg.ideal  # and the exact model's reference runs once, on the same displacements
     assert len(stage.plan(cfg)) == (len(cfg.budgets) * len(cfg.explorations) * 12
-                                    * len(cfg.rows) * cfg.experiments)
+                                    * len(cfg.rows) * cfg.experiments + 12 * cfg.experiments)
 
 
 @pytest.mark.parametrize("table", [
     {"explorations": ["psychic"]}, {"budgets": [5]}, {"rows": {}},
     {"rows": {"a": {"strategy": "random", "mode": "ideal"}}}, {"baseline": "nobody"},
     {"adapt": {"strategy": "random"}}, {"arm": "clumsy"}, {"mode": "teleport"}, {"budget": [10]},
+    {"ideal": "yes"}, {"rows": {"random": {"strategy": "random"},
+                                stage.IDEAL_ROW: {"strategy": "infogain"}}},
 ])
 def test_bad_quality_configs_are_refused(table):
     with pytest.raises(ConfigError):
@@ -67,6 +70,11 @@ def test_seeds_are_paired_across_rows_and_models():
         by.setdefault((t.category, t.param_index, t.rep), set()).add(t.spawn_key)
     assert all(len(v) == 1 for v in by.values())  # one seed per displacement and repetition
     assert len(by) == 12 * 2
+    exact = [t for t in tasks if t.model == stage.EXACT]
+    assert len(exact) == 12 * 2 and {t.method for t in exact} == {stage.IDEAL_ROW}
+    off = stage.plan(stage.QualityConfig.from_dict({"budgets": [100, 200], "experiments": 2,
+                                                    "ideal": False}))
+    assert len(off) == len(tasks) - len(exact) and stage.EXACT not in {t.model for t in off}
 
 
 def test_touches_to_threshold_and_paired_test_known_answers():
@@ -108,8 +116,13 @@ def test_a_tiny_sweep_runs_and_reports(runner, small_kb, tmp_path):
     assert r.exit_code == 0, r.output
     assert "advantage over random" in r.output
     art = read_artifact(out, "model_quality")
-    assert art.data["experiments"]["errors"].shape == (2 * 1 * 2 * 2, 6)
+    # 2 models x 1 displacement x 2 rows x 2 repetitions, then the exact model's 2 runs
+    assert art.data["experiments"]["errors"].shape == (2 * 1 * 2 * 2 + 2, 6)
     assert set(art.attrs["models"]) == {"random-40", "random-120"}
+    info = sorted(art.attrs["models"].values(), key=lambda m: m["threshold"])
+    ideal = [m["ideal_touches"]["small"] for m in info]  # a wider tau is never reached later
+    assert all(1 <= v <= 7 for v in ideal) and ideal == sorted(ideal, reverse=True)
+    assert art.attrs["rows_resolved"][stage.IDEAL_ROW]["robot"]["strategy"] == "infogain"
     assert art.attrs["rows_resolved"]["infogain"]["robot"]["robust"] is True
     assert not (tmp_path / "q.h5.ckpt").exists()
     # same inputs and seed: the same numbers
@@ -122,4 +135,5 @@ def test_a_tiny_sweep_runs_and_reports(runner, small_kb, tmp_path):
     assert r.exit_code == 0, r.output
     text = (rep / "README.md").read_text()
     assert "The paper's explanation, tested" in text and "random-120" in text
+    assert "infogain with the exact model" in text and "exact model's touches" in text
     assert (rep / "advantage.png").stat().st_size > 10_000

@@ -110,7 +110,7 @@ def quality_cmd(
 
     # phase 2: the adaptations
     tasks = stage.plan(cfg)
-    ctx = {"models": models, "quality": cfg.to_dict()}
+    ctx = {"models": models, "quality": cfg.to_dict(), "keyboard": kb_art}
     key = "adapt-" + "-".join(str(models[n].sha256)[:12] for n, _, _ in stage.model_names(cfg))
     job = Job(setup="kbcli.stages.quality:adapt_setup", run="kbcli.stages.quality:adapt_one",
               context=ctx, context_key=key, tasks=tuple(tasks))
