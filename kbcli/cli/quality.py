@@ -52,8 +52,9 @@ def quality_cmd(
 
     Reads the TOML config and KEYBOARD. Writes OUTPUT (kind 'model_quality': every run's error per
     touch; per model, category and row the final error, touches to the model's threshold, the
-    advantage over the baseline and its Wilcoxon signed-rank p-value). Learned models and finished
-    adaptations are kept in OUTPUT.ckpt/ while it runs (--resume continues from there). Prints a
+    advantage over the baseline and its Wilcoxon signed-rank p-value; with `ideal = true`, the
+    default, also infogain once with the exact model, and its touches to each model's threshold).
+    Learned models and finished adaptations are kept in OUTPUT.ckpt/ while it runs (--resume continues from there). Prints a
     progress bar per phase and a table of the advantage per model; `kbcli report OUTPUT` draws it.
     """
     if config == DEFAULT_CONFIG and not config.is_file():
