@@ -4,6 +4,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 KBCLI  := $(BIN)/kbcli
+PY     := $(BIN)/python
 STAMP  := $(VENV)/.kbcli-installed
 OUT    ?= out
 SEED   ?= 0
@@ -54,12 +55,15 @@ demo: $(STAMP)
 # that the smoke tests read. DATA=folder builds it elsewhere (tests/test_golden.py checks that a
 # rebuild gives the same numbers). data/schema/vN/ keeps a file of every schema version ever written:
 # never rebuilt, copy a golden file there when you bump a kind's schema version.
+# $(DATA)/platform.json names the platform that built them (numpy's SIMD level, the BLAS kernel,
+# the libraries' versions): the bytes are reproduced on that platform only (kbcli/io/platform.py).
 DATA ?= data
 G := $(DATA)/golden
 data: $(STAMP) data-files
 
 data-files:
 	@mkdir -p $(G)
+	$(PY) -m kbcli.io.platform -o $(DATA)/platform.json
 	$(KBCLI) keyboard --config pipelines/keyboard.toml -o $(DATA)/keyboard.h5
 	$(KBCLI) learn --keyboard $(DATA)/keyboard.h5 --mode dynamics --strategy active --budget 800 \
 	    --seed 0 -o $(DATA)/default-model.h5
