@@ -50,6 +50,21 @@ def test_the_default_pipeline_config_is_valid():
                                     * len(cfg.rows) * cfg.experiments + 12 * cfg.experiments)
 
 
+def test_the_variants_pipeline_reuses_the_sweeps_weak_active_models():
+    """pipelines/infogain-variants.toml learns the same models as the sweep (same seeds, mode and
+    arm), so its numbers compare with the sweep's."""
+    from kbcli.io.config import load_toml
+
+    main = stage.QualityConfig.from_dict(load_toml("pipelines/model-quality.toml", "quality"))
+    var = stage.QualityConfig.from_dict(load_toml("pipelines/infogain-variants.toml", "quality"))
+    assert (var.seed, var.mode, var.arm, var.reach_noise) == (main.seed, main.mode, main.arm,
+                                                              main.reach_noise)
+    learned = stage.learn_tasks(var)  # the same models: same names, budgets and seeds
+    assert learned == stage.learn_tasks(main)[:len(learned)]
+    assert var.baseline == main.baseline and "infogain" in var.rows and len(var.rows) >= 3
+    assert len(stage.plan(var)) == len(var.budgets) * 12 * len(var.rows) * var.experiments
+
+
 @pytest.mark.parametrize("table", [
     {"explorations": ["psychic"]}, {"budgets": [5]}, {"rows": {}},
     {"rows": {"a": {"strategy": "random", "mode": "ideal"}}}, {"baseline": "nobody"},
