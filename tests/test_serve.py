@@ -227,8 +227,18 @@ def test_serve_survives_a_broken_pipe(model_file, tmp_path):
     assert read_artifact(out, "run").attrs["steps"] == 2
 
 
+@pytest.fixture
+def sigint_heard():
+    """Children that hear Ctrl-C. A process inherits an *ignored* SIGINT (so does a test suite
+    started in the background by a shell without job control, and every child it spawns), but a
+    handled one is reset to the default at exec, where Python turns it into KeyboardInterrupt."""
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_serve_interrupted_keeps_the_touches(model_file, tmp_path, sig):
+def test_serve_interrupted_keeps_the_touches(model_file, tmp_path, sig, sigint_heard):
     out = tmp_path / "session.h5"
     proc = _one_touch(model_file, out)
     proc.send_signal(sig)
