@@ -30,8 +30,10 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
+# The suite on every core (pytest-xdist; TEST_JOBS=1 runs it in one process).
+TEST_JOBS ?= auto
 test: $(STAMP)
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q -n $(TEST_JOBS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check kbcli tests
