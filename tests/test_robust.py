@@ -23,7 +23,7 @@ from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.learned import LearnedModel
 from kbcli.core.model import ExactModel, grid_points
 from kbcli.core.posterior import HypothesisGrid, LikelihoodTable, Posterior, likelihood_term
-from kbcli.core.reliability import assess, expected_calibration_error
+from kbcli.core.reliability import assess, choose_calibration, expected_calibration_error
 from kbcli.core.robust import Nuisance, RobustPosterior, blurred_map, raw_prob, robust_terms
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig, World, keys_heard_when_felt, make_reacher
@@ -213,6 +213,44 @@ def test_calibration_is_chosen_from_the_grid_and_applied_to_a_copy(random_sample
     assert full.noise_sd == 0.0 and full.floor == 0.0  # the input model is unchanged
     again = assess(_fit, full, x, s, rng=np.random.default_rng(0))[1]
     assert again == rel  # same inputs and seed, same numbers
+
+
+def test_a_calibration_must_beat_the_models_own_by_a_standard_error():
+    n = 100
+    w = np.full(n, 1 / n)
+    own = np.full(n, 0.5)
+    # (own, consistently better by 0.1, better by 0.01 on average but noisy)
+    noisy = own - 0.01 + np.where(np.arange(n) % 2 == 0, 0.3, -0.3)
+    scores = np.stack([own, own - 0.1, noisy])
+    assert choose_calibration(scores, w, (0,)) == (1,)
+    assert choose_calibration(scores[[0, 2]], w, (0,)) == (0,)  # 0.01 with an error of 0.03
+    assert choose_calibration(scores[[0, 2]], w, (0,), margin=0.0) == (1,)  # plain best mean
+    # candidates on a (2, 2) grid, the model's own at (1, 0): a consistent gain moves off it
+    grid = np.stack([own + 0.2, own - 0.05, own, noisy]).reshape(2, 2, n)
+    assert choose_calibration(grid, w, (1, 0)) == (0, 1)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(2, 6), st.integers(0, 5))
+def test_the_chosen_calibration_is_the_models_own_or_a_significantly_better_one(seed, k, own):
+    rng = np.random.default_rng(seed)
+    own = own % k
+    n = 40
+    scores = rng.uniform(0, 1, (k, n)) + rng.normal(0, 0.2, (k, 1))
+    w = rng.dirichlet(np.ones(n))
+    (got,) = choose_calibration(scores, w, (own,))
+    mean = scores @ w
+    if got != own:
+        diff = scores[got] - scores[own]
+        gain = diff @ w
+        assert gain < -np.sqrt(((diff - gain) ** 2) @ (w * w))
+        assert mean[got] < mean[own]
+    # nothing better than the choice passed the test
+    better = [i for i in range(k) if mean[i] < mean[got]]
+    for i in better:
+        diff = scores[i] - scores[own]
+        gain = diff @ w
+        assert i != own and not gain < -np.sqrt(((diff - gain) ** 2) @ (w * w))
 
 
 def test_noisy_labels_are_calibrated_with_label_noise():
