@@ -242,9 +242,8 @@ def choose_calibration(scores: np.ndarray, weights: np.ndarray,
     w = np.asarray(weights, float)
     ref = int(np.ravel_multi_index(own, shape))
     mean = b @ w
-    diff = b - b[ref]
-    gain = diff @ w
-    se = np.sqrt(((diff - gain[:, None]) ** 2) @ (w * w))
+    gain = mean - mean[ref]
+    se = np.sqrt(((b - b[ref] - gain[:, None]) ** 2) @ (w * w))
     ok = gain < -margin * se
     ok[ref] = True
     live = np.flatnonzero(ok)
