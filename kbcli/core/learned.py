@@ -117,6 +117,50 @@ def discover_classes(perceived: np.ndarray, threshold: float) -> tuple[np.ndarra
     return features, labels
 
 
+def prepare_samples(
+    actions: np.ndarray, perceived: np.ndarray, targets: np.ndarray | None, threshold: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Check exploration samples and find their sound classes (the start of every model's fit).
+
+    Parameters
+    ----------
+    actions : (n, 2) array_like
+        Where the finger landed (proprioception); finite, at least one.
+    perceived : (n, D) array_like
+        What was heard there (NaN rows: silence).
+    targets : (n, 2) array_like or None
+        Where the reaches aimed.
+    threshold : float
+        Eq. 2's matching threshold (:func:`discover_classes`).
+
+    Returns
+    -------
+    x : (n, 2) ndarray
+    features : (C, D) ndarray
+    labels : (n,) ndarray
+        As :func:`discover_classes`.
+    reach_sd : float
+        Per-axis rms of landed minus aimed (~0 for an ideal arm; 0 without ``targets``).
+
+    Raises
+    ------
+    ConfigError
+        No sample, or a non-finite action.
+    """
+    x = np.asarray(actions, float).reshape(-1, 2)
+    if len(x) < 1:
+        raise ConfigError("fit needs at least one sample")
+    if not np.isfinite(x).all():
+        raise ConfigError("actions must be finite")
+    s = np.asarray(perceived, float).reshape(len(x), -1)
+    features, labels = discover_classes(s, threshold)
+    reach_sd = 0.0
+    if targets is not None:
+        d = x - np.asarray(targets, float).reshape(-1, 2)
+        reach_sd = float(np.sqrt(np.mean(d * d)))
+    return x, features, labels, reach_sd
+
+
 def _straddling_edges(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
     """(m, 2) Delaunay edges joining samples of two different sounds, lower class's end first.
 
@@ -666,18 +710,8 @@ class LearnedModel:
         self
         """
         self._check_params()
-        x = np.asarray(actions, float).reshape(-1, 2)
-        if len(x) < 1:
-            raise ConfigError("fit needs at least one sample")
-        s = np.asarray(perceived, float).reshape(len(x), -1)
-        if not np.isfinite(x).all():
-            raise ConfigError("actions must be finite")
-        features, labels = discover_classes(s, self.match_threshold)
-        if targets is not None:
-            d = x - np.asarray(targets, float).reshape(-1, 2)
-            reach_sd = float(np.sqrt(np.mean(d * d)))  # per-axis rms; ~0 for an ideal arm
-        else:
-            reach_sd = 0.0
+        x, features, labels, reach_sd = prepare_samples(actions, perceived, targets,
+                                                        self.match_threshold)
         e = _straddling_edges(x, labels)
         e = e[np.lexsort((e[:, 1], e[:, 0], labels[e[:, 1]], labels[e[:, 0]]))]
         piece = np.zeros(len(e), dtype=np.int64)

@@ -64,7 +64,7 @@ from scipy.special import log_ndtr
 from sklearn.exceptions import NotFittedError
 from sklearn.svm import SVC
 
-from kbcli.core.learned import LearnedModel, _straddling_edges, discover_classes
+from kbcli.core.learned import LearnedModel, _straddling_edges, prepare_samples
 from kbcli.core.model import SILENCE
 from kbcli.errors import ArtifactError, ConfigError
 
@@ -186,17 +186,8 @@ class SVCModel:
         self
         """
         self._check_params()
-        x = np.asarray(actions, float).reshape(-1, 2)
-        if len(x) < 1:
-            raise ConfigError("fit needs at least one sample")
-        if not np.isfinite(x).all():
-            raise ConfigError("actions must be finite")
-        s = np.asarray(perceived, float).reshape(len(x), -1)
-        features, labels = discover_classes(s, self.match_threshold)
-        reach_sd = 0.0
-        if targets is not None:
-            d = x - np.asarray(targets, float).reshape(-1, 2)
-            reach_sd = float(np.sqrt(np.mean(d * d)))
+        x, features, labels, reach_sd = prepare_samples(actions, perceived, targets,
+                                                        self.match_threshold)
         self._set_fitted(features, x, labels, reach_sd)
         return self
 
