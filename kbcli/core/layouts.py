@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from kbcli.core.config import check_whole
 from kbcli.core.geometry import KeyShapes, check_polygon
 from kbcli.errors import ConfigError
 
@@ -172,12 +173,6 @@ def get_layout(name: str) -> Layout:
 
 
 # -- helpers ----------------------------------------------------------------------------------------
-def _whole(name: str, v: object, lo: int = 1) -> int:
-    if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
-        raise ConfigError(f"{name} must be a whole number >= {lo}, got {v!r}")
-    return int(v)
-
-
 def _size(name: str, v: object) -> float:
     if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0):
         raise ConfigError(f"{name} must be a positive finite number, got {v!r}")
@@ -212,7 +207,7 @@ def _base(cfg: KeyboardConfig) -> int:
 @layout("grid", "rows x cols square keys (the paper's keyboard)",
         {"rows": 4, "cols": 8, "key_size": 50.0}, default_origin=(200.0, 250.0))
 def _grid(cfg: KeyboardConfig) -> LayoutGeometry:
-    rows, cols = _whole("rows", cfg.rows), _whole("cols", cfg.cols)
+    rows, cols = check_whole("rows", cfg.rows), check_whole("cols", cfg.cols)
     _count(rows, cols)
     s = _size("key_size", cfg.key_size)
     shapes = GridShapes(rows, cols, s)
@@ -223,7 +218,7 @@ def _grid(cfg: KeyboardConfig) -> LayoutGeometry:
 @layout("hex", "hexagonal isomorphic keys (Wicki-Hayden)", {"rows": 4, "cols": 8, "key_size": 50.0},
         uses_scale=False)
 def _hex(cfg: KeyboardConfig) -> LayoutGeometry:
-    rows, cols = _whole("rows", cfg.rows), _whole("cols", cfg.cols)
+    rows, cols = check_whole("rows", cfg.rows), check_whole("cols", cfg.cols)
     _count(rows, cols)
     w = _size("key_size", cfg.key_size)
     rad = w / math.sqrt(3)  # circumradius of a hexagon w across the flats
@@ -244,7 +239,7 @@ def _hex(cfg: KeyboardConfig) -> LayoutGeometry:
         {"cols": 12, "key_size": 36.0, "key_height": 160.0, "black_width": 20.0,
          "black_height": 100.0}, uses_scale=False)
 def _piano(cfg: KeyboardConfig) -> LayoutGeometry:
-    n = _whole("cols", cfg.cols)
+    n = check_whole("cols", cfg.cols)
     w, h = _size("key_size", cfg.key_size), _size("key_height", cfg.key_height)
     bw, bh = _size("black_width", cfg.black_width), _size("black_height", cfg.black_height)
     if bw >= w:
@@ -290,7 +285,7 @@ def _piano(cfg: KeyboardConfig) -> LayoutGeometry:
 @layout("pads", "round pads with silence between them",
         {"rows": 4, "cols": 8, "key_size": 50.0, "pad_radius": 20.0})
 def _pads(cfg: KeyboardConfig) -> LayoutGeometry:
-    rows, cols = _whole("rows", cfg.rows), _whole("cols", cfg.cols)
+    rows, cols = check_whole("rows", cfg.rows), check_whole("cols", cfg.cols)
     _count(rows, cols)
     s, r = _size("key_size", cfg.key_size), _size("pad_radius", cfg.pad_radius)
     if 2 * r > s:

@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from kbcli.core import stats, transforms
-from kbcli.core.config import check_known
+from kbcli.core.config import check_known, check_names, check_whole
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
@@ -100,21 +100,6 @@ def _number(name: str, v: Any) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise ConfigError(f"{name} must be a finite number, got {v!r}")
     return float(v)
-
-
-def _whole(name: str, v: Any, low: int) -> int:
-    if isinstance(v, bool) or not isinstance(v, int) or v < low:
-        raise ConfigError(f"{name} must be a whole number >= {low}, got {v!r}")
-    return v
-
-
-def _names(name: str, v: Any) -> tuple[str, ...]:
-    if isinstance(v, (str, bytes)) or not isinstance(v, (list, tuple)) or len(v) == 0 \
-            or not all(isinstance(s, str) for s in v):
-        raise ConfigError(f"{name} must be a non-empty list of names, got {v!r}")
-    if len(set(v)) != len(v):
-        raise ConfigError(f"{name} lists a name twice: {list(v)!r}")
-    return tuple(v)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -213,7 +198,7 @@ class Method:
 
     def __post_init__(self) -> None:
         where = f"methods.{self.name}"
-        object.__setattr__(self, "strategies", _names(f"{where}.strategies", self.strategies))
+        object.__setattr__(self, "strategies", check_names(f"{where}.strategies", self.strategies))
         known = known_strategies()
         for st in self.strategies:
             if st not in known:
@@ -221,7 +206,7 @@ class Method:
         for k in ("modes", "categories"):
             v = getattr(self, k)
             if v is not None:
-                object.__setattr__(self, k, _names(f"{where}.{k}", v))
+                object.__setattr__(self, k, check_names(f"{where}.{k}", v))
         if self.modes is not None:
             for m in self.modes:
                 if m not in MODES:
@@ -336,14 +321,14 @@ class EvaluateConfig:
     melody: str = DEFAULT_MELODY
 
     def __post_init__(self) -> None:
-        _whole("seed", self.seed, 0)
-        _whole("experiments", self.experiments, 1)
-        _whole("max_steps", self.max_steps, 1)
-        _whole("play_notes", self.play_notes, 0)
+        check_whole("seed", self.seed, 0)
+        check_whole("experiments", self.experiments, 1)
+        check_whole("max_steps", self.max_steps, 1)
+        check_whole("play_notes", self.play_notes, 0)
         if not isinstance(self.melody, str) or not self.melody.split():
             raise ConfigError(f"melody must be notes like 'A:1 D:1', got {self.melody!r}")
         names = transforms.check_family(self.family)
-        object.__setattr__(self, "modes", _names("modes", self.modes))
+        object.__setattr__(self, "modes", check_names("modes", self.modes))
         for m in self.modes:
             if m not in MODES:
                 raise ConfigError(f"unknown mode {m!r}; valid: {', '.join(MODES)}")

@@ -38,7 +38,7 @@ import numpy as np
 from scipy import stats as sps
 
 from kbcli.core.adapt import REDUNDANCY_FACTOR, blur_grid, temper
-from kbcli.core.config import check_known
+from kbcli.core.config import check_known, check_names, check_whole
 from kbcli.errors import ConfigError
 from kbcli.sim import MODES
 from kbcli.sim.arms import arm_config
@@ -60,20 +60,6 @@ EXACT = "exact"
 FIXED = ("mode", "arm", "reach_noise", "max_steps", "family", "stop")
 LEARN_KEY = 1
 ADAPT_KEY = 2
-
-
-def _whole(name: str, v: Any, low: int) -> int:
-    if isinstance(v, bool) or not isinstance(v, int) or v < low:
-        raise ConfigError(f"quality.{name} must be a whole number >= {low}, got {v!r}")
-    return v
-
-
-def _names(name: str, v: Any) -> tuple[str, ...]:
-    if isinstance(v, (str, bytes)) or not v or not all(isinstance(s, str) for s in v):
-        raise ConfigError(f"quality.{name} must be a non-empty list of names, got {v!r}")
-    if len(set(v)) != len(v):
-        raise ConfigError(f"quality.{name} lists a name twice: {list(v)!r}")
-    return tuple(v)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -130,9 +116,9 @@ class QualityConfig:
     def __post_init__(self) -> None:
         from kbcli.stages.learn import strategies as learn_strategies
 
-        _whole("seed", self.seed, 0)
-        _whole("experiments", self.experiments, 1)
-        _whole("max_steps", self.max_steps, 1)
+        check_whole("quality.seed", self.seed, 0)
+        check_whole("quality.experiments", self.experiments, 1)
+        check_whole("quality.max_steps", self.max_steps, 1)
         if not isinstance(self.ideal, bool):
             raise ConfigError(f"quality.ideal must be true or false, got {self.ideal!r}")
         b = self.budgets
@@ -140,7 +126,7 @@ class QualityConfig:
                 isinstance(v, int) and not isinstance(v, bool) and v >= 10 for v in b):
             raise ConfigError(f"quality.budgets must be whole numbers >= 10, got {b!r}")
         object.__setattr__(self, "budgets", tuple(sorted(set(b))))
-        object.__setattr__(self, "explorations", _names("explorations", self.explorations))
+        object.__setattr__(self, "explorations", check_names("quality.explorations", self.explorations))
         for e in self.explorations:
             if e not in learn_strategies() or e == "exact":
                 raise ConfigError(f"unknown exploration {e!r}; valid: active, random")
