@@ -152,3 +152,36 @@ def test_a_tiny_sweep_runs_and_reports(runner, small_kb, tmp_path):
     assert "The paper's explanation, tested" in text and "random-120" in text
     assert "infogain with the exact model" in text and "exact model's touches" in text
     assert (rep / "advantage.png").stat().st_size > 10_000
+
+
+def test_an_interrupted_sweep_keeps_its_models_and_resumes_to_the_same_numbers(
+        runner, small_kb, tmp_path, monkeypatch):
+    """Ctrl-C during the adaptations: exit 130, no output, the learned models kept in the
+    checkpoint and named in the message; --resume then gives the uninterrupted run's numbers."""
+    from kbcli.cli import quality as cli_quality
+
+    conf = tmp_path / "q.toml"
+    conf.write_text(TINY)
+    base = ["quality", "--config", str(conf), "--keyboard", str(small_kb)]
+    r = runner.invoke(app, [*base, "-o", str(tmp_path / "whole.h5")])
+    assert r.exit_code == 0, r.output
+    real = cli_quality.execute
+
+    def interrupting(job, todo, **kw):
+        if job.run.endswith("adapt_one"):
+            raise KeyboardInterrupt
+        yield from real(job, todo, **kw)
+
+    monkeypatch.setattr(cli_quality, "execute", interrupting)
+    out = tmp_path / "q.h5"
+    r = runner.invoke(app, [*base, "-o", str(out)])
+    assert r.exit_code == 130
+    assert "0 of 10 adaptations kept" in r.stderr and "--resume" in r.stderr, r.stderr
+    assert not out.exists()
+    assert len(list((tmp_path / "q.h5.ckpt" / "models").glob("*.h5"))) == 2
+    monkeypatch.setattr(cli_quality, "execute", real)
+    r = runner.invoke(app, [*base, "-o", str(out), "--resume"])
+    assert r.exit_code == 0, r.output
+    np.testing.assert_array_equal(read_artifact(out).data["experiments"]["errors"],
+                                  read_artifact(tmp_path / "whole.h5").data["experiments"]["errors"])
+    assert not (tmp_path / "q.h5.ckpt").exists()

@@ -162,6 +162,50 @@ def progress(items: Iterable[T], total: int | None, description: str, *,
                 bar.update(task, description=text)
 
 
+def run_checkpointed(results: Iterable[tuple[int, dict]], todo: int, ckpt: Any, *, kept: int,
+                     total: int, what: str) -> dict[int, dict]:
+    """Drain ``(index, result)`` pairs of a parallel job into its checkpoint, with a progress bar.
+
+    On Ctrl-C the pending results are flushed, one line says how many of ``total`` ``what`` (a
+    plural noun) are kept and how to resume, and the command exits 130.
+
+    Parameters
+    ----------
+    results : iterable of (int, dict)
+        :func:`kbcli.io.runner.execute`'s output.
+    todo : int
+        How many results to expect (the bar's length).
+    ckpt : kbcli.io.runner.Checkpoint
+    kept : int
+        Results already in the checkpoint when this run resumed.
+
+    Returns
+    -------
+    dict
+        The new results by index.
+    """
+    fresh: dict[int, dict] = {}
+    try:
+        for i, res in progress(results, todo, what):
+            ckpt.add(i, res)
+            fresh[i] = res
+    except KeyboardInterrupt:
+        with contextlib.suppress(KbcliError):
+            ckpt.flush()
+        n = kept + len(fresh)
+        if ckpt.exists():  # (it may hold earlier phases' work even when n is 0)
+            msg = f"{n} of {total} {what} kept in {ckpt.folder}: rerun with --resume to continue"
+        elif n:
+            msg = f"{n} of {total} {what} had finished, but writing them failed; nothing was kept"
+        else:
+            msg = f"none of {total} {what} had finished; nothing was kept"
+        err.print(f"kbcli: interrupted; {msg}", markup=False)
+        raise typer.Exit(130) from None
+    finally:
+        ckpt.flush()
+    return fresh
+
+
 @contextlib.contextmanager
 def ticker(total: int | None, description: str) -> Iterator[Callable[..., None]]:
     """A progress bar driven by a callback, for stages that report their steps through one:

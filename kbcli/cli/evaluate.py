@@ -10,7 +10,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from kbcli.cli.app import bench_app, check_io, command, err, out, progress
+from kbcli.cli.app import bench_app, check_io, command, err, out, progress, run_checkpointed
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_arm, load_toml
@@ -148,27 +148,8 @@ def evaluate_cmd(
         err.print(f"resuming: {len(done)} of {len(tasks)} experiments already done", markup=False)
     todo = [t.row for t in tasks if t.row not in done]
     started = time.perf_counter()
-    fresh: dict[int, dict] = {}
-    try:
-        for i, res in progress(execute(job, todo, jobs=jobs, scheduler=scheduler), len(todo),
-                               "experiments"):
-            ckpt.add(i, res)
-            fresh[i] = res
-    except KeyboardInterrupt:
-        try:
-            ckpt.flush()
-        except KbcliError:
-            pass
-        kept = len(done) + len(fresh)
-        if kept and ckpt.exists():
-            msg = (f"{kept} of {len(tasks)} experiments kept in {ckpt.folder}: rerun with --resume "
-                   f"to continue")
-        else:
-            msg = f"no experiment of {len(tasks)} had finished; nothing was kept"
-        err.print(f"kbcli: interrupted; {msg}", markup=False)
-        raise typer.Exit(130) from None
-    finally:
-        ckpt.flush()
+    fresh = run_checkpointed(execute(job, todo, jobs=jobs, scheduler=scheduler), len(todo), ckpt,
+                             kept=len(done), total=len(tasks), what="experiments")
     elapsed = time.perf_counter() - started
     results = {**done, **fresh}
     art = stage.assemble(cfg, tasks, results, model_art, keyboard)

@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from kbcli.cli.app import check_io, command, err, out, progress
+from kbcli.cli.app import check_io, command, err, out, progress, run_checkpointed
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml
@@ -118,19 +118,8 @@ def quality_cmd(
     todo = [t.row for t in tasks if t.row not in done]
     if done:
         err.print(f"resuming: {len(done)} of {len(tasks)} adaptations already done", markup=False)
-    fresh: dict[int, dict] = {}
-    try:
-        for i, res in progress(execute(job, todo, jobs=jobs, scheduler=scheduler), len(todo),
-                               "adaptations"):
-            ckpt.add(i, res)
-            fresh[i] = res
-    except KeyboardInterrupt:
-        ckpt.flush()
-        err.print(f"kbcli: interrupted; {len(done) + len(fresh)} of {len(tasks)} adaptations kept "
-                  f"in {ckpt_dir}: rerun with --resume to continue", markup=False)
-        raise typer.Exit(130) from None
-    finally:
-        ckpt.flush()
+    fresh = run_checkpointed(execute(job, todo, jobs=jobs, scheduler=scheduler), len(todo), ckpt,
+                             kept=len(done), total=len(tasks), what="adaptations")
     results = {**done, **fresh}
     art = stage.assemble(cfg, models, tasks, results, kb_art)
     write_artifact(art, output)
