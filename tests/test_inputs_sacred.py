@@ -26,24 +26,26 @@ PIPELINES = Path(__file__).resolve().parent.parent / "pipelines"
 CASES: dict[str, tuple[list[str], list[str], list[str]]] = {
     "keyboard": (["keyboard", "--config", "{toml_kb}", "-o", "{out}"], ["toml_kb"], ["out"]),
     "plot keyboard": (["plot", "keyboard", "{keyboard}", "-o", "{fig}"], ["keyboard"], ["fig"]),
-    "learn": (["learn", "--keyboard", "{keyboard}", "--budget", "20", "-o", "{out}"],
-              ["keyboard"], ["out"]),
+    "learn": (["learn", "--keyboard", "{keyboard}", "--budget", "20", "--arm", "{toml_arm}",
+               "-o", "{out}"], ["keyboard", "toml_arm"], ["out"]),
     "plot model": (["plot", "model", "{model}", "-o", "{fig}"], ["model"], ["fig"]),
     "perturb": (["perturb", "--keyboard", "{keyboard}", "--dx", "3", "-o", "{out}"],
                 ["keyboard"], ["out"]),
-    "play": (["play", "--model", "{model}", "--scene", "{scene}", "--steps", "4", "-o", "{out}",
-              "--wav", "{wav}"], ["model", "scene"], ["out", "wav"]),
+    "play": (["play", "--model", "{model}", "--scene", "{scene}", "--steps", "4", "--arm",
+              "{toml_arm}", "-o", "{out}", "--wav", "{wav}"], ["model", "scene", "toml_arm"],
+             ["out", "wav"]),
     "plot play": (["plot", "play", "{history}", "--detection", "{detection}", "-o", "{fig}"],
                   ["history", "detection"], ["fig"]),
     "detect": (["detect", "{history}", "-o", "{out}"], ["history"], ["out"]),
     "adapt": (["adapt", "--model", "{model}", "--scene", "{scene}", "--config", "{toml_golden}",
-               "-o", "{out}"], ["model", "scene", "toml_golden"], ["out"]),
+               "--arm", "{toml_arm}", "-o", "{out}"], ["model", "scene", "toml_golden", "toml_arm"],
+              ["out"]),
     "plot adapt": (["plot", "adapt", "{run}", "-o", "{fig}"], ["run"], ["fig"]),
-    "run": (["run", "--model", "{model}", "--scene", "{scene}", "-o", "{out}"],
-            ["model", "scene"], ["out"]),
+    "run": (["run", "--model", "{model}", "--scene", "{scene}", "--arm", "{toml_arm}", "-o",
+             "{out}"], ["model", "scene", "toml_arm"], ["out"]),
     "plot run": (["plot", "run", "{closed_loop}", "-o", "{fig}"], ["closed_loop"], ["fig"]),
-    "evaluate": (["evaluate", "--model", "{model}", "--config", "{toml_golden}", "-o", "{out}"],
-                 ["model", "toml_golden"], ["out"]),
+    "evaluate": (["evaluate", "--model", "{model}", "--config", "{toml_golden}", "--arm",
+                  "{toml_arm}", "-o", "{out}"], ["model", "toml_golden", "toml_arm"], ["out"]),
     "report": (["report", "{evaluation}", "-o", "{folder}"], ["evaluation"], ["folder"]),
     "animate": (["animate", "{run}", "-o", "{gif}"], ["run"], ["gif"]),
     "quality": (["quality", "--config", "{toml_quality}", "--keyboard", "{keyboard}", "-o",
@@ -68,6 +70,8 @@ def _inputs(tmp: Path) -> dict[str, Path]:
     files["toml_quality"].write_text(
         '[quality]\nbudgets = [20]\nexplorations = ["random"]\nmode = "ideal"\narm = "ideal"\n'
         'experiments = 1\nmax_steps = 2\n')
+    files["toml_arm"] = tmp / "arm.toml"
+    files["toml_arm"].write_text('[arm]\npreset = "servo"\n')
     files["toml_serve"] = tmp / "serve.toml"
     files["toml_serve"].write_text("[serve]\nmax_steps = 3\n")
     return files

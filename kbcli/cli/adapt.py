@@ -27,7 +27,7 @@ from kbcli.cli.app import (
 )
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.io.config import load_arm, load_toml
+from kbcli.io.config import arm_file, load_arm, load_toml
 from kbcli.stages import adapt as stage
 
 
@@ -95,7 +95,8 @@ def adapt_cmd(
     the estimate, its error against the scene's true pose, the posterior entropy and the time
     spent; plus posterior snapshots. Prints the final error and the steps to an error below 1 px.
     """
-    check_io({"--model": model, "--scene": scene, "--config": config}, ("--output", output))
+    check_io({"--model": model, "--scene": scene, "--config": config, "--arm": arm_file(arm)},
+             ("--output", output))
     values = dict(load_toml(config, "adapt")) if config is not None else {}
     flags = {"strategy": strategy, "posterior": posterior, "family": family, "mode": mode,
              "reach_noise": reach_noise, "feedback": feedback, "model_blur": model_blur,

@@ -13,7 +13,7 @@ from rich.table import Table
 from kbcli.cli.app import bench_app, check_io, command, err, out, progress, run_checkpointed
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.io.config import load_arm, load_toml
+from kbcli.io.config import arm_file, load_arm, load_toml
 from kbcli.io.paths import Output
 from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
 from kbcli.stages import evaluate as stage
@@ -123,7 +123,7 @@ def evaluate_cmd(
         from kbcli.stages.models import default_model_path
 
         model = default_model_path()
-    check_io({"--model": model, "--config": config}, ("--output", output),
+    check_io({"--model": model, "--config": config, "--arm": arm_file(arm)}, ("--output", output),
              Output(Checkpoint.beside(output), "checkpoint folder", folder=True, removes=True))
     cfg = _load_config(config, experiments, mode, method)
     if arm is not None:

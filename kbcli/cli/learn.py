@@ -24,7 +24,7 @@ from kbcli.cli.app import (
 )
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.io.config import load_arm
+from kbcli.io.config import arm_file, load_arm
 from kbcli.io.schema import MIN_SOUNDS
 from kbcli.sim import SimConfig
 from kbcli.stages import keyboard as keyboard_stage
@@ -74,7 +74,7 @@ def learn_cmd(
     cfg = stage.LearnConfig(strategy=strategy, budget=budget, batch=batch,
                             explore_radius=explore_radius, curve_every=curve_every, sim=sim,
                             model_class=model_class)
-    check_io({"--keyboard": keyboard}, ("--output", output))
+    check_io({"--keyboard": keyboard, "--arm": arm_file(arm)}, ("--output", output))
     kb_art = read_artifact(keyboard, "keyboard")
     if cfg.strategy == "exact":
         art = stage.run(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)

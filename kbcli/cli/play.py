@@ -24,7 +24,7 @@ from kbcli.core.melody import DEFAULT_MELODY, MAX_BEATS, MAX_NOTES, parse_melody
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.atomic import atomic_path
-from kbcli.io.config import load_arm
+from kbcli.io.config import arm_file, load_arm
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import play as stage
 
@@ -81,7 +81,8 @@ def play_cmd(
     actions, landing points, heard features, aimed notes, MATCH/NO_MATCH per step) and optionally a
     WAV; prints the failure rates before and after the move.
     """
-    check_io({"--model": model, "--scene": scene}, ("--output", output), ("--wav", wav))
+    check_io({"--model": model, "--scene": scene, "--arm": arm_file(arm)}, ("--output", output),
+             ("--wav", wav))
     cfg = stage.PlayConfig(melody=melody, steps=steps, perturb_at=perturb_at, mode=mode,
                            reach_noise=reach_noise, arm=load_arm(arm))
     model_art = read_artifact(model, "model")

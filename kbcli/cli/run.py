@@ -22,7 +22,7 @@ from kbcli.core.detect import DetectorConfig
 from kbcli.core.loop import PLAY
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.io.config import load_arm
+from kbcli.io.config import arm_file, load_arm
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import run as stage
 from kbcli.stages.adapt import AdaptConfig
@@ -61,7 +61,7 @@ def run_cmd(
     robot is not told). Writes OUTPUT (kind 'closed_loop': every touch with its phase, result and
     detector score) and prints the success rate before the move, after it, and after adaptation.
     """
-    check_io({"--model": model, "--scene": scene}, ("--output", output))
+    check_io({"--model": model, "--scene": scene, "--arm": arm_file(arm)}, ("--output", output))
     cfg = stage.LoopConfig(
         melody=melody, steps=steps, perturb_at=perturb_at, max_adapt_steps=max_adapt_steps,
         detector=DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold),

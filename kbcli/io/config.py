@@ -18,13 +18,20 @@ def load_arm(value: str | None):
     ConfigError
         An unknown preset, a missing file or an invalid table.
     """
-    from kbcli.sim.arms import PRESETS, arm_config
+    from kbcli.sim.arms import arm_config
 
-    if value is None:
-        return arm_config(None)
-    if value in PRESETS or not value.endswith(".toml"):
-        return arm_config(value)
-    return arm_config(load_toml(value, "arm"))
+    path = arm_file(value)
+    return arm_config(value if path is None else load_toml(path, "arm"))
+
+
+def arm_file(value: str | None) -> Path | None:
+    """The TOML file ``--arm VALUE`` reads (an input, never to be overwritten), or None for a
+    preset name."""
+    from kbcli.sim.arms import PRESETS
+
+    if value is None or value in PRESETS or not value.endswith(".toml"):
+        return None
+    return Path(value)
 
 
 def load_toml(path: str | Path, table: str | None = None) -> dict[str, Any]:
