@@ -132,6 +132,7 @@ def test_stage_refuses_mismatched_inputs(files):
         (("--resolution", "0.005"), {}, ["would need", "GB"]),
         (("--snapshots", "a,b"), {}, ["--snapshots"]),
         (("--model-blur", "-1"), {}, ["model_blur"]),
+        (("--model-blur", "1000"), {}, ["model_blur", "<= 50"]),  # not a 35 GiB kernel
         (("--feedback", "vision"), {}, ["unknown feedback"]),
         ((), {"model": "missing.h5"}, ["no such file"]),
     ],

@@ -202,6 +202,10 @@ def test_the_plain_posterior_softens_learned_models_and_the_robust_one_learns_th
     cfg = plain
     with pytest.raises(ConfigError, match="model_blur"):
         AdapterConfig(model_blur=-1.0)
+    for bad in ({"model_blur": 50.5}, {"blur": 1e9}, {"robust_blurs": (0.0, 1e3)}):
+        with pytest.raises(ConfigError, match="<= 50"):
+            AdapterConfig(**bad)
+    assert AdapterConfig(model_blur=50.0).model_blur == 50.0
     ad = Adapter(soft, cfg, rng=np.random.default_rng(15))
     assert not ad.table.hard
     truth = np.array([-3.3, 2.2])

@@ -70,9 +70,10 @@ def adapt_cmd(
         "and joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
         "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields) [default ideal].")] = None,
     model_blur: Annotated[float | None, typer.Option(
-        "--model-blur", help="Soften the model's map by this many px, for a model whose "
-        "boundaries are less certain than it says [default: 1 for a learned model, 0 for the "
-        "exact one].")] = None,
+        "--model-blur", help="Override: fix the blur (px, 0-50) of the model's key edges "
+        "instead of letting the robust posterior learn it from the touches (its default: "
+        "it weighs 0, 1, 2.5 and 5 px, and twice a weak model's own boundary error; "
+        "recorded in the run as robust_blurs).")] = None,
     max_steps: Annotated[int | None, typer.Option(
         "--max-steps", "-T", help="Observations at most [default 40].")] = None,
     resolution: Annotated[float | None, typer.Option(

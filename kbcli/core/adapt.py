@@ -84,15 +84,20 @@ REDUNDANCY_FACTOR = 4.0
 #: posterior then also weighs a blur of this many times the model's own cross-validated boundary
 #: error (``AdapterConfig.robust_blurs`` None, translation family), when that exceeds the grid.
 WIDE_BLUR_FACTOR = 2.0
+#: Largest blur (px) any blur option accepts: a key's width. A map blurred further says nothing,
+#: and its Gaussian kernel would outgrow memory (a 1000 px blur asked for 35 GiB).
+MAX_BLUR = 50.0
 ESTIMATORS = ("mean", "ml")
 
 
-def _num(name: str, v: object, *, lo: float = 0.0, strict: bool = True) -> None:
+def _num(name: str, v: object, *, lo: float = 0.0, strict: bool = True,
+         hi: float = math.inf) -> None:
     ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-    ok = ok and (v > lo if strict else v >= lo)
+    ok = ok and (v > lo if strict else v >= lo) and v <= hi
     if not ok:
         rel = ">" if strict else ">="
-        raise ConfigError(f"{name} must be a finite number {rel} {lo:g}, got {v!r}")
+        top = f" and <= {hi:g}" if math.isfinite(hi) else ""
+        raise ConfigError(f"{name} must be a finite number {rel} {lo:g}{top}, got {v!r}")
 
 
 def _int(name: str, v: object, lo: int = 1) -> None:
@@ -232,9 +237,9 @@ class AdapterConfig:
         _num("angle_resolution", self.angle_resolution)
         if self.prior_halfwidth < self.resolution:
             raise ConfigError("prior_halfwidth must be at least one resolution step")
-        _num("blur", self.blur, strict=False)
+        _num("blur", self.blur, strict=False, hi=MAX_BLUR)
         if self.model_blur is not None:
-            _num("model_blur", self.model_blur, strict=False)
+            _num("model_blur", self.model_blur, strict=False, hi=MAX_BLUR)
         if self.robust_eta is not None:
             _num("robust_eta", self.robust_eta)
             if self.robust_eta > 1:
@@ -254,7 +259,8 @@ class AdapterConfig:
             if isinstance(v, (str, bytes)) or not hasattr(v, "__len__") or len(v) == 0:
                 raise ConfigError(f"{name} must be a non-empty list of numbers, got {v!r}")
             for x in v:
-                _num(name, x, strict=name == "robust_outliers")
+                _num(name, x, strict=name == "robust_outliers",
+                     hi=MAX_BLUR if name == "robust_blurs" else math.inf)
             object.__setattr__(self, name, tuple(float(x) for x in v))
         if any(e >= 1 for e in self.robust_outliers):
             raise ConfigError(f"robust_outliers must be rates in (0, 1), got {self.robust_outliers!r}")
