@@ -185,3 +185,28 @@ def test_an_interrupted_sweep_keeps_its_models_and_resumes_to_the_same_numbers(
     np.testing.assert_array_equal(read_artifact(out).data["experiments"]["errors"],
                                   read_artifact(tmp_path / "whole.h5").data["experiments"]["errors"])
     assert not (tmp_path / "q.h5.ckpt").exists()
+
+
+def test_each_models_likelihood_tables_are_built_once(runner, small_kb, tmp_path, monkeypatch):
+    """Three rows that need three different tables, over two displacements: each model's three
+    tables are built once (a cache that held two rebuilt them at every displacement)."""
+    from kbcli.stages import adapt as adapt_stage
+
+    conf = tmp_path / "q.toml"
+    conf.write_text(TINY.replace(
+        'infogain = { strategy = "infogain" }',
+        'respot = { strategy = "infogain", redundancy_radius = 0.0 }\n'
+        'plain = { strategy = "infogain", robust = false }').replace(
+        "displacements = [[3.0, -2.0]]", "displacements = [[3.0, -2.0], [-2.0, 3.0]]").replace(
+        "experiments = 2", "experiments = 1").replace("max_steps = 6", "max_steps = 2"))
+    real, calls = adapt_stage.build_shared_table, []
+
+    def counting(acfg, model):
+        calls.append(acfg)
+        return real(acfg, model)
+
+    monkeypatch.setattr(adapt_stage, "build_shared_table", counting)
+    r = runner.invoke(app, ["quality", "--config", str(conf), "--keyboard", str(small_kb), "-o",
+                            str(tmp_path / "q.h5")])
+    assert r.exit_code == 0, r.output
+    assert len(calls) == 2 * 3 + 1  # two models' three tables, and the exact model's one

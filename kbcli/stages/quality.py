@@ -327,7 +327,10 @@ def adapt_one(state: dict, task: Task) -> dict:
     model = state["models"][task.model]
     key = (task.model, replace(acfg.adapter_config(), strategy="random"))
     if key not in state["tables"]:
-        if len(state["tables"]) >= 2:  # bound the memory (about 0.5 GB a model) of a worker
+        # keep the current model's tables only (one per distinct row setting: three for the
+        # shipped rows, about 0.5 GB each), which plan() runs together: clearing at a fixed count
+        # rebuilt them at every displacement
+        if any(m != task.model for m, _ in state["tables"]):
             state["tables"].clear()
         state["tables"][key] = adapt_stage.build_shared_table(acfg, model)
     rng = np.random.default_rng(np.random.SeedSequence(task.entropy, spawn_key=task.spawn_key))
