@@ -180,8 +180,9 @@ def test_an_interrupted_sweep_keeps_its_models_and_resumes_to_the_same_numbers(
     assert not out.exists()
     assert len(list((tmp_path / "q.h5.ckpt" / "models").glob("*.h5"))) == 2
     monkeypatch.setattr(cli_quality, "execute", real)
-    r = runner.invoke(app, [*base, "-o", str(out), "--resume"])
+    r = runner.invoke(app, [*base, "-o", str(out), "--resume", "--models", str(tmp_path / "m")])
     assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in (tmp_path / "m").iterdir()) == ["random-120.h5", "random-40.h5"]
     np.testing.assert_array_equal(read_artifact(out).data["experiments"]["errors"],
                                   read_artifact(tmp_path / "whole.h5").data["experiments"]["errors"])
     assert not (tmp_path / "q.h5.ckpt").exists()
@@ -210,3 +211,16 @@ def test_each_models_likelihood_tables_are_built_once(runner, small_kb, tmp_path
                             str(tmp_path / "q.h5")])
     assert r.exit_code == 0, r.output
     assert len(calls) == 2 * 3 + 1  # two models' three tables, and the exact model's one
+
+
+def test_an_unreachable_scheduler_leaves_nothing(runner, small_kb, tmp_path, monkeypatch):
+    import kbcli.io.runner
+
+    monkeypatch.setattr(kbcli.io.runner, "CONNECT_TIMEOUT_S", 1.0)
+    conf = tmp_path / "q.toml"
+    conf.write_text(TINY)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    r = runner.invoke(app, ["quality", "--config", str(conf), "--keyboard", str(small_kb), "-o",
+                            str(tmp_path / "q.h5"), "--scheduler", "tcp://127.0.0.1:9"])
+    assert r.exit_code == 1 and "cannot reach the Dask scheduler" in r.stderr, r.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # no q.h5, no q.h5.ckpt

@@ -45,7 +45,8 @@ def quality_cmd(
     resume: Annotated[bool, typer.Option(
         "--resume", help="Continue an interrupted sweep from OUTPUT.ckpt/.")] = False,
     models_dir: Annotated[Path | None, typer.Option(
-        "--models", help="Also keep every learned model artifact in this folder.")] = None,
+        "--models", help="Also keep every learned model artifact in this folder (created if "
+        "missing).")] = None,
 ) -> None:
     """Test the paper's Sect. IV-C hypothesis: learn models of every budget and exploration, adapt
     with each, and measure how the strategies' advantage depends on the model's quality.
@@ -75,8 +76,6 @@ def quality_cmd(
             raise ConfigError("--jobs and --scheduler exclude each other")
         check_scheduler_address(scheduler)
     kb_art = read_artifact(keyboard, "keyboard")
-    if models_dir is not None and not models_dir.is_dir():
-        raise KbcliError(f"{models_dir}: no such folder (for --models)")
     fp = {**stage.fingerprint(cfg, kb_art), "source_code": source_digest()}
     ckpt = Checkpoint(ckpt_dir, fp, every=20)
     done = ckpt.load(resume)
@@ -91,9 +90,6 @@ def quality_cmd(
         if resume and f.is_file():
             models[t.name] = read_artifact(f, "model")
     todo = [i for i, t in enumerate(ltasks) if t.name not in models]
-    if todo:
-        ckpt.start()
-        model_dir.mkdir(exist_ok=True)
     ctx = {"keyboard": kb_art, "quality": cfg.to_dict()}
     job = Job(setup="kbcli.stages.quality:learn_setup", run="kbcli.stages.quality:learn_one",
               context=ctx, context_key=f"learn-{kb_art.sha256}", tasks=tuple(ltasks))
@@ -101,11 +97,15 @@ def quality_cmd(
         for i, res in progress(execute(job, todo, jobs=jobs, scheduler=scheduler), len(todo),
                                "learning models"):
             art = res["artifact"]
+            ckpt.start()  # (only now: a run that fails before its first model leaves nothing)
+            model_dir.mkdir(exist_ok=True)
             write_artifact(art, model_dir / f"{ltasks[i].name}.h5")
             models[ltasks[i].name] = art
     except KeyboardInterrupt:
-        err.print(f"kbcli: interrupted; {len(models)} of {len(ltasks)} models kept in {model_dir}: "
-                  "rerun with --resume to continue", markup=False)
+        msg = (f"{len(models)} of {len(ltasks)} models kept in {model_dir}: rerun with --resume "
+               "to continue") if models else f"none of {len(ltasks)} models had finished; " \
+            "nothing was kept"
+        err.print(f"kbcli: interrupted; {msg}", markup=False)
         raise typer.Exit(130) from None
     learned_s = time.perf_counter() - started
 
@@ -124,6 +124,7 @@ def quality_cmd(
     art = stage.assemble(cfg, models, tasks, results, kb_art)
     write_artifact(art, output)
     if models_dir is not None:
+        models_dir.mkdir(exist_ok=True)
         for name, m in models.items():
             write_artifact(m, models_dir / f"{name}.h5")
     ckpt.remove()
