@@ -179,3 +179,22 @@ def test_experiment_in_dynamics_mode():
     # the arm does not land exactly where it aimed, and the robot observes where it landed
     assert not np.allclose(res["landed"], res["actions"])
     assert np.isfinite(res["errors"]).all()
+
+
+def test_a_config_files_arm_table_is_read_beside_its_adapt_table(runner, files):
+    """One file with [adapt] and [arm]: the arm is the run's (it was silently ignored); both [arm]
+    and [adapt.arm], or an unknown preset there, are refused in one line."""
+    conf = files / "a.toml"
+    conf.write_text('[adapt]\nmax_steps = 2\n[arm]\npreset = "servo"\nfriction = 123.0\n')
+    r = _adapt(runner, files, "--config", str(conf))
+    assert r.exit_code == 0, r.output
+    arm = read_artifact(files / "run.h5", "run").config["adapt"]["arm"]
+    from kbcli.sim.arms import arm_config
+
+    servo = arm_config("servo").to_dict()
+    assert arm["friction"] == 123.0 and arm["kp"] == servo["kp"] != arm_config("ideal").kp
+    conf.write_text('[adapt]\n[adapt.arm]\npreset = "servo"\n[arm]\npreset = "realistic"\n')
+    _one_line_error(_adapt(runner, files, "--config", str(conf), out="bad.h5"), "both [arm]")
+    conf.write_text('[adapt]\n[arm]\npreset = "wobbly"\n')
+    _one_line_error(_adapt(runner, files, "--config", str(conf), out="bad.h5"), "wobbly")
+    assert not (files / "bad.h5").exists()

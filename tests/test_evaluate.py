@@ -588,3 +588,13 @@ def test_artifact_layout(tmp_path, model_path, fake):
     np.testing.assert_array_equal(back.array("curves/ideal/m/small/active/rmse"), cur["rmse"])
     np.testing.assert_array_equal(back.array("steps/errors"), art.array("steps/errors"))
     assert back.config == cfg.to_dict()
+
+
+def test_a_top_level_arm_table_is_refused_not_ignored(runner, tmp_path, model_path):
+    conf = write_config(tmp_path / "e.toml")
+    conf.write_text(conf.read_text() + '\n[arm]\npreset = "servo"\n')
+    out = tmp_path / "e.h5"
+    r = runner.invoke(app, ["evaluate", "--config", str(conf), "--model", str(model_path),
+                            "-o", str(out)])
+    _one_line_error(r, "[evaluate.arm]", "--arm")
+    assert not out.exists() and not Checkpoint.beside(out).exists()

@@ -27,7 +27,7 @@ from kbcli.cli.app import (
 )
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.io.config import arm_file, load_arm, load_toml
+from kbcli.io.config import arm_file, load_arm, load_stage_table
 from kbcli.stages import adapt as stage
 
 
@@ -98,7 +98,7 @@ def adapt_cmd(
     """
     check_io({"--model": model, "--scene": scene, "--config": config, "--arm": arm_file(arm)},
              ("--output", output))
-    values = dict(load_toml(config, "adapt")) if config is not None else {}
+    values = load_stage_table(config, "adapt") if config is not None else {}
     flags = {"strategy": strategy, "posterior": posterior, "family": family, "mode": mode,
              "reach_noise": reach_noise, "feedback": feedback, "model_blur": model_blur,
              "max_steps": max_steps,

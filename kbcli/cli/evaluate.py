@@ -26,6 +26,10 @@ def _load_config(config: Path, experiments: int | None, mode: str | None,
     if config == DEFAULT_CONFIG and not config.is_file():
         raise KbcliError(f"{config}: no such config file here; run from the kbcli checkout or pass "
                          f"--config FILE")
+    doc = load_toml(config)
+    if "arm" in doc:  # (adapt reads one; here each mode has its arm)
+        raise ConfigError(f"{config}: evaluate does not read a top-level [arm] table: give each "
+                          "mode its arm in [evaluate.arm], or pass --arm")
     cfg = stage.EvaluateConfig.from_dict(dict(load_toml(config, "evaluate")))
     if cfg.family == "rigid":
         for cat in cfg.categories:

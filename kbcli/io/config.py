@@ -49,10 +49,33 @@ def load_toml(path: str | Path, table: str | None = None) -> dict[str, Any]:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: invalid TOML ({exc})") from None
-    if table is None:
-        return doc
+    return doc if table is None else _table(doc, path, table)
+
+
+def _table(doc: dict[str, Any], path: Path, table: str) -> dict[str, Any]:
     if table not in doc:
         raise ConfigError(f"{path}: no [{table}] table")
     if not isinstance(doc[table], dict):
         raise ConfigError(f"{path}: {table} must be a table")
     return doc[table]
+
+
+def load_stage_table(path: str | Path, table: str) -> dict[str, Any]:
+    """A stage's ``[table]`` of a TOML file, with a top-level ``[arm]`` table beside it read as
+    the stage's arm (the table ``--arm FILE`` reads), so one file can hold both.
+
+    Raises
+    ------
+    ConfigError
+        As :func:`load_toml`; or both ``[arm]`` and ``[table.arm]``, or an ``arm`` that is not a
+        table.
+    """
+    doc = load_toml(path)
+    values = dict(_table(doc, Path(path), table))
+    if "arm" in doc:
+        _table(doc, Path(path), "arm")
+        if "arm" in values:
+            raise ConfigError(f"{path}: both [arm] and [{table}.arm]: keep one")
+        values["arm"] = doc["arm"]
+    return values
+
