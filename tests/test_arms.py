@@ -142,3 +142,23 @@ def test_servo_on_chipmunk_takes_the_same_steps_as_through_pymunk(arm):
     assert np.array_equal(fast.last_steps, public.last_steps)
     assert np.array_equal(fast.last_felt, public.last_felt)
     assert fast.last_steps.min() > 12  # every reach moved and settled
+
+
+def test_ideal_mode_says_which_part_of_the_arm_it_ignores():
+    from kbcli.sim.arms import ideal_mode_note, preset
+
+    assert ideal_mode_note(preset("ideal"), "ideal") is None
+    assert ideal_mode_note(preset("servo"), "dynamics") is None
+    assert "it is the ideal arm here" in ideal_mode_note(preset("servo"), "ideal")
+    assert "finger and proprioception act" in ideal_mode_note(preset("realistic"), "ideal")
+
+
+def test_play_notes_an_ignored_servo_on_stderr(runner, tmp_path):
+    from pathlib import Path
+
+    golden = Path(__file__).resolve().parent.parent / "data" / "golden"
+    r = runner.invoke(app, ["play", "--model", str(golden / "model.h5"), "--scene",
+                            str(golden / "scene.h5"), "--steps", "2", "--arm", "servo", "-o",
+                            str(tmp_path / "h.h5")])
+    assert r.exit_code == 0, r.output
+    assert "servo and friction are ignored" in r.stderr and "no physics" not in r.stdout

@@ -20,6 +20,7 @@ from kbcli.cli.app import (
     err,
     figure_output,
     interactive,
+    note_arm,
     out,
     plot_app,
     progress,
@@ -110,6 +111,7 @@ def adapt_cmd(
     scene_art = read_artifact(scene, "scene")
     values.setdefault("family", scene_art.config.get("family", "translation"))
     cfg = stage.AdaptConfig.from_dict(values)
+    note_arm(cfg.arm, cfg.mode)
     steps = _snapshots(snapshots, cfg.max_steps)
     stage.check_inputs(model_art, scene_art)
     what = f"adapting ({cfg.strategy}, {cfg.posterior} posterior), observations"

@@ -162,6 +162,14 @@ def progress(items: Iterable[T], total: int | None, description: str, *,
                 bar.update(task, description=text)
 
 
+def note_arm(arm: Any, mode: str) -> None:
+    """Say on stderr when ``mode`` ignores part of the arm (:func:`kbcli.sim.arms.ideal_mode_note`)."""
+    from kbcli.sim.arms import ideal_mode_note
+
+    if (line := ideal_mode_note(arm, mode)) is not None:
+        err.print(line, markup=False)
+
+
 def run_checkpointed(results: Iterable[tuple[int, dict]], todo: int, ckpt: Any, *, kept: int,
                      total: int, what: str) -> dict[int, dict]:
     """Drain ``(index, result)`` pairs of a parallel job into its checkpoint, with a progress bar.

@@ -18,6 +18,7 @@ from kbcli.cli.app import (
     command,
     figure_output,
     interactive,
+    note_arm,
     out,
     plot_app,
     progress,
@@ -71,6 +72,7 @@ def learn_cmd(
     simulator's ground truth.
     """
     sim = SimConfig(mode=mode, reach_noise=reach_noise, arm=load_arm(arm))
+    note_arm(sim.arm, sim.mode)
     cfg = stage.LearnConfig(strategy=strategy, budget=budget, batch=batch,
                             explore_radius=explore_radius, curve_every=curve_every, sim=sim,
                             model_class=model_class)
@@ -107,7 +109,8 @@ def learn_cmd(
         f"{mode} mode, {a['n_reaches']} reaches: "
         f"{a['n_classes'] - 1} sounds + silence, accuracy {100 * a['accuracy']:.2f} %, "
         f"boundary error {a['boundary_error_px']:.2f} px, "
-        + (f"99 % after {to99} reaches" if to99 is not None else "99 % not reached")
+        + (f"99 % accuracy after {to99} reaches" if to99 is not None
+           else "99 % accuracy not reached")
     )
 
 

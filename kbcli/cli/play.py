@@ -15,6 +15,7 @@ from kbcli.cli.app import (
     check_io,
     command,
     figure_output,
+    note_arm,
     out,
     plot_app,
     progress,
@@ -85,6 +86,7 @@ def play_cmd(
              ("--wav", wav))
     cfg = stage.PlayConfig(melody=melody, steps=steps, perturb_at=perturb_at, mode=mode,
                            reach_noise=reach_noise, arm=load_arm(arm))
+    note_arm(cfg.arm, cfg.mode)
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene") if scene is not None else None
     if wav is not None:

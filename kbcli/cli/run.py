@@ -14,6 +14,7 @@ from kbcli.cli.app import (
     check_io,
     command,
     figure_output,
+    note_arm,
     out,
     plot_app,
     progress,
@@ -68,6 +69,7 @@ def run_cmd(
         adapt=AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
                           reach_noise=reach_noise, arm=load_arm(arm), stop=True),
     )
+    note_arm(cfg.adapt.arm, cfg.adapt.mode)
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
     session = stage.LoopSession(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed)

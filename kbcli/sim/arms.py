@@ -155,6 +155,18 @@ PRESETS: dict[str, ArmConfig] = {
 }
 
 
+def ideal_mode_note(arm: ArmConfig, mode: str) -> str | None:
+    """A line for the user when ``mode`` ignores part of ``arm``: ``ideal`` mode has no physics,
+    so a torque servo and its friction do nothing there (the ``servo`` preset is then the ideal
+    arm). None when nothing is ignored."""
+    if mode != "ideal" or arm.exact_servo:
+        return None
+    tail = ("it is the ideal arm here" if arm.senses_exactly else
+            "only its finger and proprioception act here")
+    return (f"note: ideal mode has no physics, so the {arm.preset} arm's servo and friction are "
+            f"ignored and {tail}; --mode dynamics simulates them")
+
+
 def preset(name: str) -> ArmConfig:
     """The arm preset called ``name``; ConfigError listing the valid ones otherwise."""
     try:
