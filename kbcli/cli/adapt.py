@@ -111,9 +111,9 @@ def adapt_cmd(
     scene_art = read_artifact(scene, "scene")
     values.setdefault("family", scene_art.config.get("family", "translation"))
     cfg = stage.AdaptConfig.from_dict(values)
-    note_arm(cfg.arm, cfg.mode)
     steps = _snapshots(snapshots, cfg.max_steps)
     stage.check_inputs(model_art, scene_art)
+    note_arm(cfg.arm, cfg.mode)
     what = f"adapting ({cfg.strategy}, {cfg.posterior} posterior), observations"
     with ticker(cfg.max_steps, what) as tick:
         art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,

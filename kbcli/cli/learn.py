@@ -72,12 +72,12 @@ def learn_cmd(
     simulator's ground truth.
     """
     sim = SimConfig(mode=mode, reach_noise=reach_noise, arm=load_arm(arm))
-    note_arm(sim.arm, sim.mode)
     cfg = stage.LearnConfig(strategy=strategy, budget=budget, batch=batch,
                             explore_radius=explore_radius, curve_every=curve_every, sim=sim,
                             model_class=model_class)
     check_io({"--keyboard": keyboard, "--arm": arm_file(arm)}, ("--output", output))
     kb_art = read_artifact(keyboard, "keyboard")
+    note_arm(sim.arm, sim.mode)
     if cfg.strategy == "exact":
         art = stage.run(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
         write_artifact(art, output)

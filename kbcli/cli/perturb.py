@@ -26,8 +26,8 @@ def perturb_cmd(
         "--angle", help="Rotation about the keyboard centre, degrees counter-clockwise (makes the "
         "move rigid); wrapped to (-180, 180].")] = None,
     category: Annotated[str | None, typer.Option(
-        "--category", help="Draw a random move instead: small, medium or large (largest per-axis "
-        "displacement in (0,10], (10,20] or (20,40] px).")] = None,
+        "--category", help="Draw a random move instead: small, medium or large (translation size, "
+        "the Euclidean norm, in (0,10], (10,20] or (20,40] px).")] = None,
     family: Annotated[str | None, typer.Option(
         "--family", help="translation or rigid (rigid draws also turn up to 5 degrees) "
         "[default translation, rigid with --angle].")] = None,

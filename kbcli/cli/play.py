@@ -86,7 +86,6 @@ def play_cmd(
              ("--wav", wav))
     cfg = stage.PlayConfig(melody=melody, steps=steps, perturb_at=perturb_at, mode=mode,
                            reach_noise=reach_noise, arm=load_arm(arm))
-    note_arm(cfg.arm, cfg.mode)
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene") if scene is not None else None
     if wav is not None:
@@ -96,6 +95,7 @@ def play_cmd(
                 f"--wav: {steps} notes of this melody may last up to {longest:,.0f} s, more than "
                 f"the {MAX_WAV_SECONDS:g} s a WAV may hold: play fewer --steps or shorter notes")
     session = stage.Session(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed)
+    note_arm(cfg.arm, cfg.mode)
     for _ in progress(session, cfg.steps, "playing"):
         pass
     art = session.artifact()

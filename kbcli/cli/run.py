@@ -69,10 +69,10 @@ def run_cmd(
         adapt=AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
                           reach_noise=reach_noise, arm=load_arm(arm), stop=True),
     )
-    note_arm(cfg.adapt.arm, cfg.adapt.mode)
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
     session = stage.LoopSession(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed)
+    note_arm(cfg.adapt.arm, cfg.adapt.mode)
     adapting = [0]
 
     def describe(s) -> str:

@@ -104,9 +104,10 @@ def check_outputs(inputs: Mapping[str, PathLike | None] | Iterable[tuple[str, Pa
         for what, src in ins:
             for t in targets:
                 if same_file(t, src):
-                    name = t if t == o.path else f"{o.path}/{t.name}"
+                    name, role = (t, f"the {o.what}") if t == o.path else \
+                        (f"{o.path}/{t.name}", f"a file the {o.what} writes")
                     raise KbcliError(
-                        f"{name}: the {o.what} is the input {src} ({what}); refusing to overwrite "
+                        f"{name}: {role} is the input {src} ({what}); refusing to overwrite "
                         f"an input: choose another output name"
                     )
             if o.folder and o.removes and _inside(o.path, src):
