@@ -131,14 +131,14 @@ def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> N
         rel = art.attrs.get("reliability")
         if rel:  # what the model estimates of itself from its samples (model schema 2)
             cal = ", ".join(f"{k} {v:g}" for k, v in sorted(rel.get("calibration", {}).items()))
-            ax.text(0.97, 0.20,
+            ax.text(0.5, -0.13,  # below the axes: inside, it hid a weak model's curve
                     f"the model's own estimate ({rel.get('folds', 'k')}-fold cross-validation):\n"
                     f"boundary error ~{rel['boundary_error']:.2f} px "
                     f"(measured {_num(a.get('boundary_error_px')):.2f})\n"
                     f"mislabel rate {100 * rel['cv_error']:.1f} % "
                     f"(measured {100 * (1 - _num(a.get('accuracy'))):.1f})\n"
                     f"calibration error {rel['cv_ece']:.3f}" + (f"; {cal}" if cal else ""),
-                    transform=ax.transAxes, ha="right", va="bottom", fontsize=7,
+                    transform=ax.transAxes, ha="center", va="top", fontsize=7,
                     bbox={"boxstyle": "round", "fc": "white", "ec": "0.7", "alpha": 0.9})
     fig.tight_layout()
     save(fig, path)
