@@ -135,8 +135,9 @@ def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> N
                     f"the model's own estimate ({rel.get('folds', 'k')}-fold cross-validation):\n"
                     f"boundary error ~{rel['boundary_error']:.2f} px "
                     f"(measured {_num(a.get('boundary_error_px')):.2f})\n"
-                    f"mislabel rate {100 * rel['cv_error']:.1f} % "
-                    f"(measured {100 * (1 - _num(a.get('accuracy'))):.1f})\n"
+                    f"held-out touches mislabelled {100 * rel['cv_error']:.1f} % "
+                    f"(pad wrong: {100 * (1 - _num(a.get('accuracy'))):.1f} %;\n"
+                    f"pessimistic where exploration sat on the boundaries)\n"
                     f"calibration error {rel['cv_ece']:.3f}" + (f"; {cal}" if cal else ""),
                     transform=ax.transAxes, ha="center", va="top", fontsize=7,
                     bbox={"boxstyle": "round", "fc": "white", "ec": "0.7", "alpha": 0.9})
