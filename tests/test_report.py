@@ -239,3 +239,24 @@ def test_report_reads_back_written_artifact(tmp_path):
     assert "sha256" in rep.readme and rep.claims[0].verdict == "agrees"
     assert "| option | `paper` | `kbcli` |" in rep.readme  # the config's order survives HDF5
     assert [c.verdict for c in rep.claims] == [c.verdict for c in stage.claims(_evaluation(PAPER_LIKE))]
+
+
+def test_point_labels_never_overlap():
+    """place_labels: five labels on a crowded spot take different places or are left out; no two
+    drawn labels overlap."""
+    import matplotlib.pyplot as plt
+
+    from kbcli.viz.common import place_labels
+
+    fig, ax = plt.subplots(figsize=(4, 3))
+    xy = np.array([[1.0, 0.0], [1.02, 0.0], [1.04, 0.01], [2.0, 5.0], [1.01, 0.02]])
+    ax.scatter(*xy.T)
+    ax.set_xlim(0, 3)
+    ax.set_ylim(-1, 6)
+    skipped = place_labels(ax, xy, ["100", "150", "200", "800", "1600"])
+    boxes = [t.get_window_extent() for t in ax.texts]
+    assert len(boxes) == 5 - skipped >= 4
+    for i, a in enumerate(boxes):
+        for b in boxes[i + 1:]:
+            assert not a.overlaps(b)
+    plt.close(fig)

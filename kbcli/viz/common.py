@@ -102,3 +102,49 @@ def draw_keyboard(ax, kb: Keyboard, *, labels: bool = True, alpha: float = 1.0,
             pitch, tempo = kb.features[k]
             ax.text(*centres[k], f"{kb.names[k]}\n{tempo:.0f}{unit}", ha="center", va="center",
                     fontsize=fontsize)
+
+
+#: Offsets (points, from the point to the label's lower-left corner; ``None``: the label's width
+#: to the left) tried in turn by :func:`place_labels`.
+_LABEL_OFFSETS = ((4, 4), (4, -11), (None, 4), (None, -11), (4, 13), (4, -20), (None, 13),
+                  (None, -20))
+
+
+def place_labels(ax, xy: np.ndarray, texts: list[str], fontsize: float = 6.5,
+                 avoid: np.ndarray | None = None, **kw) -> int:
+    """Label points without letting two labels overlap or cover a point.
+
+    Each label takes the first offset of :data:`_LABEL_OFFSETS` whose box is clear of the labels
+    placed before it and of every point (``xy`` and ``avoid``, as a marker of about 8 points);
+    a label with no free place is left out. Call once the axes' limits are final.
+
+    Returns
+    -------
+    int
+        How many labels were left out.
+    """
+    fig = ax.figure
+    fig.canvas.draw()  # the final limits and axes position
+    scale = fig.dpi / 72.0  # pixels per point
+    pts = np.asarray(xy, float).reshape(-1, 2)
+    every = pts if avoid is None else np.vstack([pts, np.asarray(avoid, float).reshape(-1, 2)])
+    disp = ax.transData.transform(pts)
+    marks = ax.transData.transform(every)
+    r = 4.0 * scale
+    taken: list[tuple[float, float, float, float]] = [
+        (mx - r, my - r, mx + r, my + r) for mx, my in marks]
+    skipped = 0
+    for (px, py), (x, y), text in zip(disp, pts, texts, strict=True):
+        w, h = 0.62 * fontsize * len(text) * scale, fontsize * scale
+        for ox, oy in _LABEL_OFFSETS:
+            ox = -4 - w / scale if ox is None else ox
+            box = (px + ox * scale, py + oy * scale, px + ox * scale + w, py + oy * scale + h)
+            if all(box[2] <= a or box[0] >= c or box[3] <= b or box[1] >= d
+                   for a, b, c, d in taken):
+                taken.append(box)
+                ax.annotate(text, (x, y), textcoords="offset points", xytext=(ox, oy),
+                            fontsize=fontsize, **kw)
+                break
+        else:
+            skipped += 1
+    return skipped

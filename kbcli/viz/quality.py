@@ -13,7 +13,7 @@ import numpy as np  # noqa: E402
 from matplotlib.ticker import FixedLocator, NullFormatter, ScalarFormatter  # noqa: E402
 
 from kbcli.stages.artifact import Artifact  # noqa: E402
-from kbcli.viz.common import save  # noqa: E402
+from kbcli.viz.common import place_labels, save  # noqa: E402
 
 MARKERS = {"active": "o", "random": "s"}
 
@@ -51,10 +51,6 @@ def plot_advantage(art: Artifact, path: str | os.PathLike) -> None:
                        label=f"{explo} exploration, p < 0.01")
             ax.scatter(xb[~sig], adv[~sig], marker=mk, s=42, facecolors="white",
                        edgecolors="tab:blue", zorder=3, label=f"{explo} exploration, p >= 0.01")
-            for i in sel:
-                ax.annotate(str(info[names[i]]["budget"]), (berr[i], summ[names[i]]["all"][r]
-                                                           ["advantage"]),
-                            textcoords="offset points", xytext=(4, 4), fontsize=6.5, color="0.3")
         ax.axhline(0, color="black", lw=0.8)
         _px_axis(ax, x_lo, x_hi)
         ax.set_xlabel("model's boundary error (px, log scale)")
@@ -84,6 +80,10 @@ def plot_advantage(art: Artifact, path: str | os.PathLike) -> None:
                  f"{art.config['arm']['preset']}: does a better model make active adaptation pay?",
                  fontsize=10)
     fig.tight_layout()
+    for ax, r in zip(axes[:-1], rows, strict=True):  # budgets, once the layout is final
+        adv = [summ[m]["all"][r]["advantage"] for m in names]
+        place_labels(ax, np.column_stack([berr, adv]), [str(info[m]["budget"]) for m in names],
+                     color="0.3")
     save(fig, path)
 
 
