@@ -7,8 +7,10 @@ a learned model, the historical default), ``experiments`` adaptations per displa
 (:func:`kbcli.stages.perturb.draw`), ``max_steps`` touches each. Run ``i`` of a category uses the
 same displacement and seed for every row (paired). Reported per row and category: the median
 touches until the error first drops below 1 px (``T + 1`` when never), the median and 90th
-percentile of the final error, and the median time per step, wall clock and CPU (decision plus
-update), which a loaded machine inflates less in CPU time. Pure: returns rows.
+percentile of the final error, the median wall-clock time of one step (decision plus update),
+and the run's whole CPU time (its setup and, in ``dynamics`` mode, the arm's reaching included)
+over its touches, which a loaded machine inflates less but a short run's setup dominates
+(:func:`step_time` times the posterior's step alone). Pure: returns rows.
 """
 
 from __future__ import annotations

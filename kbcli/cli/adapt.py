@@ -361,7 +361,8 @@ def bench_robust_cmd(
     t = Table(title=f"robust vs plain posterior, {model}: {experiments} runs per row, T = "
                     f"{max_steps}", title_justify="left")
     for col in ("mode / arm", "strategy", "posterior", "category", "touches to <1 px",
-                "final median", "final p90", "ms/step wall", "ms/step CPU"):
+                "final median", "final p90", "median step ms (wall)",
+                "run CPU ms / touch (setup, reaching included)"):
         t.add_column(col, justify="left" if col in ("mode / arm", "strategy", "posterior",
                                                    "category") else "right")
     for r in rows:
