@@ -104,3 +104,21 @@ def test_console_script_runs_and_errors_on_stderr(tmp_path):
     bad = subprocess.run([exe, "inspect", str(tmp_path / "x.h5")], capture_output=True, text=True)
     assert bad.returncode == 1 and bad.stdout == ""
     assert bad.stderr.strip().count("\n") == 0 and "no such file" in bad.stderr
+
+
+def test_default_inputs_are_found_in_the_checkout_from_any_folder(tmp_path, monkeypatch):
+    """quality's data/keyboard.h5, evaluate's pipelines/paper.toml...: the current folder's if it
+    has one, else the kbcli checkout's; a one-line error naming the option otherwise."""
+    from pathlib import Path
+
+    from kbcli.errors import KbcliError
+    from kbcli.io.paths import checkout_file
+
+    root = Path(__file__).resolve().parent.parent
+    monkeypatch.chdir(tmp_path)
+    assert checkout_file("pipelines/paper.toml", "--config") == root / "pipelines" / "paper.toml"
+    (tmp_path / "pipelines").mkdir()
+    (tmp_path / "pipelines" / "paper.toml").write_text("[evaluate]\n")
+    assert checkout_file("pipelines/paper.toml", "--config") == Path("pipelines/paper.toml")
+    with pytest.raises(KbcliError, match="pass --keyboard FILE"):
+        checkout_file("data/no-such.h5", "--keyboard")

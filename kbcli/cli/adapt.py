@@ -328,8 +328,8 @@ def bench_adapt_cmd(
 
 @command(bench_app, name="robust")
 def bench_robust_cmd(
-    model: Annotated[Path, typer.Option("--model", help="Model artifact.")] = Path(
-        "data/default-model.h5"),
+    model: Annotated[Path | None, typer.Option(
+        "--model", help="Model artifact [default: the embedded default model].")] = None,
     experiments: Annotated[int, typer.Option(
         "--experiments", min=1, help="Runs per category, strategy and posterior.")] = 30,
     max_steps: Annotated[int, typer.Option("--max-steps", "-T", min=1, help="Touches per run.")] = 30,
@@ -342,13 +342,14 @@ def bench_robust_cmd(
     Reads MODEL (default: the embedded default model). Writes nothing. Prints, for the ideal arm in
     ideal mode and the realistic arm in dynamics mode, per strategy, posterior and category: the
     median touches to an error below 1 px, the median and 90th percentile of the final error, and
-    the median milliseconds per step (wall clock and CPU, the decision and the reach included);
-    then the CPU time of one translation step of the posterior alone.
+    the median wall-clock time of one step and the run's CPU time per touch (setup and reaching
+    included); then the CPU time of one translation step of the posterior alone.
     """
     from kbcli.bench import robust as bench
     from kbcli.stages import keyboard as keyboard_stage
-    from kbcli.stages.models import load_model
+    from kbcli.stages.models import default_model_path, load_model
 
+    model = default_model_path() if model is None else model
     art = read_artifact(model, "model")
     m, kb = load_model(art), keyboard_stage.load(art)
     strategies = tuple(strategy) if strategy else bench.STRATEGIES

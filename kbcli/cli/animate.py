@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from kbcli.cli.app import bench_app, check_io, command, err, interactive, out
+from kbcli.stages.models import DEFAULT_MODEL, default_model_path
 
 
 @command(name="animate")
@@ -48,7 +49,7 @@ def animate_cmd(
 @command(bench_app, name="animate")
 def bench_animate_cmd(
     model: Annotated[Path, typer.Option("--model", help="Model artifact the runs adapt with.")]
-    = Path("data/default-model.h5"),
+    = Path(DEFAULT_MODEL),
     repeats: Annotated[int, typer.Option("--repeats", min=1, help="Renders per run (the "
                                          "median is reported).")] = 3,
     touches: Annotated[int, typer.Option("--touches", min=1, help="Touches of the "
@@ -69,6 +70,8 @@ def bench_animate_cmd(
     from kbcli.io.artifact import read_artifact
 
     cfg = bench.BenchConfig(repeats=repeats, touches=touches, loop=loop)
+    if model == Path(DEFAULT_MODEL):
+        model = default_model_path()
     runs = bench.make_runs(cfg, read_artifact(model, "model"))
     t = Table(title=f"kbcli animate: median of {repeats} renders to GIF (target: a "
                     f"40-touch run in {bench.TARGET_S:g} s or less on one core)",

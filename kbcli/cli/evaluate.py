@@ -14,7 +14,7 @@ from kbcli.cli.app import bench_app, check_io, command, err, out, progress, run_
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm, load_toml
-from kbcli.io.paths import Output
+from kbcli.io.paths import Output, checkout_file
 from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
 from kbcli.stages import evaluate as stage
 
@@ -23,9 +23,8 @@ DEFAULT_CONFIG = Path("pipelines/paper.toml")
 
 def _load_config(config: Path, experiments: int | None, mode: str | None,
                  methods: list[str] | None = None) -> stage.EvaluateConfig:
-    if config == DEFAULT_CONFIG and not config.is_file():
-        raise KbcliError(f"{config}: no such config file here; run from the kbcli checkout or pass "
-                         f"--config FILE")
+    if config == DEFAULT_CONFIG:
+        config = checkout_file(config, "--config")
     doc = load_toml(config)
     if "arm" in doc:  # (adapt reads one; here each mode has its arm)
         raise ConfigError(f"{config}: evaluate does not read a top-level [arm] table: give each "
@@ -127,6 +126,8 @@ def evaluate_cmd(
         from kbcli.stages.models import default_model_path
 
         model = default_model_path()
+    if config == DEFAULT_CONFIG:
+        config = checkout_file(config, "--config")
     check_io({"--model": model, "--config": config, "--arm": arm_file(arm)}, ("--output", output),
              Output(Checkpoint.beside(output), "checkpoint folder", folder=True, removes=True))
     cfg = _load_config(config, experiments, mode, method)

@@ -9,10 +9,10 @@ from typing import Annotated
 import typer
 
 from kbcli.cli.app import check_io, command, err, out, progress, run_checkpointed
-from kbcli.errors import ConfigError, KbcliError
+from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml
-from kbcli.io.paths import Output
+from kbcli.io.paths import Output, checkout_file
 from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
 from kbcli.stages import quality as stage
 
@@ -58,9 +58,10 @@ def quality_cmd(
     Learned models and finished adaptations are kept in OUTPUT.ckpt/ while it runs (--resume continues from there). Prints a
     progress bar per phase and a table of the advantage per model; `kbcli report OUTPUT` draws it.
     """
-    if config == DEFAULT_CONFIG and not config.is_file():
-        raise KbcliError(f"{config}: no such config file here; run from the kbcli checkout or pass "
-                         "--config FILE")
+    if config == DEFAULT_CONFIG:
+        config = checkout_file(config, "--config")
+    if keyboard == DEFAULT_KEYBOARD:
+        keyboard = checkout_file(keyboard, "--keyboard")
     ckpt_dir = Checkpoint.beside(output)
     cfg = stage.QualityConfig.from_dict(dict(load_toml(config, "quality")))
     cfg = cfg.with_overrides(experiments=experiments, budgets=_budgets(budgets))

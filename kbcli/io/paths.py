@@ -169,3 +169,19 @@ def probe_writable(folder: PathLike, target: PathLike, *, folder_output: bool = 
             os.unlink(tmp)
     except OSError as exc:
         raise KbcliError(f"{target}: cannot write in {folder} ({exc.strerror or exc})") from None
+
+
+def checkout_file(relative: PathLike, option: str) -> Path:
+    """A default input named relative to a kbcli checkout (``data/...``, ``pipelines/...``): that
+    path in the current folder, else in the checkout this package runs from.
+
+    Raises
+    ------
+    KbcliError
+        When neither exists (an installed kbcli without its checkout): pass ``option``.
+    """
+    rel = Path(relative)
+    for base in (Path.cwd(), Path(__file__).resolve().parents[2]):
+        if (base / rel).is_file():
+            return base / rel if base != Path.cwd() else rel
+    raise KbcliError(f"{rel}: not found here nor in the kbcli checkout: pass {option} FILE")

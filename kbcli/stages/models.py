@@ -52,13 +52,6 @@ def default_model_path():
     KbcliError
         When neither exists (an installed kbcli without its checkout): pass ``--model``.
     """
-    from pathlib import Path
+    from kbcli.io.paths import checkout_file
 
-    from kbcli.errors import KbcliError
-
-    for base in (Path.cwd(), Path(__file__).resolve().parents[2]):
-        path = base / DEFAULT_MODEL
-        if path.is_file():
-            return path
-    raise KbcliError(f"no default model ({DEFAULT_MODEL} not found here nor in the kbcli checkout): "
-                     f"pass --model FILE")
+    return checkout_file(DEFAULT_MODEL, "--model")
