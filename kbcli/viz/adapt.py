@@ -4,7 +4,8 @@ entropy curves (Figs. 6, 7 for a single experiment).
 Top row: the translation posterior (log scale over 30 nats below its maximum, with a colour bar;
 the angle summed out for the rigid family) at the stored snapshot steps, the true displacement
 marked with a cross and the estimate (posterior mean) with a circle; the last panel zooms in on the
-estimate, wide enough to keep the truth in view. Bottom: the translation error (px, log scale)
+estimate, wide enough to keep the truth and the posterior within 10 nats of its maximum in view
+(no zoom when that is nearly the whole panel: a wide posterior). Bottom: the translation error (px, log scale)
 with the 1 px level, the angle error (degrees, rigid runs, on its own axis) and the entropy (nats)
 against the observations, the stopping rule marked. One legend names every mark. A session with a
 robot in another process (``kbcli serve``) has no ground truth: no cross, and the error panel shows
@@ -27,6 +28,7 @@ MAX_PANELS = 6
 DYNAMIC_RANGE = 30.0  # nats of log-posterior shown
 ZOOM = 4.0  # px, least half-width of the last panel
 MARGIN = 1.5  # px around the estimate and the truth in the zoomed panel
+BRIGHT = 10.0  # nats below the maximum: the part of the posterior the zoomed panel keeps in view
 
 
 def _plain(v: float, _pos=None) -> str:
@@ -83,10 +85,18 @@ def plot_adapt(run: Artifact, path: str | os.PathLike) -> None:
             hi = est.copy()
             if has_truth:
                 lo, hi = np.minimum(lo, (tx, ty)), np.maximum(hi, (tx, ty))
+            if lp.ndim == 2 and lp.shape == (len(dy), len(dx)):  # and the bright part
+                rows, cols = np.nonzero(lp - top > -BRIGHT)
+                if len(rows):
+                    lo = np.minimum(lo, (dx[cols].min(), dy[rows].min()))
+                    hi = np.maximum(hi, (dx[cols].max(), dy[rows].max()))
             centre = (lo + hi) / 2
             half = max(ZOOM, float(np.max(hi - lo)) / 2 + MARGIN)
-            ax.set_xlim(centre[0] - half, centre[0] + half)
-            ax.set_ylim(centre[1] - half, centre[1] + half)
+            # a wide posterior (a weak model's, tempered) fills the panel: no zoom to show
+            zoom = half < 0.8 * min(dx[-1] - dx[0], dy[-1] - dy[0]) / 2
+            if zoom:
+                ax.set_xlim(centre[0] - half, centre[0] + half)
+                ax.set_ylim(centre[1] - half, centre[1] + half)
         ax.set_title(f"after {t} observation{'s' if t != 1 else ''}" if t else "prior (t = 0)",
                      fontsize=9)
         if zoom:
