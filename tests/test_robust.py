@@ -10,6 +10,7 @@ from scipy.special import logsumexp
 
 from kbcli.core import accuracy as scoring
 from kbcli.core.adapt import (
+    MAX_BLUR,
     REDUNDANCY_FACTOR,
     WIDE_BLUR_FACTOR,
     Adapter,
@@ -309,6 +310,7 @@ def test_the_blur_grid_widens_for_a_model_that_says_it_is_weak():
     """A model whose own boundary error is 4 px also has a blur of 2 x 4 = 8 px weighed; a good
     model (1.5 px), the exact one (no estimate) and the rigid family keep their grids; an explicit
     grid or model_blur wins."""
+    from kbcli.core.adapt import learning_rate
     from kbcli.core.robust import DEFAULT_BLURS, RIGID_BLURS
 
     class Rated(ExactModel):
@@ -320,6 +322,10 @@ def test_the_blur_grid_widens_for_a_model_that_says_it_is_weak():
     assert robust_blurs(EXACT, cfg) == DEFAULT_BLURS
     assert robust_blurs(Rated(KB, 1.5), cfg) == DEFAULT_BLURS
     assert robust_blurs(Rated(KB, 4.0), cfg) == (*DEFAULT_BLURS, WIDE_BLUR_FACTOR * 4.0)
+    # a model that could not place its edges at all (inf) weighs the widest blur allowed, and
+    # is tempered hard but still learns (not treated as exact, nor frozen)
+    assert robust_blurs(Rated(KB, float("inf")), cfg) == (*DEFAULT_BLURS, MAX_BLUR)
+    assert 0 < learning_rate(Rated(KB, float("inf")), cfg) < 0.01
     assert robust_blurs(Rated(KB, 4.0), AdapterConfig(family="rigid")) == RIGID_BLURS
     assert robust_blurs(Rated(KB, 4.0), AdapterConfig(robust_blurs=(0.0, 3.0))) == (0.0, 3.0)
     assert robust_blurs(Rated(KB, 4.0), AdapterConfig(model_blur=2.0)) == (2.0,)

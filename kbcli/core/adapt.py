@@ -319,10 +319,13 @@ class AdapterConfig:
 
 
 def _boundary_error(model) -> float | None:
-    """The model's own cross-validated boundary error (px), or None when it has no estimate."""
+    """The model's own cross-validated boundary error (px), at most ``MAX_BLUR / WIDE_BLUR_FACTOR``
+    (a model that could not place its edges at all says inf), or None when it has no estimate."""
     rel = getattr(model, "reliability_", None) or {}
     berr = rel.get("boundary_error") if isinstance(rel, dict) else None
-    return float(berr) if berr is not None and np.isfinite(berr) else None
+    if berr is None or np.isnan(berr):
+        return None
+    return min(float(berr), MAX_BLUR / WIDE_BLUR_FACTOR)
 
 
 def robust_blurs(model, cfg: AdapterConfig) -> tuple[float, ...]:
@@ -342,8 +345,9 @@ def robust_blurs(model, cfg: AdapterConfig) -> tuple[float, ...]:
 def blur_grid(boundary_error: float | None) -> tuple[float, ...]:
     """The translation family's default blur grid for a model whose own cross-validated boundary
     error is ``boundary_error`` px (None: no estimate): ``DEFAULT_BLURS``, and
-    ``WIDE_BLUR_FACTOR * boundary_error`` when that lies beyond them."""
+    ``WIDE_BLUR_FACTOR * boundary_error`` (at most ``MAX_BLUR``) when that lies beyond them."""
     wide = WIDE_BLUR_FACTOR * boundary_error if boundary_error is not None else 0.0
+    wide = min(wide, MAX_BLUR)
     if wide > max(DEFAULT_BLURS):
         return (*DEFAULT_BLURS, round(wide, 2))
     return DEFAULT_BLURS
