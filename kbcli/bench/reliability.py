@@ -11,7 +11,8 @@ simulator on a 2 px grid over the working area:
 - the model's accuracy and boundary error (:mod:`kbcli.core.accuracy`);
 
 beside what the model estimated of itself from its samples alone (:mod:`kbcli.core.reliability`:
-cross-validated calibration error, mislabel rate and boundary error). Pure: returns rows.
+cross-validated calibration error and boundary error, and the mislabel rate its calibrated p expects
+on the pad). Pure: returns rows.
 
 One learning run is one draw: a model learned from 150 or 300 reaches depends on where those
 reaches landed, and its calibration error against the simulator varies by about +-0.015 from seed to
@@ -127,6 +128,6 @@ def run(budgets=(150, 300, 800, 1600), explorations=("active", "random"), mode: 
         rows.append(Row(e, int(b), int(s), float(a["accuracy"]), float(a["boundary_error_px"]),
                         measured_ece(model, kb, sim, np.random.default_rng(s)),
                         float(rel["cv_ece"]), 1.0 - float(a["accuracy"]),
-                        float(rel["cv_error"]), float(rel["boundary_error"]),
+                        float(rel["expected_error"]), float(rel["boundary_error"]),
                         dict(rel["calibration"]), secs))
     return rows

@@ -478,6 +478,9 @@ def _reliability(art) -> str | None:
     for key in ("cv_error", "cv_log_loss", "cv_ece", "boundary_error"):
         if not _TYPES["num"](rel.get(key)):
             return f"summary attribute reliability.{key} must be a number, got {rel.get(key)!r:.40}"
+    if "expected_error" in rel and not _TYPES["num"](rel["expected_error"]):  # (since kbcli 2026-12)
+        return (f"summary attribute reliability.expected_error must be a number, got "
+                f"{rel['expected_error']!r:.40}")
     if not _TYPES["numdict"](rel.get("calibration", {})):
         return "summary attribute reliability.calibration must be a table of numbers"
     return None

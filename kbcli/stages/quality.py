@@ -383,7 +383,8 @@ def assemble(cfg: QualityConfig, models: dict[str, Artifact], tasks: list[Task],
         model_info[name] = {"exploration": e, "budget": b, "accuracy": float(a["accuracy"]),
                             "boundary_error": berr, "threshold": tau,
                             "estimated_boundary_error": rel.get("boundary_error"),
-                            "estimated_mislabel_rate": rel.get("cv_error"),
+                            "estimated_mislabel_rate": rel.get("expected_error",
+                                                               rel.get("cv_error")),
                             "redundancy_radius": (REDUNDANCY_FACTOR * float(rel["boundary_error"])
                                                   if rel.get("boundary_error") is not None
                                                   else None),

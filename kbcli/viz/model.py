@@ -131,14 +131,18 @@ def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> N
         rel = art.attrs.get("reliability")
         if rel:  # what the model estimates of itself from its samples (model schema 2)
             cal = ", ".join(f"{k} {v:g}" for k, v in sorted(rel.get("calibration", {}).items()))
+            wrong = 100 * (1 - _num(a.get("accuracy")))
+            expects = (f"mislabel rate it expects on the pad {100 * rel['expected_error']:.1f} % "
+                       f"(measured {wrong:.1f} %)\n" if rel.get("expected_error") is not None
+                       else "")  # (models learned before it was estimated)
             ax.text(0.5, -0.13,  # below the axes: inside, it hid a weak model's curve
                     f"the model's own estimate ({rel.get('folds', 'k')}-fold cross-validation):\n"
                     f"boundary error ~{rel['boundary_error']:.2f} px "
                     f"(measured {_num(a.get('boundary_error_px')):.2f})\n"
-                    f"held-out touches mislabelled {100 * rel['cv_error']:.1f} % "
-                    f"(pad wrong: {100 * (1 - _num(a.get('accuracy'))):.1f} %;\n"
-                    f"pessimistic where exploration sat on the boundaries)\n"
-                    f"calibration error {rel['cv_ece']:.3f}" + (f"; {cal}" if cal else ""),
+                    + expects
+                    + f"held-out touches mislabelled {100 * rel['cv_error']:.1f} %"
+                    + ("\n" if expects else f" (pad: {wrong:.1f} %)\n")
+                    + f"calibration error {rel['cv_ece']:.3f}" + (f"; {cal}" if cal else ""),
                     transform=ax.transAxes, ha="center", va="top", fontsize=7,
                     bbox={"boxstyle": "round", "fc": "white", "ec": "0.7", "alpha": 0.9})
     fig.tight_layout()
