@@ -105,3 +105,33 @@ def test_pyproject_license_is_an_spdx_expression():
     req = [r for r in meta["build-system"]["requires"] if r.startswith("setuptools")]
     assert req and re.search(r">=\s*(\d+)", req[0]) and int(
         re.search(r">=\s*(\d+)", req[0]).group(1)) >= 77  # the first setuptools that reads it
+
+
+def test_ctrl_c_with_a_failing_checkpoint_write_still_exits_130_in_one_line(capsys, tmp_path):
+    """run_checkpointed: the flush on Ctrl-C fails (disk full): exit 130 and one line that counts
+    only what is on disk, not a second error."""
+    import typer
+
+    from kbcli.cli.app import run_checkpointed
+    from kbcli.errors import KbcliError
+    from kbcli.io.runner import Checkpoint
+
+    class Full(Checkpoint):
+        def flush(self):
+            if 4 in self._pending:
+                raise KbcliError("disk full")
+            super().flush()
+
+    ck = Full(tmp_path / "o.ckpt", {"x": 1}, every=2)
+
+    def results():
+        for i in range(5):
+            yield i, {"v": float(i)}
+        raise KeyboardInterrupt
+
+    with pytest.raises(typer.Exit) as e:
+        run_checkpointed(results(), 5, ck, kept=0, total=9, what="experiments")
+    assert e.value.exit_code == 130
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "4 of 9 experiments kept" in lines[0], lines
+    assert "writing the last 1 failed" in lines[0]

@@ -596,5 +596,5 @@ def test_a_top_level_arm_table_is_refused_not_ignored(runner, tmp_path, model_pa
     out = tmp_path / "e.h5"
     r = runner.invoke(app, ["evaluate", "--config", str(conf), "--model", str(model_path),
                             "-o", str(out)])
-    _one_line_error(r, "[evaluate.arm]", "--arm")
+    _one_line_error(r, "remove it", "[evaluate.arm]")
     assert not out.exists() and not Checkpoint.beside(out).exists()

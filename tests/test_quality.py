@@ -189,8 +189,9 @@ def test_an_interrupted_sweep_keeps_its_models_and_resumes_to_the_same_numbers(
 
 
 def test_each_models_likelihood_tables_are_built_once(runner, small_kb, tmp_path, monkeypatch):
-    """Three rows that need three different tables, over two displacements: each model's three
-    tables are built once (a cache that held two rebuilt them at every displacement)."""
+    """Three rows (robust, robust without the redundancy discount, plain) over two displacements:
+    each model's two tables (the robust rows share one) are built once (a cache that held two
+    configs rebuilt them at every displacement)."""
     from kbcli.stages import adapt as adapt_stage
 
     conf = tmp_path / "q.toml"
@@ -210,7 +211,16 @@ def test_each_models_likelihood_tables_are_built_once(runner, small_kb, tmp_path
     r = runner.invoke(app, ["quality", "--config", str(conf), "--keyboard", str(small_kb), "-o",
                             str(tmp_path / "q.h5")])
     assert r.exit_code == 0, r.output
-    assert len(calls) == 2 * 3 + 1  # two models' three tables, and the exact model's one
+    assert len(calls) == 2 * 2 + 1  # two models' two tables, and the exact model's one
+
+
+def test_a_top_level_arm_table_is_refused_not_ignored(runner, small_kb, tmp_path):
+    conf = tmp_path / "q.toml"
+    conf.write_text(TINY + '\n[arm]\npreset = "servo"\n')
+    r = runner.invoke(app, ["quality", "--config", str(conf), "--keyboard", str(small_kb), "-o",
+                            str(tmp_path / "q.h5")])
+    assert r.exit_code == 1 and "remove it" in r.stderr and r.stderr.count("\n") == 1, r.output
+    assert not (tmp_path / "q.h5").exists() and not (tmp_path / "q.h5.ckpt").exists()
 
 
 def test_an_unreachable_scheduler_leaves_nothing(runner, small_kb, tmp_path, monkeypatch):
@@ -224,3 +234,19 @@ def test_an_unreachable_scheduler_leaves_nothing(runner, small_kb, tmp_path, mon
                             str(tmp_path / "q.h5"), "--scheduler", "tcp://127.0.0.1:9"])
     assert r.exit_code == 1 and "cannot reach the Dask scheduler" in r.stderr, r.output
     assert sorted(p.name for p in tmp_path.iterdir()) == before  # no q.h5, no q.h5.ckpt
+
+
+def test_the_default_keyboard_is_found_from_any_folder(runner, tmp_path, monkeypatch):
+    """Without --keyboard, quality learns on the checkout's data/keyboard.h5 even when run from
+    another folder (it said 'data/keyboard.h5: no such file')."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "q.toml").write_text(
+        '[quality]\nbudgets = [20]\nexplorations = ["random"]\nmode = "ideal"\narm = "ideal"\n'
+        'experiments = 1\nmax_steps = 2\nideal = false\n[quality.rows]\nrandom = '
+        '{ strategy = "random" }\n[quality.categories.small]\nlimit = 10.0\n'
+        'displacements = [[3.0, -2.0]]\n')
+    r = runner.invoke(app, ["quality", "--config", "q.toml", "-o", "q.h5"])
+    assert r.exit_code == 0, r.output
+    kb = read_artifact(tmp_path / "q.h5").inputs["keyboard"]
+    assert kb["sha256"] == read_artifact(stage.__file__.rsplit("/kbcli/", 1)[0]
+                                         + "/data/keyboard.h5").sha256

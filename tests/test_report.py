@@ -260,3 +260,9 @@ def test_point_labels_never_overlap():
         for b in boxes[i + 1:]:
             assert not a.overlaps(b)
     plt.close(fig)
+    fig, ax = plt.subplots()  # a point that is not finite loses its label, not the others theirs
+    ax.set_xlim(0, 6)
+    ax.set_ylim(0, 6)
+    assert place_labels(ax, np.array([[1.0, 1.0], [5.0, 5.0], [np.nan, 3.0]]), list("abc")) == 1
+    assert [t.get_text() for t in ax.texts] == ["a", "b"]
+    plt.close(fig)

@@ -71,10 +71,11 @@ def adapt_cmd(
         "and joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
         "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields) [default ideal].")] = None,
     model_blur: Annotated[float | None, typer.Option(
-        "--model-blur", help="Override: fix the blur (px, 0-50) of the model's key edges "
-        "instead of letting the robust posterior learn it from the touches (its default: "
-        "it weighs 0, 1, 2.5 and 5 px, and twice a weak model's own boundary error; "
-        "recorded in the run as robust_blurs).")] = None,
+        "--model-blur", help="Override: fix the blur (px, 0-50) of the model's key edges. "
+        "Default: the robust posterior learns it from the touches (translation: it weighs "
+        "0, 1, 2.5 and 5 px and twice a weak model's own boundary error; rigid: 0 px; "
+        "recorded in the run as robust_blurs); the plain (robust = false) and kde "
+        "posteriors soften a learned model's map by 1 px, the exact one's by 0.")] = None,
     max_steps: Annotated[int | None, typer.Option(
         "--max-steps", "-T", help="Observations at most [default 40].")] = None,
     resolution: Annotated[float | None, typer.Option(

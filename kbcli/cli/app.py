@@ -198,19 +198,27 @@ def run_checkpointed(results: Iterable[tuple[int, dict]], todo: int, ckpt: Any, 
             ckpt.add(i, res)
             fresh[i] = res
     except KeyboardInterrupt:
-        with contextlib.suppress(KbcliError):
+        failed = False
+        try:
             ckpt.flush()
-        n = kept + len(fresh)
+        except KbcliError:
+            failed = True
+        n = kept + len(fresh) - ckpt.pending  # what is on disk
+        lost = f" (writing the last {ckpt.pending} failed)" if failed else ""
         if ckpt.exists():  # (it may hold earlier phases' work even when n is 0)
-            msg = f"{n} of {total} {what} kept in {ckpt.folder}: rerun with --resume to continue"
-        elif n:
-            msg = f"{n} of {total} {what} had finished, but writing them failed; nothing was kept"
+            msg = (f"{n} of {total} {what} kept in {ckpt.folder}{lost}: rerun with --resume to "
+                   "continue")
+        elif fresh:
+            msg = f"{len(fresh)} of {total} {what} had finished, but writing them failed; nothing was kept"
         else:
             msg = f"none of {total} {what} had finished; nothing was kept"
         err.print(f"kbcli: interrupted; {msg}", markup=False)
         raise typer.Exit(130) from None
-    finally:
-        ckpt.flush()
+    except BaseException:  # keep what finished, then let the error speak
+        with contextlib.suppress(KbcliError):
+            ckpt.flush()
+        raise
+    ckpt.flush()
     return fresh
 
 

@@ -27,8 +27,8 @@ def _load_config(config: Path, experiments: int | None, mode: str | None,
         config = checkout_file(config, "--config")
     doc = load_toml(config)
     if "arm" in doc:  # (adapt reads one; here each mode has its arm)
-        raise ConfigError(f"{config}: evaluate does not read a top-level [arm] table: give each "
-                          "mode its arm in [evaluate.arm], or pass --arm")
+        raise ConfigError(f"{config}: evaluate does not read a top-level [arm] table: remove it "
+                          "(each mode's arm goes in [evaluate.arm]; --arm sets every mode's)")
     cfg = stage.EvaluateConfig.from_dict(dict(load_toml(config, "evaluate")))
     if cfg.family == "rigid":
         for cat in cfg.categories:

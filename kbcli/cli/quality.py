@@ -63,6 +63,9 @@ def quality_cmd(
     if keyboard == DEFAULT_KEYBOARD:
         keyboard = checkout_file(keyboard, "--keyboard")
     ckpt_dir = Checkpoint.beside(output)
+    if "arm" in load_toml(config):  # (adapt reads one; here the sweep's arm is quality.arm)
+        raise ConfigError(f"{config}: quality does not read a top-level [arm] table: remove it "
+                          "(the sweep's arm is the arm key of [quality])")
     cfg = stage.QualityConfig.from_dict(dict(load_toml(config, "quality")))
     cfg = cfg.with_overrides(experiments=experiments, budgets=_budgets(budgets))
     names = tuple(f"{n}.h5" for n, _, _ in stage.model_names(cfg))

@@ -145,7 +145,8 @@ class AdapterConfig:
         ``alpha = 30 eta / (1 - eta)``, so the first touches count almost in full;
         :mod:`kbcli.core.robust`). None: resolved with the model,
         ``min(1, (TEMPER_PX / b)^2)`` for its own cross-validated boundary error ``b`` px
-        (``TEMPER_PX`` 1.5; 1 for the exact model or a model without an estimate;
+        (capped at 25 px: :func:`own_boundary_error`; ``TEMPER_PX`` 1.5; 1 for the exact model or
+        a model without an estimate;
         :func:`learning_rate`). 1: untempered.
     redundancy_radius : float or None
         A learned model's errors are not independent from touch to touch: where its boundary is
@@ -154,8 +155,8 @@ class AdapterConfig:
         posterior with weight ``1 / k`` (a coarsened likelihood), and infogain divides a
         candidate's expected gain by the same ``k``, so it seeks new evidence instead of asking one
         doubtful spot again. None: ``REDUNDANCY_FACTOR`` (4) times the model's own cross-validated
-        boundary error (its ``reliability``; 0, no discount, for the exact model or a model that
-        has no estimate). 0: off.
+        boundary error (its ``reliability``, capped at 25 px: :func:`own_boundary_error`; 0, no
+        discount, for the exact model or a model that has no estimate). 0: off.
     model_blur : float or None
         Override: softening (px, a Gaussian) of the model's map. With ``robust``, the blur is fixed
         to it instead of being learned. Without, None means ``LEARNED_BLUR`` (1 px) for a learned
@@ -318,14 +319,19 @@ class AdapterConfig:
         return cls(**d)
 
 
-def _boundary_error(model) -> float | None:
-    """The model's own cross-validated boundary error (px), at most ``MAX_BLUR / WIDE_BLUR_FACTOR``
-    (a model that could not place its edges at all says inf), or None when it has no estimate."""
-    rel = getattr(model, "reliability_", None) or {}
-    berr = rel.get("boundary_error") if isinstance(rel, dict) else None
+def own_boundary_error(reliability: dict | None) -> float | None:
+    """The boundary error (px) a model's own estimate (its ``reliability`` table) gives the robust
+    posterior: the cross-validated one, at most ``MAX_BLUR / WIDE_BLUR_FACTOR`` (25 px; a model
+    that could not place its edges at all says inf), or None when it has no estimate. Every
+    setting resolved from it (blur grid, learning rate, redundancy radius) uses this value."""
+    berr = reliability.get("boundary_error") if isinstance(reliability, dict) else None
     if berr is None or np.isnan(berr):
         return None
     return min(float(berr), MAX_BLUR / WIDE_BLUR_FACTOR)
+
+
+def _boundary_error(model) -> float | None:
+    return own_boundary_error(getattr(model, "reliability_", None))
 
 
 def robust_blurs(model, cfg: AdapterConfig) -> tuple[float, ...]:
@@ -392,6 +398,13 @@ def _size(nbytes: float) -> str:
         if nbytes >= scale:
             return f"{nbytes / scale:.1f} {unit}"
     return f"{nbytes / 1024:.1f} kB"
+
+
+def table_key(model, cfg: AdapterConfig) -> tuple:
+    """What :func:`build_table` reads of ``cfg`` for ``model``: two configs with the same key share
+    one table (the robust posterior's options, the strategy and the stopping rule do not count)."""
+    return (total_blur(model, cfg), cfg.raster_step, cfg.resolution, cfg.family, cfg.outlier,
+            cfg.max_memory_mb)
 
 
 def build_table(model, cfg: AdapterConfig,

@@ -370,6 +370,11 @@ class Checkpoint:
     def exists(self) -> bool:
         return (self.folder / "meta.json").is_file()
 
+    @property
+    def pending(self) -> int:
+        """Results added but not written yet."""
+        return len(self._pending)
+
     def load(self, resume: bool) -> dict[int, dict]:
         """Finished experiments to keep (empty when starting afresh).
 

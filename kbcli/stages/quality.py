@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from scipy import stats as sps
 
-from kbcli.core.adapt import REDUNDANCY_FACTOR, blur_grid, temper
+from kbcli.core.adapt import REDUNDANCY_FACTOR, blur_grid, own_boundary_error, table_key, temper
 from kbcli.core.config import check_known, check_names, check_whole
 from kbcli.errors import ConfigError
 from kbcli.sim import MODES
@@ -325,11 +325,11 @@ def adapt_one(state: dict, task: Task) -> dict:
     cfg: QualityConfig = state["cfg"]
     acfg = adapt_config(cfg, task.method)
     model = state["models"][task.model]
-    key = (task.model, replace(acfg.adapter_config(), strategy="random"))
+    key = (task.model, table_key(model, acfg.adapter_config()))
     if key not in state["tables"]:
-        # keep the current model's tables only (one per distinct row setting: three for the
-        # shipped rows, about 0.5 GB each), which plan() runs together: clearing at a fixed count
-        # rebuilt them at every displacement
+        # keep the current model's tables only, which plan() runs together (two for the shipped
+        # rows, robust and plain, about 0.1 GB each): clearing at a fixed count rebuilt them at
+        # every displacement
         if any(m != task.model for m, _ in state["tables"]):
             state["tables"].clear()
         state["tables"][key] = adapt_stage.build_shared_table(acfg, model)
@@ -380,18 +380,20 @@ def assemble(cfg: QualityConfig, models: dict[str, Artifact], tasks: list[Task],
         berr = float(a["boundary_error_px"])
         tau = threshold(berr)
         rel = a.get("reliability") or {}
+        own = own_boundary_error(rel)  # (capped as the runs used it)
         model_info[name] = {"exploration": e, "budget": b, "accuracy": float(a["accuracy"]),
                             "boundary_error": berr, "threshold": tau,
                             "estimated_boundary_error": rel.get("boundary_error"),
-                            "estimated_mislabel_rate": rel.get("expected_error",
-                                                               rel.get("cv_error")),
-                            "redundancy_radius": (REDUNDANCY_FACTOR * float(rel["boundary_error"])
-                                                  if rel.get("boundary_error") is not None
-                                                  else None),
+                            # held-out touches' rate (as before) and the pad's, as the
+                            # calibrated model expects it (models learned since 2026-12-02)
+                            "estimated_mislabel_rate": rel.get("cv_error"),
+                            "expected_mislabel_rate": rel.get("expected_error"),
+                            "redundancy_radius": (REDUNDANCY_FACTOR * own
+                                                  if own is not None else None),
                             # the widest boundary blur the robust posterior weighs by default
-                            "widest_blur": max(blur_grid(rel.get("boundary_error"))),
+                            "widest_blur": max(blur_grid(own)),
                             # the learning rate the robust posterior tempers touches with
-                            "learning_rate": temper(rel.get("boundary_error"))}
+                            "learning_rate": temper(own)}
         per: dict[str, Any] = {}
         for group in [*[c.name for c in cfg.categories], "all"]:
             sel_m = (model == name) & ((cat == group) if group != "all" else True)
@@ -565,15 +567,15 @@ def report(art: Artifact) -> str:
         lines.append(f"| {r} | {h['rho']:.2f} | {h['p']:.1e} | {h['significant_good']} of "
                      f"{h['good']} | {h['significant_bad']} of {h['bad']} | {verdict(h)} |")
     lines += ["", "## Models", "",
-              "| model | accuracy | boundary error (px) | self-estimated (px) | mislabel rate: measured / self-estimated | tau (px) | spot radius (px) | widest blur (px) | learning rate |",
+              "| model | accuracy | boundary error (px) | self-estimated (px) | mislabel rate: measured / expected by the model / held-out touches | tau (px) | spot radius (px) | widest blur (px) | learning rate |",
               "|---|---|---|---|---|---|---|---|---|"]
     for m, mi in _ordered(a["models"]):
         est = mi.get("estimated_boundary_error")
-        mis = mi.get("estimated_mislabel_rate")
+        rates = [mi.get("expected_mislabel_rate"), mi.get("estimated_mislabel_rate")]
         lines.append(f"| {m} | {100 * mi['accuracy']:.1f} % | {mi['boundary_error']:.2f} | "
                      + (f"{est:.2f}" if est is not None else "n/a") + " | "
                      f"{100 * (1 - mi['accuracy']):.1f} % / "
-                     + (f"{100 * mis:.1f} %" if mis is not None else "n/a")
+                     + " / ".join(f"{100 * v:.1f} %" if v is not None else "n/a" for v in rates)
                      + f" | {mi['threshold']:.2f} | "
                      + (f"{mi['redundancy_radius']:.1f}" if mi.get("redundancy_radius") is not None
                         else "n/a") + " | "

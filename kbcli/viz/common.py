@@ -116,7 +116,8 @@ def place_labels(ax, xy: np.ndarray, texts: list[str], fontsize: float = 6.5,
 
     Each label takes the first offset of :data:`_LABEL_OFFSETS` whose box is clear of the labels
     placed before it and of every point (``xy`` and ``avoid``, as a marker of about 8 points);
-    a label with no free place is left out. Call once the axes' limits are final.
+    a label with no free place, or of a point that is not finite, is left out. Call once the axes'
+    limits are final.
 
     Returns
     -------
@@ -128,6 +129,7 @@ def place_labels(ax, xy: np.ndarray, texts: list[str], fontsize: float = 6.5,
     scale = fig.dpi / 72.0  # pixels per point
     pts = np.asarray(xy, float).reshape(-1, 2)
     every = pts if avoid is None else np.vstack([pts, np.asarray(avoid, float).reshape(-1, 2)])
+    every = every[np.isfinite(every).all(axis=1)]  # (a point not drawn is no obstacle)
     disp = ax.transData.transform(pts)
     marks = ax.transData.transform(every)
     r = 4.0 * scale
@@ -135,6 +137,9 @@ def place_labels(ax, xy: np.ndarray, texts: list[str], fontsize: float = 6.5,
         (mx - r, my - r, mx + r, my + r) for mx, my in marks]
     skipped = 0
     for (px, py), (x, y), text in zip(disp, pts, texts, strict=True):
+        if not (np.isfinite(px) and np.isfinite(py)):
+            skipped += 1
+            continue
         w, h = 0.62 * fontsize * len(text) * scale, fontsize * scale
         for ox, oy in _LABEL_OFFSETS:
             ox = -4 - w / scale if ox is None else ox

@@ -136,7 +136,8 @@ def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> N
                        f"(measured {wrong:.1f} %)\n" if rel.get("expected_error") is not None
                        else "")  # (models learned before it was estimated)
             ax.text(0.5, -0.13,  # below the axes: inside, it hid a weak model's curve
-                    f"the model's own estimate ({rel.get('folds', 'k')}-fold cross-validation):\n"
+                    f"the model's own estimate, from its samples "
+                    f"({rel.get('folds', 'k')}-fold cross-validation, calibrated p):\n"
                     f"boundary error ~{rel['boundary_error']:.2f} px "
                     f"(measured {_num(a.get('boundary_error_px')):.2f})\n"
                     + expects
