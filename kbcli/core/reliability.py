@@ -176,7 +176,7 @@ def expected_calibration_error(probs: np.ndarray, hit: np.ndarray, bins: int = E
     debiased : bool
         For ``hit`` drawn once per prediction (0 or 1): a bin's ``|mean(hit) - mean(conf)|`` then
         carries the binomial noise of its few outcomes, which inflates the error of a perfectly
-        calibrated model (300 predictions in 15 bins: about 0.05). Take instead the square root
+        calibrated model (300 predictions in 15 bins: about 0.06). Take instead the square root
         of the plug-in squared gap less its sampling variance ``a_b (1 - a_b) / (n_b - 1)``,
         floored at 0 (the debiased estimator of Kumar, Liang and Ma 2019, "Verified uncertainty
         calibration"; ``n_b`` the bin's effective sample size under ``weights``).
