@@ -57,6 +57,8 @@ from kbcli.core.adapt import Adapter, AdapterConfig, build_samples, build_table
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.layouts import example_config_fields, get_layout
 from kbcli.core.model import ExactModel
+from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.stages.adapt import AdaptConfig, experiment
 from kbcli.stages.perturb import CATEGORIES, draw
@@ -204,7 +206,7 @@ def run_cells(cells: list[Cell]) -> Iterator[tuple[Cell, int]]:
         if key not in tables:
             tables[key] = build_table(cell.model, acfg)
         skey = key + (acfg.kde_samples, acfg.kde_bandwidth)
-        if acfg.posterior == "kde" and skey not in samples:  # drawn once per class, shared
+        if POSTERIORS.get(acfg.posterior).uses_samples and skey not in samples:  # once per class
             samples[skey] = build_samples(cell.model, acfg, [0])
         for i, truth in enumerate(cell.truths):
             # a fresh copy: spawning from a shared SeedSequence would advance it for later cells
@@ -220,7 +222,7 @@ def run_cells(cells: list[Cell]) -> Iterator[tuple[Cell, int]]:
 def counted_errors(cell: Cell) -> np.ndarray:
     """(n, T) the error the thresholds apply to (``max(px, 2 * deg)`` for the rigid family)."""
     e = np.asarray(cell.errors, float)
-    if cell.cfg.family == "rigid":
+    if FAMILIES.get(cell.cfg.family).rotates:
         e = np.maximum(e, 2 * np.asarray(cell.angle_errors, float))
     return e
 

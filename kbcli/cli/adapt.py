@@ -26,6 +26,7 @@ from kbcli.cli.app import (
     progress,
     ticker,
 )
+from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm, load_stage_table
@@ -126,7 +127,8 @@ def adapt_cmd(
     reach = a["steps_to_1px"]
     stop_txt = f"; stopping rule at step {a['stop_step']}" if a["stop_step"] else ""
     angle = (f", angle error {a['final_angle_error_deg']:.2f} deg"
-             if cfg.family == "rigid" or a["world_family"] == "rigid" else "")
+             if FAMILIES.get(cfg.family).rotates or FAMILIES.get(a["world_family"]).rotates
+             else "")
     out.print(f"wrote {output}: {cfg.strategy}/{cfg.posterior}, {a['steps']} steps; estimate "
               f"{est} (truth {truth}); final error {a['final_error_px']:.2f} px{angle}; "
               f"below 1 px {'from step ' + str(reach) if reach else 'never'}{stop_txt}; "

@@ -11,6 +11,7 @@ import typer
 from rich.table import Table
 
 from kbcli.cli.app import bench_app, check_io, command, err, out, progress, run_checkpointed
+from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm, load_toml
@@ -30,7 +31,7 @@ def _load_config(config: Path, experiments: int | None, mode: str | None,
         raise ConfigError(f"{config}: evaluate does not read a top-level [arm] table: remove it "
                           "(each mode's arm goes in [evaluate.arm]; --arm sets every mode's)")
     cfg = stage.EvaluateConfig.from_dict(dict(load_toml(config, "evaluate")))
-    if cfg.family == "rigid":
+    if FAMILIES.get(cfg.family).rotates:
         for cat in cfg.categories:
             for d in cat.displacements:
                 if not -180.0 < float(d[0]) <= 180.0:

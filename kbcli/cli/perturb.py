@@ -10,7 +10,7 @@ import numpy as np
 import typer
 
 from kbcli.cli.app import check_io, command, err, out
-from kbcli.core.transforms import wrap_degrees
+from kbcli.core.transforms import FAMILIES, wrap_degrees
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import perturb as stage
@@ -47,8 +47,9 @@ def perturb_cmd(
         raise ConfigError("give a displacement (--dx, --dy, optionally --angle) or a --category")
     if family is None:
         family = "rigid" if angle is not None else "translation"
-    if angle is not None and family != "rigid":
-        raise ConfigError("--angle makes a rigid move; it cannot be used with --family translation")
+    fam = FAMILIES.get(family)
+    if angle is not None and not fam.rotates:
+        raise ConfigError(f"--angle makes a rigid move; it cannot be used with --family {family}")
     if angle is not None and math.isfinite(angle):
         wrapped = wrap_degrees(angle)
         if wrapped != angle:
@@ -56,8 +57,7 @@ def perturb_cmd(
                       f"wrapped to (-180, 180])", markup=False)
         angle = wrapped
     if explicit:
-        d = (dx or 0.0, dy or 0.0)
-        params = d if family == "translation" else (angle or 0.0, *d)
+        params = tuple(float(v) for v in fam.compose(angle or 0.0, (dx or 0.0, dy or 0.0)))
         cfg = stage.PerturbConfig(family=family, params=params)
     else:
         cfg = stage.PerturbConfig(family=family, category=category)

@@ -49,6 +49,7 @@ import numpy as np
 
 from kbcli.core import transforms
 from kbcli.core.config import check_known
+from kbcli.core.estimators import ESTIMATORS
 from kbcli.core.model import UNKNOWN, ExactModel
 from kbcli.core.posterior import (
     ActionSamples,
@@ -60,6 +61,7 @@ from kbcli.core.posterior import (
     kde_term,
     likelihood_term,
 )
+from kbcli.core.posteriors import POSTERIORS
 from kbcli.core.robust import (
     DEFAULT_BLURS,
     DEFAULT_OUTLIERS,
@@ -74,7 +76,6 @@ from kbcli.core.robust import (
 from kbcli.core.strategies import STRATEGIES, Context, get_strategy
 from kbcli.errors import ConfigError, ObservationError
 
-POSTERIORS = ("likelihood", "kde")
 #: Default softening (px) of a learned model's map (``AdapterConfig.model_blur``).
 LEARNED_BLUR = 1.0
 #: Radius (px) within which touches count as one spot, as a multiple of the model's own
@@ -87,7 +88,6 @@ WIDE_BLUR_FACTOR = 2.0
 #: Largest blur (px) any blur option accepts: a key's width. A map blurred further says nothing,
 #: and its Gaussian kernel would outgrow memory (a 1000 px blur asked for 35 GiB).
 MAX_BLUR = 50.0
-ESTIMATORS = ("mean", "ml")
 
 
 def _num(name: str, v: object, *, lo: float = 0.0, strict: bool = True,
@@ -300,7 +300,7 @@ class AdapterConfig:
     @property
     def is_robust(self) -> bool:
         """Whether the robust posterior is used (asked for, with the likelihood posterior)."""
-        return self.robust and self.posterior == "likelihood"
+        return self.robust and POSTERIORS.get(self.posterior).robust
 
     def nuisance(self, model=None) -> Nuisance:
         """The blurs (:func:`robust_blurs` for ``model``) and outlier rates the robust posterior
@@ -531,7 +531,7 @@ class Adapter:
         self._edges: np.ndarray | None = None
         self._corners: np.ndarray | None = None
         self.bandwidths: list[float] = []
-        if cfg.posterior == "kde" and samples is None:
+        if POSTERIORS.get(cfg.posterior).uses_samples and samples is None:
             samples = build_samples(model, cfg, [int(v) for v in rng.integers(2**32, size=2)])
         self.samples = samples
 
@@ -707,7 +707,7 @@ class Adapter:
 
     def estimate(self) -> np.ndarray:
         """(P,) the estimate the config asks for (posterior mean or maximum-likelihood cell)."""
-        return self.posterior.mean() if self.cfg.estimator == "mean" else self.posterior.ml()
+        return ESTIMATORS.get(self.cfg.estimator).read(self.posterior)
 
     def entropy(self) -> float:
         """Posterior entropy, nats (over grid cells)."""
@@ -814,7 +814,7 @@ def step_record(adapter: Adapter, t: int, action: np.ndarray, landed: np.ndarray
     ms = 1e3 * (time.perf_counter() - t0) + extra_ms
     return Step(t=t, action=np.asarray(action, float), landed=np.asarray(landed, float),
                 perceived=np.asarray(perceived, float), cls=int(cls), ml=ml, mean=mean,
-                estimate=mean if adapter.cfg.estimator == "mean" else ml,
+                estimate=ESTIMATORS.get(adapter.cfg.estimator).read(post),
                 entropy=post.entropy(), ml_prob=post.ml_prob(),
                 mass=adapter.mass_near_estimate(), stop=adapter.should_stop(), ms=ms)
 

@@ -1,7 +1,8 @@
 """Transform families of the action space (paper Sect. III-B, Eq. 3).
 
 A displacement of the keyboard is a transform ``T`` of the pad: the key that was under ``x`` before
-is under ``T(x)`` after. Two families share one code path, chosen by name:
+is under ``T(x)`` after. The families are a registry (:data:`FAMILIES`) of :class:`Family`
+entries that share one code path:
 
 - ``translation``: parameters ``(dx, dy)`` in px; ``T(x) = x + d`` (the paper's).
 - ``rigid``: parameters ``(angle, dx, dy)``, angle in degrees counter-clockwise about the keyboard
@@ -13,24 +14,89 @@ hypotheses too (shapes in the docstrings).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from kbcli.core.registry import Registry
 from kbcli.errors import ConfigError
 
-FAMILIES: dict[str, tuple[str, ...]] = {
-    "translation": ("dx", "dy"),
-    "rigid": ("angle", "dx", "dy"),
-}
+
+@dataclass(frozen=True)
+class Family:
+    """A registered transform family: its parameters and how they split into a rotation and a
+    shift.
+
+    Attributes
+    ----------
+    name : str
+    params : tuple of str
+        Parameter names, in the order every array of this family's parameters uses.
+    rotates : bool
+        Whether the first parameter is an angle (degrees, counter-clockwise about the centre).
+    """
+
+    name: str
+    params: tuple[str, ...]
+    rotates: bool
+
+    @property
+    def size(self) -> int:
+        """Number of parameters."""
+        return len(self.params)
+
+    def angle(self, params: np.ndarray) -> float:
+        """The rotation (degrees) of one parameter vector (0 for a family that does not rotate)."""
+        return float(np.asarray(params, float)[0]) if self.rotates else 0.0
+
+    def shift(self, params: np.ndarray) -> np.ndarray:
+        """(..., 2) the translation part of (..., P) parameters."""
+        p = np.asarray(params, float)
+        return p[..., 1:] if self.rotates else p
+
+    def compose(self, angle: float, shift: np.ndarray) -> np.ndarray:
+        """(P,) this family's parameters for a rotation ``angle`` (deg; dropped by a family that
+        does not rotate) and a translation ``shift`` (2,)."""
+        d = [float(v) for v in np.asarray(shift, float)]
+        return np.array([float(angle), *d] if self.rotates else d, float)
+
+    def as_dict(self, params: np.ndarray) -> dict[str, float]:
+        """``{name: value}`` of one parameter vector."""
+        return {k: float(v) for k, v in zip(self.params, np.asarray(params, float), strict=True)}
+
+    def split(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(..., P) params -> angle in radians (...,) and translation (..., 2)."""
+        params = np.asarray(params, float)
+        if params.shape[-1] != self.size:
+            raise ConfigError(
+                f"a {self.name} transform takes {self.size} parameters ({', '.join(self.params)}), "
+                f"got {params.shape[-1]}"
+            )
+        if not self.rotates:
+            return np.zeros(params.shape[:-1]), params
+        return np.deg2rad(params[..., 0]), params[..., 1:]
+
+
+#: The transform families (``--family``), read with ``FAMILIES.get(name)``.
+FAMILIES: Registry[Family] = Registry("transform family")
+FAMILIES.register("translation", Family("translation", ("dx", "dy"), rotates=False),
+                  summary="a shift (dx, dy) in px: the paper's")
+FAMILIES.register("rigid", Family("rigid", ("angle", "dx", "dy"), rotates=True),
+                  summary="a rotation (deg) about the keyboard centre and a shift (dx, dy)")
+
+
+def family_for(params: dict[str, float]) -> Family:
+    """The largest family whose parameters are all keys of ``params`` (a stored truth such as
+    ``{"angle": 2, "dx": 3, "dy": 0}``)."""
+    fits = [fam for _, fam in FAMILIES.items() if set(fam.params) <= set(params)]
+    if not fits:
+        raise ConfigError(f"no transform family has the parameters {', '.join(params)}")
+    return max(fits, key=lambda f: f.size)
 
 
 def check_family(family: str) -> tuple[str, ...]:
     """Parameter names of ``family``; raises ``ConfigError`` listing the valid ones."""
-    try:
-        return FAMILIES[family]
-    except KeyError:
-        raise ConfigError(
-            f"unknown transform family {family!r}; valid: {', '.join(FAMILIES)}"
-        ) from None
+    return FAMILIES.get(family).params
 
 
 def wrap_degrees(angle: np.ndarray | float) -> np.ndarray | float:
@@ -43,16 +109,7 @@ def wrap_degrees(angle: np.ndarray | float) -> np.ndarray | float:
 
 def _split(family: str, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(..., P) params -> angle in radians (...,) and translation (..., 2)."""
-    names = check_family(family)
-    params = np.asarray(params, float)
-    if params.shape[-1] != len(names):
-        raise ConfigError(
-            f"a {family} transform takes {len(names)} parameters ({', '.join(names)}), "
-            f"got {params.shape[-1]}"
-        )
-    if family == "translation":
-        return np.zeros(params.shape[:-1]), params
-    return np.deg2rad(params[..., 0]), params[..., 1:]
+    return FAMILIES.get(family).split(params)
 
 
 def _rotate(points: np.ndarray, angle: np.ndarray) -> np.ndarray:

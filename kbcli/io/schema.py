@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from kbcli.errors import ArtifactError
+from kbcli.errors import ArtifactError, KbcliError
 
 #: dtype kinds: f float, i/u integer, b bool, U text (a string dataset)
 FLOAT, INT, BOOL, TEXT = "f", "iu", "b", "U"
@@ -186,11 +186,12 @@ def _scene_params(art) -> str | None:
     fam = art.config["family"]
     if fam not in FAMILIES:
         return f"config family {fam!r} is not one of {', '.join(FAMILIES)}"
+    family = FAMILIES.get(fam)
     p = art.config["params"]
-    if len(p) != len(FAMILIES[fam]) or not all(math.isfinite(v) for v in p):
-        return (f"config params must be {len(FAMILIES[fam])} finite numbers "
-                f"({', '.join(FAMILIES[fam])}) for a {fam} scene, got {p!r}")
-    if fam == "rigid" and not -180.0 < p[0] <= 180.0:
+    if len(p) != family.size or not all(math.isfinite(v) for v in p):
+        return (f"config params must be {family.size} finite numbers "
+                f"({', '.join(family.params)}) for a {fam} scene, got {p!r}")
+    if family.rotates and not -180.0 < p[0] <= 180.0:
         return f"the scene's angle {p[0]:g} is outside (-180, 180] degrees: make it again with kbcli perturb"
     return None
 
@@ -211,17 +212,20 @@ def _eval_lists(art) -> str | None:
 
 def _truth_keys(art) -> str | None:
     """A ground truth names every parameter of the world's transform family."""
-    from kbcli.core.transforms import FAMILIES
+    from kbcli.core.transforms import FAMILIES, family_for
 
     truth = art.attrs.get("truth")
     if not truth:
         return None
     fam = art.attrs.get("world_family") or art.attrs.get("family") or "translation"
-    if art.kind == "closed_loop":
-        fam = "rigid" if "angle" in truth else "translation"
+    if art.kind == "closed_loop":  # its truth names its family's parameters
+        try:
+            fam = family_for(truth).name
+        except KbcliError as exc:
+            return f"summary attribute 'truth': {exc}"
     if fam not in FAMILIES:
         return f"summary attribute world_family {fam!r} is not one of {', '.join(FAMILIES)}"
-    missing = [k for k in FAMILIES[fam] if k not in truth]
+    missing = [k for k in FAMILIES.get(fam).params if k not in truth]
     if missing:
         return f"summary attribute 'truth' lacks {', '.join(missing)} of a {fam} move"
     return None

@@ -46,6 +46,7 @@ from kbcli.core.adapt import (
     build_samples,
     build_table,
 )
+from kbcli.core.estimators import ESTIMATORS
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.melody import DEFAULT_MELODY, parse_melody
 from kbcli.core.play import MATCH, replay
@@ -236,7 +237,7 @@ def play_success(model, keyboard: Keyboard, sim: SimConfig, family: str, truth: 
     to resample instead of calling ``model.sample_actions`` (see :func:`kbcli.core.play.replay`).
     """
     melody = parse_melody(check.melody, keyboard)
-    n = len(transforms.FAMILIES[family])
+    n = len(transforms.FAMILIES.get(family).params)
     out = {"before": math.nan, "unadapted": math.nan, "adapted": math.nan}
     runs = []
     if check.reference:
@@ -259,8 +260,8 @@ def _errors(est: np.ndarray, truth: np.ndarray, robot_family: str,
             world_family: str) -> tuple[float, float]:
     """Translation error (px) and angle error (deg) of an estimate against the truth."""
     t_err = float(np.hypot(*(est[-2:] - truth[-2:])))
-    a_est = float(est[0]) if robot_family == "rigid" else 0.0
-    a_true = float(truth[0]) if world_family == "rigid" else 0.0
+    a_est = transforms.FAMILIES.get(robot_family).angle(est)
+    a_true = transforms.FAMILIES.get(world_family).angle(truth)
     return t_err, abs(transforms.wrap_degrees(a_est - a_true))
 
 
@@ -345,7 +346,7 @@ class Recorder:
         if self.snap_t:
             out["snapshots"] = np.stack(self.snap_log)
             out["snapshot_angles"] = np.stack(self.snap_ang)
-        if self.adapter.cfg.posterior == "kde":
+        if POSTERIORS.get(self.adapter.cfg.posterior).uses_samples:
             out["bandwidths"] = np.asarray(self.adapter.bandwidths, float)
         out["redundancy_radius"] = np.float64(getattr(self.adapter, "redundancy_radius", 0.0))
         rob = getattr(self.adapter, "robust", None)
@@ -438,7 +439,7 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     out = rec.arrays()
     out["true_landed"] = np.asarray(true_landed, float).reshape(-1, 2)
     if play is not None:
-        final = out["means"][-1] if cfg.robot.estimator == "mean" else out["estimates"][-1]
+        final = ESTIMATORS.get(cfg.robot.estimator).final(out)
         if world_family != cfg.robot.family:  # correct in the world's parameters
             final = _as_family(final, cfg.robot.family, world_family)
         res = play_success(model, keyboard, cfg.sim_config(), world_family, truth, final, play,
@@ -453,16 +454,15 @@ def _as_family(est: np.ndarray, family: str, world_family: str) -> np.ndarray:
     est = np.asarray(est, float)
     if family == world_family:
         return est
-    if world_family == "rigid":
-        return np.concatenate([[0.0], est[-2:]])
-    return est[-2:]
+    fam = transforms.FAMILIES.get(family)
+    return transforms.FAMILIES.get(world_family).compose(fam.angle(est), fam.shift(est))
 
 
 def _inside_prior(cfg: AdaptConfig, truth: np.ndarray, world_family: str) -> bool:
     """Whether the true pose lies in the robot's prior box (else no estimate can reach it)."""
     inside = bool(np.all(np.abs(truth[-2:]) <= cfg.robot.prior_halfwidth))
-    angle = float(truth[0]) if world_family == "rigid" else 0.0
-    limit = cfg.robot.max_angle if cfg.robot.family == "rigid" else 0.0
+    angle = transforms.FAMILIES.get(world_family).angle(truth)
+    limit = cfg.robot.max_angle if transforms.FAMILIES.get(cfg.robot.family).rotates else 0.0
     return inside and abs(angle) <= limit + 1e-9
 
 
@@ -550,7 +550,7 @@ def run_attrs(res: dict[str, np.ndarray], acfg: AdapterConfig, *, truth: np.ndar
     ``final_error_px``, ``final_angle_error_deg`` and ``steps_to_1px`` are None. A run of no step
     has no estimate.
     """
-    names = transforms.FAMILIES[acfg.family]
+    names = transforms.FAMILIES.get(acfg.family).params
     errors = np.asarray(res["errors"], float)
     n = int(len(errors))
     known = truth is not None and n > 0
@@ -561,7 +561,7 @@ def run_attrs(res: dict[str, np.ndarray], acfg: AdapterConfig, *, truth: np.ndar
     stop_at = np.flatnonzero(res["stop"])
     final = None
     if n:
-        final = res["means"][-1] if acfg.estimator == "mean" else res["estimates"][-1]
+        final = ESTIMATORS.get(acfg.estimator).final(res)
     wf = world_family or acfg.family
     return {
         "strategy": acfg.strategy,
@@ -577,7 +577,7 @@ def run_attrs(res: dict[str, np.ndarray], acfg: AdapterConfig, *, truth: np.ndar
         "estimate": None if final is None else
         {k: float(v) for k, v in zip(names, final, strict=True)},
         "truth": None if truth is None else
-        {k: float(v) for k, v in zip(transforms.FAMILIES[wf], truth, strict=True)},
+        {k: float(v) for k, v in zip(transforms.FAMILIES.get(wf).params, truth, strict=True)},
         "grid_cells": acfg.grid_cells,
         "median_step_ms": float(np.median(res["step_ms"])) if n else None,
         # resolved from the model's own reliability when the config leaves it None
@@ -606,7 +606,7 @@ def build_shared_table(cfg: AdaptConfig, model) -> LikelihoodTable:
 def build_shared_samples(cfg: AdaptConfig, model, seed) -> ActionSamples | None:
     """The ``kde`` posterior's per-class samples for ``cfg`` (None for other posteriors), drawn
     from ``seed`` once per class, to share across many :func:`experiment` calls."""
-    if cfg.robot.posterior != "kde":
+    if not POSTERIORS.get(cfg.robot.posterior).uses_samples:
         return None
     return build_samples(model, cfg.adapter_config(), seed)
 

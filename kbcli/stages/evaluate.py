@@ -54,8 +54,10 @@ import numpy as np
 
 from kbcli.core import stats, transforms
 from kbcli.core.config import check_known, check_names, check_whole
+from kbcli.core.estimators import ESTIMATORS
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.melody import DEFAULT_MELODY
+from kbcli.core.posteriors import POSTERIORS
 from kbcli.errors import ConfigError
 from kbcli.sim import MODES
 from kbcli.stages.artifact import Artifact, ref
@@ -415,7 +417,7 @@ class EvaluateConfig:
 
     @property
     def n_params(self) -> int:
-        return len(transforms.FAMILIES[self.family])
+        return len(transforms.FAMILIES.get(self.family).params)
 
     @property
     def strategies(self) -> tuple[str, ...]:
@@ -730,8 +732,8 @@ def run_experiment(state: dict, task: Task) -> dict[str, np.ndarray]:
     out = dict(out)
     if "means" in out:  # both estimates' errors, whichever the method reports
         out["mean_errors"] = np.hypot(*(np.asarray(out["means"])[:, -2:] - truth[-2:]).T)
-        if getattr(acfg, "estimator", "mean") == "mean":
-            out["estimates"] = out["means"]  # "errors" are those of the posterior mean
+        est = ESTIMATORS.get(getattr(acfg, "estimator", "mean"))
+        out["estimates"] = out[est.record]  # "errors" are those of the method's estimator
     return _normalise(out, cfg.max_steps, cfg.n_params, keep_extra=task.example)
 
 
@@ -752,7 +754,7 @@ def _samples(state: dict, acfg, seed: int):
     same sampling settings; drawn from ``SeedSequence([seed, cls])`` once per class, so every
     process draws the same ones (None for other posteriors)."""
     adapt = _adapt_stage()
-    if acfg is None or adapt is None or getattr(acfg, "posterior", None) != "kde":
+    if acfg is None or adapt is None or not POSTERIORS.get(getattr(acfg, "posterior", "likelihood")).uses_samples:
         return None
     r = acfg.adapter_config()
     key = (r.kde_samples, r.kde_bandwidth, r.resolution)

@@ -156,7 +156,7 @@ def check_reach(kb: Keyboard, family: str, params: np.ndarray, sim: SimConfig) -
         i = int(np.flatnonzero(~ok)[0])
         key = kb.key_label(int(keys[i]))
         x, y = pts[i]
-        shown = ", ".join(f"{n}={v:g}" for n, v in zip(transforms.FAMILIES[family], params, strict=True))
+        shown = ", ".join(f"{n}={v:g}" for n, v in zip(transforms.FAMILIES.get(family).params, params, strict=True))
         raise OutOfReachError(
             f"displacement ({shown}) moves key {key} to ({x:.0f}, {y:.0f}), outside the arm's reach"
         )
@@ -196,7 +196,7 @@ def run(
     else:
         params = draw(cfg.category, cfg.family, 1, rng=rng, max_angle=cfg.max_angle)[0]
     check_reach(kb, cfg.family, params, sim)
-    names = transforms.FAMILIES[cfg.family]
+    names = transforms.FAMILIES.get(cfg.family).params
     moved = transforms.apply(cfg.family, params, kb.key_centres(), kb.centre)
     return Artifact(
         kind="scene",

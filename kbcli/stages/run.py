@@ -169,7 +169,7 @@ class LoopSession:
         during = result[play & (t >= moved) & (t <= (first_fire if first_fire is not None else t[-1]))]
         restored = result[play & (t > end_adapt)] if end_adapt is not None else np.array([])
         correction = st[-1].correction if st else np.zeros(0)
-        names = transforms.FAMILIES[self.cfg.adapt.family]
+        names = transforms.FAMILIES.get(self.cfg.adapt.family).params
         err_px = None
         if end_adapt is not None:
             c = np.asarray(correction, float)
@@ -187,7 +187,7 @@ class LoopSession:
             "adapt_touches": int((phase == ADAPT).sum()),
             "correction": {n: float(v) for n, v in zip(names, correction, strict=True)},
             "truth": {n: float(v) for n, v in
-                      zip(transforms.FAMILIES[self.world_family], self.truth, strict=True)},
+                      zip(transforms.FAMILIES.get(self.world_family).params, self.truth, strict=True)},
             "correction_error_px": err_px,
             # resolved from the model's own reliability when the config leaves it None
             "redundancy_radius": (redundancy_radius(self.model, self.cfg.adapt.adapter_config())

@@ -174,7 +174,7 @@ class Session:
         self.model = load_model(model_artifact) if model is None else model
         self.adapter = Adapter(self.model, cfg.adapter, rng=rng, max_steps=cfg.max_steps)
         self.recorder = Recorder(self.adapter, range(cfg.max_steps + 1))
-        self.names = transforms.FAMILIES[cfg.adapter.family]
+        self.names = transforms.FAMILIES.get(cfg.adapter.family).params
         self.n_features = int(np.shape(self.model.class_features_)[1])
         self.errors = 0
         self.ended: str | None = None

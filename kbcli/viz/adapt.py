@@ -21,6 +21,7 @@ import numpy as np
 from matplotlib.lines import Line2D
 from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator
 
+from kbcli.core.transforms import FAMILIES
 from kbcli.stages.artifact import Artifact
 from kbcli.viz.common import save
 
@@ -56,7 +57,8 @@ def plot_adapt(run: Artifact, path: str | os.PathLike) -> None:
     tx, ty = float(truth.get("dx", np.nan)), float(truth.get("dy", np.nan))
     has_truth = bool(np.isfinite(tx) and np.isfinite(ty)) and bool(np.isfinite(errors).any())
     means = np.asarray(d["means"], float)
-    rigid = a.get("family") == "rigid" or a.get("world_family") == "rigid"
+    rigid = any(FAMILIES.get(f).rotates for f in (a.get("family"), a.get("world_family"))
+                if f is not None)
     stop = a.get("stop_step")
     pick = np.arange(len(steps)) if snaps is not None else np.arange(0)
     if len(pick) > MAX_PANELS:

@@ -35,6 +35,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 
 from kbcli.core import transforms
+from kbcli.core.estimators import ESTIMATORS
 from kbcli.core.keyboard import Keyboard, sound_name
 from kbcli.errors import KbcliError
 from kbcli.io.atomic import atomic_path
@@ -141,14 +142,14 @@ def load_replay(art: Artifact) -> Replay:
         family = a.get("family", "translation")
         adapt_cfg = art.config.get("adapt") or {}
         # run schema 3 nests the robot's options under "robot"; sessions and schema <= 2: flat
-        estimator = (adapt_cfg.get("robot") or adapt_cfg).get("estimator", "mean")
-        belief = np.asarray(d["means"] if estimator == "mean" else d["estimates"], float)
+        estimator = ESTIMATORS.get((adapt_cfg.get("robot") or adapt_cfg).get("estimator", "mean"))
+        belief = np.asarray(d[estimator.record], float)
         belief = belief.reshape(len(actions), -1)
         truth_d = a.get("truth")
         world_family = a.get("world_family") or family
         truth = None
         if truth_d:
-            truth = np.array([truth_d[k] for k in transforms.FAMILIES[world_family]], float)
+            truth = np.array([truth_d[k] for k in transforms.FAMILIES.get(world_family).params], float)
         steps = np.asarray(d.get("snapshot_steps", np.zeros(0, int)), int)
         snaps = d.get("snapshots")
         posteriors = {int(t): np.asarray(snaps[j], float) for j, t in enumerate(steps)} \
@@ -172,8 +173,8 @@ def load_replay(art: Artifact) -> Replay:
         est = np.asarray(st["estimate"], float).reshape(belief.shape)
         belief = np.where(np.isfinite(est), est, belief)
     truth_d = a.get("truth") or {}
-    world_family = "rigid" if "angle" in truth_d else "translation"
-    truth = np.array([truth_d[k] for k in transforms.FAMILIES[world_family]], float)
+    world_family = transforms.family_for(truth_d).name if truth_d else "translation"
+    truth = np.array([truth_d[k] for k in transforms.FAMILIES.get(world_family).params], float)
     posteriors: dict[int, np.ndarray] = {}
     dx = dy = np.zeros(0)
     if "posterior" in d:
@@ -373,7 +374,7 @@ class _Animator:
     def _belief_at(self, k: int) -> np.ndarray:
         rep = self.rep
         if k == 0:
-            return np.zeros(len(transforms.FAMILIES[rep.family]))
+            return np.zeros(len(transforms.FAMILIES.get(rep.family).params))
         return rep.belief[k - 1]
 
     def _moved_at(self, k: int) -> bool:
@@ -591,7 +592,7 @@ class _Animator:
     # -- titles -------------------------------------------------------------------------------------
     def _update_titles(self, k: int) -> None:
         rep = self.rep
-        names = transforms.FAMILIES[rep.family]
+        names = transforms.FAMILIES.get(rep.family).params
         belief = _fmt(names, self._belief_at(k))
         if rep.kind == "run":
             src = " (external robot)" if rep.attrs.get("source") == "external" else ""
@@ -603,7 +604,7 @@ class _Animator:
                 sub = f"heard {rep.labels[k - 1]}; estimate {belief}"
                 err = rep.data["errors"][k - 1]
                 if rep.truth is not None and np.isfinite(err):
-                    sub += f" (truth {_fmt(transforms.FAMILIES[rep.world_family], rep.truth)}, " \
+                    sub += f" (truth {_fmt(transforms.FAMILIES.get(rep.world_family).params, rep.truth)}, " \
                            f"error {err:.2f} px)"
             self.subtitle.set_text(sub)
             return

@@ -72,10 +72,9 @@ def _key_polygons(kb: Keyboard, family: str, params: np.ndarray) -> list[np.ndar
 
 
 def _pose(d: dict) -> tuple[str, np.ndarray]:
-    """(family, params) of a pose given as a dict of named parameters."""
-    if "angle" in d:
-        return "rigid", np.array([d.get("angle", 0.0), d.get("dx", 0.0), d.get("dy", 0.0)], float)
-    return "translation", np.array([d.get("dx", 0.0), d.get("dy", 0.0)], float)
+    """(family, params) of a pose given as a dict of named parameters (absent ones are 0)."""
+    fam = transforms.family_for({"dx": 0.0, "dy": 0.0, **d})
+    return fam.name, np.array([d.get(k, 0.0) for k in fam.params], float)
 
 
 def plot_loop(steps: dict, attrs: dict, kb: Keyboard, path: str | os.PathLike, window: int = 20,
