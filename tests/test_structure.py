@@ -1,0 +1,61 @@
+"""The package's shape (issue 25's targets): small modules and functions, imports that flow one way
+(core <- sim <- stages <- io <- viz, bench <- api <- cli), no import cycle, and every function
+under ruff's McCabe complexity 12. ``python tools/structure.py`` prints the same findings."""
+
+from __future__ import annotations
+
+import importlib.util
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+# Issue 25 is landing in steps; the shape checks pass once every step is in. Remove this mark then.
+pytestmark = pytest.mark.xfail(reason="issue 25 refactor in progress: the shape targets are met only once it lands", strict=False)
+
+ROOT = Path(__file__).resolve().parent.parent
+_spec = importlib.util.spec_from_file_location("structure", ROOT / "tools" / "structure.py")
+structure = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(structure)
+
+
+def test_no_module_over_500_lines():
+    assert structure.long_modules(500) == []
+
+
+def test_no_function_over_80_lines():
+    assert structure.long_functions(80) == []
+
+
+def test_no_import_cycle():
+    assert structure.cycles(structure.graph()) == []
+
+
+def test_no_import_up_the_layers():
+    assert structure.upward(structure.graph()) == []
+
+
+def test_the_checks_see_a_cycle_and_an_upward_import():
+    """The graph walker itself: a made-up package with a cycle and an upward import."""
+    g = {"kbcli.core.a": {"kbcli.core.b"}, "kbcli.core.b": {"kbcli.core.a"},
+         "kbcli.stages.s": {"kbcli.io.x"}, "kbcli.io.x": set()}
+    assert structure.cycles(g) == [["kbcli.core.a", "kbcli.core.b"]]
+    assert structure.upward(g) == [("kbcli.stages.s", "kbcli.io.x")]
+
+
+def test_only_the_simulator_imports_pymunk():
+    users = [m for m, p in structure.modules().items()
+             if "pymunk" in p.read_text() and "import pymunk" in p.read_text()]
+    assert users and all(m.startswith("kbcli.sim") for m in users), users
+
+
+@pytest.mark.skipif(shutil.which("ruff") is None and not (Path(sys.executable).parent / "ruff").exists(),
+                    reason="ruff is in the dev extra (make test installs it)")
+def test_mccabe_complexity_at_most_12():
+    ruff = Path(sys.executable).parent / "ruff"
+    cmd = [str(ruff) if ruff.exists() else "ruff", "check", str(ROOT / "kbcli"), "--select", "C901",
+           "--config", "lint.mccabe.max-complexity=12", "--output-format", "concise"]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
