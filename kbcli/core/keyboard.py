@@ -22,7 +22,6 @@ known sounds uses the Manhattan distance with a threshold (Eq. 2, Algorithm 1).
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -34,21 +33,17 @@ from kbcli.core.layouts import (
     DEFAULT_CENTRE,
     LAYOUT_FIELDS,
     LAYOUTS,
-    SCALES,
     LayoutGeometry,
     PolygonKey,
     get_layout,
 )
+from kbcli.core.notes import DEFAULT_SCALE, SCALES, midi_to_name, name_to_midi, sound_name
 from kbcli.errors import ConfigError
 
-NOTE_NAMES = ("C", "C#", "D", "D#", "E", "F", "F#", "G", "G#", "A", "A#", "B")
-_NOTE_RE = re.compile(r"^([A-Ga-g])([#b]?)(-?\d+)?$")
-DEFAULT_OCTAVE = 4
 FEATURE_NAMES = ("pitch", "tempo")
-DEFAULT_SCALE = "diatonic"
 
 __all__ = ["SCALES", "LAYOUTS", "KeyboardConfig", "Keyboard", "PolygonKey", "match",
-           "midi_to_name", "name_to_midi"]
+           "midi_to_name", "name_to_midi", "sound_name"]
 
 
 def _positive(name: str, value: float) -> None:
@@ -59,37 +54,6 @@ def _positive(name: str, value: float) -> None:
 def _non_negative(name: str, value: float) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
         raise ConfigError(f"{name} must be a finite number >= 0, got {value!r}")
-
-
-def midi_to_name(midi: int) -> str:
-    """MIDI note number -> scientific pitch name (60 -> 'C4')."""
-    return f"{NOTE_NAMES[int(midi) % 12]}{int(midi) // 12 - 1}"
-
-
-def sound_name(features) -> str:
-    """A heard sound in words: ``"A4 96 bpm"`` (the pitch's nearest note), ``"silence"`` (NaN)."""
-    f = np.asarray(features, float).reshape(-1)
-    if f.size == 0 or np.isnan(f).all():
-        return "silence"
-    text = midi_to_name(int(np.rint(f[0])))
-    return f"{text} {f[1]:.0f} bpm" if f.size > 1 and np.isfinite(f[1]) else text
-
-
-def name_to_midi(name: str) -> int:
-    """Scientific pitch name -> MIDI number ('C4' -> 60, 'A' -> 69 with the default octave 4).
-
-    Raises
-    ------
-    ConfigError
-        If the name is not a note name such as ``A``, ``F#3`` or ``Bb4``.
-    """
-    m = _NOTE_RE.match(name.strip())
-    if m is None:
-        raise ConfigError(f"unknown note {name!r}: expected a name like A, F#3 or Bb4")
-    letter, accidental, octave = m.groups()
-    pc = NOTE_NAMES.index(letter.upper()) + {"": 0, "#": 1, "b": -1}[accidental]
-    octv = DEFAULT_OCTAVE if octave is None else int(octave)
-    return (octv + 1) * 12 + pc
 
 
 @dataclass(frozen=True, kw_only=True)

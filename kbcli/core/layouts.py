@@ -38,27 +38,21 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from kbcli.core.config import check_whole
 from kbcli.core.geometry import KeyShapes, check_polygon
+from kbcli.core.notes import BLACK, NATURAL, midi_to_name, name_to_midi, scale_pitches
 from kbcli.errors import ConfigError
 
-if TYPE_CHECKING:
-    from kbcli.core.keyboard import KeyboardConfig
-
-SCALES: dict[str, tuple[int, ...]] = {
-    "diatonic": (0, 2, 4, 5, 7, 9, 11),  # C major
-    "chromatic": tuple(range(12)),
-    "pentatonic": (0, 2, 4, 7, 9),
-}
+#: The keyboard config a layout builds from (:class:`kbcli.core.keyboard.KeyboardConfig`; not
+#: imported here: the keyboard imports its layouts).
+KeyboardConfig = Any
 MAX_KEYS = 256
 #: Where every layout's default origin puts the keyboard's centre (the default grid's centre).
 DEFAULT_CENTRE = (400.0, 350.0)
-_BLACK = (1, 3, 6, 8, 10)  # pitch classes of the black keys
-_NATURAL = (0, 2, 4, 5, 7, 9, 11)
 
 
 class GridShapes(KeyShapes):
@@ -184,13 +178,6 @@ def _count(rows: int, cols: int) -> None:
         raise ConfigError(f"rows x cols must be at most {MAX_KEYS} keys, got {rows * cols}")
 
 
-def scale_pitches(base: int, scale: str, n: int) -> np.ndarray:
-    """(n,) MIDI notes climbing ``scale`` from ``base``."""
-    steps = SCALES[scale]
-    k = np.arange(n)
-    return base + 12 * (k // len(steps)) + np.asarray(steps)[k % len(steps)]
-
-
 def _rowcol_tempo(cfg: KeyboardConfig, rows: int, cols: int) -> np.ndarray:
     k = np.arange(rows * cols)
     return (cfg.tempo_base + (k % cols) * cfg.tempo_col_step
@@ -198,8 +185,6 @@ def _rowcol_tempo(cfg: KeyboardConfig, rows: int, cols: int) -> np.ndarray:
 
 
 def _base(cfg: KeyboardConfig) -> int:
-    from kbcli.core.keyboard import name_to_midi
-
     return name_to_midi(cfg.base_note)
 
 
@@ -248,15 +233,13 @@ def _piano(cfg: KeyboardConfig) -> LayoutGeometry:
     if bh >= h:
         raise ConfigError(f"black_height ({bh:g}) must be below key_height ({h:g})")
     base = _base(cfg)
-    if base % 12 not in _NATURAL:
-        from kbcli.core.keyboard import midi_to_name
-
+    if base % 12 not in NATURAL:
         raise ConfigError(f"a piano starts on a white key: base_note {cfg.base_note!r} "
                           f"({midi_to_name(base)}) is a black key")
     whites = [base]
     while len(whites) < n:
         p = whites[-1] + 1
-        whites.append(p + 1 if p % 12 in _BLACK else p)
+        whites.append(p + 1 if p % 12 in BLACK else p)
     # a black key between white keys i and i + 1 when a sharp lies between them
     black_after = [i for i in range(n - 1) if whites[i + 1] - whites[i] == 2]
     if n + len(black_after) > MAX_KEYS:
@@ -352,8 +335,6 @@ class PolygonKey:
 @layout("polygons", "explicit key polygons (rotated or irregular) from the TOML",
         {"keys": None}, default_origin=(0.0, 0.0), checks_overlap=True)
 def _polygons(cfg: KeyboardConfig) -> LayoutGeometry:
-    from kbcli.core.keyboard import name_to_midi
-
     if not cfg.keys:
         raise ConfigError("the polygons layout needs its keys: a [[keyboard.keys]] table per key "
                           "with vertices = [[x, y], ...] (see pipelines/layouts/polygons.toml)")
