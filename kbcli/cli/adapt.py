@@ -182,7 +182,8 @@ def _loadavg() -> str:
 def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: int,
                      con: Console) -> None:
     """Print the KDE step's speed on the learned model (the issue's target: <= 5 ms per step)."""
-    from kbcli.stages.models import default_model_path, load_model
+    from kbcli.io.paths import default_model_path
+    from kbcli.stages.models import load_model
 
     if learned is None:
         model_path = default_model_path()
@@ -349,8 +350,9 @@ def bench_robust_cmd(
     included); then the CPU time of one translation step of the posterior alone.
     """
     from kbcli.bench import robust as bench
+    from kbcli.io.paths import default_model_path
     from kbcli.stages import keyboard as keyboard_stage
-    from kbcli.stages.models import default_model_path, load_model
+    from kbcli.stages.models import load_model
 
     model = default_model_path() if model is None else model
     art = read_artifact(model, "model")

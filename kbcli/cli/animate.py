@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from kbcli.cli.app import bench_app, check_io, command, err, interactive, out
-from kbcli.stages.models import DEFAULT_MODEL, default_model_path
+from kbcli.io.paths import DEFAULT_MODEL, default_model_path
 
 
 @command(name="animate")

@@ -124,7 +124,7 @@ def evaluate_cmd(
     p-values and playing success, and the speed.
     """
     if model is None:
-        from kbcli.stages.models import default_model_path
+        from kbcli.io.paths import default_model_path
 
         model = default_model_path()
     if config == DEFAULT_CONFIG:

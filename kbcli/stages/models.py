@@ -38,20 +38,3 @@ def load_model(art: Artifact):
     model.reliability_ = dict(rel) if isinstance(rel, dict) else None
     return model
 
-
-#: The embedded default model (learned in dynamics mode by ``make data``), relative to a checkout.
-DEFAULT_MODEL = "data/default-model.h5"
-
-
-def default_model_path():
-    """Where the embedded default model is: ``data/default-model.h5`` of the current folder, else
-    of the kbcli checkout this package runs from.
-
-    Raises
-    ------
-    KbcliError
-        When neither exists (an installed kbcli without its checkout): pass ``--model``.
-    """
-    from kbcli.io.paths import checkout_file
-
-    return checkout_file(DEFAULT_MODEL, "--model")
