@@ -12,8 +12,9 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, out, progress
-from kbcli.core.detect import DETECTORS, DetectorConfig
+from kbcli.core.detect import DetectorConfig
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import detect as stage
@@ -22,9 +23,8 @@ from kbcli.stages import detect as stage
 @command(name="detect")
 def detect_cmd(
     history: Annotated[Path, typer.Argument(help="History artifact (kbcli play).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Detection artifact to write (.h5).")],
-    detector: Annotated[str, typer.Option(
-        "--detector", help=f"Detector: {', '.join(DETECTORS)} (binomial is the paper's).")] = "binomial",
+    output: opts.output_option("Detection artifact to write (.h5)."),
+    detector: opts.detector_option() = "binomial",
     n_lt: Annotated[int, typer.Option("--n-lt", help="Long-term window N_LT (Eq. 4).")] = 100,
     n_st: Annotated[int, typer.Option("--n-st", help="Short-term window N_ST (Eq. 5), < N_LT.")] = 10,
     threshold: Annotated[float, typer.Option(
@@ -71,9 +71,9 @@ def bench_detect_cmd(
     p_post: Annotated[str | None, typer.Option(
         "--p-post", help="Comma-separated post-change failure rates instead of the displacement "
         "categories (e.g. 0.05,0.2).")] = None,
-    model: Annotated[Path | None, typer.Option(
-        "--model", help="Model artifact whose melody player sets the failure rates "
-        "[default: the exact model of the default keyboard].")] = None,
+    model: opts.model_option("Model artifact whose melody player sets the failure rates "
+                             "[default: the exact model of the default keyboard].",
+                             optional=True) = None,
     streams: Annotated[int, typer.Option("--streams", help="Evaluation streams per category.")] = 400,
     tune_actions: Annotated[int, typer.Option(
         "--tune-actions", help="Change-free actions used to tune every detector.")] = 1_000_000,
@@ -86,7 +86,7 @@ def bench_detect_cmd(
     detectors: Annotated[str, typer.Option(
         "--detectors", help="Comma-separated subset of binomial,cusum,bocpd,fhddm,ddm,adwin.")] =
         "binomial,cusum,bocpd,fhddm,ddm,adwin",
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the simulation.")] = 0,
+    seed: opts.seed_option("Seed of the simulation.") = 0,
 ) -> None:
     """Benchmark the failure detectors against river's FHDDM, DDM and ADWIN on simulated histories.
 

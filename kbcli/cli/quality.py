@@ -8,6 +8,7 @@ from typing import Annotated
 
 import typer
 
+from kbcli.cli import options as opts
 from kbcli.cli.app import check_io, command, err, out, progress, run_checkpointed
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -32,16 +33,15 @@ def _budgets(text: str | None) -> tuple[int, ...] | None:
 
 @command(name="quality")
 def quality_cmd(
-    output: Annotated[Path, typer.Option("-o", "--output", help="model_quality artifact to write (.h5).")],
+    output: opts.output_option("model_quality artifact to write (.h5)."),
     config: Annotated[Path, typer.Option("--config", help="TOML with a [quality] table.")] = DEFAULT_CONFIG,
-    keyboard: Annotated[Path, typer.Option("--keyboard", help="Keyboard artifact the models are learned on.")] = DEFAULT_KEYBOARD,
+    keyboard: opts.keyboard_option("Keyboard artifact the models are learned on.") = DEFAULT_KEYBOARD,
     experiments: Annotated[int | None, typer.Option(
         "--experiments", help="Repetitions per displacement, model and row (overrides the config).")] = None,
     budgets: Annotated[str | None, typer.Option(
         "--budgets", help="Reach budgets of the models, comma-separated (overrides the config).")] = None,
-    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Local worker processes (joblib/loky).")] = 1,
-    scheduler: Annotated[str | None, typer.Option(
-        "--scheduler", help="Run on a Dask cluster: address of its scheduler, tcp://HOST:PORT.")] = None,
+    jobs: opts.Jobs = 1,
+    scheduler: opts.Scheduler = None,
     resume: Annotated[bool, typer.Option(
         "--resume", help="Continue an interrupted sweep from OUTPUT.ckpt/.")] = False,
     models_dir: Annotated[Path | None, typer.Option(
