@@ -48,7 +48,7 @@ map unsoftened or softened by 1 px (worse than random, 4-5 px), 2.6 px softened 
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -156,10 +156,10 @@ def plan(cfg: BenchConfig, learned_model=None, keyboard: Keyboard | None = None)
                 add(section, s, with_(base, strategy=s), exact, "translation")
         elif section == "noise":
             for s in cfg.strategies:
-                add(section, f"{s}/aim", replace(with_(base, strategy=s), reach_noise=cfg.noise,
-                                                 feedback="aim"), exact, "translation")
-            add(section, "infogain/landed", replace(with_(base, strategy="infogain"),
-                                                    reach_noise=cfg.noise), exact, "translation")
+                aim = with_(base, strategy=s).replace(reach_noise=cfg.noise, feedback="aim")
+                add(section, f"{s}/aim", aim, exact, "translation")
+            add(section, "infogain/landed", with_(base, strategy="infogain").replace(
+                reach_noise=cfg.noise), exact, "translation")
         elif section == "rigid":
             for s in cfg.strategies:
                 add(section, s, with_(base, strategy=s, family="rigid"), exact, "rigid")
