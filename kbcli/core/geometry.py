@@ -24,13 +24,19 @@ vertices, no area, crossing edges) and keys whose interiors overlap.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Annotated
 
 import numpy as np
+from pydantic import Field, Strict
 from scipy.spatial import cKDTree
 
 from kbcli.errors import ConfigError
 
 DISC_VERTICES = 64  # vertices of a disc's outline polygon
+#: px: the largest |x| or |y| of a key's vertex (the pad is ~800 px; far beyond is a typo).
+MAX_COORD = 10_000.0
+#: A vertex coordinate in a config: a finite number within [-MAX_COORD, MAX_COORD] px.
+Coordinate = Annotated[float, Strict(), Field(ge=-MAX_COORD, le=MAX_COORD, allow_inf_nan=False)]
 MIN_AREA = 1.0  # px^2: a key smaller than this is degenerate
 _CHUNK = 1 << 18  # points per block in the crossing test
 
@@ -211,6 +217,12 @@ class KeyShapes:
             if len(cand):
                 out[cand[points_in_polygon(p[cand], poly)]] = k
         return out
+
+    def shifted(self, dx: float, dy: float) -> KeyShapes:
+        """The same keys moved by (dx, dy) px."""
+        if self.discs is not None:
+            return KeyShapes(discs=self.discs + (dx, dy, 0.0))
+        return KeyShapes(polygons=[p + (dx, dy) for p in self.polygons])
 
     def outlines(self) -> list[np.ndarray]:
         """The boundary of each key as a counter-clockwise polygon (discs as 64-gons)."""
