@@ -28,7 +28,7 @@ import numpy as np
 
 from kbcli.core import transforms
 from kbcli.core.config import check_known
-from kbcli.core.geometry import check_overlaps
+from kbcli.core.geometry import check_in_pad, check_overlaps
 from kbcli.core.layouts import (
     DEFAULT_CENTRE,
     LAYOUT_FIELDS,
@@ -162,6 +162,7 @@ class KeyboardConfig:
         top = int(np.max(geom.pitches))
         if top > 127:
             raise ConfigError(f"the highest key would be MIDI {top}, above 127: lower base_note")
+        check_in_pad(geom.shapes)
         check_overlaps(geom.shapes, names)
         feats = np.column_stack([geom.pitches.astype(float), geom.tempos.astype(float)])
         _check_distinct(feats, names, self.match_threshold)
