@@ -55,7 +55,7 @@ import numpy as np
 from kbcli.core import stats
 from kbcli.core.adapt import Adapter, AdapterConfig, build_samples, build_table
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import example_config_fields, get_layout
+from kbcli.core.layouts import LAYOUTS, example_config_fields
 from kbcli.core.model import ExactModel
 from kbcli.core.posteriors import POSTERIORS
 from kbcli.core.transforms import FAMILIES
@@ -84,7 +84,7 @@ class BenchConfig:
     layout: str = "grid"
 
     def __post_init__(self) -> None:
-        get_layout(self.layout)
+        LAYOUTS.get(self.layout)
         if not isinstance(self.experiments, int) or self.experiments < 2:
             raise ConfigError(f"experiments must be a whole number >= 2, got {self.experiments!r}")
         if not isinstance(self.max_steps, int) or self.max_steps < 1:

@@ -34,7 +34,7 @@ from kbcli.bench import adapt as adapt_bench
 from kbcli.bench import learn as learn_bench
 from kbcli.core.config import check_known
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import get_layout
+from kbcli.core.layouts import LAYOUTS
 from kbcli.core.model_classes import get_model_class
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -80,7 +80,7 @@ class LayoutsConfig:
 
     def __post_init__(self) -> None:
         for name in self.layouts:
-            get_layout(name)
+            LAYOUTS.get(name)
         if self.adapt_class != "best":
             get_model_class(self.adapt_class)
         if not isinstance(self.adapt_budget, int) or self.adapt_budget < 1:

@@ -30,7 +30,7 @@ from kbcli import __version__
 from kbcli.core import accuracy as scoring
 from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import LAYOUTS, example_config_fields, get_layout
+from kbcli.core.layouts import LAYOUTS, example_config_fields
 from kbcli.core.model_classes import fit_model, get_model_class
 from kbcli.errors import ConfigError
 from kbcli.io.atomic import atomic_path
@@ -78,7 +78,7 @@ class BenchConfig:
         if not self.layouts or not self.model_classes:
             raise ConfigError("give at least one layout and one model class")
         for name in self.layouts:
-            get_layout(name)
+            LAYOUTS.get(name)
         for name in self.model_classes:
             get_model_class(name)
         SimConfig(mode=self.mode, reach_noise=self.reach_noise)

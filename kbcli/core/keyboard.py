@@ -28,14 +28,14 @@ import numpy as np
 
 from kbcli.core import transforms
 from kbcli.core.config import check_known
-from kbcli.core.geometry import check_overlaps
+from kbcli.core.geometry import check_in_pad, check_overlaps
 from kbcli.core.layouts import (
     DEFAULT_CENTRE,
     LAYOUT_FIELDS,
     LAYOUTS,
     LayoutGeometry,
     PolygonKey,
-    get_layout,
+    polygon_keys,
 )
 from kbcli.core.notes import DEFAULT_SCALE, SCALES, midi_to_name, name_to_midi, sound_name
 from kbcli.errors import ConfigError
@@ -118,7 +118,7 @@ class KeyboardConfig:
     match_threshold: float = 1.5
 
     def __post_init__(self) -> None:
-        lay = get_layout(self.layout)
+        lay = LAYOUTS.get(self.layout)
         for name in LAYOUT_FIELDS:
             if name not in lay.fields and getattr(self, name) is not None:
                 users = [n for n, v in LAYOUTS.items() if name in v.fields]
@@ -127,8 +127,7 @@ class KeyboardConfig:
             if name in lay.fields and getattr(self, name) is None:
                 object.__setattr__(self, name, lay.defaults[name])
         if self.keys is not None:
-            object.__setattr__(self, "keys", tuple(
-                PolygonKey.from_dict(k, i) for i, k in enumerate(self.keys)))
+            object.__setattr__(self, "keys", polygon_keys(self.keys))
         if not lay.uses_scale and self.scale is not None:
             raise ConfigError(f"scale does not apply to the {self.layout} layout (its notes follow "
                               f"its own lattice)")
@@ -163,8 +162,8 @@ class KeyboardConfig:
         top = int(np.max(geom.pitches))
         if top > 127:
             raise ConfigError(f"the highest key would be MIDI {top}, above 127: lower base_note")
-        if lay.checks_overlap:
-            check_overlaps(geom.shapes, names)
+        check_in_pad(geom.shapes)
+        check_overlaps(geom.shapes, names)
         feats = np.column_stack([geom.pitches.astype(float), geom.tempos.astype(float)])
         _check_distinct(feats, names, self.match_threshold)
         object.__setattr__(self, "_geometry", geom)
@@ -180,7 +179,7 @@ class KeyboardConfig:
 
     def to_dict(self) -> dict:
         """The config as a plain mapping: the layout's own fields and the common ones."""
-        lay = get_layout(self.layout)
+        lay = LAYOUTS.get(self.layout)
         d: dict = {"layout": self.layout}
         for f in fields(self):
             if f.name == "layout" or (f.name in LAYOUT_FIELDS and f.name not in lay.fields):
@@ -380,17 +379,7 @@ class Keyboard:
         """One line: the layout, its keys and their range."""
         c = self.config
         lo, hi = midi_to_name(self.pitches.min()), midi_to_name(self.pitches.max())
-        if c.layout == "grid":
-            what = f"{c.rows} x {c.cols} keys of {c.key_size:g} px"
-        elif c.layout == "hex":
-            what = f"{c.rows} x {c.cols} hexagonal keys {c.key_size:g} px across"
-        elif c.layout == "piano":
-            what = (f"{c.cols} white keys ({c.key_size:g} x {c.key_height:g} px) and "
-                    f"{self.n_keys - c.cols} black keys ({c.black_width:g} x {c.black_height:g} px)")
-        elif c.layout == "pads":
-            what = f"{c.rows} x {c.cols} round pads of radius {c.pad_radius:g} px"
-        else:
-            what = f"{self.n_keys} polygon keys"
+        what = LAYOUTS.get(c.layout).describe(c, self.n_keys)
         return f"{what}, {lo} to {hi}"
 
 

@@ -1,0 +1,50 @@
+"""The ``hex`` layout: a hexagonal isomorphic keyboard (Wicki-Hayden tuning).
+
+``rows`` rows of ``cols`` pointy-top hexagons, ``key_size`` across the flats, odd rows shifted right
+by half a key. One key right is a whole tone up, up-right a fifth, up-left a fourth (``pitch = base +
+2 (c - r // 2) + 7 r``); the same note can sit on several keys, told apart by their tempo (as the
+grid's).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from kbcli.core.config import check_whole
+from kbcli.core.geometry import KeyShapes
+from kbcli.core.layouts.base import (
+    KeyboardConfig,
+    LayoutGeometry,
+    base_midi,
+    check_count,
+    layout,
+    rowcol_tempo,
+    size,
+)
+
+
+def _describe(cfg: KeyboardConfig, n_keys: int) -> str:
+    return f"{cfg.rows} x {cfg.cols} hexagonal keys {cfg.key_size:g} px across"
+
+
+@layout("hex", "hexagonal isomorphic keys (Wicki-Hayden)", {"rows": 4, "cols": 8, "key_size": 50.0},
+        uses_scale=False, describe=_describe)
+def build(cfg: KeyboardConfig) -> LayoutGeometry:
+    """The hexagons, their Wicki-Hayden pitches and their tempi."""
+    rows, cols = check_whole("rows", cfg.rows), check_whole("cols", cfg.cols)
+    check_count(rows, cols)
+    w = size("key_size", cfg.key_size)
+    rad = w / math.sqrt(3)  # circumradius of a hexagon w across the flats
+    k = np.arange(rows * cols)
+    r, c = k // cols, k % cols
+    cx = w / 2 + c * w + (r % 2) * w / 2
+    cy = rad + r * 1.5 * rad
+    ang = np.deg2rad(30 + 60 * np.arange(6))
+    unit = np.column_stack([np.cos(ang), np.sin(ang)]) * rad
+    polys = [np.array([x, y]) + unit for x, y in zip(cx, cy, strict=True)]
+    pitches = base_midi(cfg) + 2 * (c - r // 2) + 7 * r
+    shapes = KeyShapes(polygons=polys)
+    return LayoutGeometry(shapes, pitches.astype(np.int64), rowcol_tempo(cfg, rows, cols),
+                          shapes.bounds)
