@@ -101,7 +101,7 @@ class AdaptConfig:
     robot: AdapterConfig = field(default_factory=AdapterConfig)
     mode: str = "ideal"
     reach_noise: float = 0.0
-    arm: ArmConfig = PRESETS["ideal"]
+    arm: ArmConfig = PRESETS.get("ideal")
     feedback: str = "landed"
     max_steps: int = 40
     stop: bool = False
