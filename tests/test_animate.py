@@ -10,8 +10,7 @@ from PIL import Image
 from kbcli.cli import app
 from kbcli.core.keyboard import KeyboardConfig
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.sim import SimConfig
-from kbcli.sim.arm import forward_kinematics
+from kbcli.sim import SimConfig, forward_kinematics
 from kbcli.stages import adapt as adapt_stage
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import perturb

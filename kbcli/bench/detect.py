@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -254,7 +254,7 @@ def tune_ours(cfg: det.DetectorConfig, x: np.ndarray, lengths: np.ndarray,
         hi = lo
     thr = 10.0**hi
     while True:  # restarts can add a few alarms: step down until the measured rate is in target
-        _, fired = det.run_batch(replace(cfg, threshold=thr), x, restart=True)
+        _, fired = det.run_batch(cfg.replace(threshold=thr), x, restart=True)
         r = fa_rate([np.flatnonzero(f) for f in fired], lengths)
         if r <= target or thr < 1e-300:
             return thr, r

@@ -310,7 +310,7 @@ class EvaluateConfig:
     methods: tuple[Method, ...] = field(default_factory=_default_methods)
     judged: str = "paper"
     baseline: str = "random"
-    modes: tuple[str, ...] = MODES
+    modes: tuple[str, ...] = MODES.names()
     family: str = "translation"
     max_steps: int = 40
     thresholds: tuple[float, ...] = (20.0, 15.0, 10.0, 8.0, 6.0, 4.0, 2.0, 1.0)

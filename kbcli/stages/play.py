@@ -55,7 +55,7 @@ class PlayConfig:
     perturb_at: int | None = None
     mode: str = "ideal"
     reach_noise: float = 0.0
-    arm: ArmConfig = PRESETS["ideal"]
+    arm: ArmConfig = PRESETS.get("ideal")
 
     def __post_init__(self) -> None:
         if not isinstance(self.steps, int) or isinstance(self.steps, bool) or self.steps < 1:
