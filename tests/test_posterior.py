@@ -12,20 +12,13 @@ from hypothesis import strategies as st
 
 from kbcli.core import transforms
 from kbcli.core.adapt import AdapterConfig, build_table
+from kbcli.core.grid import HypothesisGrid, grid_bytes
+from kbcli.core.kde import ActionSamples, binned_kde, kde_term, scott_bandwidth
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.likelihood import cell_sigma, likelihood_term
 from kbcli.core.model import ExactModel
-from kbcli.core.posterior import (
-    ActionSamples,
-    HypothesisGrid,
-    LikelihoodTable,
-    Posterior,
-    binned_kde,
-    cell_sigma,
-    grid_bytes,
-    kde_term,
-    likelihood_term,
-    scott_bandwidth,
-)
+from kbcli.core.posterior import Posterior
+from kbcli.core.table import LikelihoodTable
 from kbcli.errors import ConfigError
 
 KB = Keyboard(KeyboardConfig())

@@ -20,12 +20,15 @@ from kbcli.core.adapt import (
     robust_blurs,
     spot_count,
 )
+from kbcli.core.grid import HypothesisGrid
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.learned import LearnedModel
+from kbcli.core.likelihood import likelihood_term
 from kbcli.core.model import ExactModel, grid_points
-from kbcli.core.posterior import HypothesisGrid, LikelihoodTable, Posterior, likelihood_term
+from kbcli.core.posterior import Posterior
 from kbcli.core.reliability import assess, choose_calibration, expected_calibration_error
 from kbcli.core.robust import Nuisance, RobustPosterior, blurred_map, raw_prob, robust_terms
+from kbcli.core.table import LikelihoodTable
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig, World, keys_heard_when_felt, make_reacher
 

@@ -10,13 +10,14 @@ import pytest
 from kbcli.core.adapt import Adapter, AdapterConfig, adapt, build_table
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.model import ExactModel
-from kbcli.core.posterior import LikelihoodTable, Posterior
+from kbcli.core.posterior import Posterior
 from kbcli.core.strategies import (
     STRATEGIES,
     entropy_rows,
     get_strategy,
     outcome_distribution,
 )
+from kbcli.core.table import LikelihoodTable
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig, World, make_reacher
 

@@ -8,7 +8,7 @@
     (:mod:`kbcli.core.robust`).
 ``kde`` (the paper's, Eq. 7)
     Each touch multiplies it by a kernel density estimate of p(action | sound) built from
-    samples of the model (:class:`~kbcli.core.posterior.ActionSamples`).
+    samples of the model (:class:`~kbcli.core.kde.ActionSamples`).
 """
 
 from __future__ import annotations

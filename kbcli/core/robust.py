@@ -64,14 +64,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import correlate1d
 
+from kbcli.core.grid import HypothesisGrid
+from kbcli.core.likelihood import cell_index, inverse_coords
 from kbcli.core.model import SILENCE
-from kbcli.core.posterior import (
-    HypothesisGrid,
-    LikelihoodTable,
-    Posterior,
-    _cell_index,
-    _inverse_coords,
-)
+from kbcli.core.posterior import Posterior
+from kbcli.core.table import LikelihoodTable
 
 #: Default nuisance grids: boundary blur (px) and outlier rate.
 DEFAULT_BLURS = (0.0, 1.0, 2.5, 5.0)
@@ -137,7 +134,7 @@ def robust_terms(grid: HypothesisGrid, table: LikelihoodTable, action: np.ndarra
     (S * E, *grid.shape) float32 ndarray
         Nuisance values in row-major (blur, outlier) order.
     """
-    x, y = _inverse_coords(grid, action)
+    x, y = inverse_coords(grid, action)
     c = table.n_classes
     s_n, e_n = len(nuisance.blurs), len(nuisance.outliers)
     out = np.empty((s_n, e_n) + grid.shape, np.float32)
@@ -157,8 +154,8 @@ def robust_terms(grid: HypothesisGrid, table: LikelihoodTable, action: np.ndarra
             y0, y1 = float(np.min(y)) - pad, float(np.max(y)) + pad
             patch, org = table.window(cls, (x0, y0, x1, y1))
             h, w = patch.shape
-            col = _cell_index(x, org[0], step, w)
-            row = _cell_index(y, org[1], step, h)
+            col = cell_index(x, org[0], step, w)
+            row = cell_index(y, org[1], step, h)
         reads.append(_blurred_read(patch, row, col, math.hypot(s, cell_sigma) / table.step))
     for i, v in enumerate(reads):
         v = np.broadcast_to(v, grid.shape)

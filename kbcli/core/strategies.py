@@ -40,7 +40,8 @@ from typing import Any
 import numpy as np
 
 from kbcli.core import transforms
-from kbcli.core.posterior import LikelihoodTable, Posterior
+from kbcli.core.posterior import Posterior
+from kbcli.core.table import LikelihoodTable
 from kbcli.errors import ConfigError
 
 StrategyFn = Callable[["Context", np.random.Generator], np.ndarray]

@@ -1,0 +1,345 @@
+"""The robot's side of the adaptation: :class:`Adapter` decides, observes, estimates and stops.
+
+It never sees the true pose. It is driven by an ask/tell loop (the public API, ``from kbcli import
+Adapter``): ``suggest() -> action``, ``observe(action, heard, felt_position=None)``, then
+``estimate()``, ``posterior``, ``entropy()``, ``done()``. ``propose`` and ``should_stop`` are the
+older names of ``suggest`` and of the stopping rule.
+
+Choices
+-------
+- An *unknown* sound (class -1: heard something that matches no known sound) carries no usable
+  information about the pose and is skipped (the posterior is unchanged); silence is an observation.
+- The robot uses the landed finger position it *feels* (proprioception, ``felt_position``) as the
+  point of the observation; ``action`` is where it aimed. When it only knows its aim (no
+  ``felt_position``), set ``blur`` to the reach noise: the model raster is blurred by it.
+- The model is not trusted blindly (``robust = True``, the default with the likelihood
+  posterior): its boundary blur and an outlier rate are unknowns marginalised online on a small
+  grid (:mod:`kbcli.core.robust`), so a poor model's wrong edges widen the posterior instead of
+  dragging the estimate away, and the strategies plan with the map as blurred as the touches say
+  it is. ``model_blur`` (px) fixes the blur instead of learning it (an override). With
+  ``robust = False`` the map is read as it is, a learned model's softened by ``model_blur``
+  (default 1 px) and floored at ``outlier``: the historical posterior, kept for comparison.
+- The first decision on the flat prior is the most expensive (resampling the full grid); later
+  ones work on the shrinking support of the posterior.
+- The estimate is the posterior mean (``estimator = "mean"``, the RMSE-optimal choice) or the
+  maximum-likelihood cell (``"ml"``, the paper's).
+- Stopping rules (:meth:`Adapter.should_stop`): the paper's, the probability of the
+  maximum-likelihood cell above ``stop_ml`` (off by default: at 0.5 px a well-pinned posterior still
+  spreads over a few cells); and ours, the posterior mass within ``stop_radius`` px (and
+  ``stop_angle`` degrees) of the estimate at least ``stop_mass``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kbcli.core.adapt_setup import build_samples, build_table, spot_count
+from kbcli.core.adapter_config import AdapterConfig, learning_rate, redundancy_radius
+from kbcli.core.estimators import ESTIMATORS
+from kbcli.core.grid import HypothesisGrid
+from kbcli.core.kde import ActionSamples, kde_term
+from kbcli.core.likelihood import cell_sigma, likelihood_term
+from kbcli.core.model import UNKNOWN
+from kbcli.core.posterior import Posterior
+from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.robust import RobustPosterior, planning_table, robust_terms
+from kbcli.core.strategies import Context, get_strategy
+from kbcli.core.table import LikelihoodTable
+from kbcli.errors import ConfigError, ObservationError
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Estimates of the transform parameters, in family order (``[angle,] dx, dy``)."""
+
+    ml: np.ndarray
+    mean: np.ndarray
+    ml_prob: float
+
+
+class Adapter:
+    """The robot's side of the adaptation: decide, observe, estimate, stop.
+
+    Parameters
+    ----------
+    model : SoundModel
+        The learned (or exact) model of the instrument at its reference pose.
+    cfg : AdapterConfig
+    rng : numpy.random.Generator
+        Drives the strategy's candidate sampling and the KDE's samples.
+    area : tuple of float, optional
+        Where actions may go (default: the model's working area).
+    centre : (2,) ndarray, optional
+        Rotation centre of the rigid family (default: the centre of ``area``, which is the
+        keyboard's centre at its reference pose).
+    table : LikelihoodTable, optional
+        A prebuilt :func:`build_table` (saves rasterising the model again).
+    samples : ActionSamples, optional
+        The ``kde`` posterior's samples of p(action | sound), drawn once per class and shared (see
+        :func:`build_samples`); default: a cache of this adapter's own, seeded from ``rng``.
+    max_steps : int, optional
+        A touch budget: :meth:`done` holds once this many touches were observed (None: only the
+        stopping rule ends the adaptation).
+
+    Examples
+    --------
+    The ask/tell loop, with a touch of the bundled simulator (see :meth:`from_model` for a model
+    file)::
+
+        adapter = Adapter.from_model("data/default-model.h5", strategy="infogain", seed=0)
+        while not adapter.done():
+            action = adapter.suggest()
+            felt, heard = robot_touch(action)   # your robot: where it felt it landed, what it heard
+            adapter.observe(action, heard, felt_position=felt)
+        print(adapter.estimate(), adapter.entropy())
+    """
+
+    def __init__(self, model, cfg: AdapterConfig, *, rng: np.random.Generator,
+                 area: tuple[float, float, float, float] | None = None,
+                 centre: np.ndarray | None = None, table: LikelihoodTable | None = None,
+                 samples: ActionSamples | None = None,
+                 max_steps: int | None = None) -> None:
+        if max_steps is not None and (not isinstance(max_steps, int) or isinstance(max_steps, bool)
+                                      or max_steps < 1):
+            raise ConfigError(f"max_steps must be a whole number >= 1, got {max_steps!r}")
+        self.max_steps = max_steps
+        #: touches observed so far (unknown sounds included; ``posterior.n_obs`` counts updates)
+        self.touches = 0
+        self.model = model
+        self.cfg = cfg
+        self.rng = rng
+        self.area = tuple(float(v) for v in (model.area if area is None else area))
+        x0, y0, x1, y1 = self.area
+        c = np.array([(x0 + x1) / 2, (y0 + y1) / 2]) if centre is None else np.asarray(centre, float)
+        self.grid = HypothesisGrid.build(cfg.family, prior_halfwidth=cfg.prior_halfwidth,
+                                         resolution=cfg.resolution, centre=c,
+                                         max_angle=cfg.max_angle,
+                                         angle_resolution=cfg.angle_resolution)
+        self.table = build_table(model, cfg, self.area) if table is None else table
+        self.posterior = Posterior.uniform(self.grid)
+        #: the robust posterior (None with the plain one); ``posterior`` is then its marginal
+        self.robust: RobustPosterior | None = (
+            RobustPosterior(self.grid, cfg.nuisance(model), eta=learning_rate(model, cfg))
+            if cfg.is_robust else None)
+        self._strategy = get_strategy(cfg.strategy)
+        #: px: touches this close count as one spot (robust posterior; see AdapterConfig)
+        self.redundancy_radius = redundancy_radius(model, cfg) if cfg.is_robust else 0.0
+        #: where each observed touch was read (felt position, or the aim)
+        self.points: list[np.ndarray] = []
+        self._edges: np.ndarray | None = None
+        self._corners: np.ndarray | None = None
+        self.bandwidths: list[float] = []
+        if POSTERIORS.get(cfg.posterior).uses_samples and samples is None:
+            samples = build_samples(model, cfg, [int(v) for v in rng.integers(2**32, size=2)])
+        self.samples = samples
+
+    @classmethod
+    def from_model(cls, model, *, strategy: str = "infogain", family: str = "translation",
+                   seed: int | None = None, rng: np.random.Generator | None = None,
+                   config: AdapterConfig | None = None, max_steps: int | None = None,
+                   **options) -> Adapter:
+        """An adapter for a model: a model artifact file (``.h5``, kind ``model``), a loaded
+        :class:`~kbcli.stages.artifact.Artifact`, or a model object.
+
+        Parameters
+        ----------
+        model : str, path, Artifact or SoundModel
+            A file is read with :mod:`kbcli.io` (imported only then: the core needs no h5py).
+        strategy, family : str
+            See :class:`AdapterConfig`.
+        seed : int, optional
+            Seed of the robot's generator (``numpy.random.default_rng(seed)``); or pass ``rng``.
+        config : AdapterConfig, optional
+            A whole config (then ``strategy``, ``family`` and ``options`` must not be given).
+        max_steps : int, optional
+            Touch budget after which :meth:`done` holds.
+        **options
+            Any other :class:`AdapterConfig` field (``posterior``, ``resolution``, ``stop_mass``...).
+
+        Raises
+        ------
+        ArtifactError
+            A missing or unreadable file, or an artifact that is not a model.
+        ConfigError
+            An unknown or invalid option.
+        """
+        if config is None:
+            config = AdapterConfig.from_dict({"strategy": strategy, "family": family, **options})
+        elif options:
+            raise ConfigError(f"give either config or options, not both ({', '.join(options)})")
+        if rng is None:
+            rng = np.random.default_rng(seed)
+        elif seed is not None:
+            raise ConfigError("give either seed or rng, not both")
+        if not hasattr(model, "classify"):  # a path or an artifact: the I/O layer loads it
+            from kbcli.api import load_model
+
+            model = load_model(model)
+        return cls(model, config, rng=rng, max_steps=max_steps)
+
+    # -- deciding ----------------------------------------------------------------------------------
+    def planning_table(self) -> LikelihoodTable:
+        """The map the strategies plan with: the model's, or with the robust posterior, blurred by
+        the most probable boundary blur and floored at the most probable outlier rate."""
+        if self.robust is None:
+            return self.table
+        i, j = self.robust.map_index()
+        nz = self.robust.nuisance
+        return planning_table(self.table, float(nz.blurs[i]), float(nz.outliers[j]))
+
+    def context(self) -> Context:
+        if self._edges is None:
+            self._edges, self._corners = self.table.boundary_points()
+        return Context(self.posterior, self.planning_table(), self.area, self._edges,
+                       self._corners, self.cfg, touched=self.touched(),
+                       redundancy_radius=self.redundancy_radius)
+
+    def touched(self) -> np.ndarray:
+        """(k, 2) where the observed touches were read (felt positions, or the aims)."""
+        return np.asarray(self.points, float).reshape(-1, 2)
+
+    def spot_count(self, points: np.ndarray) -> np.ndarray:
+        """(n,) for each point, how many observed touches lie within ``redundancy_radius``."""
+        pts = np.asarray(points, float).reshape(-1, 2)
+        return spot_count(pts, self.touched(), self.redundancy_radius)
+
+    def suggest(self) -> np.ndarray:
+        """(2,) the next action (pad px) chosen by the strategy."""
+        return np.asarray(self._strategy(self.context(), self.rng), float)
+
+    def propose(self) -> np.ndarray:
+        """The older name of :meth:`suggest`."""
+        return self.suggest()
+
+    # -- observing ---------------------------------------------------------------------------------
+    def observe(self, action: np.ndarray, heard: np.ndarray | None,
+                felt_position: np.ndarray | None = None) -> int:
+        """Classify a heard sound (``model.classify``) and update the posterior with it.
+
+        Parameters
+        ----------
+        action : (2,) array_like
+            Where the robot aimed (pad px, inside the working area).
+        heard : (D,) array_like or None
+            The heard features; None (or all NaN) for silence.
+        felt_position : (2,) array_like, optional
+            Where the robot felt its finger land (proprioception): the point the posterior is
+            updated at. None: the aim is used (set ``AdapterConfig.blur`` to the reach noise).
+
+        Returns
+        -------
+        int
+            The class (0 silence, -1 unknown: skipped).
+
+        Raises
+        ------
+        ObservationError
+            Non-numeric or wrongly sized input, an action outside the working area; the posterior
+            is left unchanged.
+        """
+        a = self.check_action(action, "action")
+        point = a if felt_position is None else _point(felt_position, "felt_position")
+        h = self.check_heard(heard)
+        cls = int(self.model.classify(h.reshape(1, -1))[0])
+        self.observe_class(point, cls)
+        self.touches += 1
+        return cls
+
+    def check_action(self, action, name: str = "action") -> np.ndarray:
+        """``action`` as a (2,) array inside the working area; raises :class:`ObservationError`."""
+        a = _point(action, name)
+        x0, y0, x1, y1 = self.area
+        tol = 1e-9 * max(1.0, abs(x1 - x0), abs(y1 - y0))
+        if not (x0 - tol <= a[0] <= x1 + tol and y0 - tol <= a[1] <= y1 + tol):
+            raise ObservationError(f"{name} ({a[0]:g}, {a[1]:g}) is outside the working area "
+                                   f"({x0:g}, {y0:g})-({x1:g}, {y1:g})")
+        return a
+
+    def check_heard(self, heard) -> np.ndarray:
+        """``heard`` as a (D,) float array (all NaN: silence); raises :class:`ObservationError`."""
+        d = int(np.shape(self.model.class_features_)[1])
+        if heard is None:
+            return np.full(d, np.nan)
+        try:
+            h = np.asarray(heard, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ObservationError(f"heard features must be {d} numbers or null (silence), got "
+                                   f"{heard!r}") from None
+        if h.shape != (d,):
+            raise ObservationError(f"heard features must be {d} numbers (or null for silence), "
+                                   f"got {h.size}")
+        nan = np.isnan(h)
+        if (nan.any() and not nan.all()) or np.isinf(h).any():
+            raise ObservationError(f"heard features must be all finite (or all missing for "
+                                   f"silence), got {h.tolist()}")
+        return h
+
+    def observe_class(self, action: np.ndarray, cls: int) -> None:
+        """Update the posterior with an already classified observation (Eq. 8)."""
+        if cls == UNKNOWN:
+            return
+        a = np.asarray(action, float).reshape(2)
+        if self.cfg.posterior == "kde":
+            term, bw = kde_term(self.grid, self.model, a, cls, n_samples=self.cfg.kde_samples,
+                                eps=self.cfg.outlier, samples=self.samples)
+            self.bandwidths.append(bw)
+        elif self.robust is not None:
+            sigma = cell_sigma(self.grid, a) if self.cfg.cell_average and self.grid.rigid else 0.0
+            terms = robust_terms(self.grid, self.table, a, cls, self.robust.nuisance, sigma)
+            k = int(self.spot_count(a)[0])
+            if k:  # the (k + 1)-th touch at one spot: weight 1 / (k + 1)
+                terms = terms * np.float32(1.0 / (k + 1))
+            self.points.append(a)
+            self.robust = self.robust.update(terms)
+            self.posterior = self.robust.marginal()
+            return
+        else:
+            sigma = cell_sigma(self.grid, a) if self.cfg.cell_average else 0.0
+            term = likelihood_term(self.grid, self.table, a, cls, sigma)
+        self.posterior = self.posterior.update(term)
+
+    # -- reading -----------------------------------------------------------------------------------
+    def estimates(self) -> Estimate:
+        post = self.posterior
+        return Estimate(ml=post.ml(), mean=post.mean(), ml_prob=post.ml_prob())
+
+    def estimate(self) -> np.ndarray:
+        """(P,) the estimate the config asks for (posterior mean or maximum-likelihood cell)."""
+        return ESTIMATORS.get(self.cfg.estimator).read(self.posterior)
+
+    def entropy(self) -> float:
+        """Posterior entropy, nats (over grid cells)."""
+        return self.posterior.entropy()
+
+    def mass_near_estimate(self) -> float:
+        """Posterior mass within ``stop_radius`` (and ``stop_angle``) of the estimate."""
+        return self.posterior.mass_within(self.estimate(), self.cfg.stop_radius, self.cfg.stop_angle)
+
+    def should_stop(self) -> bool:
+        """The paper's rule (ML probability >= ``stop_ml``, when set) or ours (mass near the
+        estimate >= ``stop_mass``)."""
+        if self.posterior.n_obs == 0:
+            return False
+        if self.cfg.stop_ml is not None and self.posterior.ml_prob() >= self.cfg.stop_ml:
+            return True
+        return self.mass_near_estimate() >= self.cfg.stop_mass
+
+    def done(self) -> bool:
+        """Whether to stop touching: the stopping rule (:meth:`should_stop`) holds, or the
+        ``max_steps`` budget is used up."""
+        return (self.max_steps is not None and self.touches >= self.max_steps) or \
+            self.should_stop()
+
+
+def _point(v, name: str) -> np.ndarray:
+    """``v`` as a finite (2,) float array; raises :class:`ObservationError`."""
+    try:
+        p = np.asarray(v, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ObservationError(f"{name} must be two numbers (x, y in pad px), got {v!r}") from None
+    if p.shape != (2,) or not np.isfinite(p).all():
+        raise ObservationError(f"{name} must be two finite numbers (x, y in pad px), got "
+                               f"{np.asarray(v).tolist() if p.size < 8 else f'{p.size} values'}")
+    return p

@@ -1,0 +1,340 @@
+"""The adapter's config: how the robot adapts (robot side only), and the settings it resolves
+with the model (robust blur grid, learning rate, redundancy radius; paper Sect. III-D/E).
+
+See :class:`AdapterConfig` for every option; :mod:`kbcli.core.adapter` for how they are used.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from kbcli.core import transforms
+from kbcli.core.config import check_known
+from kbcli.core.estimators import ESTIMATORS
+from kbcli.core.grid import grid_bytes
+from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.robust import (
+    DEFAULT_BLURS,
+    DEFAULT_OUTLIERS,
+    RIGID_BLURS,
+    RIGID_OUTLIERS,
+    TEMPER_PX,
+    Nuisance,
+)
+from kbcli.core.strategies import get_strategy
+from kbcli.errors import ConfigError
+
+#: Default softening (px) of a learned model's map (``AdapterConfig.model_blur``).
+LEARNED_BLUR = 1.0
+#: Radius (px) within which touches count as one spot, as a multiple of the model's own
+#: cross-validated boundary error (``AdapterConfig.redundancy_radius`` None).
+REDUNDANCY_FACTOR = 4.0
+#: A weak model's boundaries can sit further off than the default blur grid reaches: the robust
+#: posterior then also weighs a blur of this many times the model's own cross-validated boundary
+#: error (``AdapterConfig.robust_blurs`` None, translation family), when that exceeds the grid.
+WIDE_BLUR_FACTOR = 2.0
+#: Largest blur (px) any blur option accepts: a key's width. A map blurred further says nothing,
+#: and its Gaussian kernel would outgrow memory (a 1000 px blur asked for 35 GiB).
+MAX_BLUR = 50.0
+
+
+def _num(name: str, v: object, *, lo: float = 0.0, strict: bool = True,
+         hi: float = math.inf) -> None:
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+    ok = ok and (v > lo if strict else v >= lo) and v <= hi
+    if not ok:
+        rel = ">" if strict else ">="
+        top = f" and <= {hi:g}" if math.isfinite(hi) else ""
+        raise ConfigError(f"{name} must be a finite number {rel} {lo:g}{top}, got {v!r}")
+
+
+def _int(name: str, v: object, lo: int = 1) -> None:
+    if not isinstance(v, int) or isinstance(v, bool) or v < lo:
+        raise ConfigError(f"{name} must be a whole number >= {lo}, got {v!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class AdapterConfig:
+    """How the robot adapts (robot side only: nothing about the simulated world).
+
+    Parameters
+    ----------
+    strategy : str
+        A name in :data:`kbcli.core.strategies.STRATEGIES` (random, active, infogain).
+    posterior : str
+        ``likelihood`` (the model's classifier) or ``kde`` (the paper's Eq. 7 from samples).
+    family : str
+        Transform family (translation or rigid).
+    resolution : float
+        Hypothesis grid step, px.
+    prior_halfwidth : float
+        The prior box of dx and dy, +-px.
+    max_angle, angle_resolution : float
+        Prior range (+-deg) and grid step (deg) of the angle (rigid family).
+    outlier : float
+        eps of the outlier floor (``p_eps = (1 - eps) p + eps / C``; the KDE mixes eps of the prior).
+    blur : float
+        Std (px) of the landing scatter the robot cannot see (0 when it knows where it landed).
+    robust : bool
+        Marginalise the model's error (boundary blur ``robust_blurs`` and outlier rate
+        ``robust_outliers``, uniform prior) online (:mod:`kbcli.core.robust`); likelihood posterior
+        only. False: the plain posterior, which reads the map as the truth.
+    robust_blurs : tuple of float or None
+        Boundary blurs (px) the robust posterior weighs; None: 0, 1, 2.5 and 5 px (translation),
+        and ``WIDE_BLUR_FACTOR`` (2) times the model's own cross-validated boundary error when that
+        is wider (a weak model: its edges can sit further off than 5 px; :func:`robust_blurs`);
+        0 px only (rigid, whose grid is 41 times larger: outliers only).
+    robust_outliers : tuple of float or None
+        Outlier rates the robust posterior weighs; None: 0.001, 0.02 and 0.1 (translation),
+        0.001 and 0.05 (rigid).
+    robust_eta : float or None
+        Learning rate in (0, 1] the robust posterior tempers the log-likelihood with after 30
+        touches (a coarsened posterior: after ``n`` touches the rate is ``alpha / (alpha + n)``,
+        ``alpha = 30 eta / (1 - eta)``, so the first touches count almost in full;
+        :mod:`kbcli.core.robust`). None: resolved with the model,
+        ``min(1, (TEMPER_PX / b)^2)`` for its own cross-validated boundary error ``b`` px
+        (capped at 25 px: :func:`own_boundary_error`; ``TEMPER_PX`` 1.5; 1 for the exact model or
+        a model without an estimate;
+        :func:`learning_rate`). 1: untempered.
+    redundancy_radius : float or None
+        A learned model's errors are not independent from touch to touch: where its boundary is
+        wrong, every touch there is wrong the same way. With ``robust``, touches within this
+        radius (px) of earlier ones count as one spot: the ``k``-th touch at a spot enters the
+        posterior with weight ``1 / k`` (a coarsened likelihood), and infogain divides a
+        candidate's expected gain by the same ``k``, so it seeks new evidence instead of asking one
+        doubtful spot again. None: ``REDUNDANCY_FACTOR`` (4) times the model's own cross-validated
+        boundary error (its ``reliability``, capped at 25 px: :func:`own_boundary_error`; 0, no
+        discount, for the exact model or a model that has no estimate). 0: off.
+    model_blur : float or None
+        Override: softening (px, a Gaussian) of the model's map. With ``robust``, the blur is fixed
+        to it instead of being learned. Without, None means ``LEARNED_BLUR`` (1 px) for a learned
+        model and 0 for the exact one. A learned model's probabilities are read as calibrated, but its edges
+        can sit a pixel or two off: touches that contradict them then pull the posterior off the
+        truth, and the estimate drifts as evidence piles up (benchmarked: a model with 1.1 px
+        boundary error drifted to 2.1 px RMSE at step 40 unsoftened, 0.28 px with 1 px).
+    cell_average : bool
+        Read the likelihood of a grid cell averaged over the cell (a Gaussian of the cell's spread,
+        :func:`kbcli.core.likelihood.cell_sigma`) rather than at its centre; matters for the rigid
+        family, where an angle step moves far keys by more than a raster cell.
+    raster_step : float or None
+        Cell of the model raster, px (None: the grid resolution; half of it for the exact model
+        with the rigid family, whose cell-averaged likelihood needs a finer map).
+    candidates : int
+        Candidate actions per decision (active, infogain).
+    hypotheses : int
+        Posterior cells on which infogain evaluates its candidates.
+    active_keep, active_hypotheses : int
+        Most confusing candidates kept by ``active``, and the cells its simulated updates use.
+    kde_samples : int
+        N, actions drawn from p(action | sound) per sound class, once (kde posterior; see
+        :class:`kbcli.core.kde.ActionSamples`).
+    kde_bandwidth : float or None
+        Kernel std, px; None: Scott's rule (see :mod:`kbcli.core.posterior`).
+    estimator : str
+        ``mean`` or ``ml``: which estimate :meth:`Adapter.estimate` returns.
+    stop_ml : float or None
+        The paper's rule: stop when the most probable cell holds at least this probability.
+    stop_mass, stop_radius, stop_angle : float
+        Ours: stop when ``stop_mass`` of the posterior lies within ``stop_radius`` px (and
+        ``stop_angle`` deg) of the estimate.
+    max_memory_mb : float
+        Refuse hypothesis grids (and model rasters) that would need more working memory.
+    """
+
+    strategy: str = "infogain"
+    posterior: str = "likelihood"
+    family: str = "translation"
+    resolution: float = 0.5
+    prior_halfwidth: float = 45.0
+    max_angle: float = 5.0
+    angle_resolution: float = 0.25
+    outlier: float = 1e-3
+    blur: float = 0.0
+    robust: bool = True
+    robust_blurs: tuple[float, ...] | None = None
+    robust_outliers: tuple[float, ...] | None = None
+    robust_eta: float | None = None
+    redundancy_radius: float | None = None
+    model_blur: float | None = None
+    cell_average: bool = True
+    raster_step: float | None = None
+    candidates: int = 256
+    hypotheses: int = 512
+    active_keep: int = 8
+    active_hypotheses: int = 2048
+    kde_samples: int = 10000
+    kde_bandwidth: float | None = None
+    estimator: str = "mean"
+    stop_ml: float | None = None
+    stop_mass: float = 0.95
+    stop_radius: float = 1.0
+    stop_angle: float = 0.5
+    max_memory_mb: float = 2048.0
+
+    def __post_init__(self) -> None:
+        get_strategy(self.strategy)
+        if self.posterior not in POSTERIORS:
+            raise ConfigError(f"unknown posterior {self.posterior!r}; valid: {', '.join(POSTERIORS)}")
+        transforms.check_family(self.family)
+        if self.estimator not in ESTIMATORS:
+            raise ConfigError(f"unknown estimator {self.estimator!r}; valid: {', '.join(ESTIMATORS)}")
+        _num("resolution", self.resolution)
+        _num("prior_halfwidth", self.prior_halfwidth)
+        _num("max_angle", self.max_angle, strict=False)
+        if self.max_angle > 180:
+            raise ConfigError(f"max_angle must be in [0, 180] degrees, got {self.max_angle!r}")
+        _num("angle_resolution", self.angle_resolution)
+        if self.prior_halfwidth < self.resolution:
+            raise ConfigError("prior_halfwidth must be at least one resolution step")
+        _num("blur", self.blur, strict=False, hi=MAX_BLUR)
+        if self.model_blur is not None:
+            _num("model_blur", self.model_blur, strict=False, hi=MAX_BLUR)
+        if self.robust_eta is not None:
+            _num("robust_eta", self.robust_eta)
+            if self.robust_eta > 1:
+                raise ConfigError(f"robust_eta must lie in (0, 1], got {self.robust_eta!r}")
+        if self.redundancy_radius is not None:
+            _num("redundancy_radius", self.redundancy_radius, strict=False)
+        if not isinstance(self.robust, bool):
+            raise ConfigError(f"robust must be true or false, got {self.robust!r}")
+        rigid = self.family == "rigid"
+        if self.robust_outliers is None:
+            object.__setattr__(self, "robust_outliers",
+                               RIGID_OUTLIERS if rigid else DEFAULT_OUTLIERS)
+        for name in ("robust_blurs", "robust_outliers"):
+            v = getattr(self, name)
+            if v is None:  # robust_blurs: resolved with the model (robust_blurs())
+                continue
+            if isinstance(v, (str, bytes)) or not hasattr(v, "__len__") or len(v) == 0:
+                raise ConfigError(f"{name} must be a non-empty list of numbers, got {v!r}")
+            for x in v:
+                _num(name, x, strict=name == "robust_outliers",
+                     hi=MAX_BLUR if name == "robust_blurs" else math.inf)
+            object.__setattr__(self, name, tuple(float(x) for x in v))
+        if any(e >= 1 for e in self.robust_outliers):
+            raise ConfigError(f"robust_outliers must be rates in (0, 1), got {self.robust_outliers!r}")
+        if not isinstance(self.cell_average, bool):
+            raise ConfigError(f"cell_average must be true or false, got {self.cell_average!r}")
+        _num("outlier", self.outlier)
+        if self.outlier >= 1:
+            raise ConfigError(f"outlier must be in (0, 1), got {self.outlier!r}")
+        if self.raster_step is not None:
+            _num("raster_step", self.raster_step)
+        for name in ("candidates", "hypotheses", "active_keep", "active_hypotheses"):
+            _int(name, getattr(self, name))
+        _int("kde_samples", self.kde_samples, 10)
+        if self.kde_bandwidth is not None:
+            _num("kde_bandwidth", self.kde_bandwidth)
+        if self.stop_ml is not None:
+            _num("stop_ml", self.stop_ml)
+        _num("stop_mass", self.stop_mass)
+        _num("stop_radius", self.stop_radius)
+        _num("stop_angle", self.stop_angle)
+        _num("max_memory_mb", self.max_memory_mb)
+        cells, need = grid_bytes(self.family, self.prior_halfwidth, self.resolution,
+                                 self.max_angle, self.angle_resolution)
+        if need > self.max_memory_mb * 2**20:
+            raise ConfigError(
+                f"hypothesis grid of {cells:,} cells would need {_size(need)} of working memory, "
+                f"above max_memory_mb = {self.max_memory_mb:g} MB: coarsen the resolution or "
+                f"narrow the prior"
+            )
+
+    @property
+    def grid_cells(self) -> int:
+        return grid_bytes(self.family, self.prior_halfwidth, self.resolution, self.max_angle,
+                          self.angle_resolution)[0]
+
+    @property
+    def is_robust(self) -> bool:
+        """Whether the robust posterior is used (asked for, with the likelihood posterior)."""
+        return self.robust and POSTERIORS.get(self.posterior).robust
+
+    def nuisance(self, model=None) -> Nuisance:
+        """The blurs (:func:`robust_blurs` for ``model``) and outlier rates the robust posterior
+        marginalises."""
+        return Nuisance.build(robust_blurs(model, self), self.robust_outliers)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["robust_blurs"] = None if self.robust_blurs is None else list(self.robust_blurs)
+        d["robust_outliers"] = list(self.robust_outliers)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> AdapterConfig:
+        check_known(cls, d, "adapt")
+        return cls(**d)
+
+
+def own_boundary_error(reliability: dict | None) -> float | None:
+    """The boundary error (px) a model's own estimate (its ``reliability`` table) gives the robust
+    posterior: the cross-validated one, at most ``MAX_BLUR / WIDE_BLUR_FACTOR`` (25 px; a model
+    that could not place its edges at all says inf), or None when it has no estimate. Every
+    setting resolved from it (blur grid, learning rate, redundancy radius) uses this value."""
+    berr = reliability.get("boundary_error") if isinstance(reliability, dict) else None
+    if berr is None or np.isnan(berr):
+        return None
+    return min(float(berr), MAX_BLUR / WIDE_BLUR_FACTOR)
+
+
+def _boundary_error(model) -> float | None:
+    return own_boundary_error(getattr(model, "reliability_", None))
+
+
+def robust_blurs(model, cfg: AdapterConfig) -> tuple[float, ...]:
+    """The boundary blurs (px) the robust posterior weighs for ``model`` (see
+    :class:`AdapterConfig`): ``cfg.model_blur`` alone when set, ``cfg.robust_blurs`` when given,
+    else the family's grid, widened for a translation by ``WIDE_BLUR_FACTOR`` times the model's
+    own boundary error when that lies beyond it."""
+    if cfg.model_blur is not None:
+        return (float(cfg.model_blur),)
+    if cfg.robust_blurs is not None:
+        return tuple(cfg.robust_blurs)
+    if cfg.family == "rigid":
+        return RIGID_BLURS
+    return blur_grid(_boundary_error(model))
+
+
+def blur_grid(boundary_error: float | None) -> tuple[float, ...]:
+    """The translation family's default blur grid for a model whose own cross-validated boundary
+    error is ``boundary_error`` px (None: no estimate): ``DEFAULT_BLURS``, and
+    ``WIDE_BLUR_FACTOR * boundary_error`` (at most ``MAX_BLUR``) when that lies beyond them."""
+    wide = WIDE_BLUR_FACTOR * boundary_error if boundary_error is not None else 0.0
+    wide = min(wide, MAX_BLUR)
+    if wide > max(DEFAULT_BLURS):
+        return (*DEFAULT_BLURS, round(wide, 2))
+    return DEFAULT_BLURS
+
+
+def learning_rate(model, cfg: AdapterConfig) -> float:
+    """The resolved ``cfg.robust_eta`` for ``model``: ``min(1, (TEMPER_PX / b)^2)`` for its own
+    cross-validated boundary error ``b`` px, 1 without an estimate (see :class:`AdapterConfig`)."""
+    if cfg.robust_eta is not None:
+        return float(cfg.robust_eta)
+    return temper(_boundary_error(model))
+
+
+def temper(boundary_error: float | None) -> float:
+    """``min(1, (TEMPER_PX / boundary_error)^2)`` (1 for None or 0), rounded to 3 decimals."""
+    if boundary_error is None or boundary_error <= TEMPER_PX:
+        return 1.0
+    return round((TEMPER_PX / float(boundary_error)) ** 2, 3)
+
+
+def redundancy_radius(model, cfg: AdapterConfig) -> float:
+    """The resolved ``cfg.redundancy_radius`` (px) for ``model`` (see :class:`AdapterConfig`)."""
+    if cfg.redundancy_radius is not None:
+        return float(cfg.redundancy_radius)
+    berr = _boundary_error(model)
+    return 0.0 if berr is None else REDUNDANCY_FACTOR * berr
+
+
+def _size(nbytes: float) -> str:
+    for unit, scale in (("GB", 2**30), ("MB", 2**20)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.1f} {unit}"
+    return f"{nbytes / 1024:.1f} kB"

@@ -1,0 +1,225 @@
+"""The KDE term of one observation (the paper's Eq. 7, Algorithm 2).
+
+Draw ``N`` actions ``a_i ~ p(action | s_t)`` from the model, map each onto ``a_t`` with
+``computeTransform`` (:func:`kbcli.core.transforms.translation_mapping`; for the rigid family, once
+per grid angle), bin the hypotheses linearly onto the grid and convolve with a Gaussian kernel by
+FFT (:func:`binned_kde`, ``scipy.fft``, O(G log G), the binned-KDE trick of fast KDE libraries;
+checked against the direct sum in the tests), then mix with the outlier floor (a uniform density
+over the prior with weight ``eps``) and take the log. The samples of ``p(action | s)`` do not depend
+on the posterior, so they are drawn once per sound class and reused (:class:`ActionSamples`; per
+run, or per model in the evaluation): a KDE step then costs a binning and two FFTs (a few ms)
+instead of thousands of model evaluations.
+
+Bandwidth rule: Scott's ``sigma_hat * N^(-1/6)`` (d = 2) with Silverman's robust spread
+``sigma_hat = min(std, IQR / 1.349)`` averaged over both axes of the sampled actions, clipped to
+``[resolution, max_bandwidth]`` (default 4 px: the rule over-smooths multi-modal samples such as
+silence, a ring around the keyboard). The angle axis is not smoothed: each angle slice is its own
+2-D KDE. With a uniform prior over actions, ``KDE_t`` is a sampled and smoothed version of the
+likelihood term (:mod:`kbcli.core.likelihood`), which the benchmark compares. One limitation is
+inherited from Algorithm 2: actions for a silence are drawn from the model's working area only, so
+hypotheses that put the touch beyond it get the floor, not the silence they would in fact give (the
+likelihood term knows the outside is silent).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+from scipy import fft as sfft
+
+from kbcli.core import transforms
+from kbcli.core.grid import HypothesisGrid
+
+
+def scott_bandwidth(samples: np.ndarray) -> float:
+    """Scott's rule for a 2-D sample, ``sigma_hat * n^(-1/6)``, with Silverman's robust spread."""
+    n = len(samples)
+    std = samples.std(axis=0)
+    q75, q25 = np.percentile(samples, [75, 25], axis=0)
+    sig = np.minimum(std, (q75 - q25) / 1.349)
+    sig = np.where(sig > 0, sig, std)
+    return float(np.mean(sig) * n ** (-1 / 6))
+
+
+class ActionSamples:
+    """Samples of ``p(action | sound)`` per sound class, drawn once and reused (Algorithm 2, line 3).
+
+    The actions that produce a sound do not depend on the posterior, so Algorithm 2's
+    ``sampleFrom(p(a | s_t, M_INST))`` needs no fresh draw at every touch: each class's ``n_samples``
+    actions (and their bandwidth) are drawn the first time the class is heard and kept. Each class
+    draws from its own generator, ``default_rng(SeedSequence([seed, cls]))``, so the samples do not
+    depend on the order in which classes are heard: one cache can serve every run of a model (as the
+    evaluation does, per process) and still give the same numbers on any worker.
+
+    Parameters
+    ----------
+    model : SoundModel
+        ``sample_actions(cls, n, rng)`` draws from p(action | sound).
+    n_samples : int
+        N, actions per class.
+    seed : int or sequence of int
+        Root of the per-class generators.
+    bandwidth : float, optional
+        Kernel std in px for every class; None: the rule of the module docstring per class.
+    resolution : float
+        The hypothesis grid step (the bandwidth rule's lower clip).
+    max_bandwidth : float
+        The bandwidth rule's upper clip, px.
+    """
+
+    def __init__(self, model, n_samples: int, seed, *, bandwidth: float | None = None,
+                 resolution: float = 0.5, max_bandwidth: float = 4.0) -> None:
+        self.model = model
+        self.n_samples = int(n_samples)
+        self.seed = [int(v) for v in np.atleast_1d(seed)]
+        self.bandwidth = bandwidth
+        self.resolution = float(resolution)
+        self.max_bandwidth = float(max_bandwidth)
+        self._cache: dict[int, tuple[np.ndarray, float]] = {}
+
+    def get(self, cls: int) -> tuple[np.ndarray, float]:
+        """``(samples (N, 2), bandwidth px)`` of class ``cls`` (drawn on first use)."""
+        cls = int(cls)
+        if cls not in self._cache:
+            rng = np.random.default_rng(np.random.SeedSequence([*self.seed, cls]))
+            s = np.asarray(self.model.sample_actions(cls, self.n_samples, rng), float)
+            bw = self.bandwidth
+            if bw is None:
+                res = self.resolution
+                bw = float(np.clip(scott_bandwidth(s), res, max(res, self.max_bandwidth)))
+            self._cache[cls] = (s, float(bw))
+        return self._cache[cls]
+
+    def __len__(self) -> int:
+        return len(self._cache)
+
+    def draw(self, cls: int, n: int, rng: np.random.Generator) -> np.ndarray:
+        """(n, 2) actions resampled (with replacement) from class ``cls``'s samples: draws from
+        the empirical p(action | sound) of N model samples, without calling the model again."""
+        s, _ = self.get(cls)
+        return s[rng.integers(len(s), size=int(n))]
+
+
+@functools.lru_cache(maxsize=64)
+def _kernel_fft(sig: float, pad: int, size: int) -> np.ndarray:
+    """rFFT of the Gaussian kernel of std ``sig`` cells, truncated to ``|offset| <= pad`` taps and
+    laid out circularly on a ``size x size`` grid (offset 0 at index 0), as a density per cell
+    (the caller divides by ``res^2``)."""
+    k1 = np.zeros(size)
+    off = np.arange(-pad, pad + 1)
+    k1[off % size] = np.exp(-0.5 * (off / sig) ** 2) / (math.sqrt(2 * math.pi) * sig)
+    return sfft.rfft2(np.outer(k1, k1).astype(np.float32))
+
+
+def binned_kde(points: np.ndarray, x0: float, y0: float, res: float, n: int,
+               bandwidth: float) -> np.ndarray:
+    """Gaussian KDE of 2-D points on an ``n x n`` grid by linear binning and FFT convolution.
+
+    ``density[..., i, j] ~= mean_k N((x0 + j res, y0 + i res); points[..., k, :], bandwidth^2 I)``,
+    the direct sum of the paper's Eq. 7 (with a Gaussian ``K``). Points are linearly binned onto the
+    grid widened by the kernel's reach (``4 bandwidth``, so points just outside the grid still count)
+    and convolved with the kernel by ``scipy.fft`` (O(G log G); the kernel's transform is cached per
+    bandwidth). The kernel is truncated at 4 standard deviations.
+
+    Parameters
+    ----------
+    points : (..., N, 2) ndarray
+        One or more (leading axes) sets of points, px.
+    x0, y0 : float
+        Coordinates of grid cell (0, 0) (column 0 is ``x0``, row 0 is ``y0``).
+    res : float
+        Grid step, px.
+    n : int
+        Cells per axis.
+    bandwidth : float
+        Kernel std, px.
+
+    Returns
+    -------
+    (..., n, n) ndarray
+        Density per px^2 (rows y, columns x).
+    """
+    pts = np.asarray(points, float)
+    lead = pts.shape[:-2]
+    pts = pts.reshape((-1,) + pts.shape[-2:])
+    b, npts = pts.shape[0], pts.shape[1]
+    sig = bandwidth / res
+    pad = int(math.ceil(4 * sig))
+    m = n + 2 * pad  # widened grid
+    # a circular convolution of period >= m gives the inner n x n cells without wrap-around
+    size = sfft.next_fast_len(m, real=True)
+    u = (pts[..., 0] - x0) / res + pad
+    v = (pts[..., 1] - y0) / res + pad
+    iu = np.floor(u).astype(np.int64)
+    iv = np.floor(v).astype(np.int64)
+    fu = u - iu
+    fv = v - iv
+    ok = (iu >= 0) & (iu < m - 1) & (iv >= 0) & (iv < m - 1)
+    base = (np.arange(b)[:, None] * m + iv) * m + iu
+    base, fu, fv = base[ok], fu[ok], fv[ok]
+    nb = b * m * m
+    idx = np.concatenate([base, base + 1, base + m, base + m + 1])
+    w = np.concatenate([(1 - fu) * (1 - fv), fu * (1 - fv), (1 - fu) * fv, fu * fv])
+    counts = np.bincount(idx, w, nb).reshape(b, m, m).astype(np.float32)
+    # single precision: the density's rounding (~1e-7 of its peak) is far below the outlier floor
+    spec = sfft.rfft2(counts, s=(size, size), axes=(1, 2))
+    spec *= _kernel_fft(float(sig), pad, size)[None]
+    full = sfft.irfft2(spec, s=(size, size), axes=(1, 2))
+    dens = full[:, pad:pad + n, pad:pad + n]
+    dens = np.maximum(dens, 0.0, dtype=np.float64) / (npts * res * res)
+    return dens.reshape(lead + (n, n))
+
+
+def kde_term(grid: HypothesisGrid, model, action: np.ndarray, cls: int,
+             rng: np.random.Generator | None = None, *, n_samples: int, eps: float,
+             bandwidth: float | None = None, max_bandwidth: float = 4.0,
+             samples: ActionSamples | None = None) -> tuple[np.ndarray, float]:
+    """``log KDE_t(h)`` of Algorithm 2 / Eq. 7 on the grid, with the outlier floor.
+
+    Parameters
+    ----------
+    model : SoundModel
+        ``sample_actions(cls, n, rng)`` draws from p(action | sound).
+    action : (2,) ndarray
+        Where the finger touched.
+    cls : int
+        The perceived sound class (0: silence, itself an observation).
+    rng : numpy.random.Generator, optional
+        Draws fresh samples when no ``samples`` cache is given.
+    n_samples : int
+        N, actions drawn from the model (ignored with ``samples``: the cache's N).
+    bandwidth : float, optional
+        Kernel std in px; None: the rule in the module docstring.
+    samples : ActionSamples, optional
+        Per-class samples drawn once (:class:`ActionSamples`); the fast path.
+
+    Returns
+    -------
+    logkde : ndarray of ``grid.shape``
+    bandwidth : float
+        The bandwidth used, px.
+    """
+    res = grid.resolution
+    if samples is not None:
+        drawn, bw = samples.get(int(cls))
+        bandwidth = bw if bandwidth is None else bandwidth
+    else:
+        if rng is None:
+            raise ValueError("kde_term needs an rng or an ActionSamples cache")
+        drawn = np.asarray(model.sample_actions(int(cls), int(n_samples), rng), float)
+        if bandwidth is None:
+            bandwidth = float(np.clip(scott_bandwidth(drawn), res, max(res, max_bandwidth)))
+    a = np.asarray(action, float)
+    # computeTransform(a_i, a_t) for every grid angle: (A, N, 2)
+    if grid.rigid:
+        hyp = np.stack([transforms.translation_mapping(grid.family, float(th), drawn, a,
+                                                       grid.centre) for th in grid.angles])
+    else:
+        hyp = (a - drawn)[None]
+    dens = binned_kde(hyp, float(grid.dx[0]), float(grid.dy[0]), res, len(grid.dx),
+                      float(bandwidth))
+    prior_density = 1.0 / (float(grid.dx[-1] - grid.dx[0]) + res) ** 2
+    out = np.log((1 - eps) * dens + eps * prior_density)
+    return out.reshape(grid.shape), float(bandwidth)
