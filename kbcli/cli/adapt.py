@@ -239,90 +239,83 @@ def bench_adapt_cmd(
     """
     from kbcli.bench import adapt as bench
 
-    learned = None
-    model_art = None
-    kb = None
-    if model is not None:
-        model_art = read_artifact(model, "model")
-        from kbcli.stages import keyboard as keyboard_stage
-        from kbcli.stages.models import load_model
-
-        learned = load_model(model_art)
-        kb = keyboard_stage.load(model_art)
-        if layout is not None and layout != kb.layout:
-            raise ConfigError(f"--layout {layout} but the model {model} was learned on a "
-                              f"{kb.layout} keyboard")
-        layout = kb.layout
-    sections = tuple(section) if section else tuple(
-        s for s in bench.SECTIONS if s == "learned" and model is not None
-        or not s.startswith("learned"))
+    learned, model_art, kb, layout = _bench_model(model, layout)
+    sections = tuple(section) if section else bench.default_sections(model is not None)
     cfg = bench.BenchConfig(
         experiments=experiments, max_steps=max_steps, seed=seed, sections=sections,
         strategies=tuple(strategy) if strategy else bench.STRATEGY_ORDER,
         categories=tuple(category) if category else tuple(bench.CATEGORIES), model_blur=model_blur,
         layout=layout or "grid")
+    # tables are wide: never wrap them at a narrow default width when the output is not a terminal
+    con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
     if "kde" in sections:
-        wide = out if interactive() else Console(width=max(out.width, 200), highlight=False)
-        _kde_speed_table(bench, model, learned, kde_steps, seed, wide)
+        _kde_speed_table(bench, model, learned, kde_steps, seed, con)
     cells = bench.plan(cfg, learned, kb)
     total = sum(len(c.truths) for c in cells)
     for _ in progress(bench.run_cells(cells), total, "adaptation runs"):
         pass
     rows = bench.summarize(cells)
-    titles = {
-        "exact": "exact model, translation, no reach noise",
-        "noise": f"exact model, translation, {cfg.noise:g} px reach noise (aim: the robot knows "
-                 f"only where it aimed; landed: where it landed)",
-        "rigid": "exact model, rigid family (angles up to 5 deg); a threshold of t px also needs "
-                 "the angle within t/2 deg",
-        "kde": "the paper's KDE posterior (Eq. 7) against the likelihood posterior",
-        "learned": "learned model" + (f" ({model})" if model else "")
-                   + (f", map softened by {model_blur:g} px" if model_blur is not None else ""),
-        "learned-rigid": "learned model" + (f" ({model})" if model else "")
-                         + ", rigid family (angles up to 5 deg); a threshold of t px also needs "
-                           "the angle within t/2 deg",
-    }
-    # tables are wide: never wrap them at a narrow default width when the output is not a terminal
-    con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
+    bnd = model_art.attrs.get("boundary_error_px") if model_art is not None else None
     for sec in sections:
         sec_rows = [r for r in rows if r["section"] == sec]
-        if not sec_rows:
-            continue
-        T = sec_rows[0]["T"]
-        t = Table(title=f"{cfg.layout} layout, {titles[sec]}: {experiments} runs per row, T = {T}",
-                  title_justify="left")
-        t.add_column("strategy")
-        t.add_column("category")
-        for thr in bench.THRESHOLDS:
-            t.add_column(f"<{thr:g}px", justify="right")
-        for s in bench.RMSE_STEPS:
-            if s <= T:
-                t.add_column(f"rmse@{s}", justify="right")
-        t.add_column("p vs random, paired (<4/2/1/0.5)", justify="right")
-        t.add_column("ms/step", justify="right")
-        extra = sec in ("rigid", "learned", "learned-rigid")
-        if sec in ("rigid", "learned-rigid"):
-            t.add_column("final angle rmse", justify="right")
-        if sec.startswith("learned"):
-            t.add_column("final err / boundary err", justify="right")
-        bnd = (model_art.attrs.get("boundary_error_px") if model_art is not None else None)
-        for r in sec_rows:
-            cells_txt = [_fmt_med(m, n) for m, n in zip(r["median"], r["never"], strict=True)]
-            rm = [f"{r['rmse'][s]:.2f}" for s in bench.RMSE_STEPS if s <= T]
-            p = " ".join(_fmt_p(v) for v in r["p"]) if r["p"] is not None else ""
-            row = [r["label"], r["category"], *cells_txt, *rm, p, f"{r['ms']:.1f}"]
-            if extra and sec in ("rigid", "learned-rigid"):
-                row.append(f"{r['final_angle_rmse']:.2f} deg")
-            if extra and sec.startswith("learned"):
-                row.append(f"{r['final_rmse']:.2f} / "
-                           + (f"{bnd:.2f} px" if isinstance(bnd, (int, float)) else "n/a"))
-            t.add_row(*row)
-        con.print(t)
+        if sec_rows:
+            con.print(_section_table(bench, cfg, sec, sec_rows, bench.section_title(
+                sec, cfg, str(model) if model else None), bnd))
     err.print("medians: observations until the error first drops below the threshold; (k): runs "
               "that never got there within T; rmse in px over all runs; p: Wilcoxon signed-rank "
               "test of the observation counts against random on the paired runs (same "
               f"displacement and seed; the smallest p {experiments} pairs can give is "
               f"{2.0 ** (1 - experiments):.0e})", markup=False)
+
+
+def _bench_model(model: Path | None, layout: str | None) -> tuple:
+    """The learned model of ``--model`` (its fitted model, artifact and keyboard; Nones without
+    one) and the layout (the model's; a different ``--layout`` is refused)."""
+    if model is None:
+        return None, None, None, layout
+    from kbcli.stages import keyboard as keyboard_stage
+    from kbcli.stages.models import load_model
+
+    model_art = read_artifact(model, "model")
+    kb = keyboard_stage.load(model_art)
+    if layout is not None and layout != kb.layout:
+        raise ConfigError(f"--layout {layout} but the model {model} was learned on a "
+                          f"{kb.layout} keyboard")
+    return load_model(model_art), model_art, kb, kb.layout
+
+
+def _section_table(bench, cfg, sec: str, sec_rows: list[dict], title: str, bnd) -> Table:
+    """One section's table: per strategy and category the medians to each threshold, the RMSE
+    at steps, the p-values, ms per step (and the angle and boundary columns of its section)."""
+    part = bench.SECTIONS.get(sec)
+    T = sec_rows[0]["T"]
+    t = Table(title=f"{cfg.layout} layout, {title}: {cfg.experiments} runs per row, T = {T}",
+              title_justify="left")
+    t.add_column("strategy")
+    t.add_column("category")
+    for thr in bench.THRESHOLDS:
+        t.add_column(f"<{thr:g}px", justify="right")
+    for s in bench.RMSE_STEPS:
+        if s <= T:
+            t.add_column(f"rmse@{s}", justify="right")
+    t.add_column("p vs random, paired (<4/2/1/0.5)", justify="right")
+    t.add_column("ms/step", justify="right")
+    if part.angle:
+        t.add_column("final angle rmse", justify="right")
+    if part.learned:
+        t.add_column("final err / boundary err", justify="right")
+    for r in sec_rows:
+        cells_txt = [_fmt_med(m, n) for m, n in zip(r["median"], r["never"], strict=True)]
+        rm = [f"{r['rmse'][s]:.2f}" for s in bench.RMSE_STEPS if s <= T]
+        p = " ".join(_fmt_p(v) for v in r["p"]) if r["p"] is not None else ""
+        row = [r["label"], r["category"], *cells_txt, *rm, p, f"{r['ms']:.1f}"]
+        if part.angle:
+            row.append(f"{r['final_angle_rmse']:.2f} deg")
+        if part.learned:
+            row.append(f"{r['final_rmse']:.2f} / "
+                       + (f"{bnd:.2f} px" if isinstance(bnd, (int, float)) else "n/a"))
+        t.add_row(*row)
+    return t
 
 
 @command(bench_app, name="robust")

@@ -236,15 +236,13 @@ def bench_layouts_cmd(
     adaptation tables, each target beside the measured figure, the settings),
     <layout>.png and results.json. Long: hours at the default settings (make reproduce-layouts).
     """
-    from dataclasses import replace
-
     from kbcli.bench.layouts import LayoutsConfig, Pipeline
 
     cfg = LayoutsConfig.from_toml(config)
     over = {k: v for k, v in (("seeds", seeds), ("experiments", experiments),
                               ("layouts", tuple(layout) if layout else None)) if v is not None}
     if over:
-        cfg = replace(cfg, **over)
+        cfg = cfg.replace(**over)
     if output.exists() and not output.is_dir():
         raise ConfigError(f"{output}: exists and is not a folder")
     output.mkdir(parents=True, exist_ok=True)

@@ -78,7 +78,7 @@ class AdaptConfig(StageConfig):
     robot: InstanceOf[AdapterConfig] = Field(default_factory=AdapterConfig)
     mode: Name = "ideal"
     reach_noise: Number = 0.0
-    arm: InstanceOf[ArmConfig] = PRESETS["ideal"]
+    arm: InstanceOf[ArmConfig] = PRESETS.get("ideal")
     feedback: Name = "landed"
     max_steps: Count = 40
     stop: Flag = False
