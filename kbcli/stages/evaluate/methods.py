@@ -15,7 +15,7 @@ from kbcli.errors import ConfigError
 from kbcli.sim import MODES
 from kbcli.stages.config import StageConfig
 
-#: Strategies known when the adapt stage cannot be imported to ask it.
+#: The strategies of the layout before named methods when it names none.
 DEFAULT_STRATEGIES = ("random", "active", "infogain")
 #: Adapt options the protocol sets per experiment (not in a method's table).
 PER_EXPERIMENT = ("strategy", "mode", "max_steps", "family", "reach_noise", "arm")
@@ -46,12 +46,10 @@ def _adapt_stage():
 
 
 def known_strategies() -> tuple[str, ...]:
-    """Strategy names the adapt stage offers (its registry), or :data:`DEFAULT_STRATEGIES`."""
-    adapt = _adapt_stage()
-    if adapt is None:
-        return DEFAULT_STRATEGIES
-    reg = getattr(adapt, "STRATEGIES", None)
-    return tuple(reg) if reg else DEFAULT_STRATEGIES
+    """Strategy names the adapter offers (:data:`kbcli.core.strategies.STRATEGIES`)."""
+    from kbcli.core.strategies import STRATEGIES
+
+    return tuple(STRATEGIES)
 
 
 def _known_modes(names: tuple[str, ...] | None) -> tuple[str, ...] | None:
