@@ -20,9 +20,9 @@ from kbcli.stages.config import StageConfig
 from kbcli.stages.evaluate.methods import (
     DEFAULT_STRATEGIES,
     Method,
-    _adapt_stage,
-    _default_methods,
-    _known_modes,
+    adapt_stage,
+    check_modes,
+    default_methods,
 )
 from kbcli.stages.perturb import CATEGORIES as SIZE_CATEGORIES
 from kbcli.stages.perturb import displacement_size
@@ -213,7 +213,7 @@ class EvaluateConfig(StageConfig):
 
     seed: NonNegativeInt = 2013
     experiments: Count = 50
-    methods: tuple[InstanceOf[Method], ...] = Field(default_factory=_default_methods, min_length=1)
+    methods: tuple[InstanceOf[Method], ...] = Field(default_factory=default_methods, min_length=1)
     judged: Name = "paper"
     baseline: Name = "random"
     modes: Names = tuple(MODES)
@@ -254,7 +254,7 @@ class EvaluateConfig(StageConfig):
     @field_validator("modes")
     @classmethod
     def _modes(cls, v: tuple[str, ...]) -> tuple[str, ...]:
-        return _known_modes(v)
+        return check_modes(v)
 
     @field_validator("family")
     @classmethod
@@ -274,7 +274,7 @@ class EvaluateConfig(StageConfig):
     @field_validator("reach_noise")
     @classmethod
     def _reach_noise(cls, v: Mapping[str, float]) -> Mapping[str, float]:
-        _known_modes(tuple(v))
+        check_modes(tuple(v))
         return MappingProxyType({m: float(v.get(m, 0.0)) for m in MODES})
 
     @field_validator("arm")
@@ -282,7 +282,7 @@ class EvaluateConfig(StageConfig):
     def _arm(cls, v: Mapping[str, Any]) -> Mapping[str, Any]:
         from kbcli.sim.arms import arm_config
 
-        _known_modes(tuple(v))
+        check_modes(tuple(v))
         return MappingProxyType({m: arm_config(v.get(m)).to_dict() for m in MODES})
 
     @field_validator("melody")
@@ -382,7 +382,7 @@ class EvaluateConfig(StageConfig):
 
 def adapt_config(cfg: EvaluateConfig, method: str, strategy: str, mode: str):
     """The adapt stage's config for one experiment (None when that stage is not available)."""
-    adapt = _adapt_stage()
+    adapt = adapt_stage()
     if adapt is None:
         return None
     values = {**cfg.method(method).options, "strategy": strategy, "mode": mode,

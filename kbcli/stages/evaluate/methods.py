@@ -33,7 +33,7 @@ KBCLI_METHOD = {"description": "kbcli's best: the adapter's defaults", "strategi
                 ["random", "active", "infogain"]}
 
 
-def _adapt_stage():
+def adapt_stage():
     """The adapt stage package, or None while it is not available."""
     import importlib
 
@@ -52,7 +52,8 @@ def known_strategies() -> tuple[str, ...]:
     return tuple(STRATEGIES)
 
 
-def _known_modes(names: tuple[str, ...] | None) -> tuple[str, ...] | None:
+def check_modes(names: tuple[str, ...] | None) -> tuple[str, ...] | None:
+    """``names`` itself when each is a mode of :data:`kbcli.sim.MODES` (for validators)."""
     for m in names or ():
         if m not in MODES:
             raise ValueError(f"unknown mode {m!r}; valid: {', '.join(MODES)}")
@@ -104,7 +105,7 @@ class Method(StageConfig):
     @field_validator("modes")
     @classmethod
     def _modes(cls, v: tuple[str, ...] | None) -> tuple[str, ...] | None:
-        return _known_modes(v)
+        return check_modes(v)
 
     @field_validator("options")
     @classmethod
@@ -151,5 +152,5 @@ class Method(StageConfig):
         return cls(name=name, options=d, **kw)
 
 
-def _default_methods() -> tuple[Method, ...]:
+def default_methods() -> tuple[Method, ...]:
     return (Method.from_table("paper", PAPER_METHOD), Method.from_table("kbcli", KBCLI_METHOD))

@@ -12,7 +12,7 @@ from kbcli.core.posteriors import POSTERIORS
 from kbcli.errors import ConfigError
 from kbcli.stages.config import replace_config
 from kbcli.stages.evaluate.config import EvaluateConfig, adapt_config
-from kbcli.stages.evaluate.methods import _adapt_stage
+from kbcli.stages.evaluate.methods import adapt_stage
 from kbcli.stages.evaluate.planning import Task, _key
 
 #: What an example run keeps beyond its per-step arrays (Fig. 5).
@@ -71,7 +71,7 @@ def run_experiment(state: dict, task: Task) -> dict[str, np.ndarray]:
     samples = _samples(state, acfg, cfg.seed)
     if samples is not None:
         kw["samples"] = samples
-    adapt = _adapt_stage()
+    adapt = adapt_stage()
     if cfg.play_notes > 0 and adapt is not None and hasattr(adapt, "PlayCheck"):
         kw["play"] = adapt.PlayCheck(melody=cfg.melody, notes=cfg.play_notes,
                                      reference=task.play_reference)
@@ -93,7 +93,7 @@ def run_experiment(state: dict, task: Task) -> dict[str, np.ndarray]:
 def _table(state: dict, acfg):
     """The model raster for ``acfg``, built once per process and shared by every experiment that
     rasterises the same way (it depends on the robot's settings, not on the strategy)."""
-    adapt = _adapt_stage()
+    adapt = adapt_stage()
     if acfg is None or adapt is None:
         return None
     key = replace_config(acfg.adapter_config(), strategy="random")
@@ -106,7 +106,7 @@ def _samples(state: dict, acfg, seed: int):
     """The KDE posterior's per-class samples, shared by every experiment of the process with the
     same sampling settings; drawn from ``SeedSequence([seed, cls])`` once per class, so every
     process draws the same ones (None for other posteriors)."""
-    adapt = _adapt_stage()
+    adapt = adapt_stage()
     if acfg is None or adapt is None or not POSTERIORS.get(getattr(acfg, "posterior", "likelihood")).uses_samples:
         return None
     r = acfg.adapter_config()
