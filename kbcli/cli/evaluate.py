@@ -129,10 +129,8 @@ def evaluate_cmd(
              Output(Checkpoint.beside(output), "checkpoint folder", folder=True, removes=True))
     cfg = _load_config(config, experiments, mode, method)
     if arm is not None:
-        from dataclasses import replace
-
         arm_cfg = load_arm(arm).to_dict()
-        cfg = replace(cfg, arm={m: arm_cfg for m in cfg.modes})
+        cfg = cfg.replace(arm={m: arm_cfg for m in cfg.modes})
     _check_backend(jobs, scheduler)
     if checkpoint_every < 1:
         raise ConfigError(f"--checkpoint-every must be >= 1, got {checkpoint_every}")
