@@ -68,7 +68,9 @@ def points_in_polygon(points: np.ndarray, v: np.ndarray) -> np.ndarray:
     """(n,) bool: whether each point is inside the polygon ``v`` (m, 2) (even-odd rule).
 
     Half-open: a point on a vertical edge is inside the polygon to its right, on a horizontal edge
-    inside the polygon above it. Vectorized over points; a loop over the (few) edges.
+    inside the polygon above it. Each edge is evaluated from its lower end, so two keys sharing a
+    slanted edge compute the same crossing bit for bit and a point on it is in exactly one of them.
+    Vectorized over points; a loop over the (few) edges.
     """
     p = np.asarray(points, float).reshape(-1, 2)
     v = np.asarray(v, float)
@@ -77,8 +79,8 @@ def points_in_polygon(points: np.ndarray, v: np.ndarray) -> np.ndarray:
         px, py = p[lo:lo + _CHUNK, 0], p[lo:lo + _CHUNK, 1]
         inside = np.zeros(len(px), dtype=bool)
         for i in range(len(v)):  # the polygon's edges: a handful per key
-            x1, y1 = v[i]
-            x2, y2 = v[(i + 1) % len(v)]
+            (x1, y1), (x2, y2) = sorted((tuple(v[i]), tuple(v[(i + 1) % len(v)])),
+                                        key=lambda q: q[1])  # lower end first: see above
             if y1 == y2:
                 continue
             spans = (y1 > py) != (y2 > py)

@@ -57,6 +57,10 @@ class LayoutGeometry:
 class Layout:
     """A registered layout: the config fields it uses (with defaults) and its builder.
 
+    The builder gets a validated config (whole ``rows``/``cols`` >= 1, positive sizes: the
+    :class:`~kbcli.core.keyboard.KeyboardConfig` field constraints) and checks how its own fields
+    relate (a pad's radius against the distance between pads, ...).
+
     ``build(config) -> LayoutGeometry`` places the keys in the keyboard's own frame (lower-left at
     (0, 0)) and raises :class:`~kbcli.errors.ConfigError` naming the key or option at fault.
     """
@@ -87,13 +91,6 @@ def layout(name: str, summary: str, defaults: dict[str, Any], **kw: Any):
         return fn
 
     return deco
-
-
-def size(name: str, v: object) -> float:
-    """``v`` as a float; ConfigError unless it is a positive finite number."""
-    if not (isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v > 0):
-        raise ConfigError(f"{name} must be a positive finite number, got {v!r}")
-    return float(v)
 
 
 def check_count(rows: int, cols: int) -> None:

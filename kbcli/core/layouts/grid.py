@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core.config import check_whole
 from kbcli.core.geometry import KeyShapes
 from kbcli.core.layouts.base import (
     KeyboardConfig,
@@ -17,7 +16,6 @@ from kbcli.core.layouts.base import (
     check_count,
     layout,
     rowcol_tempo,
-    size,
 )
 from kbcli.core.notes import scale_pitches
 
@@ -70,9 +68,9 @@ def _describe(cfg: KeyboardConfig, n_keys: int) -> str:
         describe=_describe)
 def build(cfg: KeyboardConfig) -> LayoutGeometry:
     """The grid's keys, pitches and tempi."""
-    rows, cols = check_whole("rows", cfg.rows), check_whole("cols", cfg.cols)
+    rows, cols = cfg.rows, cfg.cols
     check_count(rows, cols)
-    s = size("key_size", cfg.key_size)
+    s = cfg.key_size
     shapes = GridShapes(rows, cols, s)
     return LayoutGeometry(shapes, scale_pitches(base_midi(cfg), cfg.scale, rows * cols),
                           rowcol_tempo(cfg, rows, cols), shapes.bounds)

@@ -12,7 +12,6 @@ import math
 
 import numpy as np
 
-from kbcli.core.config import check_whole
 from kbcli.core.geometry import KeyShapes
 from kbcli.core.layouts.base import (
     KeyboardConfig,
@@ -21,7 +20,6 @@ from kbcli.core.layouts.base import (
     check_count,
     layout,
     rowcol_tempo,
-    size,
 )
 
 
@@ -33,9 +31,9 @@ def _describe(cfg: KeyboardConfig, n_keys: int) -> str:
         uses_scale=False, describe=_describe)
 def build(cfg: KeyboardConfig) -> LayoutGeometry:
     """The hexagons, their Wicki-Hayden pitches and their tempi."""
-    rows, cols = check_whole("rows", cfg.rows), check_whole("cols", cfg.cols)
+    rows, cols = cfg.rows, cfg.cols
     check_count(rows, cols)
-    w = size("key_size", cfg.key_size)
+    w = cfg.key_size
     rad = w / math.sqrt(3)  # circumradius of a hexagon w across the flats
     k = np.arange(rows * cols)
     r, c = k // cols, k % cols

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core.config import check_whole
 from kbcli.core.geometry import KeyShapes
 from kbcli.core.layouts.base import (
     KeyboardConfig,
@@ -17,7 +16,6 @@ from kbcli.core.layouts.base import (
     check_count,
     layout,
     rowcol_tempo,
-    size,
 )
 from kbcli.core.notes import scale_pitches
 from kbcli.errors import ConfigError
@@ -31,9 +29,9 @@ def _describe(cfg: KeyboardConfig, n_keys: int) -> str:
         {"rows": 4, "cols": 8, "key_size": 50.0, "pad_radius": 20.0}, describe=_describe)
 def build(cfg: KeyboardConfig) -> LayoutGeometry:
     """The pads (discs), their pitches and tempi, and their cells' bounds."""
-    rows, cols = check_whole("rows", cfg.rows), check_whole("cols", cfg.cols)
+    rows, cols = cfg.rows, cfg.cols
     check_count(rows, cols)
-    s, r = size("key_size", cfg.key_size), size("pad_radius", cfg.pad_radius)
+    s, r = cfg.key_size, cfg.pad_radius
     if 2 * r > s:
         raise ConfigError(f"pad_radius ({r:g}) must be at most half of key_size ({s:g}), the "
                           "distance between pad centres: pads would overlap")

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core.config import check_whole
 from kbcli.core.geometry import KeyShapes
 from kbcli.core.layouts.base import (
     MAX_KEYS,
@@ -19,7 +18,6 @@ from kbcli.core.layouts.base import (
     LayoutGeometry,
     base_midi,
     layout,
-    size,
 )
 from kbcli.core.notes import BLACK, NATURAL, midi_to_name
 from kbcli.errors import ConfigError
@@ -58,9 +56,9 @@ def _white_outline(i: int, w: float, h: float, bw: float, bh: float, left: bool,
          "black_height": 100.0}, uses_scale=False, describe=_describe)
 def build(cfg: KeyboardConfig) -> LayoutGeometry:
     """The white and black keys, numbered by pitch, and their tempi."""
-    n = check_whole("cols", cfg.cols)
-    w, h = size("key_size", cfg.key_size), size("key_height", cfg.key_height)
-    bw, bh = size("black_width", cfg.black_width), size("black_height", cfg.black_height)
+    n = cfg.cols
+    w, h = cfg.key_size, cfg.key_height
+    bw, bh = cfg.black_width, cfg.black_height
     if bw >= w:
         raise ConfigError(f"black_width ({bw:g}) must be below key_size ({w:g}), the white keys' "
                           "width: black keys would overlap")
