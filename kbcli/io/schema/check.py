@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
+import kbcli.io.schema.rules as rules
 from kbcli.errors import ArtifactError
-from kbcli.io.schema import rules
 from kbcli.io.schema.kinds import schema_for
 from kbcli.io.schema.spec import KIND_WORDS, WORDS, Dataset, Schema, typed
 

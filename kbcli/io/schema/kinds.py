@@ -8,7 +8,7 @@ arrays each model class stores are in one table, :data:`MODEL_ARRAYS`.
 
 from __future__ import annotations
 
-from kbcli.io.schema import rules
+import kbcli.io.schema.rules as rules
 from kbcli.io.schema.spec import FLAG, FLOAT, INT, NUM, TEXT, Dataset, Schema, extend
 
 _KEYBOARD_CFG = {"keyboard": "dict"}
