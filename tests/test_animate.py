@@ -16,7 +16,7 @@ from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import perturb
 from kbcli.stages.models import exact_artifact
 from kbcli.stages.run import LoopConfig, LoopSession
-from kbcli.viz.animate import frame_plan, load_replay
+from kbcli.viz.replay import frame_plan, load_replay
 
 KB_ART = keyboard_stage.run(KeyboardConfig())
 MODEL_ART = exact_artifact(KB_ART)
