@@ -35,7 +35,7 @@ from kbcli.bench import learn as learn_bench
 from kbcli.core.config import check_known
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.layouts import get_layout
-from kbcli.core.model_classes import get_model_class
+from kbcli.core.model_classes import check_learned
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.atomic import atomic_path
@@ -82,7 +82,7 @@ class LayoutsConfig:
         for name in self.layouts:
             get_layout(name)
         if self.adapt_class != "best":
-            get_model_class(self.adapt_class)
+            check_learned(self.adapt_class)
         if not isinstance(self.adapt_budget, int) or self.adapt_budget < 1:
             raise ConfigError(f"adapt budget must be a whole number >= 1, got {self.adapt_budget!r}")
         self.learn_config()

@@ -31,7 +31,7 @@ from kbcli.core import accuracy as scoring
 from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.layouts import LAYOUTS, example_config_fields, get_layout
-from kbcli.core.model_classes import fit_model, get_model_class
+from kbcli.core.model_classes import check_learned, fit_model
 from kbcli.errors import ConfigError
 from kbcli.io.atomic import atomic_path
 from kbcli.sim import MODES, SimConfig, World, check_keyboard_reachable, make_reacher
@@ -80,7 +80,7 @@ class BenchConfig:
         for name in self.layouts:
             get_layout(name)
         for name in self.model_classes:
-            get_model_class(name)
+            check_learned(name)
         SimConfig(mode=self.mode, reach_noise=self.reach_noise)
         if not isinstance(self.resolution, int) or self.resolution < 1:
             raise ConfigError(f"resolution must be a whole number >= 1, got {self.resolution!r}")
