@@ -36,7 +36,7 @@ from kbcli.bench import learn as learn_bench
 from kbcli.core.config import Config, Count, Name, Names, NonNegativeInt, Whole
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.layouts import LAYOUTS
-from kbcli.core.model_classes import get_model_class
+from kbcli.core.model_classes import check_learned
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.atomic import atomic_path
@@ -58,7 +58,7 @@ def _check_layouts(v: tuple[str, ...]) -> tuple[str, ...]:
 
 def _check_class(v: str) -> str:
     if v != "best":
-        get_model_class(v)
+        check_learned(v)
     return v
 
 

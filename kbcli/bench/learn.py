@@ -34,7 +34,7 @@ from kbcli.core.config import Config, Count, Name, NonNegativeInt, Number, Posit
 from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.layouts import LAYOUTS, example_config_fields
-from kbcli.core.model_classes import fit_model, get_model_class
+from kbcli.core.model_classes import check_learned, fit_model
 from kbcli.io.atomic import atomic_path
 from kbcli.sim import MODES, SimConfig, World, check_keyboard_reachable, make_reacher
 from kbcli.stages import keyboard as keyboard_stage
@@ -65,7 +65,7 @@ def _check_layouts(v: tuple[str, ...]) -> tuple[str, ...]:
 
 def _check_classes(v: tuple[str, ...]) -> tuple[str, ...]:
     for name in v:
-        get_model_class(name)
+        check_learned(name)
     return v
 
 

@@ -73,9 +73,9 @@ def learn_cmd(
                             model_class=model_class)
     check_io({"--keyboard": keyboard, "--arm": arm_file(arm)}, ("--output", output))
     kb_art = read_artifact(keyboard, "keyboard")
-    if strategy != "exact":  # (the exact model reaches for nothing)
+    if not cfg.exact:  # (the exact model reaches for nothing)
         note_arm(sim.arm, sim.mode)
-    if cfg.strategy == "exact":
+    if cfg.exact:
         art = stage.run(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
         write_artifact(art, output)
         out.print(f"wrote {output}: exact model (the keyboard's own geometry, "
