@@ -65,12 +65,13 @@ def between(base: Any, low: float | None = None, high: float | None = None, *,
         Whether the bound itself is excluded.
     """
     whole = "a whole number" if _is_whole(base) else "a number"
+    lo, hi = _bound(low), _bound(high)
     if low is not None and high is not None:
-        text = f"in {'(' if low_open else '['}{low:g}, {high:g}{')' if high_open else ']'}"
+        text = f"in {'(' if low_open else '['}{lo}, {hi}{')' if high_open else ']'}"
     elif low is not None:
-        text = f"{'>' if low_open else '>='} {low:g}"
+        text = f"{'>' if low_open else '>='} {lo}"
     else:
-        text = f"{'<' if high_open else '<='} {high:g}"
+        text = f"{'<' if high_open else '<='} {hi}"
 
     def check(v: Any) -> Any:
         ok = v == v  # not NaN
@@ -83,6 +84,12 @@ def between(base: Any, low: float | None = None, high: float | None = None, *,
         return v
 
     return Annotated[base, AfterValidator(check)]
+
+
+def _bound(v: float | None) -> str:
+    if v is None:
+        return ""
+    return str(int(v)) if float(v).is_integer() and abs(v) < 1e15 else f"{v:g}"
 
 
 def _is_whole(base: Any) -> bool:
