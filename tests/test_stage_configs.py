@@ -123,7 +123,7 @@ def test_methods_check_their_own_table():
         ({"reach_noise": {"dynamics": -1.0}}, "evaluate.reach_noise.dynamics"),
         ({"reach_noise": {"flying": 1.0}}, "evaluate.reach_noise: unknown mode 'flying'"),
         ({"arm": {"flying": "ideal"}}, "evaluate.arm: unknown mode 'flying'"),
-        ({"melody": " "}, "evaluate.melody: must be notes"),
+        ({"melody": " "}, ("evaluate.melody", "must be notes like 'A:1 D:1'")),
         ({"family": "shear"}, "unknown"),
         ({"methods": {}}, "evaluate.methods must hold at least one table"),
         ({"strategies": ["random"], "methods": {"m": {"strategies": ["random"]}}},
@@ -131,7 +131,8 @@ def test_methods_check_their_own_table():
     ],
 )
 def test_evaluate_config_errors_are_one_line(change, fragment):
-    _error(lambda: EvaluateConfig.from_dict(change), fragment)
+    fragments = fragment if isinstance(fragment, tuple) else (fragment,)
+    _error(lambda: EvaluateConfig.from_dict(change), *fragments)
 
 
 # -- stored configs --------------------------------------------------------------------------------
