@@ -84,8 +84,8 @@ class Adapter:
 
     Examples
     --------
-    The ask/tell loop, with a touch of the bundled simulator (see :meth:`from_model` for a model
-    file)::
+    The ask/tell loop, with a touch of the bundled simulator (``kbcli.Adapter``,
+    :class:`kbcli.api.Adapter`, reads a model file in :meth:`from_model`)::
 
         adapter = Adapter.from_model("data/default-model.h5", strategy="infogain", seed=0)
         while not adapter.done():
@@ -141,13 +141,12 @@ class Adapter:
                    seed: int | None = None, rng: np.random.Generator | None = None,
                    config: AdapterConfig | None = None, max_steps: int | None = None,
                    **options) -> Adapter:
-        """An adapter for a model: a model artifact file (``.h5``, kind ``model``), a loaded
-        :class:`~kbcli.stages.artifact.Artifact`, or a model object.
+        """An adapter for a model (what :meth:`load` accepts: a model object here; the public
+        ``kbcli.Adapter``, :class:`kbcli.api.Adapter`, also reads a model artifact file).
 
         Parameters
         ----------
-        model : str, path, Artifact or SoundModel
-            A file is read with :mod:`kbcli.io` (imported only then: the core needs no h5py).
+        model : SoundModel (or, through :class:`kbcli.api.Adapter`, a path or an Artifact)
         strategy, family : str
             See :class:`AdapterConfig`.
         seed : int, optional
@@ -162,9 +161,10 @@ class Adapter:
         Raises
         ------
         ArtifactError
-            A missing or unreadable file, or an artifact that is not a model.
+            (:class:`kbcli.api.Adapter`) A missing or unreadable file, or an artifact that is not a
+            model.
         ConfigError
-            An unknown or invalid option.
+            An unknown or invalid option, or (the core's) a model that is not a model object.
         """
         if config is None:
             config = AdapterConfig.from_dict({"strategy": strategy, "family": family, **options})
@@ -174,11 +174,16 @@ class Adapter:
             rng = np.random.default_rng(seed)
         elif seed is not None:
             raise ConfigError("give either seed or rng, not both")
-        if not hasattr(model, "classify"):  # a path or an artifact: the I/O layer loads it
-            from kbcli.api import load_model
+        return cls(cls.load(model), config, rng=rng, max_steps=max_steps)
 
-            model = load_model(model)
-        return cls(model, config, rng=rng, max_steps=max_steps)
+    @staticmethod
+    def load(model):
+        """The model object :meth:`from_model` adapts with. The core takes model objects only (it
+        reads no files); :class:`kbcli.api.Adapter` overrides this to read artifacts."""
+        if not hasattr(model, "classify"):
+            raise ConfigError(f"Adapter.from_model needs a sound model here, got {model!r}; read a "
+                              f"model file with kbcli.Adapter.from_model (kbcli.api)")
+        return model
 
     # -- deciding ----------------------------------------------------------------------------------
     def planning_table(self) -> LikelihoodTable:
