@@ -29,7 +29,7 @@ __version__ = "0.1.0"
 
 #: public name -> module that defines it (imported lazily by :func:`__getattr__`)
 _EXPORTS = {
-    "Adapter": "kbcli.core.adapt",
+    "Adapter": "kbcli.api",
     "AdapterConfig": "kbcli.core.adapt",
     "Detector": "kbcli.core.detect",
     "DetectorConfig": "kbcli.core.detect",
@@ -41,8 +41,8 @@ __all__ = ["__version__", "Adapter", "AdapterConfig", "Detector", "DetectorConfi
            "load_keyboard"]
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
-    from kbcli.api import load_keyboard, load_model
-    from kbcli.core.adapt import Adapter, AdapterConfig
+    from kbcli.api import Adapter, load_keyboard, load_model
+    from kbcli.core.adapt import AdapterConfig
     from kbcli.core.detect import Detector, DetectorConfig
 
 

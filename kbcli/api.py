@@ -2,14 +2,16 @@
 
 The objects a robot drives live in the numeric core and are exported lazily by :mod:`kbcli`
 (``from kbcli import Adapter, Detector``); this module holds what needs the I/O layer (h5py), so
-that the core stays free of it. :meth:`kbcli.core.adapt.Adapter.from_model` calls
-:func:`load_model` when it is handed a file.
+that the core stays free of it. :class:`Adapter` (``kbcli.Adapter``) is the core's
+:class:`kbcli.core.adapter.Adapter` whose :meth:`~Adapter.from_model` also takes a model file or
+artifact (read with :func:`load_model`).
 """
 
 from __future__ import annotations
 
 import os
 
+from kbcli.core.adapter import Adapter as CoreAdapter
 from kbcli.core.keyboard import Keyboard
 from kbcli.stages.artifact import Artifact
 
@@ -49,4 +51,22 @@ def load_keyboard(source: str | os.PathLike | Artifact) -> Keyboard:
                                                   "closed_loop", "history")))
 
 
-__all__ = ["load_model", "load_keyboard"]
+class Adapter(CoreAdapter):
+    """The core's :class:`~kbcli.core.adapter.Adapter`; :meth:`from_model` also reads a model
+    artifact file (``.h5``, kind ``model``) or a loaded
+    :class:`~kbcli.stages.artifact.Artifact`.
+
+    Examples
+    --------
+    ::
+
+        adapter = Adapter.from_model("data/default-model.h5", strategy="infogain", seed=0)
+    """
+
+    @staticmethod
+    def load(model):
+        """A model object as it is; a path or an artifact through :func:`load_model`."""
+        return model if hasattr(model, "classify") else load_model(model)
+
+
+__all__ = ["Adapter", "load_model", "load_keyboard"]

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import kbcli
-from kbcli.core.adapt import Adapter as CoreAdapter
+from kbcli.core.adapter import Adapter as CoreAdapter
 from kbcli.core.detect import Detector as CoreDetector
 from kbcli.core.keyboard import KeyboardConfig
 from kbcli.core.model import ExactModel
@@ -38,7 +38,9 @@ def test_import_kbcli_stays_light():
 def test_public_names_are_the_core_objects():
     from kbcli import Adapter, Detector
 
-    assert Adapter is CoreAdapter and Detector is CoreDetector
+    # kbcli.Adapter is the core's, plus reading a model file (kbcli.api: the core reads no files)
+    assert issubclass(Adapter, CoreAdapter) and Adapter.__init__ is CoreAdapter.__init__
+    assert Detector is CoreDetector
     assert {"Adapter", "Detector", "load_model"} <= set(dir(kbcli))
     with pytest.raises(AttributeError):
         kbcli.NoSuchThing  # noqa: B018
@@ -97,6 +99,9 @@ def test_from_model_bad_input(tmp_path):
         kbcli.Adapter.from_model(MODEL, strategy="psychic")
     with pytest.raises(ConfigError, match="seed or rng"):
         kbcli.Adapter.from_model(MODEL, seed=1, rng=np.random.default_rng(1))
+    # the core reads no files: only kbcli.Adapter (kbcli.api) does
+    with pytest.raises(ConfigError, match="needs a sound model"):
+        CoreAdapter.from_model(tmp_path / "kb.h5")
 
 
 @pytest.mark.parametrize("action, heard, felt, fragment", [

@@ -11,8 +11,8 @@ import numpy as np
 
 from kbcli.core.adapter_config import LEARNED_BLUR, AdapterConfig, _size
 from kbcli.core.kde import ActionSamples
-from kbcli.core.model import ExactModel
-from kbcli.core.table import LikelihoodTable
+from kbcli.core.table import LikelihoodTable, exact_map
+from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError
 
 
@@ -47,11 +47,11 @@ def build_table(model, cfg: AdapterConfig,
     blur = total_blur(model, cfg)
     step = cfg.raster_step
     if step is None:  # a rigid grid cell reaches sub-cell precision only on a finer class map
-        fine = cfg.family == "rigid" and isinstance(model, ExactModel) and blur == 0
+        fine = FAMILIES.get(cfg.family).rotates and exact_map(model) and blur == 0
         step = cfg.resolution / 2 if fine else cfg.resolution
     x0, y0, x1, y1 = area
     cells = math.ceil((x1 - x0) / step) * math.ceil((y1 - y0) / step)
-    per_cell = 2 if (isinstance(model, ExactModel) and blur == 0) else 4 * len(
+    per_cell = 2 if (exact_map(model) and blur == 0) else 4 * len(
         model.class_features_)
     need = cells * per_cell
     if need > cfg.max_memory_mb * 2**20:
@@ -74,5 +74,5 @@ def total_blur(model, cfg: AdapterConfig) -> float:
         return float(cfg.blur)
     mb = cfg.model_blur
     if mb is None:
-        mb = 0.0 if isinstance(model, ExactModel) else LEARNED_BLUR
+        mb = 0.0 if exact_map(model) else LEARNED_BLUR
     return float(math.hypot(cfg.blur, mb))

@@ -39,13 +39,12 @@ from kbcli.core.adapt_setup import build_samples, build_table, spot_count
 from kbcli.core.adapter_config import AdapterConfig, learning_rate, redundancy_radius
 from kbcli.core.estimators import ESTIMATORS
 from kbcli.core.grid import HypothesisGrid
-from kbcli.core.kde import ActionSamples, kde_term
-from kbcli.core.likelihood import cell_sigma, likelihood_term
+from kbcli.core.kde import ActionSamples
 from kbcli.core.model import UNKNOWN
 from kbcli.core.posterior import Posterior
-from kbcli.core.posteriors import POSTERIORS
-from kbcli.core.robust import RobustPosterior, planning_table, robust_terms
-from kbcli.core.strategies import Context, get_strategy
+from kbcli.core.posteriors import POSTERIORS, Observation
+from kbcli.core.robust import RobustPosterior, planning_table
+from kbcli.core.strategies import STRATEGIES, Context
 from kbcli.core.table import LikelihoodTable
 from kbcli.errors import ConfigError, ObservationError
 
@@ -85,8 +84,8 @@ class Adapter:
 
     Examples
     --------
-    The ask/tell loop, with a touch of the bundled simulator (see :meth:`from_model` for a model
-    file)::
+    The ask/tell loop, with a touch of the bundled simulator (``kbcli.Adapter``,
+    :class:`kbcli.api.Adapter`, reads a model file in :meth:`from_model`)::
 
         adapter = Adapter.from_model("data/default-model.h5", strategy="infogain", seed=0)
         while not adapter.done():
@@ -123,7 +122,7 @@ class Adapter:
         self.robust: RobustPosterior | None = (
             RobustPosterior(self.grid, cfg.nuisance(model), eta=learning_rate(model, cfg))
             if cfg.is_robust else None)
-        self._strategy = get_strategy(cfg.strategy)
+        self._strategy = STRATEGIES.get(cfg.strategy)
         #: px: touches this close count as one spot (robust posterior; see AdapterConfig)
         self.redundancy_radius = redundancy_radius(model, cfg) if cfg.is_robust else 0.0
         #: where each observed touch was read (felt position, or the aim)
@@ -131,7 +130,9 @@ class Adapter:
         self._edges: np.ndarray | None = None
         self._corners: np.ndarray | None = None
         self.bandwidths: list[float] = []
-        if POSTERIORS.get(cfg.posterior).uses_samples and samples is None:
+        #: the kind of posterior (:data:`kbcli.core.posteriors.POSTERIORS`)
+        self.kind = POSTERIORS.get(cfg.posterior)
+        if self.kind.uses_samples and samples is None:
             samples = build_samples(model, cfg, [int(v) for v in rng.integers(2**32, size=2)])
         self.samples = samples
 
@@ -140,13 +141,12 @@ class Adapter:
                    seed: int | None = None, rng: np.random.Generator | None = None,
                    config: AdapterConfig | None = None, max_steps: int | None = None,
                    **options) -> Adapter:
-        """An adapter for a model: a model artifact file (``.h5``, kind ``model``), a loaded
-        :class:`~kbcli.stages.artifact.Artifact`, or a model object.
+        """An adapter for a model (what :meth:`load` accepts: a model object here; the public
+        ``kbcli.Adapter``, :class:`kbcli.api.Adapter`, also reads a model artifact file).
 
         Parameters
         ----------
-        model : str, path, Artifact or SoundModel
-            A file is read with :mod:`kbcli.io` (imported only then: the core needs no h5py).
+        model : SoundModel (or, through :class:`kbcli.api.Adapter`, a path or an Artifact)
         strategy, family : str
             See :class:`AdapterConfig`.
         seed : int, optional
@@ -161,9 +161,10 @@ class Adapter:
         Raises
         ------
         ArtifactError
-            A missing or unreadable file, or an artifact that is not a model.
+            (:class:`kbcli.api.Adapter`) A missing or unreadable file, or an artifact that is not a
+            model.
         ConfigError
-            An unknown or invalid option.
+            An unknown or invalid option, or (the core's) a model that is not a model object.
         """
         if config is None:
             config = AdapterConfig.from_dict({"strategy": strategy, "family": family, **options})
@@ -173,11 +174,16 @@ class Adapter:
             rng = np.random.default_rng(seed)
         elif seed is not None:
             raise ConfigError("give either seed or rng, not both")
-        if not hasattr(model, "classify"):  # a path or an artifact: the I/O layer loads it
-            from kbcli.api import load_model
+        return cls(cls.load(model), config, rng=rng, max_steps=max_steps)
 
-            model = load_model(model)
-        return cls(model, config, rng=rng, max_steps=max_steps)
+    @staticmethod
+    def load(model):
+        """The model object :meth:`from_model` adapts with. The core takes model objects only (it
+        reads no files); :class:`kbcli.api.Adapter` overrides this to read artifacts."""
+        if not hasattr(model, "classify"):
+            raise ConfigError(f"Adapter.from_model needs a sound model here, got {model!r}; read a "
+                              f"model file with kbcli.Adapter.from_model (kbcli.api)")
+        return model
 
     # -- deciding ----------------------------------------------------------------------------------
     def planning_table(self) -> LikelihoodTable:
@@ -280,25 +286,26 @@ class Adapter:
         """Update the posterior with an already classified observation (Eq. 8)."""
         if cls == UNKNOWN:
             return
-        a = np.asarray(action, float).reshape(2)
-        if self.cfg.posterior == "kde":
-            term, bw = kde_term(self.grid, self.model, a, cls, n_samples=self.cfg.kde_samples,
-                                eps=self.cfg.outlier, samples=self.samples)
-            self.bandwidths.append(bw)
-        elif self.robust is not None:
-            sigma = cell_sigma(self.grid, a) if self.cfg.cell_average and self.grid.rigid else 0.0
-            terms = robust_terms(self.grid, self.table, a, cls, self.robust.nuisance, sigma)
-            k = int(self.spot_count(a)[0])
-            if k:  # the (k + 1)-th touch at one spot: weight 1 / (k + 1)
-                terms = terms * np.float32(1.0 / (k + 1))
-            self.points.append(a)
-            self.robust = self.robust.update(terms)
-            self.posterior = self.robust.marginal()
+        obs = Observation(self.grid, self.table, self.model, self.cfg, self.samples,
+                          np.asarray(action, float).reshape(2), int(cls))
+        if self.robust is not None:
+            self._observe_robust(obs)
             return
-        else:
-            sigma = cell_sigma(self.grid, a) if self.cfg.cell_average else 0.0
-            term = likelihood_term(self.grid, self.table, a, cls, sigma)
+        term, bandwidth = self.kind.term(obs)
+        if bandwidth is not None:
+            self.bandwidths.append(bandwidth)
         self.posterior = self.posterior.update(term)
+
+    def _observe_robust(self, obs: Observation) -> None:
+        """The robust posterior's update: the kind's terms under every nuisance value, the
+        ``(k + 1)``-th touch at one spot weighted ``1 / (k + 1)``."""
+        terms = self.kind.robust_terms(obs, self.robust.nuisance)
+        k = int(self.spot_count(obs.action)[0])
+        if k:  # the (k + 1)-th touch at one spot: weight 1 / (k + 1)
+            terms = terms * np.float32(1.0 / (k + 1))
+        self.points.append(obs.action)
+        self.robust = self.robust.update(terms)
+        self.posterior = self.robust.marginal()
 
     # -- reading -----------------------------------------------------------------------------------
     def estimates(self) -> Estimate:

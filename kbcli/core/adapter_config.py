@@ -24,7 +24,7 @@ from kbcli.core.robust import (
     TEMPER_PX,
     Nuisance,
 )
-from kbcli.core.strategies import get_strategy
+from kbcli.core.strategies import STRATEGIES
 from kbcli.errors import ConfigError
 
 #: Default softening (px) of a learned model's map (``AdapterConfig.model_blur``).
@@ -175,7 +175,7 @@ class AdapterConfig:
     max_memory_mb: float = 2048.0
 
     def __post_init__(self) -> None:
-        get_strategy(self.strategy)
+        STRATEGIES.get(self.strategy)
         if self.posterior not in POSTERIORS:
             raise ConfigError(f"unknown posterior {self.posterior!r}; valid: {', '.join(POSTERIORS)}")
         transforms.check_family(self.family)

@@ -1,6 +1,7 @@
 """Where to touch next: the action-selection strategies of the adaptation (paper Sect. III-E).
 
-A strategy is a plain function registered by name with :func:`strategy`::
+A strategy is a plain function registered by name in :data:`STRATEGIES` (``@STRATEGIES.register(name)``)
+and read with ``STRATEGIES.get(name)``::
 
     fn(ctx: Context, rng: numpy.random.Generator) -> (2,) ndarray   # the next action, pad px
 
@@ -41,34 +42,16 @@ import numpy as np
 
 from kbcli.core import transforms
 from kbcli.core.posterior import Posterior
+from kbcli.core.registry import Registry
 from kbcli.core.table import LikelihoodTable
-from kbcli.errors import ConfigError
 
 StrategyFn = Callable[["Context", np.random.Generator], np.ndarray]
 
-#: name -> strategy function (filled by :func:`strategy`).
-STRATEGIES: dict[str, StrategyFn] = {}
+#: The adaptation strategies (``--strategy``), read with ``STRATEGIES.get(name)``.
+STRATEGIES: Registry[StrategyFn] = Registry("strategy")
 
 #: Hypotheses used by ``active`` to rank candidates by confusion.
 CONFUSION_HYPOTHESES = 128
-
-
-def strategy(name: str) -> Callable[[StrategyFn], StrategyFn]:
-    """Register a strategy function under ``name``."""
-
-    def deco(fn: StrategyFn) -> StrategyFn:
-        STRATEGIES[name] = fn
-        return fn
-
-    return deco
-
-
-def get_strategy(name: str) -> StrategyFn:
-    """The strategy registered as ``name``; ``ConfigError`` listing the valid ones otherwise."""
-    try:
-        return STRATEGIES[name]
-    except KeyError:
-        raise ConfigError(f"unknown strategy {name!r}; valid: {', '.join(STRATEGIES)}") from None
 
 
 @dataclass
@@ -209,13 +192,13 @@ def boundary_candidates(ctx: Context, n_edges: int, n_corners: int, hyp: np.ndar
 # ---------------------------------------------------------------------------------------------
 # The strategies
 # ---------------------------------------------------------------------------------------------
-@strategy("random")
+@STRATEGIES.register("random")
 def random_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """Uniform over the working area (the paper's baseline)."""
     return uniform_actions(ctx.area, 1, rng)[0]
 
 
-@strategy("active")
+@STRATEGIES.register("active")
 def active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """The paper's: most confusing candidates, then the largest simulated entropy reduction under
     the best hypothesis."""
@@ -242,7 +225,7 @@ def active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     return kept[int(np.argmin(after))]
 
 
-@strategy("infogain")
+@STRATEGIES.register("infogain")
 def infogain_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """Largest expected information gain over the whole posterior predictive."""
     cfg, post = ctx.cfg, ctx.posterior

@@ -25,6 +25,16 @@ from kbcli.core.model import SILENCE, ExactModel, grid_points
 TOP_K = 4
 
 
+def exact_map(model) -> bool:
+    """Whether ``model`` knows its class map exactly (a cheap hard ``predict_class``, no
+    probabilities): its ``exact_map`` attribute.
+
+    Until every model class declares ``exact_map``, a model without the attribute falls back to
+    ``isinstance(model, ExactModel)`` (the same answer as before the attribute existed).
+    """
+    return bool(getattr(model, "exact_map", isinstance(model, ExactModel)))
+
+
 @dataclass(frozen=True)
 class LikelihoodTable:
     """``p_eps(sound class | point)`` on a raster, indexed in the adaptation's inner loop.
@@ -87,11 +97,12 @@ class LikelihoodTable:
         """
         area = model.area if area is None else area
         n_classes = int(len(model.class_features_))
-        if isinstance(model, ExactModel) and blur == 0:
+        exact = exact_map(model)
+        if exact and blur == 0:
             origin, pts = grid_points(area, step)
             cl = model.predict_class(pts.reshape(-1, 2)).reshape(pts.shape[:2])
             return cls(origin, float(step), n_classes, eps, classes=cl.astype(np.int16))
-        if isinstance(model, ExactModel):
+        if exact:
             origin, pts = grid_points(area, step)
             cl = model.predict_class(pts.reshape(-1, 2)).reshape(pts.shape[:2])
             probs = np.eye(n_classes, dtype=np.float32)[cl]

@@ -1,0 +1,31 @@
+"""``kde`` (the paper's Eq. 7): each touch multiplies the posterior by a kernel density estimate of
+p(action | sound) built from samples of the model (:mod:`kbcli.core.kde`,
+:class:`~kbcli.core.kde.ActionSamples`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kbcli.core.kde import kde_term
+from kbcli.core.posteriors.base import POSTERIORS, Observation
+
+
+@dataclass(frozen=True)
+class KdePosterior:
+    """The paper's product of KDEs of p(action | sound), from per-class samples of the model."""
+
+    name: str = "kde"
+    uses_samples: bool = True
+    robust: bool = False
+
+    def term(self, obs: Observation) -> tuple[np.ndarray, float]:
+        """``log KDE_t(h)`` with the outlier floor, and the kernel bandwidth (px) it used."""
+        return kde_term(obs.grid, obs.model, obs.action, obs.cls, n_samples=obs.cfg.kde_samples,
+                        eps=obs.cfg.outlier, samples=obs.samples)
+
+
+POSTERIORS.register("kde", KdePosterior(),
+                    summary="the paper's product of KDEs of p(action | sound) (Eq. 7)")

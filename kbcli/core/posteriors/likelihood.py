@@ -1,0 +1,39 @@
+"""``likelihood`` (ours, the default): each touch multiplies the posterior by the model's classifier
+read at the touch (Eq. 8 with the learned p(sound | action), :mod:`kbcli.core.likelihood`); it can
+be made robust to the model's own errors (:mod:`kbcli.core.robust`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kbcli.core.likelihood import cell_sigma, likelihood_term
+from kbcli.core.posteriors.base import POSTERIORS, Observation
+from kbcli.core.robust import Nuisance, robust_terms
+
+
+@dataclass(frozen=True)
+class LikelihoodPosterior:
+    """The model's classifier at each touch; the robust posterior applies to it."""
+
+    name: str = "likelihood"
+    uses_samples: bool = False
+    robust: bool = True
+
+    def term(self, obs: Observation) -> tuple[np.ndarray, None]:
+        """``log p_eps(cls | T_h^-1(action))``, cell-averaged when ``cfg.cell_average``."""
+        sigma = cell_sigma(obs.grid, obs.action) if obs.cfg.cell_average else 0.0
+        return likelihood_term(obs.grid, obs.table, obs.action, obs.cls, sigma), None
+
+    def robust_terms(self, obs: Observation, nuisance: Nuisance) -> np.ndarray:
+        """The term under every nuisance value (:func:`kbcli.core.robust.robust_terms`);
+        cell-averaged for a rotating grid only."""
+        grid = obs.grid
+        sigma = cell_sigma(grid, obs.action) if obs.cfg.cell_average and grid.rigid else 0.0
+        return robust_terms(grid, obs.table, obs.action, obs.cls, nuisance, sigma)
+
+
+POSTERIORS.register("likelihood", LikelihoodPosterior(),
+                    summary="the model's classifier at each touch (ours)")
