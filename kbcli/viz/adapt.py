@@ -24,7 +24,7 @@ from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator
 
 from kbcli.core.transforms import FAMILIES
 from kbcli.stages.artifact import Artifact
-from kbcli.viz.common import save
+from kbcli.viz.common import external, save
 
 MAX_PANELS = 6
 DYNAMIC_RANGE = 30.0  # nats of log-posterior shown
@@ -218,7 +218,7 @@ def _title(r: _Run) -> str:
         result = "estimate " + ", ".join(f"{k} {v:+.2f}" for k, v in est.items()) + \
             " (truth unknown)"
     T = len(r.errors)
-    source = " (external robot)" if a.get("source") == "external" else ""
+    source = " (external robot)" if external(a) else ""
     return (f"adaptation{source}: {a.get('strategy')} strategy, {a.get('posterior')} "
             f"posterior, {a.get('family')} family, {T} observation{'s' if T != 1 else ''}; "
             f"{result}")

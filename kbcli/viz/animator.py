@@ -13,6 +13,7 @@ from matplotlib.patches import Patch, Rectangle
 
 from kbcli.core import transforms
 from kbcli.core.keyboard import Keyboard
+from kbcli.viz.common import external
 from kbcli.viz.replay import Replay
 
 DYNAMIC_RANGE = 30.0  # nats of log-posterior shown
@@ -396,7 +397,7 @@ class Animator:
         names = transforms.FAMILIES.get(rep.family).params
         belief = _fmt(names, self._belief_at(k))
         if rep.kind == "run":
-            src = " (external robot)" if rep.attrs.get("source") == "external" else ""
+            src = " (external robot)" if external(rep.attrs) else ""
             self.title.set_text(f"adaptation{src}: {rep.attrs.get('strategy')} strategy, touch "
                                 f"{k} of {rep.n}")
             if k == 0:

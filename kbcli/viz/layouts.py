@@ -19,6 +19,7 @@ from kbcli.viz.common import draw_keyboard, key_colours, save
 MAP_STEP = 2.0  # px
 _STRATEGY_COLOURS = {"random": "tab:grey", "active": "tab:orange", "infogain": "tab:blue"}
 _CLASS_COLOURS = {"lines": "tab:green", "svc": "tab:purple"}
+_EXPLORATION_STYLES = {"active": "-"}  # any other exploration: dotted
 
 
 def _key_colours(n_keys: int) -> np.ndarray:
@@ -79,7 +80,7 @@ def _learning_panel(ax, res) -> None:
                 continue
             n = np.array(runs[0].checkpoints)
             acc = np.array([r.accuracy for r in runs if len(r.accuracy) == len(n)])
-            ax.plot(n, 100 * np.median(acc, axis=0), "-" if strategy == "active" else ":",
+            ax.plot(n, 100 * np.median(acc, axis=0), _EXPLORATION_STYLES.get(strategy, ":"),
                     color=_CLASS_COLOURS.get(mc, "black"), lw=1.6,
                     label=f"{mc}, {strategy} ({len(acc)} runs)")
     for level in (97, 99):

@@ -12,6 +12,7 @@ from kbcli.core.estimators import ESTIMATORS
 from kbcli.core.keyboard import Keyboard, sound_name
 from kbcli.errors import KbcliError
 from kbcli.stages.artifact import Artifact
+from kbcli.viz.common import external
 
 
 @dataclass
@@ -68,7 +69,7 @@ def _sim_mode(art: Artifact) -> str | None:
 def _arm_shown(art: Artifact, mode: str | None) -> bool:
     """Whether there is an arm to draw: not for a robot in another process (``external``).
     This and :func:`_ik_note` are the one place this module names sim modes."""
-    return not (mode == "external" or art.attrs.get("source") == "external")
+    return not (mode == "external" or external(art.attrs))
 
 
 def _ik_note(mode: str | None) -> str:
