@@ -76,22 +76,6 @@ _CHECKS = (
 )
 
 
-def check_common(model) -> None:
-    """The checks every learned model class makes: ``match_threshold`` > 0, a valid ``area``.
-
-    Raises
-    ------
-    ConfigError
-        Naming the parameter and what is allowed.
-    """
-    if not (np.isfinite(model.match_threshold) and model.match_threshold > 0):
-        raise ConfigError(f"match_threshold must be > 0, got {model.match_threshold!r}")
-    x0, y0, x1, y1 = (float(v) for v in model.area)
-    if not (x1 > x0 and y1 > y0):
-        raise ConfigError(
-            f"area must be (xmin, ymin, xmax, ymax) with max > min, got {model.area!r}")
-
-
 class LearnedModel(ModelBase):
     """p(sound | action) learned from exploration samples (see the module docstring).
 
@@ -188,7 +172,7 @@ class LearnedModel(ModelBase):
 
     # -- parameters -----------------------------------------------------------------------------
     def _check_params(self) -> None:
-        check_common(self)
+        self._check_common()
         for name, ok, allowed in _CHECKS:
             v = getattr(self, name)
             finite = name == "n_neighbors" or np.isfinite(v)

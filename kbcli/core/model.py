@@ -26,6 +26,7 @@ from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.exceptions import NotFittedError
 
 from kbcli.core.keyboard import Keyboard, match
+from kbcli.errors import ConfigError
 
 SILENCE = 0
 UNKNOWN = -1
@@ -184,7 +185,24 @@ class ModelBase(ClassifierMixin, BaseEstimator):
         self._check_fitted()
         return len(self.class_features_)
 
+    def _check_common(self) -> None:
+        """The checks of every learned class: ``match_threshold`` > 0, a valid ``area``.
+
+        Raises
+        ------
+        ConfigError
+            Naming the parameter and what is allowed.
+        """
+        if not (np.isfinite(self.match_threshold) and self.match_threshold > 0):
+            raise ConfigError(f"match_threshold must be > 0, got {self.match_threshold!r}")
+        x0, y0, x1, y1 = (float(v) for v in self.area)
+        if not (x1 > x0 and y1 > y0):
+            raise ConfigError(
+                f"area must be (xmin, ymin, xmax, ymax) with max > min, got {self.area!r}")
+
     def _pair_logp(self, code: int, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(log p(on the lower class's side), log p(on the higher's)) of the pair ``code`` at
+        each of the points ``q`` (n, 2): the subclass's contest."""
         raise NotImplementedError
 
     # -- prediction -----------------------------------------------------------------------------

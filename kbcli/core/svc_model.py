@@ -64,7 +64,6 @@ from scipy.spatial import cKDTree
 from scipy.special import log_ndtr
 from sklearn.svm import SVC
 
-from kbcli.core.learned import check_common
 from kbcli.core.model import ModelBase
 from kbcli.core.sounds import prepare_samples, straddling_edges
 from kbcli.errors import ArtifactError, ConfigError
@@ -137,7 +136,7 @@ class SVCModel(ModelBase):
 
     # -- parameters -----------------------------------------------------------------------------
     def _check_params(self) -> None:
-        check_common(self)
+        self._check_common()
         for name in ("length_scale", "C", "local_radius"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):

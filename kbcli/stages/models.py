@@ -9,6 +9,7 @@ artifacts, which are all ``lines``). The model is rebuilt from plain arrays by i
 
 from __future__ import annotations
 
+from kbcli.core.model import SoundModel
 from kbcli.core.model_classes import EXACT, MODEL_CLASSES, model_class_of
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages.artifact import Artifact, ref
@@ -25,7 +26,7 @@ def exact_artifact(kb_art: Artifact) -> Artifact:
     )
 
 
-def load_model(art: Artifact):
+def load_model(art: Artifact) -> SoundModel:
     """The model (:class:`~kbcli.core.model.SoundModel`) stored in a model artifact: its
     class's ``load`` (:data:`~kbcli.core.model_classes.MODEL_CLASSES`)."""
     kb = keyboard_stage.load(art)
