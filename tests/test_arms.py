@@ -147,12 +147,10 @@ def test_servo_on_chipmunk_takes_the_same_steps_as_through_pymunk(arm):
 def test_ideal_mode_says_which_part_of_the_arm_it_ignores():
     from kbcli.sim import ideal_mode_note
 
-    preset = PRESETS.get
-
-    assert ideal_mode_note(preset("ideal"), "ideal") is None
-    assert ideal_mode_note(preset("servo"), "dynamics") is None
-    assert "it is the ideal arm here" in ideal_mode_note(preset("servo"), "ideal")
-    assert "finger and proprioception act" in ideal_mode_note(preset("realistic"), "ideal")
+    assert ideal_mode_note(PRESETS.get("ideal"), "ideal") is None
+    assert ideal_mode_note(PRESETS.get("servo"), "dynamics") is None
+    assert "it is the ideal arm here" in ideal_mode_note(PRESETS.get("servo"), "ideal")
+    assert "finger and proprioception act" in ideal_mode_note(PRESETS.get("realistic"), "ideal")
 
 
 def test_play_notes_an_ignored_servo_on_stderr(runner, tmp_path):
