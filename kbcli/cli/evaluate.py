@@ -94,7 +94,7 @@ def evaluate_cmd(
     output: opts.output_option("Evaluation artifact to write (.h5)."),
     model: opts.model_option("Model artifact (.h5, kind 'model') to adapt with [default: the "
                              "embedded default model, data/default-model.h5].", optional=True) = None,
-    config: Annotated[Path, typer.Option("--config", help="TOML with an [evaluate] table.")] = DEFAULT_CONFIG,
+    config: opts.config_option("TOML with an [evaluate] table.", optional=False) = DEFAULT_CONFIG,
     method: Annotated[list[str] | None, typer.Option(
         "--method", help="Only this method of the config (repeat for several) [default: all].")] = None,
     experiments: Annotated[int | None, typer.Option(
@@ -162,7 +162,7 @@ def evaluate_cmd(
 
 @command(bench_app, name="evaluate")
 def bench_evaluate_cmd(
-    config: Annotated[Path, typer.Option("--config", help="TOML with an [evaluate] table.")] = DEFAULT_CONFIG,
+    config: opts.config_option("TOML with an [evaluate] table.", optional=False) = DEFAULT_CONFIG,
     model: opts.model_option("Model artifact; default: the exact model of the config's keyboard.",
                              optional=True) = None,
     experiments: Annotated[int, typer.Option(

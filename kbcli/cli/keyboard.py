@@ -18,11 +18,9 @@ from kbcli.stages import keyboard as stage
 @command(name="keyboard")
 def keyboard_cmd(
     output: opts.output_option("Keyboard artifact to write (.h5)."),
-    config: Annotated[
-        Path | None,
-        typer.Option("--config", help="TOML file with a [keyboard] table (e.g. pipelines/keyboard.toml; "
-                     "pipelines/layouts/*.toml for the other layouts, polygons' keys included)."),
-    ] = None,
+    config: opts.config_option(
+        "TOML file with a [keyboard] table (e.g. pipelines/keyboard.toml; pipelines/layouts/*.toml "
+        "for the other layouts, polygons' keys included).") = None,
     layout: opts.layout_option("Layout of the keys [default grid]. {described}.") = None,
     rows: Annotated[int | None, typer.Option(help="Rows of keys: grid, hex, pads [default 4].")] = None,
     cols: Annotated[int | None, typer.Option(

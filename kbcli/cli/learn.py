@@ -214,9 +214,8 @@ def bench_learn_cmd(
 
 @command(bench_app, name="layouts")
 def bench_layouts_cmd(
-    config: Annotated[Path, typer.Option(
-        "--config", help="TOML file with a [layouts] table (pipelines/layouts.toml).")] = Path(
-        "pipelines/layouts.toml"),
+    config: opts.config_option("TOML file with a [layouts] table (pipelines/layouts.toml).",
+                               optional=False) = Path("pipelines/layouts.toml"),
     output: opts.output_option("Folder to write keyboards/, models/, cache/ and report/ in.") = Path(
         "out/layouts"),
     seeds: Annotated[int | None, typer.Option(

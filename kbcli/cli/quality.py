@@ -34,7 +34,7 @@ def _budgets(text: str | None) -> tuple[int, ...] | None:
 @command(name="quality")
 def quality_cmd(
     output: opts.output_option("model_quality artifact to write (.h5)."),
-    config: Annotated[Path, typer.Option("--config", help="TOML with a [quality] table.")] = DEFAULT_CONFIG,
+    config: opts.config_option("TOML with a [quality] table.", optional=False) = DEFAULT_CONFIG,
     keyboard: opts.keyboard_option("Keyboard artifact the models are learned on.") = DEFAULT_KEYBOARD,
     experiments: Annotated[int | None, typer.Option(
         "--experiments", help="Repetitions per displacement, model and row (overrides the config).")] = None,
