@@ -94,8 +94,7 @@ def _arm(art: Artifact, angles: np.ndarray | None, landed: np.ndarray) -> tuple[
     links = np.asarray(geo["link_lengths"], float)
     if angles is not None and len(angles) == len(landed):
         return _arm_points(base, links, np.asarray(angles, float)), "arm (recorded joint angles)"
-    from kbcli.sim import SimConfig
-    from kbcli.sim import inverse_kinematics
+    from kbcli.sim import SimConfig, inverse_kinematics
 
     q = inverse_kinematics(SimConfig(base=tuple(base), link_lengths=tuple(links)), landed)
     return _arm_points(base, links, q), _ik_note(mode)
