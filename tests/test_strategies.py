@@ -288,3 +288,35 @@ def test_strategies_rank_on_a_fixed_set_of_displacements():
         final[name] = np.array(errs)
     assert np.all(final["infogain"] < 1.0) and np.all(final["active"] < 1.0)
     assert final["random"].mean() > 2 * max(final["active"].mean(), final["infogain"].mean())
+
+
+def test_information_gain_is_the_mutual_information_not_the_predictive_entropy():
+    """A known answer on a two-cell soft table: cell 0 sounds a or b (1/2 each), cell 1 sounds a.
+
+    Two hypotheses (weight 1/2 each): at action (0, 0) one reads cell 0, the other cell 1, so the
+    predictive is (3/4, 1/4) and I = H(3/4, 1/4) - (1/2 log 2 + 1/2 * 0) = 0.2158 nats, where the
+    predictive entropy alone is 0.5623. When both hypotheses read cell 0's coin flip the predictive
+    entropy is log 2 but nothing is learnt (I = 0): an infogain that ranked actions by predictive
+    entropy would seek the coin flip.
+    """
+    from kbcli.core.strategies import information_gain
+
+    probs = np.array([[[0.0, 0.5, 0.5], [0.0, 1.0, 0.0]]], np.float32)  # (H=1, W=2, C=3)
+    table = LikelihoodTable(np.zeros(2), 1.0, 3, 1e-9, probs=probs)
+    hyp = np.array([[0.0, 0.0], [-1.0, 0.0]])
+    w = np.array([0.5, 0.5])
+    actions = np.array([[0.0, 0.0], [-1.0, 0.0], [1.0, 0.0]])
+    # action 1 (-1, 0): h1 reads (-1, 0), outside -> silence; h2 reads cell 0: 1 bit of doubt
+    gain = information_gain(table, "translation", hyp, w, actions, np.zeros(2))
+    h = -(0.75 * np.log(0.75) + 0.25 * np.log(0.25))
+    assert gain[0] == pytest.approx(h - 0.5 * np.log(2), abs=1e-6)  # 0.2158
+    # (-1, 0): silence or a coin flip -> I = H(1/2, 1/4, 1/4) - 1/2 log 2 = log 2
+    assert gain[1] == pytest.approx(np.log(2), abs=1e-6)
+    # (1, 0): cell 1 (a) or outside (silence): fully decisive, I = log 2
+    assert gain[2] == pytest.approx(np.log(2), abs=1e-6)
+    same = information_gain(table, "translation", hyp[:1].repeat(2, 0), w, actions[:1],
+                            np.zeros(2))
+    assert same[0] == pytest.approx(0.0, abs=1e-6)  # one hypothesis: a coin flip teaches nothing
+    pred, _ = outcome_distribution(table, "translation", hyp[:1].repeat(2, 0), w, actions[:1],
+                                   np.zeros(2))
+    assert entropy_rows(pred)[0] == pytest.approx(np.log(2), abs=1e-6)  # yet its entropy is max

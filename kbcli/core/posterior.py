@@ -6,7 +6,7 @@ uniform over it. The posterior (:class:`Posterior`, immutable: ``update`` return
 normalised log-probability of every cell; the product of Eq. 8 is a sum of per-observation log terms
 (the likelihood term, :mod:`kbcli.core.likelihood`, or the paper's KDE of Eq. 7,
 :mod:`kbcli.core.kde`; the kinds are registered in :mod:`kbcli.core.posteriors`), exact on the grid
-(no resampling, no product sampling), normalised in log space (:func:`log_normalise`).
+(no resampling, no product sampling), normalised in log space (:func:`log_normalise`, the adaptation's one log-sum-exp).
 
 Estimates: the maximum-likelihood (maximum a posteriori under the flat prior) cell, the posterior
 mean (from the per-axis marginals), the entropy of the cell distribution in nats (``log G`` for the
@@ -24,6 +24,49 @@ from kbcli.core.kde import ActionSamples  # noqa: F401  re-export: stages/adapt.
 from kbcli.core.table import LikelihoodTable  # noqa: F401  re-export: stages/adapt.py
 
 
+def log_normalise(logw: np.ndarray, axis: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Normalise log weights: ``(logw - logsumexp(logw), exp(logw - logsumexp(logw)))``.
+
+    The one log-sum-exp of the adaptation (the posterior, ``active``'s simulated updates).
+    Hand-written rather than ``scipy.special.logsumexp`` because the probabilities must be
+    ``exp(logw - max) / sum`` exactly, as every stored artifact was computed: scipy's
+    ``exp(logw - lse)`` differs in the last bit, and it was 2.3x (1.3M cells) to 58x (32k cells)
+    slower on the posterior's hot path (measured with scipy 1.17 on this project's machine).
+
+    Parameters
+    ----------
+    logw : ndarray
+        Log weights, with a finite maximum (along ``axis``).
+    axis : int, optional
+        Normalise along this axis (None: over the whole array).
+
+    Raises
+    ------
+    ValueError
+        When no weight is finite (``axis`` None).
+
+    Returns
+    -------
+    logp : ndarray of ``logw.shape``
+        Normalised log-probabilities.
+    p : ndarray of ``logw.shape``
+        ``exp(logp)``, computed as ``exp(logw - max) / sum``.
+    """
+    if axis is None:
+        m = float(np.max(logw))
+        if not math.isfinite(m):
+            raise ValueError("a posterior needs at least one cell of finite log-probability")
+        p = np.exp(logw - m)
+        total = float(p.sum())
+        p /= total
+        return logw - (m + math.log(total)), p
+    m = np.max(logw, axis=axis, keepdims=True)
+    p = np.exp(logw - m)
+    total = p.sum(axis=axis, keepdims=True)
+    p /= total
+    return logw - (m + np.log(total)), p
+
+
 class Posterior:
     """A normalised log-posterior on a :class:`HypothesisGrid`; immutable, ``update`` returns a new one.
 
@@ -39,14 +82,7 @@ class Posterior:
     __slots__ = ("grid", "logp", "probs", "_entropy", "n_obs", "_ml", "_marg")
 
     def __init__(self, grid: HypothesisGrid, logp: np.ndarray, n_obs: int = 0) -> None:
-        logp = np.asarray(logp, float).reshape(grid.shape)
-        m = float(np.max(logp))
-        if not np.isfinite(m):
-            raise ValueError("a posterior needs at least one cell of finite log-probability")
-        p = np.exp(logp - m)
-        total = float(p.sum())
-        logp = logp - (m + math.log(total))
-        p /= total
+        logp, p = log_normalise(np.asarray(logp, float).reshape(grid.shape))
         logp.setflags(write=False)
         p.setflags(write=False)
         self.grid = grid

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from kbcli.core import transforms
-from kbcli.core.posterior import Posterior
+from kbcli.core.posterior import Posterior, log_normalise
 from kbcli.core.registry import Registry
 from kbcli.core.table import LikelihoodTable
 
@@ -156,6 +156,16 @@ def entropy_rows(p: np.ndarray) -> np.ndarray:
     return -(p * np.log(q)).sum(axis=-1)
 
 
+def information_gain(table: LikelihoodTable, family: str, hyp: np.ndarray, weights: np.ndarray,
+                     actions: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """(M,) expected information gain of each action, nats: the mutual information
+    ``I(S; H | a) = H[p(s | a)] - sum_h w_h H[p_eps(. | T_h^-1 a)]`` between the outcome and the
+    hypothesis (not the predictive entropy alone, which also counts the noise of one hypothesis).
+    Arguments as :func:`outcome_distribution`."""
+    pred, cond = outcome_distribution(table, family, hyp, weights, actions, centre)
+    return entropy_rows(pred) - cond
+
+
 def _clip(area: tuple[float, float, float, float], pts: np.ndarray) -> np.ndarray:
     x0, y0, x1, y1 = area
     return np.clip(pts, (x0, y0), (x1, y1))
@@ -218,9 +228,7 @@ def active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     idx2, w2 = post.sample_hypotheses(cfg.active_hypotheses, rng)
     x, y = inverse_points(ctx.family, grid.params(idx2), kept, ctx.centre)  # (K, k)
     logw = np.log(w2)[:, None] + table.log_prob(x, y, simulated[None, :])
-    logw -= logw.max(axis=0, keepdims=True)
-    q = np.exp(logw)
-    q /= q.sum(axis=0, keepdims=True)
+    _, q = log_normalise(logw, axis=0)
     after = entropy_rows(q.T)
     return kept[int(np.argmin(after))]
 
@@ -238,8 +246,7 @@ def infogain_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
         uniform_actions(ctx.area, n_uniform, rng),
         boundary_candidates(ctx, n_edges, m - n_uniform - n_edges, hyp, w, rng),
     ])
-    pred, cond = outcome_distribution(ctx.table, ctx.family, hyp, w, cands, ctx.centre)
-    gain = entropy_rows(pred) - cond
+    gain = information_gain(ctx.table, ctx.family, hyp, w, cands, ctx.centre)
     if ctx.redundancy_radius > 0 and len(ctx.touched):
         # the (k + 1)-th touch at a spot enters the posterior with weight 1 / (k + 1): so does
         # its gain (a model wrong at a spot is wrong there every time)
