@@ -129,11 +129,7 @@ def test_every_pad_point_lies_in_at_most_one_key(name):
     assert overlapping_pairs(shapes)[0].size == 0
 
 
-@pytest.mark.parametrize("name", [
-    pytest.param(n, marks=pytest.mark.xfail(
-        strict=True, reason="hex keys are built one by one (centre + cos/sin): a vertex shared by "
-        "two keys differs in its last bit, so a point on that edge can be in both"))
-    if n == "hex" else n for n in LAYOUTS.names()])
+@pytest.mark.parametrize("name", LAYOUTS.names())
 def test_every_point_on_a_shared_edge_lies_in_exactly_one_key(name):
     """The half-open rule on the layouts: points on the keys' own edges and vertices lie in at
     most one key (exactly, no tolerance), and key_at agrees."""

@@ -37,11 +37,13 @@ def build(cfg: KeyboardConfig) -> LayoutGeometry:
     rad = w / math.sqrt(3)  # circumradius of a hexagon w across the flats
     k = np.arange(rows * cols)
     r, c = k // cols, k % cols
-    cx = w / 2 + c * w + (r % 2) * w / 2
-    cy = rad + r * 1.5 * rad
-    ang = np.deg2rad(30 + 60 * np.arange(6))
-    unit = np.column_stack([np.cos(ang), np.sin(ang)]) * rad
-    polys = [np.array([x, y]) + unit for x, y in zip(cx, cy, strict=True)]
+    # Vertices on an exact lattice of (w / 2, rad / 2) steps, counterclockwise from 30 degrees: a
+    # vertex two keys share is the same float in both (the half-open rule on shared edges).
+    ix = 1 + 2 * c + r % 2  # centre in half-widths
+    iy = 2 + 3 * r  # centre in half-radii
+    dx, dy = np.array([1, 0, -1, -1, 0, 1]), np.array([1, 2, 1, -1, -2, -1])
+    polys = [np.column_stack([(x + dx) * (w / 2), (y + dy) * (rad / 2)])
+             for x, y in zip(ix, iy, strict=True)]
     pitches = base_midi(cfg) + 2 * (c - r // 2) + 7 * r
     shapes = KeyShapes(polygons=polys)
     return LayoutGeometry(shapes, pitches.astype(np.int64), rowcol_tempo(cfg, rows, cols),
