@@ -105,6 +105,8 @@ _PHRASES = (
     ("a valid boolean", "true or false"),
     ("a valid tuple", "a list"),
     ("a valid string", "a string"),
+    ("Tuple should have at least 1 item after validation, not 0", "must not be empty"),
+    ("List should have at least 1 item after validation, not 0", "must not be empty"),
 )
 
 
