@@ -9,23 +9,23 @@ from typing import Any
 
 import numpy as np
 
+from kbcli.core import model_classes
+from kbcli.core.model_classes import MODEL_CLASSES
 from kbcli.errors import KbcliError
 from kbcli.io.schema.spec import MIN_SOUNDS, TYPES
-
-#: The model class of model artifacts that do not name one (schema 1 and 2: every model was this).
-_DEFAULT_MODEL_CLASS = "lines"
-
 
 # -- which artifacts hold what ---------------------------------------------------------------------
 
 def learned(art) -> bool:
-    """A learned model (not the exact model of the keyboard)."""
-    return art.config.get("strategy") != "exact"
+    """A learned model (not the exact model of the keyboard), as its model class says; a class
+    this kbcli does not know is checked as learned (its arrays are then named unknown)."""
+    name = model_class_of(art)
+    return name not in MODEL_CLASSES or MODEL_CLASSES.get(name).learned
 
 
 def model_class_of(art) -> str:
-    """The model class a learned model artifact names (the one place it is read)."""
-    return art.config.get("model_class", _DEFAULT_MODEL_CLASS)
+    """The model class a model artifact names (:func:`kbcli.core.model_classes.model_class_of`)."""
+    return model_classes.model_class_of(art.config)
 
 
 def of_class(name: str) -> Callable[[Any], bool]:

@@ -9,6 +9,7 @@ from typing import Annotated, Any
 from pydantic import Field, Strict, ValidationInfo, field_validator, model_validator
 
 from kbcli.core.config import Config, Count, Flag, Name, Names, NonNegative, NonNegativeInt
+from kbcli.core.model_classes import EXACT  # the reference row's model: the exact class
 from kbcli.errors import ConfigError
 from kbcli.sim import MODES
 from kbcli.sim.arms import arm_config
@@ -23,8 +24,6 @@ DEFAULT_ROWS = {
 }
 #: The reference row adapted with the exact model (the keyboard's own map) when ``ideal`` is on.
 IDEAL_ROW = "exact-infogain"
-#: Its model's name among the sweep's experiments.
-EXACT = "exact"
 #: Options the sweep sets itself for every experiment (not allowed in a row or ``adapt``).
 FIXED = ("mode", "arm", "reach_noise", "max_steps", "family", "stop")
 #: Fewest reaches of a learned model.
