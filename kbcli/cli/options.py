@@ -28,9 +28,10 @@ def _layouts() -> Iterable:
 
 
 def _model_classes() -> Iterable:
+    """The model classes learned from samples (``--model-class``; the exact model is not one)."""
     from kbcli.core.model_classes import MODEL_CLASSES
 
-    return MODEL_CLASSES
+    return tuple(n for n in MODEL_CLASSES if getattr(MODEL_CLASSES.get(n), "learned", True))
 
 
 def _strategies() -> Iterable:
