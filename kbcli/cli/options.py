@@ -16,67 +16,40 @@ from typing import Annotated, Any
 
 import typer
 
+from kbcli.core.detect import DETECTORS
 from kbcli.core.estimators import ESTIMATORS
+from kbcli.core.explore import STRATEGIES as EXPLORATIONS
+from kbcli.core.layouts import LAYOUTS
+from kbcli.core.model_classes import MODEL_CLASSES, learned_classes
 from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.strategies import STRATEGIES
 from kbcli.core.transforms import FAMILIES
+from kbcli.sim import MODES
+from kbcli.sim.arms import PRESETS
 
 
-def _layouts() -> Iterable:
-    from kbcli.core.layouts import LAYOUTS
-
-    return LAYOUTS
-
-
-def _model_classes() -> Iterable:
+def _learned_classes() -> tuple[str, ...]:
     """The model classes learned from samples (``--model-class``; the exact model is not one)."""
-    from kbcli.core.model_classes import MODEL_CLASSES
-
-    return tuple(n for n in MODEL_CLASSES if getattr(MODEL_CLASSES.get(n), "learned", True))
+    return learned_classes()
 
 
-def _strategies() -> Iterable:
-    from kbcli.core.strategies import STRATEGIES
-
-    return STRATEGIES
-
-
-def _explorations() -> Iterable:
-    from kbcli.core.explore import STRATEGIES
-
-    return STRATEGIES
-
-
-def _detectors() -> Iterable:
-    from kbcli.core.detect import DETECTORS
-
-    return DETECTORS
-
-
-def _arms() -> Iterable:
-    from kbcli.sim.arms import PRESETS
-
-    return PRESETS
-
-
-def _modes() -> Iterable:
-    from kbcli.sim import MODES
-
-    return MODES
-
-
-#: Where each kind of part's names come from: its registry (or, until it is one, its dict/tuple).
-_SOURCES: dict[str, Callable[[], Iterable]] = {
+#: Where each kind of part's names come from: its registry (model classes: the learned ones).
+_SOURCES: dict[str, Callable[[], Iterable[str]]] = {
     "posterior": lambda: POSTERIORS,
     "estimator": lambda: ESTIMATORS,
     "family": lambda: FAMILIES,
-    "layout": _layouts,
-    "model class": _model_classes,
-    "strategy": _strategies,
-    "exploration": _explorations,
-    "detector": _detectors,
-    "arm": _arms,
-    "mode": _modes,
+    "layout": lambda: LAYOUTS,
+    "model class": _learned_classes,
+    "strategy": lambda: STRATEGIES,
+    "exploration": lambda: EXPLORATIONS,
+    "detector": lambda: DETECTORS,
+    "arm": lambda: PRESETS,
+    "mode": lambda: MODES,
 }
+#: The registry that describes each kind's parts.
+_REGISTRIES = {"posterior": POSTERIORS, "estimator": ESTIMATORS, "family": FAMILIES,
+               "layout": LAYOUTS, "model class": MODEL_CLASSES, "strategy": STRATEGIES,
+               "exploration": EXPLORATIONS, "detector": DETECTORS, "arm": PRESETS, "mode": MODES}
 
 
 def names_of(kind: str) -> tuple[str, ...]:
@@ -86,13 +59,10 @@ def names_of(kind: str) -> tuple[str, ...]:
 
 def describe_of(kind: str) -> str:
     """``name: summary; ...`` of every registered part of ``kind`` (a name alone without one)."""
-    reg = _SOURCES[kind]()
+    reg = _REGISTRIES[kind]
     parts = []
-    for name in reg:
-        if callable(getattr(reg, "summary", None)):  # a Registry
-            summary = reg.summary(name)
-        else:  # a dict of parts with a summary attribute (or a tuple of names)
-            summary = getattr(reg[name], "summary", "") if isinstance(reg, dict) else ""
+    for name in names_of(kind):
+        summary = reg.summary(name)
         parts.append(f"{name}: {summary}" if summary else name)
     return "; ".join(parts)
 
