@@ -11,7 +11,7 @@ SEED   ?= 0
 
 JOBS   ?= 2
 
-.PHONY: help install demo test lint docs docs-serve docs-figures data data-files reproduce reproduce-ideal model-quality reproduce-layouts bench clean
+.PHONY: help install demo test lint docs docs-serve docs-figures results data data-files reproduce reproduce-ideal model-quality reproduce-layouts bench clean
 
 help:
 	@echo "make demo        install, then run the main job on the embedded default model"
@@ -43,6 +43,18 @@ docs: $(STAMP)
 
 docs-serve: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs serve
+
+# The result files the docs' Results page is generated from (benchmarks/results/*.json): each
+# benchmark at settings that finish in minutes on 2 cores, its command recorded in its file.
+RESULTS := benchmarks/results
+results: $(STAMP)
+	@mkdir -p $(RESULTS)
+	$(KBCLI) bench --json $(RESULTS)/arm.json arm
+	$(KBCLI) bench --json $(RESULTS)/detect.json detect
+	$(KBCLI) bench --json $(RESULTS)/adapt.json adapt --section exact --section learned --model data/default-model.h5 --experiments 20
+	$(KBCLI) bench --json $(RESULTS)/robust.json robust --experiments 20
+	$(KBCLI) bench --json $(RESULTS)/learn.json learn --seeds 3
+	$(KBCLI) bench --json $(RESULTS)/reliability.json reliability --seeds 3
 
 # The pictures the README and the docs show, from the stored default model.
 docs-figures: $(STAMP)

@@ -94,3 +94,22 @@ def test_the_site_builds_strictly(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     cli = (tmp_path / "site" / "reference" / "cli" / "index.html").read_text()
     assert "kbcli adapt" in cli and "kbcli bench detect" in cli
+
+
+def test_a_bench_command_writes_the_result_file_the_docs_render(tmp_path):
+    from typer.testing import CliRunner
+
+    from kbcli.cli import app
+
+    out = tmp_path / "arm.json"
+    r = CliRunner().invoke(app, ["bench", "--json", str(out), "arm", "--reaches", "20"])
+    assert r.exit_code == 0, r.output
+    d = json.loads(out.read_text())
+    assert d["command"].startswith("kbcli ") and d["kbcli_version"] and d["machine"]
+    (table,) = d["tables"]
+    assert table["columns"][0] == "preset" and len(table["rows"]) >= 3
+    page = hooks.results_markdown("arm", tmp_path)
+    assert table["rows"][0][table["columns"][2]] in page
+    bad = CliRunner().invoke(app, ["bench", "--json", str(tmp_path / "arm.h5"), "arm"])
+    assert bad.exit_code == 1 and "must end in .json" in bad.output
+    assert not (tmp_path / "arm.h5").exists()

@@ -26,6 +26,7 @@ from kbcli.cli.app import (
     progress,
     ticker,
 )
+from kbcli.cli.record import show_table
 from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -198,7 +199,7 @@ def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: 
         t.add_row(name, f"{np.median(ms):.2f}", f"{np.percentile(ms, 10):.2f}",
                   f"{np.percentile(ms, 90):.2f}", f"{np.median(cpu):.2f}",
                   f"{np.median(cpu) / np.median(r['likelihood_cpu_ms']):.1f}x")
-    con.print(t)
+    show_table(con, t)
     load = _loadavg()
     con.print(f"wall time per step on a shared machine{load}; CPU time: this process only")
     con.print(f"drawing one class's {10000} samples of p(action | sound) once: median "
@@ -259,7 +260,7 @@ def bench_adapt_cmd(
     for sec in sections:
         sec_rows = [r for r in rows if r["section"] == sec]
         if sec_rows:
-            con.print(_section_table(bench, cfg, sec, sec_rows, bench.section_title(
+            show_table(con, _section_table(bench, cfg, sec, sec_rows, bench.section_title(
                 sec, cfg, str(model) if model else None), bnd))
     err.print("medians: observations until the error first drops below the threshold; (k): runs "
               "that never got there within T; rmse in px over all runs; p: Wilcoxon signed-rank "
@@ -364,7 +365,7 @@ def bench_robust_cmd(
                   f"{r.final_median:.2f}", f"{r.final_p90:.2f}", f"{r.ms_wall:.1f}",
                   f"{r.ms_cpu:.1f}")
     con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
-    con.print(t)
+    show_table(con, t)
     st = bench.step_time(m, kb, seed=seed)
     con.print("translation step of the posterior alone (update + estimate, CPU ms, median / 90th "
               "percentile of 300 touches; one core with OMP_NUM_THREADS=1): "

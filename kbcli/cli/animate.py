@@ -9,6 +9,7 @@ import typer
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, interactive, out
+from kbcli.cli.record import show_table
 from kbcli.io.paths import DEFAULT_MODEL, default_model_path
 
 
@@ -84,6 +85,6 @@ def bench_animate_cmd(
                   f"{m['cpu_s'] / m['frames']:.3f}", f"{m['mb']:.1f}")
     # a wide table is never wrapped at a narrow default width when the output is not a terminal
     con = out if interactive() else Console(width=max(out.width, 120), highlight=False)
-    con.print(t)
+    show_table(con, t)
     err.print("CPU s: process time of the rendering (one thread); wall s includes waiting for "
               "a shared machine; neither includes kbcli's start-up (~2 s)", markup=False)

@@ -60,6 +60,30 @@ bench_app = typer.Typer(
 app.add_typer(plot_app, name="plot")
 app.add_typer(bench_app, name="bench")
 
+
+def _bench_done(*_: Any, **__: Any) -> None:
+    """After a bench command returned: write the tables it showed where ``--json`` asked."""
+    from kbcli.cli import record
+
+    record.finish()
+
+
+@bench_app.callback(result_callback=_bench_done)
+def _bench(json_path: Path | None = typer.Option(
+               None, "--json", metavar="PATH",
+               help="Also write the tables the benchmark prints to PATH (JSON: the command, "
+                    "date, machine and kbcli version with each table's rows), as the "
+                    "documentation's results pages read them (benchmarks/results/NAME.json).")
+           ) -> None:
+    """Benchmarks: tables of speed and sample efficiency (not tests)."""
+    from kbcli.cli import record
+
+    if json_path is not None:
+        if json_path.suffix != ".json":  # so it can never be one of the command's inputs
+            err.print(f"kbcli bench: --json {json_path}: a result file must end in .json")
+            raise typer.Exit(1)
+        record.start(json_path)
+
 #: Width of the consoles when the stream is not a terminal (a pipe, a file, a CI log): wide enough
 #: that Rich never wraps a line in the middle of a value (a hash, a path, a number).
 PIPE_WIDTH = 10_000

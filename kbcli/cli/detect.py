@@ -14,6 +14,7 @@ from rich.table import Table
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, out, progress
+from kbcli.cli.record import show_table
 from kbcli.core.detect import DetectorConfig
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -124,7 +125,7 @@ def bench_detect_cmd(
               f"10,000 (FA tune); FA eval: false alarms per 10,000 pre-change actions of the "
               f"evaluation streams; misses (no alarm within {cfg.horizon}) count as infinite delays")
     for group, g in res.groups.items():
-        wide.print(_group_table(res, group, g, cfg.horizon))
+        show_table(wide, _group_table(res, group, g, cfg.horizon))
     for group in res.groups:
         if (line := _verdict(bench, res, group, cfg)) is not None:
             wide.print(line)

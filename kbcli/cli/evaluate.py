@@ -12,6 +12,7 @@ from rich.table import Table
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, out, progress, run_checkpointed
+from kbcli.cli.record import show_table
 from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -227,7 +228,7 @@ def bench_evaluate_cmd(
     for label, secs, startup, steady, res in rows:
         table.add_row(label, f"{secs:.1f}", f"{startup:.1f}", f"{n / secs:.2f}", f"{steady:.2f}",
                       "yes" if same(res) else "NO")
-    out.print(table)
+    show_table(out, table)
     out.print("start-up: until the first result (process spawn, imports, model raster; for Dask "
               "also starting the LocalCluster on loopback)")
     if not all(same(r[-1]) for r in rows):

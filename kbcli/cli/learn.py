@@ -23,6 +23,7 @@ from kbcli.cli.app import (
     plot_app,
     progress,
 )
+from kbcli.cli.record import show_table
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm
@@ -199,7 +200,7 @@ def bench_learn_cmd(
         t.add_column(h, justify="left" if i < 3 else "right")
     for row in body:
         t.add_row(*row)
-    con.print(t)
+    show_table(con, t)
     con.print(f"reaches to 97 % / 99 %: median over runs of the first curve point (every "
               f"{cfg.resolution} reaches) at or above it; runs that never get there count as more "
               "than the largest budget.")
@@ -290,7 +291,7 @@ def bench_arm_cmd(
         t.add_row(r.preset, r.mode, *(f"{m:.2f} / {p:.2f}" for m, p in (r.landing, r.felt, r.contact)),
                   f"{r.reaches_per_s:,.0f}")
     con = out if interactive() else Console(width=max(out.width, 140), highlight=False)
-    con.print(t)
+    show_table(con, t)
 
 
 @command(bench_app, name="reliability")
@@ -330,6 +331,6 @@ def bench_reliability_cmd(
                   f"{100 * r.mislabel:.1f} % / {100 * r.est_mislabel:.1f} %",
                   f"{r.boundary_error:.2f} / {r.est_boundary_error:.2f}", cal, f"{r.seconds:.0f}")
     con = out if interactive() else Console(width=max(out.width, 180), highlight=False)
-    con.print(t)
+    show_table(con, t)
     worst = max(r.ece for r in rows)
     con.print(f"largest median calibration error: {worst:.3f} (target <= 0.03)")

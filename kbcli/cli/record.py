@@ -1,0 +1,90 @@
+"""Benchmark tables kept as a result file: ``kbcli bench --json PATH COMMAND ...``.
+
+Every table a bench command shows goes through :func:`show_table`; with ``--json`` the tables are
+also written, when the command ends, to one JSON file with the command line, the date, the machine
+and the kbcli version: ``{"command", "date", "machine", "kbcli_version", "platform", "tables":
+[{"title", "columns", "rows": [{column: cell}]}]}``. The documentation's results pages are
+generated from such files (``benchmarks/results/*.json``, ``tools/docs_hooks.py``), so no measured
+number in the docs is typed by hand.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import platform
+import shlex
+import sys
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+from rich.text import Text
+
+from kbcli import __version__
+from kbcli.io.atomic import atomic_path
+from kbcli.io.platform import fingerprint
+
+_recorded: list[Table] | None = None
+_path: Path | None = None
+
+
+def show_table(con: Console, table: Table) -> None:
+    """Print ``table`` on ``con``, and keep it when the command records its tables."""
+    con.print(table)
+    if _recorded is not None:
+        _recorded.append(table)
+
+
+def start(path: Path | None = None) -> None:
+    """Keep every table shown from now on (for :func:`finish` to write to ``path``)."""
+    global _recorded, _path
+    _recorded, _path = [], path
+
+
+def finish() -> None:
+    """The command ended well: write its tables where :func:`start` was asked to."""
+    global _path
+    path, _path = _path, None
+    if path is not None:
+        write(path)
+        print(f"wrote {path}", file=sys.stderr)
+
+
+def _plain(cell) -> str:
+    return cell.plain if isinstance(cell, Text) else str(cell)
+
+
+def table_dict(table: Table) -> dict:
+    """A Rich table as ``{"title", "columns", "rows"}`` of plain strings."""
+    columns = [_plain(c.header) for c in table.columns]
+    cells = [[_plain(x) for x in c.cells] for c in table.columns]
+    rows = [dict(zip(columns, r, strict=True)) for r in zip(*cells, strict=True)] if cells else []
+    return {"title": _plain(table.title or ""), "columns": columns, "rows": rows}
+
+
+def machine() -> str:
+    """A short description of this machine: CPU model (where readable), cores, OS."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}"
+
+
+def write(path: Path, argv: list[str] | None = None) -> None:
+    """Write the tables kept so far to ``path`` (atomically) and stop keeping them."""
+    global _recorded
+    tables, _recorded = _recorded or [], None
+    d = {"command": shlex.join(["kbcli", *(sys.argv[1:] if argv is None else argv)]),
+         "date": datetime.date.today().isoformat(), "machine": machine(),
+         "kbcli_version": __version__, "platform": fingerprint(),
+         "tables": [table_dict(t) for t in tables]}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path, suffix=".json") as tmp:
+        Path(tmp).write_text(json.dumps(d, indent=1) + "\n")
