@@ -112,7 +112,7 @@ class AdaptConfig:
                  **robot_options) -> None:
         # robot options given flat (``AdaptConfig(strategy="random")``, the layout before the
         # composition) still work: they override ``robot``'s
-        unknown = sorted(set(robot_options) - set(AdapterConfig.__dataclass_fields__))
+        unknown = sorted(set(robot_options) - set(AdapterConfig.model_fields))
         if unknown:
             raise ConfigError(f"unknown adapt option(s) {', '.join(unknown)}")
         if robot is None:
@@ -120,7 +120,7 @@ class AdaptConfig:
         elif robot_options:
             if not isinstance(robot, AdapterConfig):
                 raise ConfigError(f"robot must be an AdapterConfig, got {type(robot).__name__}")
-            robot = replace(robot, **robot_options)
+            robot = robot.replace(**robot_options)
         for k, v in (("robot", robot), ("mode", mode), ("reach_noise", reach_noise),
                      ("arm", arm_config(arm)), ("feedback", feedback), ("max_steps", max_steps),
                      ("stop", stop)):
@@ -145,7 +145,7 @@ class AdaptConfig:
 
     def __getattr__(self, name: str):
         # the robot's options read through (``cfg.strategy``); only called for missing attributes
-        if name != "robot" and not name.startswith("__") and name in AdapterConfig.__dataclass_fields__:
+        if name != "robot" and not name.startswith("__") and name in AdapterConfig.model_fields:
             return getattr(self.robot, name)
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
@@ -156,7 +156,7 @@ class AdaptConfig:
 
     def with_robot(self, **changes) -> AdaptConfig:
         """A copy with some robot options changed."""
-        return replace(self, robot=replace(self.robot, **changes))
+        return replace(self, robot=self.robot.replace(**changes))
 
     def sim_config(self) -> SimConfig:
         return SimConfig(mode=self.mode, reach_noise=self.reach_noise, arm=self.arm)
@@ -164,7 +164,7 @@ class AdaptConfig:
     def adapter_config(self) -> AdapterConfig:
         """The robot-side config (``blur`` is the reach noise under ``aim`` feedback)."""
         if self.feedback == "aim":
-            return replace(self.robot, blur=float(self.reach_noise))
+            return self.robot.replace(blur=float(self.reach_noise))
         return self.robot
 
     def to_dict(self) -> dict:
@@ -184,7 +184,7 @@ class AdaptConfig:
         """
         if not isinstance(d, dict):
             raise ConfigError("the adapt options must be a table")
-        robot_keys = set(AdapterConfig.__dataclass_fields__)
+        robot_keys = set(AdapterConfig.model_fields)
         flat = {k: v for k, v in d.items() if k in robot_keys}
         rest = {k: v for k, v in d.items() if k not in robot_keys}
         known = set(cls.__dataclass_fields__) | robot_keys

@@ -743,7 +743,7 @@ def _table(state: dict, acfg):
     adapt = _adapt_stage()
     if acfg is None or adapt is None:
         return None
-    key = replace(acfg.adapter_config(), strategy="random")
+    key = acfg.adapter_config().replace(strategy="random")
     if key not in state["tables"]:
         state["tables"][key] = adapt.build_shared_table(acfg, state["model"])
     return state["tables"][key]

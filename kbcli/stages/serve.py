@@ -49,7 +49,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -105,7 +105,7 @@ class ServeConfig:
         """From a flat mapping (a TOML ``[serve]`` table): any AdapterConfig field, ``max_steps``
         and ``stop``; unknown keys are rejected."""
         own = {"max_steps", "stop"}
-        known = set(AdapterConfig.__dataclass_fields__) | own
+        known = set(AdapterConfig.model_fields) | own
         unknown = sorted(set(d) - known)
         if unknown:
             raise ConfigError(f"unknown serve option(s) {', '.join(unknown)}; valid: "
@@ -116,7 +116,7 @@ class ServeConfig:
 
     def to_dict(self) -> dict:
         """Flat: the adapter's fields, ``max_steps`` and ``stop`` (what :meth:`from_dict` reads)."""
-        return {**asdict(self.adapter), "max_steps": self.max_steps, "stop": self.stop}
+        return {**self.adapter.to_dict(), "max_steps": self.max_steps, "stop": self.stop}
 
 
 class MessageError(KbcliError):
