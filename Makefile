@@ -11,7 +11,7 @@ SEED   ?= 0
 
 JOBS   ?= 2
 
-.PHONY: help install demo test lint data data-files reproduce reproduce-ideal model-quality reproduce-layouts bench clean
+.PHONY: help install demo test lint docs docs-serve docs-figures data data-files reproduce reproduce-ideal model-quality reproduce-layouts bench clean
 
 help:
 	@echo "make demo        install, then run the main job on the embedded default model"
@@ -21,11 +21,12 @@ help:
 	@echo "make reproduce-layouts  learn and adapt on every layout (out/layouts/report/; hours)"
 	@echo "make model-quality  test the paper's Sect. IV-C hypothesis: advantage vs model quality"
 	@echo "make bench       print the benchmark tables"
+	@echo "make docs        build the documentation site (site/index.html); make docs-serve serves it"
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[dev,bench]"
+	$(BIN)/python -m pip install --quiet -e ".[dev,bench,docs]"
 	@touch $@
 
 install: $(STAMP)
@@ -34,6 +35,18 @@ install: $(STAMP)
 TEST_JOBS ?= auto
 test: $(STAMP)
 	$(BIN)/pytest -q -n $(TEST_JOBS)
+
+# The documentation site (MkDocs + Material): the CLI reference, the results tables and the serve
+# transcript are generated at build time (tools/docs_hooks.py); --strict fails on broken links.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
+
+docs-serve: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs serve
+
+# The pictures the README and the docs show, from the stored default model.
+docs-figures: $(STAMP)
+	$(KBCLI) plot model data/default-model.h5 -o docs/assets/model.png
 
 lint: $(STAMP)
 	$(BIN)/ruff check kbcli tests

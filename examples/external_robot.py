@@ -39,6 +39,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("-o", "--output", default="session.h5", help="session artifact kbcli writes")
     p.add_argument("--connect", help="unix:PATH or tcp:HOST:PORT of a running kbcli serve "
                    "(default: start one with pipes)")
+    p.add_argument("--transcript", help="also write every JSON line exchanged to this file, "
+                   "each prefixed with who sent it ('kbcli' or 'robot')")
     p.add_argument("--quit-after", type=int, help="leave without a goodbye after this many "
                    "touches (to try a robot that disconnects)")
     return p.parse_args(argv)
@@ -49,6 +51,7 @@ class Link:
 
     def __init__(self, args: argparse.Namespace) -> None:
         self.proc = None
+        self.log = open(args.transcript, "w") if args.transcript else None  # noqa: SIM115
         if args.connect is None:
             cmd = [sys.executable, "-m", "kbcli", "serve", "--model", args.model,
                    "-o", args.output, "--max-steps", str(args.max_steps), "--seed", str(args.seed)]
@@ -65,17 +68,24 @@ class Link:
             self.rfile, self.wfile = sock.makefile("rb"), sock.makefile("wb")
 
     def send(self, msg: dict) -> None:
-        self.wfile.write((json.dumps(msg) + "\n").encode())
+        line = json.dumps(msg)
+        self.wfile.write((line + "\n").encode())
         self.wfile.flush()
+        if self.log:
+            self.log.write(f"robot {line}\n")
 
     def receive(self) -> dict:
         line = self.rfile.readline()
         if not line:
             raise SystemExit("kbcli closed the connection")
+        if self.log:
+            self.log.write(f"kbcli {line.decode().strip()}\n")
         return json.loads(line)
 
     def close(self) -> int:
         self.wfile.close()
+        if self.log:
+            self.log.close()
         return 0 if self.proc is None else self.proc.wait()
 
 

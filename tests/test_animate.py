@@ -10,14 +10,13 @@ from PIL import Image
 from kbcli.cli import app
 from kbcli.core.keyboard import KeyboardConfig
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.sim import SimConfig
-from kbcli.sim.arm import forward_kinematics
+from kbcli.sim import SimConfig, forward_kinematics
 from kbcli.stages import adapt as adapt_stage
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import perturb
 from kbcli.stages.models import exact_artifact
 from kbcli.stages.run import LoopConfig, LoopSession
-from kbcli.viz.animate import frame_plan, load_replay
+from kbcli.viz.replay import frame_plan, load_replay
 
 KB_ART = keyboard_stage.run(KeyboardConfig())
 MODEL_ART = exact_artifact(KB_ART)

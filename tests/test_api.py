@@ -156,17 +156,19 @@ def test_detector_public_form():
         kbcli.Detector(kbcli.DetectorConfig(), threshold=0.1)
 
 
-def _readme_example() -> str:
-    text = (ROOT / "README.md").read_text()
+def _readme_example(doc: str = "README.md") -> str:
+    text = (ROOT / doc).read_text()
     m = re.search(r"<!-- api-example -->\s*```python\n(.*?)```", text, re.S)
-    assert m, "README has no API example block"
+    assert m, f"{doc} has no API example block"
     return m.group(1)
 
 
-def test_readme_api_example_runs(monkeypatch, capsys):
-    """The README's example drives Adapter with the bundled simulator and recovers the move."""
+@pytest.mark.parametrize("doc", ["README.md", "docs/tutorials/robot.md"])
+def test_readme_api_example_runs(doc, monkeypatch, capsys):
+    """The README's and the robot tutorial's example drives Adapter with the bundled simulator and
+    recovers the move."""
     monkeypatch.chdir(ROOT)
-    exec(compile(_readme_example(), "README.md", "exec"), {"__name__": "readme"})
+    exec(compile(_readme_example(doc), doc, "exec"), {"__name__": "readme"})
     out = capsys.readouterr().out
     m = re.search(r"estimate dx ([-+.\d]+), dy ([-+.\d]+)", out)
     assert m, out

@@ -53,7 +53,7 @@ def test_realistic_preset_feels_one_to_three_px_off():
         s = bench.landing_statistics(SimConfig(mode=mode, arm="realistic"), t,
                                      np.random.default_rng(1))
         assert np.median(s["felt"]) >= 1.0 and np.median(s["felt"]) <= 3.0
-        r = PRESETS["realistic"].finger_radius
+        r = PRESETS.get("realistic").finger_radius
         assert np.max(s["contact"]) <= r + 1e-9
         # uniform in the disc: the median distance is r / sqrt(2)
         assert abs(np.median(s["contact"]) - r / math.sqrt(2)) < 0.15 * r
@@ -75,11 +75,11 @@ def test_world_hears_at_the_contact_point_and_reports_the_felt_position():
 
 
 def test_arm_config_round_trips_and_overrides_mark_it_custom():
-    for p in PRESETS.values():
+    for _, p in PRESETS.items():
         assert ArmConfig.from_dict(p.to_dict()) == p
     a = arm_config({"preset": "realistic", "finger_radius": 1.0})
-    assert a.preset == "custom" and a.finger_radius == 1.0 and a.kp == PRESETS["realistic"].kp
-    assert arm_config({"preset": "servo", "kp": PRESETS["servo"].kp}).preset == "servo"
+    assert a.preset == "custom" and a.finger_radius == 1.0 and a.kp == PRESETS.get("realistic").kp
+    assert arm_config({"preset": "servo", "kp": PRESETS.get("servo").kp}).preset == "servo"
 
 
 @pytest.mark.parametrize("table", [
@@ -145,12 +145,12 @@ def test_servo_on_chipmunk_takes_the_same_steps_as_through_pymunk(arm):
 
 
 def test_ideal_mode_says_which_part_of_the_arm_it_ignores():
-    from kbcli.sim.arms import ideal_mode_note, preset
+    from kbcli.sim import ideal_mode_note
 
-    assert ideal_mode_note(preset("ideal"), "ideal") is None
-    assert ideal_mode_note(preset("servo"), "dynamics") is None
-    assert "it is the ideal arm here" in ideal_mode_note(preset("servo"), "ideal")
-    assert "finger and proprioception act" in ideal_mode_note(preset("realistic"), "ideal")
+    assert ideal_mode_note(PRESETS.get("ideal"), "ideal") is None
+    assert ideal_mode_note(PRESETS.get("servo"), "dynamics") is None
+    assert "it is the ideal arm here" in ideal_mode_note(PRESETS.get("servo"), "ideal")
+    assert "finger and proprioception act" in ideal_mode_note(PRESETS.get("realistic"), "ideal")
 
 
 def test_play_notes_an_ignored_servo_on_stderr(runner, tmp_path):

@@ -332,9 +332,9 @@ def test_seeds_do_not_depend_on_selected_modes():
 @pytest.mark.parametrize(
     ("change", "fragment"),
     [
-        ({"bogus": 1}, "unknown evaluate option(s) bogus"),
+        ({"bogus": 1}, "unknown evaluate option 'bogus'"),
         ({"strategies": ["random", "psychic"]}, "unknown strategy 'psychic'"),
-        ({"experiments": 0}, "experiments must be a whole number >= 1"),
+        ({"experiments": 0}, "evaluate.experiments must be greater than or equal to 1"),
         ({"modes": ["telepathy"]}, "unknown mode 'telepathy'"),
         ({"baseline": "infogain"}, "baseline 'infogain' must be one of"),
         ({"thresholds": [-1.0]}, "thresholds"),
@@ -506,7 +506,7 @@ def test_cli_refuses_checkpoint_of_other_config(runner, tmp_path, model_path, fa
 @pytest.mark.parametrize(
     ("extra", "fragment"),
     [
-        (["--experiments", "0"], "experiments must be a whole number >= 1"),
+        (["--experiments", "0"], "evaluate.experiments must be greater than or equal to 1"),
         (["--mode", "dynamics"], "not in the config's modes"),
         (["--jobs", "0"], "--jobs must be >= 1"),
         (["--scheduler", "tcp://127.0.0.1:9"], "cannot reach the Dask scheduler"),
@@ -548,7 +548,7 @@ def test_cli_bad_config_file(runner, tmp_path, model_path):
     conf.write_text("[evaluate]\nexperimentz = 3\n")
     r = runner.invoke(app, ["evaluate", "--config", str(conf), "--model", str(model_path),
                             "-o", str(tmp_path / "e.h5")])
-    _one_line_error(r, "unknown evaluate option(s) experimentz")
+    _one_line_error(r, "unknown evaluate option 'experimentz'")
     r = runner.invoke(app, ["evaluate", "--config", str(conf), "--model", str(conf),
                             "-o", str(tmp_path / "e.h5")])
     assert r.exit_code == 1

@@ -198,7 +198,8 @@ SQUARE = ((0.0, 0.0), (40.0, 0.0), (40.0, 40.0), (0.0, 40.0))
 
 
 def _keys(*offsets):
-    return tuple(PolygonKey(tuple((x + dx, y + dy) for x, y in SQUARE)) for dx, dy in offsets)
+    return tuple(PolygonKey(vertices=tuple((x + dx, y + dy) for x, y in SQUARE))
+                 for dx, dy in offsets)
 
 
 @pytest.mark.parametrize(
@@ -213,11 +214,13 @@ def _keys(*offsets):
         ({"layout": "polygons"}, "needs its keys"),
         ({"layout": "polygons", "origin": (300.0, 300.0), "keys": _keys((0, 0), (20, 0))},
          "keys 0 (C3) and 1 (D3) overlap"),
-        ({"layout": "polygons", "keys": (PolygonKey(((0.0, 0.0), (1.0, 1.0), (2.0, 2.0))),)},
+        ({"layout": "polygons",
+          "keys": (PolygonKey(vertices=((0.0, 0.0), (1.0, 1.0), (2.0, 2.0))),)},
          "key 0: degenerate polygon"),
         ({"layout": "polygons", "origin": (300.0, 300.0),
-          "keys": (PolygonKey(SQUARE, note="C4", tempo=90.0),
-                   PolygonKey(tuple((x + 50, y) for x, y in SQUARE), note="C4", tempo=90.5))},
+          "keys": (PolygonKey(vertices=SQUARE, note="C4", tempo=90.0),
+                   PolygonKey(vertices=tuple((x + 50, y) for x, y in SQUARE), note="C4",
+                              tempo=90.5))},
          "keys 0 (C4, 90 bpm) and 1 (C4, 90.5 bpm) sound alike"),
         ({"layout": "grid", "rows": 20, "cols": 20}, "at most 256 keys"),
     ],
@@ -229,10 +232,11 @@ def test_bad_keyboards_are_refused_naming_the_key_or_option(kwargs, fragment):
 
 
 def test_keys_table_from_toml_is_checked():
-    with pytest.raises(ConfigError, match=r"keys\[1\]: unknown option 'colour'"):
+    with pytest.raises(ConfigError,
+                       match=r"unknown keys\[1\] option 'colour'; valid: vertices, note, tempo"):
         KeyboardConfig.from_dict({"layout": "polygons", "keys": [
             {"vertices": [list(v) for v in SQUARE]}, {"vertices": [[0, 0]], "colour": 3}]})
-    with pytest.raises(ConfigError, match=r"keys\[0\]: no vertices"):
+    with pytest.raises(ConfigError, match=r"keys\[0\].vertices is required"):
         KeyboardConfig.from_dict({"layout": "polygons", "keys": [{"note": "C4"}]})
 
 

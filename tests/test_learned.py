@@ -15,12 +15,13 @@ from kbcli.core.explore import (
     Exploration,
     ExploreConfig,
     farthest_points,
-    get_strategy,
     hex_lattice,
 )
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.learned import LearnedModel, _convex_hull, _separating_line, discover_classes
+from kbcli.core.learned import LearnedModel
 from kbcli.core.model import ExactModel
+from kbcli.core.pieces import convex_hull, separating_line
+from kbcli.core.sounds import discover_classes
 from kbcli.errors import ArtifactError, ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.sim import SimConfig, World, make_reacher
@@ -73,7 +74,7 @@ def test_discover_classes_merges_classes_split_by_noise():
 # -- geometry -----------------------------------------------------------------------------------
 def test_convex_hull_of_a_square_with_inner_points():
     p = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.5], [0.2, 0.7]], float)
-    h = _convex_hull(p)
+    h = convex_hull(p)
     assert {tuple(v) for v in h} == {(0, 0), (1, 0), (1, 1), (0, 1)}
 
 
@@ -88,7 +89,7 @@ def test_separating_line_is_the_hard_margin_svm(seed):
     a, b = p[v > 0.5], p[v < -0.5]
     if len(a) == 0 or len(b) == 0:
         return
-    line, separable = _separating_line(a, b)
+    line, separable = separating_line(a, b)
     assert separable
     assert (a @ line[:2] - line[2] > 0).all() and (b @ line[:2] - line[2] < 0).all()
     svm = SVC(kernel="linear", C=1e8).fit(np.vstack([a, b]) / 10,
@@ -224,7 +225,7 @@ def test_boundary_error_edge_cases():
 # -- exploration --------------------------------------------------------------------------------
 def test_unknown_strategy_lists_the_valid_ones():
     with pytest.raises(ConfigError, match="active, random"):
-        get_strategy("greedy")
+        STRATEGIES.get("greedy")
     with pytest.raises(ConfigError, match="budget"):
         ExploreConfig(budget=0)
 

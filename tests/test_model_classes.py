@@ -18,7 +18,7 @@ from kbcli.core.layouts import example_config_fields
 from kbcli.core.model_classes import (
     MODEL_CLASSES,
     fit_model,
-    get_model_class,
+    learned_classes,
     make_model,
     model_from_arrays,
 )
@@ -52,9 +52,10 @@ def pads_svc():
 
 # -- the registry -----------------------------------------------------------------------------------
 def test_registry_lists_the_classes_and_refuses_unknown_names():
-    assert list(MODEL_CLASSES) == ["lines", "svc"]
-    with pytest.raises(ConfigError, match="unknown model class 'gp'; valid: lines, svc"):
-        get_model_class("gp")
+    assert list(MODEL_CLASSES) == ["lines", "svc", "exact"]
+    assert learned_classes() == ("lines", "svc")
+    with pytest.raises(ConfigError, match="unknown model class 'gp'; valid: lines, svc, exact"):
+        MODEL_CLASSES.get("gp")
     with pytest.raises(ConfigError, match="takes no parameter 'gamma'"):
         make_model("svc", match_threshold=1.5, area=PADS.area, gamma=3.0)
     with pytest.raises(ConfigError, match="unknown model class .tree."):
@@ -63,7 +64,7 @@ def test_registry_lists_the_classes_and_refuses_unknown_names():
         learn_stage.LearnConfig(model_class="tree")
 
 
-@pytest.mark.parametrize("name", list(MODEL_CLASSES))
+@pytest.mark.parametrize("name", learned_classes())
 def test_every_class_follows_the_one_interface(name):
     """fit(actions, perceived) -> self; predicting before fitting raises; the same methods answer
     the same kinds of questions; to_arrays / from_arrays round-trip exactly."""
@@ -161,7 +162,7 @@ def test_svc_pairs_that_a_line_separates_get_a_straight_boundary():
     boundary is the straight line midway between the nearest samples, +-1 on them."""
     x, heard = _two_sounds(lambda p: p[:, 0] < 400.0)
     model = SVCModel(area=PADS.area).fit(x, heard)
-    ((code, svm),) = model._svms.items()
+    ((code, svm),) = model._pairs.items()
     assert svm.kernel == "linear"
     y = np.linspace(270.0, 430.0, 9)
     side = 1.0 if model.predict_class(np.array([[450.0, 350.0]]))[0] > 1 else -1.0
@@ -171,13 +172,13 @@ def test_svc_pairs_that_a_line_separates_get_a_straight_boundary():
     # a disc of one sound inside the other: no line separates them, the RBF machine bends
     disc = SVCModel(area=PADS.area).fit(*_two_sounds(
         lambda p: np.hypot(p[:, 0] - 400.0, p[:, 1] - 350.0) < 40.0))
-    (svm,) = disc._svms.values()
+    (svm,) = disc._pairs.values()
     assert svm.kernel == "rbf"
     inner, outer = disc.predict_class(np.array([[400.0, 350.0], [400.0, 420.0]]))
     assert inner != outer
     # the RBF-only machine of models stored before linear pairs: what such a stored model loads as
     rbf = SVCModel(area=PADS.area, linear_pairs=False).fit(x, heard)
-    assert next(iter(rbf._svms.values())).kernel == "rbf"
+    assert next(iter(rbf._pairs.values())).kernel == "rbf"
     old = {k: v for k, v in model.to_arrays().items() if k != "linear_pairs"}
     back = SVCModel.from_arrays(old)
     assert back.linear_pairs is False

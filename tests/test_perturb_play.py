@@ -290,7 +290,7 @@ def test_cli_perturb_bad_input(runner, kb_path, tmp_path, args, word):
         (["--melody", "A:1 H:1"], "unknown note 'H'"),
         (["--melody", "A:1 C9:1"], "'C9' is not on the keyboard"),
         (["--perturb-at", "5"], "needs a scene"),
-        (["--mode", "teleport"], "unknown mode"),
+        (["--mode", "teleport"], "unknown sim mode"),
     ],
 )
 def test_cli_play_bad_input(runner, model_path, tmp_path, args, word):

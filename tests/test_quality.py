@@ -77,6 +77,54 @@ def test_bad_quality_configs_are_refused(table):
         stage.QualityConfig.from_dict(table)
 
 
+@pytest.mark.parametrize("table,fragments", [
+    ({"budgets": [100, 5]}, ["quality.budgets", "greater than or equal to 10", "got 5"]),
+    ({"budgets": []}, ["quality.budgets", "at least one budget"]),
+    ({"budgets": [True]}, ["quality.budgets", "whole number"]),
+    ({"seed": -1}, ["quality.seed", "greater than or equal to 0", "got -1"]),
+    ({"experiments": 2.0}, ["quality.experiments", "whole number", "got 2.0"]),
+    ({"reach_noise": -0.5}, ["quality.reach_noise", "greater than or equal to 0"]),
+    ({"ideal": "yes"}, ["quality.ideal", "true or false"]),
+    ({"mode": "teleport"}, ["quality.mode", "'teleport'", "ideal, dynamics"]),
+    ({"explorations": ["psychic"]}, ["quality.explorations", "'psychic'", "active, random"]),
+    ({"arm": "clumsy"}, ["quality.arm", "'clumsy'", "realistic"]),
+    ({"rows": {"a": {"strategy": "random", "mode": "ideal"}}}, ["quality.rows", "a.mode",
+                                                                 "set by the sweep"]),
+    ({"baseline": "nobody"}, ["quality.baseline", "'nobody'", "random, active"]),
+    ({"adapt": {"max_steps": 3}}, ["quality.adapt", "max_steps"]),
+    ({"rows": {"random": {"strategy": "psychic"}}}, ["quality", "row 'random'", "'psychic'"]),
+    ({"categories": {"a": {"limit": 3}}}, ["quality.categories", "displacements"]),
+    ({"budget": [10]}, ["unknown quality option 'budget'", "budgets"]),
+])
+def test_bad_quality_config_messages_name_key_and_range(table, fragments):
+    """One line naming the table, the key and what is allowed (issue 25: pydantic configs)."""
+    with pytest.raises(ConfigError) as exc:
+        stage.QualityConfig.from_dict(table)
+    msg = str(exc.value)
+    assert "\n" not in msg
+    for f in fragments:
+        assert f in msg, (f, msg)
+
+
+def test_quality_config_normalises_round_trips_and_copies():
+    import copy
+    import pickle
+
+    cfg = stage.QualityConfig.from_dict({"budgets": [400, 100, 100], "arm": "ideal",
+                                         "reach_noise": 1, "adapt": {"robust": False}})
+    assert cfg.budgets == (100, 400) and cfg.arm["preset"] == "ideal"
+    assert cfg.reach_noise == 1.0 and isinstance(cfg.reach_noise, float)
+    assert [c.name for c in cfg.categories] == ["small", "medium", "large"]
+    back = stage.QualityConfig.from_dict(cfg.to_dict())
+    assert back == cfg and back.to_dict() == cfg.to_dict()
+    assert pickle.loads(pickle.dumps(cfg)) == cfg and copy.deepcopy(cfg) == cfg
+    with pytest.raises(TypeError):
+        cfg.rows["extra"] = {"strategy": "random"}  # read-only
+    assert cfg.with_overrides(experiments=3).experiments == 3
+    assert cfg.with_overrides(budgets=(50, 20)).budgets == (20, 50)
+    assert cfg.with_overrides() is cfg
+
+
 def test_seeds_are_paired_across_rows_and_models():
     cfg = stage.QualityConfig.from_dict({"budgets": [100, 200], "experiments": 2})
     tasks = stage.plan(cfg)

@@ -186,7 +186,7 @@ def _fit(a, s, **params):
 def test_reliability_estimates_match_the_measured_ones_on_random_exploration(random_samples):
     x, s = random_samples
     full = _fit(x, s)
-    model, rel = assess(_fit, full, x, s, rng=np.random.default_rng(0))
+    model, rel = assess(full, x, s, rng=np.random.default_rng(0))
     pred, true = scoring.key_maps(model, KB, 1.0)
     error_rate = 1 - scoring.accuracy_from_maps(pred, true)
     # the cross-validated mislabel rate estimates the error rate on the pad, and so does the one
@@ -228,12 +228,12 @@ def test_the_expected_mislabel_rate_is_not_fooled_by_touches_on_the_boundaries()
 def test_calibration_is_chosen_from_the_grid_and_applied_to_a_copy(random_samples):
     x, s = random_samples
     full = _fit(x, s)
-    model, rel = assess(_fit, full, x, s, rng=np.random.default_rng(0))
+    model, rel = assess(full, x, s, rng=np.random.default_rng(0))
     grid = {**LearnedModel.calibration_grid(), **LearnedModel.fit_grid()}
     for k, v in rel.calibration.items():
         assert v in grid[k] and getattr(model, k) == v
     assert full.noise_sd == 0.0 and full.floor == 0.0  # the input model is unchanged
-    again = assess(_fit, full, x, s, rng=np.random.default_rng(0))[1]
+    again = assess(full, x, s, rng=np.random.default_rng(0))[1]
     assert again == rel  # same inputs and seed, same numbers
 
 
@@ -282,7 +282,7 @@ def test_noisy_labels_are_calibrated_with_label_noise():
     x = rng.uniform((x0, y0), (x1, y1), size=(500, 2))
     heard = KB.perceive(x + rng.normal(0, 2.0, x.shape), rng=rng)
     full = _fit(x, heard)
-    _, rel = assess(_fit, full, x, heard, rng=np.random.default_rng(1))
+    _, rel = assess(full, x, heard, rng=np.random.default_rng(1))
     assert rel.calibration["noise_sd"] >= 1.0
 
 

@@ -17,7 +17,8 @@ from kbcli.sim import (
     rect_reachable,
     workspace_check,
 )
-from kbcli.sim.arm import DynamicsReacher, forward_kinematics, inverse_kinematics, jacobian
+from kbcli.sim.arm import DynamicsReacher
+from kbcli.sim.kinematics import forward_kinematics, inverse_kinematics, jacobian
 
 CFG = SimConfig(mode="dynamics")
 AREA = Keyboard(KeyboardConfig()).area

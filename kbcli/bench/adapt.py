@@ -47,61 +47,186 @@ map unsoftened or softened by 1 px (worse than random, 4-5 px), 2.6 px softened 
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Annotated, ClassVar
 
 import numpy as np
+from pydantic import AfterValidator, Field, Strict
 
 from kbcli.core import stats
 from kbcli.core.adapt import Adapter, AdapterConfig, build_samples, build_table
+from kbcli.core.config import Config, Count, Name, NonNegative, NonNegativeInt
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import example_config_fields, get_layout
+from kbcli.core.layouts import LAYOUTS, example_config_fields
 from kbcli.core.model import ExactModel
 from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.registry import Registry
 from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.stages.adapt import AdaptConfig, experiment
 from kbcli.stages.perturb import CATEGORIES, draw
 
-SECTIONS = ("exact", "noise", "rigid", "kde", "learned", "learned-rigid")
 STRATEGY_ORDER = ("random", "active", "infogain")
 THRESHOLDS = (4.0, 2.0, 1.0, 0.5)
 RMSE_STEPS = (1, 2, 3, 5, 10, 20, 40)
+#: The true displacements' random streams: translation draws use stream 0 (the exact section's
+#: index before sections were a registry), rigid draws stream 2 (the rigid section's).
+_TRUTH_STREAM = {"translation": 0, "rigid": 2}
 
 
-@dataclass(frozen=True, kw_only=True)
-class BenchConfig:
+@dataclass(frozen=True)
+class Section:
+    """One section of the benchmark: its rows (label, adaptation config, model) and its table.
+
+    Parameters
+    ----------
+    variants : callable
+        ``variants(cfg, base, exact, learned) -> [(label, AdaptConfig, model), ...]``: the rows,
+        in print order (each run on every category).
+    family : str
+        The transform family of the true displacements.
+    title : str
+        The table's title (``{noise}`` is the reach noise, ``{model}`` the learned model's
+        description).
+    learned : bool
+        Needs a learned model (``--model``); the table shows its boundary error.
+    angle : bool
+        The table shows the final angle RMSE.
+    """
+
+    variants: Callable[..., list[tuple[str, AdaptConfig, object]]]
+    family: str = "translation"
+    title: str = ""
+    learned: bool = False
+    angle: bool = False
+    default: bool = True
+
+
+#: The benchmark's sections (``--section``), in print order.
+SECTIONS: Registry[Section] = Registry("section")
+
+
+def _with_loop(acfg: AdaptConfig, **changes) -> AdaptConfig:
+    """A copy with loop options (reach noise, feedback) changed."""
+    return AdaptConfig.from_dict({**acfg.to_dict(), **changes})
+
+
+def _exact(cfg, base, exact, learned):
+    return [(s, base.with_robot(strategy=s), exact) for s in cfg.strategies]
+
+
+def _noise(cfg, base, exact, learned):
+    rows = [(f"{s}/aim", _with_loop(base.with_robot(strategy=s), reach_noise=cfg.noise,
+                                    feedback="aim"), exact) for s in cfg.strategies]
+    landed = _with_loop(base.with_robot(strategy="infogain"), reach_noise=cfg.noise)
+    return [*rows, ("infogain/landed", landed, exact)]
+
+
+def _rigid(cfg, base, exact, learned):
+    return [(s, base.with_robot(strategy=s, family="rigid"), exact) for s in cfg.strategies]
+
+
+def _kde(cfg, base, exact, learned):
+    rows = []
+    for s in ("random", "infogain"):
+        if s in cfg.strategies:
+            rows.append((f"{s}/kde", base.with_robot(strategy=s, posterior="kde"), exact))
+            rows.append((f"{s}/likelihood", base.with_robot(strategy=s), exact))
+    return rows
+
+
+def _learned(cfg, base, exact, learned):
+    soft = base.with_robot(model_blur=cfg.model_blur)
+    rows = [(s, soft.with_robot(strategy=s), learned) for s in cfg.strategies]
+    if "infogain" in cfg.strategies:
+        rows.append(("infogain/unsoftened", base.with_robot(model_blur=0.0), learned))
+    return rows
+
+
+def _learned_rigid(cfg, base, exact, learned):
+    soft = base.with_robot(model_blur=cfg.model_blur, family="rigid")
+    return [(s, soft.with_robot(strategy=s), learned) for s in cfg.strategies]
+
+
+_RIGID_NOTE = ("rigid family (angles up to 5 deg); a threshold of t px also needs the angle "
+               "within t/2 deg")
+SECTIONS.register("exact", Section(_exact, title="exact model, translation, no reach noise"),
+                  summary="the exact model, translation, no reach noise")
+SECTIONS.register("noise", Section(
+    _noise, title="exact model, translation, {noise} px reach noise (aim: the robot knows only "
+    "where it aimed; landed: where it landed)"), summary="2 px reach noise, aim-only feedback")
+SECTIONS.register("rigid", Section(_rigid, family="rigid", angle=True,
+                                   title="exact model, " + _RIGID_NOTE),
+                  summary="the rigid family (angles up to 5 degrees)")
+SECTIONS.register("kde", Section(
+    _kde, title="the paper's KDE posterior (Eq. 7) against the likelihood posterior"),
+    summary="the paper's KDE posterior against the likelihood one")
+SECTIONS.register("learned", Section(_learned, learned=True, title="learned model{model}"),
+                  summary="a learned model (--model)")
+SECTIONS.register("learned-rigid", Section(_learned_rigid, family="rigid", learned=True,
+                                           angle=True, default=False,
+                                           title="learned model{model}, " + _RIGID_NOTE),
+                  summary="the learned model with the rigid family")
+
+
+def default_sections(learned: bool) -> tuple[str, ...]:
+    """The sections run when none is named: every default one; the learned ones need a model."""
+    return tuple(n for n, sec in SECTIONS.items() if sec.default and (learned or not sec.learned))
+
+
+def section_title(name: str, cfg: BenchConfig, model: str | None = None) -> str:
+    """The title of a section's table (``model``: the learned model's path, if any)."""
+    desc = (f" ({model})" if model else "")
+    if name == "learned" and cfg.model_blur is not None:
+        desc += f", map softened by {cfg.model_blur:g} px"
+    return SECTIONS.get(name).title.format(noise=f"{cfg.noise:g}", model=desc)
+
+
+def _check_sections(v: tuple[str, ...]) -> tuple[str, ...]:
+    for s in v:
+        SECTIONS.get(s)
+    return v
+
+
+def _check_categories(v: tuple[str, ...]) -> tuple[str, ...]:
+    for c in v:
+        if c not in CATEGORIES:
+            raise ValueError(f"unknown category {c!r}; valid: {', '.join(CATEGORIES)}")
+    return v
+
+
+def _check_strategy(v: str) -> str:
+    AdapterConfig(strategy=v)
+    return v
+
+
+def _check_layout(v: str) -> str:
+    LAYOUTS.get(v)
+    return v
+
+
+def _check_blur(v: float | None) -> float | None:
+    AdapterConfig(model_blur=v)
+    return v
+
+
+class BenchConfig(Config):
     """Benchmark settings (see the module docstring)."""
 
-    experiments: int = 50
-    max_steps: int = 40
-    seed: int = 0
-    sections: tuple[str, ...] = ("exact", "noise", "rigid", "kde")
-    strategies: tuple[str, ...] = STRATEGY_ORDER
-    categories: tuple[str, ...] = tuple(CATEGORIES)
-    noise: float = 2.0
-    model_blur: float | None = None
-    layout: str = "grid"
+    what: ClassVar[str] = "bench adapt"
 
-    def __post_init__(self) -> None:
-        get_layout(self.layout)
-        if not isinstance(self.experiments, int) or self.experiments < 2:
-            raise ConfigError(f"experiments must be a whole number >= 2, got {self.experiments!r}")
-        if not isinstance(self.max_steps, int) or self.max_steps < 1:
-            raise ConfigError(f"max_steps must be a whole number >= 1, got {self.max_steps!r}")
-        for s in self.sections:
-            if s not in SECTIONS:
-                raise ConfigError(f"unknown section {s!r}; valid: {', '.join(SECTIONS)}")
-        for c in self.categories:
-            if c not in CATEGORIES:
-                raise ConfigError(f"unknown category {c!r}; valid: {', '.join(CATEGORIES)}")
-        if not self.strategies:
-            raise ConfigError("give at least one strategy")
-        for s in self.strategies:
-            AdapterConfig(strategy=s)
-        if not (np.isfinite(self.noise) and self.noise >= 0):
-            raise ConfigError(f"noise must be >= 0 px, got {self.noise!r}")
-        AdapterConfig(model_blur=self.model_blur)
+    experiments: Annotated[int, Strict(), Field(ge=2)] = 50
+    max_steps: Count = 40
+    seed: NonNegativeInt = 0
+    sections: Annotated[tuple[Name, ...], AfterValidator(_check_sections)] = (
+        "exact", "noise", "rigid", "kde")
+    strategies: Annotated[tuple[Annotated[Name, AfterValidator(_check_strategy)], ...],
+                          Field(min_length=1)] = STRATEGY_ORDER
+    categories: Annotated[tuple[Name, ...], AfterValidator(_check_categories)] = tuple(CATEGORIES)
+    noise: NonNegative = 2.0
+    model_blur: Annotated[float | None, AfterValidator(_check_blur)] = None
+    layout: Annotated[Name, AfterValidator(_check_layout)] = "grid"
 
 
 @dataclass
@@ -123,8 +248,7 @@ class Cell:
 
 
 def _truths(cfg: BenchConfig, family: str, category: str) -> np.ndarray:
-    ss = np.random.SeedSequence([cfg.seed, SECTIONS.index("exact") if family == "translation"
-                                 else SECTIONS.index("rigid"), list(CATEGORIES).index(category)])
+    ss = np.random.SeedSequence([cfg.seed, _TRUTH_STREAM[family], list(CATEGORIES).index(category)])
     return draw(category, family, cfg.experiments, rng=np.random.default_rng(ss))
 
 
@@ -141,53 +265,14 @@ def plan(cfg: BenchConfig, learned_model=None, keyboard: Keyboard | None = None)
     seeds = np.random.SeedSequence(cfg.seed).spawn(cfg.experiments)
     base = AdaptConfig(max_steps=cfg.max_steps)
     cells: list[Cell] = []
-
-    def add(section: str, label: str, acfg: AdaptConfig, model, family: str) -> None:
-        for cat in cfg.categories:
-            cells.append(Cell(section, label, acfg.strategy, cat, acfg, model,
-                              _truths(cfg, family, cat), seeds))
-
-    def with_(acfg: AdaptConfig, **robot) -> AdaptConfig:
-        return acfg.with_robot(**robot)
-
-    for section in cfg.sections:
-        if section == "exact":
-            for s in cfg.strategies:
-                add(section, s, with_(base, strategy=s), exact, "translation")
-        elif section == "noise":
-            for s in cfg.strategies:
-                add(section, f"{s}/aim", replace(with_(base, strategy=s), reach_noise=cfg.noise,
-                                                 feedback="aim"), exact, "translation")
-            add(section, "infogain/landed", replace(with_(base, strategy="infogain"),
-                                                    reach_noise=cfg.noise), exact, "translation")
-        elif section == "rigid":
-            for s in cfg.strategies:
-                add(section, s, with_(base, strategy=s, family="rigid"), exact, "rigid")
-        elif section == "kde":
-            for s in ("random", "infogain"):
-                if s in cfg.strategies:
-                    add(section, f"{s}/kde", with_(base, strategy=s, posterior="kde"), exact,
-                        "translation")
-                    add(section, f"{s}/likelihood", with_(base, strategy=s), exact,
-                        "translation")
-        elif section == "learned":
-            if learned_model is None:
-                raise ConfigError("section learned needs a learned model: pass --model model.h5")
-            soft = with_(base, model_blur=cfg.model_blur)
-            for s in cfg.strategies:
-                add(section, s, with_(soft, strategy=s), learned_model, "translation")
-            if "infogain" in cfg.strategies:
-                add(section, "infogain/unsoftened", with_(base, model_blur=0.0), learned_model,
-                    "translation")
-        elif section == "learned-rigid":
-            if learned_model is None:
-                raise ConfigError("section learned-rigid needs a learned model: pass --model "
-                                  "model.h5")
-            soft = with_(base, model_blur=cfg.model_blur, family="rigid")
-            for s in cfg.strategies:
-                add(section, s, with_(soft, strategy=s), learned_model, "rigid")
-    for cell in cells:
-        cell.keyboard = kb
+    for name in cfg.sections:
+        section = SECTIONS.get(name)
+        if section.learned and learned_model is None:
+            raise ConfigError(f"section {name} needs a learned model: pass --model model.h5")
+        for label, acfg, model in section.variants(cfg, base, exact, learned_model):
+            cells.extend(Cell(name, label, acfg.strategy, cat, acfg, model,
+                              _truths(cfg, section.family, cat), seeds, keyboard=kb)
+                         for cat in cfg.categories)
     return cells
 
 

@@ -14,12 +14,12 @@ from __future__ import annotations
 
 import tempfile
 import time
-from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
-from kbcli.errors import ConfigError
+from kbcli.core.config import Config, Count, Flag, NonNegativeInt
 from kbcli.stages import adapt as adapt_stage
 from kbcli.stages import perturb as perturb_stage
 from kbcli.stages import run as run_stage
@@ -28,20 +28,15 @@ from kbcli.stages.artifact import Artifact
 TARGET_S = 15.0
 
 
-@dataclass(frozen=True, kw_only=True)
-class BenchConfig:
+class BenchConfig(Config):
     """Benchmark settings (see the module docstring)."""
 
-    repeats: int = 3
-    touches: int = 40
-    loop: bool = True
-    seed: int = 0
+    what: ClassVar[str] = "bench animate"
 
-    def __post_init__(self) -> None:
-        for name in ("repeats", "touches"):
-            v = getattr(self, name)
-            if not isinstance(v, int) or isinstance(v, bool) or v < 1:
-                raise ConfigError(f"{name} must be a whole number >= 1, got {v!r}")
+    repeats: Count = 3
+    touches: Count = 40
+    loop: Flag = True
+    seed: NonNegativeInt = 0
 
 
 def make_runs(cfg: BenchConfig, model_art: Artifact) -> dict[str, Artifact]:

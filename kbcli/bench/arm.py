@@ -53,8 +53,8 @@ def landing_statistics(sim: SimConfig, targets: np.ndarray,
     }
 
 
-def run(reaches: int = 500, seed: int = 0, presets: tuple[str, ...] = tuple(PRESETS),
-        modes: tuple[str, ...] = MODES) -> list[ArmRow]:
+def run(reaches: int = 500, seed: int = 0, presets: tuple[str, ...] = PRESETS.names(),
+        modes: tuple[str, ...] = MODES.names()) -> list[ArmRow]:
     """One row per preset and mode (see the module docstring)."""
     kb = Keyboard(KeyboardConfig())
     x0, y0, x1, y1 = kb.area
@@ -63,7 +63,7 @@ def run(reaches: int = 500, seed: int = 0, presets: tuple[str, ...] = tuple(PRES
         for mode in modes:
             rng = np.random.default_rng(seed)
             targets = rng.uniform((x0, y0), (x1, y1), size=(reaches, 2))
-            s = landing_statistics(SimConfig(mode=mode, arm=PRESETS[name]), targets, rng)
+            s = landing_statistics(SimConfig(mode=mode, arm=PRESETS.get(name)), targets, rng)
             rows.append(ArmRow(name, mode, _stats(s["landing"]), _stats(s["felt"]),
                                _stats(s["contact"]), reaches / max(float(s["seconds"]), 1e-9)))
     return rows

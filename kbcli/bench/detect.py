@@ -30,24 +30,40 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
+from typing import Annotated, ClassVar
 
 import numpy as np
+from pydantic import AfterValidator, Field, model_validator
 
 from kbcli.core import detect as det
+from kbcli.core.config import Config, Count, Name, Positive, Rate, Whole
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.melody import DEFAULT_MELODY, parse_melody
 from kbcli.core.model import ExactModel
 from kbcli.core.play import expected_failure_rate
-from kbcli.errors import ConfigError, KbcliError
+from kbcli.errors import KbcliError
 from kbcli.stages.perturb import CATEGORIES, draw
 
 OURS = ("binomial", "cusum", "bocpd")
 RIVER = ("fhddm", "ddm", "adwin")
 
 
-@dataclass(frozen=True, kw_only=True)
-class BenchConfig:
+def _check_categories(v: tuple[str, ...]) -> tuple[str, ...]:
+    for c in v:
+        if c not in CATEGORIES:
+            raise ValueError(f"unknown category {c!r}; valid: {', '.join(CATEGORIES)}")
+    return v
+
+
+def _check_detectors(v: tuple[str, ...]) -> tuple[str, ...]:
+    for d in v:
+        if d not in OURS + RIVER:
+            raise ValueError(f"unknown detector {d!r}; valid: {', '.join(OURS + RIVER)}")
+    return v
+
+
+class BenchConfig(Config):
     """Benchmark settings (see the module docstring).
 
     Parameters
@@ -75,38 +91,28 @@ class BenchConfig:
         Which detectors to run (ours: binomial, cusum, bocpd; river: fhddm, ddm, adwin).
     """
 
-    p_pre: float = 0.01
-    p_post: tuple[float, ...] | None = None
-    categories: tuple[str, ...] = ("small", "medium", "large")
-    streams: int = 400
-    change_min: int = 300
-    change_max: int = 1300
-    horizon: int = 1000
-    tune_actions: int = 1_000_000
-    fa_target: float = 1.0
-    n_lt: int = 100
-    n_st: int = 10
-    detectors: tuple[str, ...] = OURS + RIVER
+    what: ClassVar[str] = "bench detect"
 
-    def __post_init__(self) -> None:
-        if not (0 < self.p_pre < 1):
-            raise ConfigError(f"p_pre must be in (0, 1), got {self.p_pre!r}")
-        if self.p_post is not None and not all(0 < p <= 1 for p in self.p_post):
-            raise ConfigError(f"post-change rates must be in (0, 1], got {self.p_post!r}")
-        for c in self.categories:
-            if c not in CATEGORIES:
-                raise ConfigError(f"unknown category {c!r}; valid: {', '.join(CATEGORIES)}")
-        for name in ("streams", "horizon", "tune_actions", "change_min"):
-            if getattr(self, name) < 1:
-                raise ConfigError(f"{name} must be >= 1, got {getattr(self, name)!r}")
+    p_pre: Rate = 0.01
+    p_post: tuple[Annotated[float, Field(gt=0, le=1)], ...] | None = None
+    categories: Annotated[tuple[Name, ...], AfterValidator(_check_categories)] = (
+        "small", "medium", "large")
+    streams: Count = 400
+    change_min: Count = 300
+    change_max: Count = 1300
+    horizon: Count = 1000
+    tune_actions: Count = 1_000_000
+    fa_target: Positive = 1.0
+    n_lt: Whole = 100
+    n_st: Whole = 10
+    detectors: Annotated[tuple[Name, ...], AfterValidator(_check_detectors)] = OURS + RIVER
+
+    @model_validator(mode="after")
+    def _consistent(self) -> BenchConfig:
         if self.change_max < self.change_min:
-            raise ConfigError("change_max must be >= change_min")
-        if not self.fa_target > 0:
-            raise ConfigError(f"fa_target must be > 0, got {self.fa_target!r}")
-        for d in self.detectors:
-            if d not in OURS + RIVER:
-                raise ConfigError(f"unknown detector {d!r}; valid: {', '.join(OURS + RIVER)}")
+            raise ValueError("change_max must be >= change_min")
         det.DetectorConfig(n_lt=self.n_lt, n_st=self.n_st)  # validates the windows
+        return self
 
 
 @dataclass
@@ -254,7 +260,7 @@ def tune_ours(cfg: det.DetectorConfig, x: np.ndarray, lengths: np.ndarray,
         hi = lo
     thr = 10.0**hi
     while True:  # restarts can add a few alarms: step down until the measured rate is in target
-        _, fired = det.run_batch(replace(cfg, threshold=thr), x, restart=True)
+        _, fired = det.run_batch(cfg.replace(threshold=thr), x, restart=True)
         r = fa_rate([np.flatnonzero(f) for f in fired], lengths)
         if r <= target or thr < 1e-300:
             return thr, r

@@ -23,19 +23,20 @@ import json
 import math
 import os
 from collections.abc import Iterator
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, ClassVar
 
 import numpy as np
+from pydantic import AfterValidator, Field, model_validator
 
 from kbcli import __version__
 from kbcli.bench import adapt as adapt_bench
 from kbcli.bench import learn as learn_bench
-from kbcli.core.config import check_known
+from kbcli.core.config import Config, Count, Name, Names, NonNegativeInt, Whole
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import get_layout
-from kbcli.core.model_classes import get_model_class
+from kbcli.core.layouts import LAYOUTS
+from kbcli.core.model_classes import check_learned
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.atomic import atomic_path
@@ -49,46 +50,51 @@ TARGET_800, TARGET_1600, TARGET_RATIO, TARGET_GRID_LINES = 0.97, 0.99, 0.5, 0.99
 TARGET_TOUCHES, TARGET_PX = 8.0, 2.0
 
 
-def _tuple(v: Any, name: str) -> tuple:
-    if not isinstance(v, (list, tuple)) or not v:
-        raise ConfigError(f"{name} must be a non-empty list, got {v!r}")
-    return tuple(v)
+def _check_layouts(v: tuple[str, ...]) -> tuple[str, ...]:
+    for name in v:
+        LAYOUTS.get(name)
+    return v
 
 
-@dataclass(frozen=True, kw_only=True)
-class LayoutsConfig:
+def _check_class(v: str) -> str:
+    if v != "best":
+        check_learned(v)
+    return v
+
+
+class LayoutsConfig(Config):
     """The ``[layouts]`` table of ``pipelines/layouts.toml`` (see that file)."""
 
-    layouts: tuple[str, ...] = ("grid", "hex", "piano", "pads", "polygons")
-    keyboards: str = "pipelines/layouts"
-    seed: int = 0
-    model_classes: tuple[str, ...] = ("lines", "svc")
-    strategies: tuple[str, ...] = ("active", "random")
-    seeds: int = 5
-    budgets: tuple[int, ...] = (200, 400, 800, 1600)
-    boundary_budget: int = 800
-    mode: str = "ideal"
-    adapt_budget: int = 800
-    adapt_class: str = "best"
-    experiments: int = 20
-    adapt_strategies: tuple[str, ...] = ("random", "active", "infogain")
-    rigid_experiments: int = 10
-    rigid_strategies: tuple[str, ...] = ("random", "infogain")
-    max_steps: int = 40
-    #: the TOML file it was read from (named in the report)
-    source: str = "pipelines/layouts.toml"
+    what: ClassVar[str] = "layouts"
 
-    def __post_init__(self) -> None:
-        for name in self.layouts:
-            get_layout(name)
-        if self.adapt_class != "best":
-            get_model_class(self.adapt_class)
-        if not isinstance(self.adapt_budget, int) or self.adapt_budget < 1:
-            raise ConfigError(f"adapt budget must be a whole number >= 1, got {self.adapt_budget!r}")
+    layouts: Annotated[Names, AfterValidator(_check_layouts)] = (
+        "grid", "hex", "piano", "pads", "polygons")
+    keyboards: Name = "pipelines/layouts"
+    seed: NonNegativeInt = 0
+    model_classes: Names = ("lines", "svc")
+    strategies: Names = ("active", "random")
+    seeds: Count = 5
+    budgets: Annotated[tuple[Count, ...], Field(min_length=1)] = (200, 400, 800, 1600)
+    boundary_budget: Count = 800
+    mode: Name = "ideal"
+    adapt_budget: Count = 800
+    adapt_class: Annotated[Name, AfterValidator(_check_class)] = "best"
+    experiments: Whole = 20
+    adapt_strategies: Names = ("random", "active", "infogain")
+    rigid_experiments: NonNegativeInt = 10
+    rigid_strategies: Names = ("random", "infogain")
+    max_steps: Count = 40
+    #: the TOML file it was read from (named in the report)
+    source: Name = "pipelines/layouts.toml"
+
+    @model_validator(mode="after")
+    def _parts(self) -> LayoutsConfig:
+        """The learning and adaptation benchmarks' configs are valid."""
         self.learn_config()
         self.adapt_config("learned")
         if self.rigid_experiments:
             self.adapt_config("learned-rigid")
+        return self
 
     def learn_config(self) -> learn_bench.BenchConfig:
         return learn_bench.BenchConfig(
@@ -132,15 +138,7 @@ class LayoutsConfig:
         kw: dict[str, Any] = dict(d)
         kw.update(learn)
         kw.update({amap[k]: v for k, v in adapt.items()})
-        for name in ("layouts", "model_classes", "strategies", "budgets", "adapt_strategies",
-                     "rigid_strategies"):
-            if name in kw:
-                kw[name] = _tuple(kw[name], name)
-        check_known(cls, kw, "layouts")
         return cls(**kw, source=str(path))
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 @dataclass
@@ -197,7 +195,7 @@ class Pipeline:
         cache = self.out / "cache"
         cache.mkdir(parents=True, exist_ok=True)
         for name, res in self.results.items():
-            one = replace(bc, layouts=(name,))
+            one = bc.replace(layouts=(name,))
             for r in learn_bench.runs(one, res.keyboard, cache):
                 res.learn_runs.append(r)
                 yield r

@@ -23,16 +23,18 @@ import time
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Annotated, ClassVar
 
 import numpy as np
+from pydantic import AfterValidator, Field, model_validator
 
 from kbcli import __version__
 from kbcli.core import accuracy as scoring
+from kbcli.core.config import Config, Count, Name, NonNegativeInt, Number, Positive
 from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import LAYOUTS, example_config_fields, get_layout
-from kbcli.core.model_classes import fit_model, get_model_class
-from kbcli.errors import ConfigError
+from kbcli.core.layouts import LAYOUTS, example_config_fields
+from kbcli.core.model_classes import check_learned, fit_model
 from kbcli.io.atomic import atomic_path
 from kbcli.sim import MODES, SimConfig, World, check_keyboard_reachable, make_reacher
 from kbcli.stages import keyboard as keyboard_stage
@@ -48,46 +50,51 @@ def bench_keyboard(layout: str) -> Keyboard:
     return Keyboard(KeyboardConfig(layout=layout, **example_config_fields(layout)))
 
 
-@dataclass(frozen=True, kw_only=True)
-class BenchConfig:
+def _check_strategies(v: tuple[str, ...]) -> tuple[str, ...]:
+    for s in v:
+        if s not in STRATEGIES:
+            raise ValueError(f"unknown strategy {s!r}; valid: {', '.join(sorted(STRATEGIES))}")
+    return v
+
+
+def _check_layouts(v: tuple[str, ...]) -> tuple[str, ...]:
+    for name in v:
+        LAYOUTS.get(name)
+    return v
+
+
+def _check_classes(v: tuple[str, ...]) -> tuple[str, ...]:
+    for name in v:
+        check_learned(name)
+    return v
+
+
+class BenchConfig(Config):
     """Benchmark settings (see the module docstring)."""
 
-    seeds: int = 5
-    budgets: tuple[int, ...] = DEFAULT_BUDGETS
-    strategies: tuple[str, ...] = STRATEGY_ORDER
-    layouts: tuple[str, ...] = ("grid",)
-    model_classes: tuple[str, ...] = ("lines",)
-    mode: str = "ideal"
-    reach_noise: float = 0.0
-    seed: int = 0
-    resolution: int = 50
-    boundary_budget: int = 800
-    eval_step: float = 1.0
+    what: ClassVar[str] = "bench learn"
 
-    def __post_init__(self) -> None:
-        if not isinstance(self.seeds, int) or self.seeds < 1:
-            raise ConfigError(f"seeds must be a whole number >= 1, got {self.seeds!r}")
-        if not self.budgets or any(not isinstance(b, int) or b < 1 for b in self.budgets):
-            raise ConfigError(f"budgets must be whole numbers >= 1, got {self.budgets!r}")
-        object.__setattr__(self, "budgets", tuple(sorted(set(self.budgets))))
-        for s in self.strategies:
-            if s not in STRATEGIES:
-                raise ConfigError(f"unknown strategy {s!r}; valid: {', '.join(sorted(STRATEGIES))}")
-        if not self.strategies:
-            raise ConfigError("give at least one strategy")
-        if not self.layouts or not self.model_classes:
-            raise ConfigError("give at least one layout and one model class")
-        for name in self.layouts:
-            get_layout(name)
-        for name in self.model_classes:
-            get_model_class(name)
+    seeds: Count = 5
+    #: sorted, each once
+    budgets: Annotated[tuple[Count, ...], Field(min_length=1),
+                       AfterValidator(lambda v: tuple(sorted(set(v))))] = DEFAULT_BUDGETS
+    strategies: Annotated[tuple[Name, ...], Field(min_length=1),
+                          AfterValidator(_check_strategies)] = STRATEGY_ORDER
+    layouts: Annotated[tuple[Name, ...], Field(min_length=1),
+                       AfterValidator(_check_layouts)] = ("grid",)
+    model_classes: Annotated[tuple[Name, ...], Field(min_length=1),
+                             AfterValidator(_check_classes)] = ("lines",)
+    mode: Name = "ideal"
+    reach_noise: Number = 0.0
+    seed: NonNegativeInt = 0
+    resolution: Count = 50
+    boundary_budget: Count = 800
+    eval_step: Positive = 1.0
+
+    @model_validator(mode="after")
+    def _sim(self) -> BenchConfig:
         SimConfig(mode=self.mode, reach_noise=self.reach_noise)
-        if not isinstance(self.resolution, int) or self.resolution < 1:
-            raise ConfigError(f"resolution must be a whole number >= 1, got {self.resolution!r}")
-        if not isinstance(self.boundary_budget, int) or self.boundary_budget < 1:
-            raise ConfigError(f"boundary budget must be >= 1, got {self.boundary_budget!r}")
-        if not (np.isfinite(self.eval_step) and self.eval_step > 0):
-            raise ConfigError(f"eval_step must be > 0 px, got {self.eval_step!r}")
+        return self
 
     @property
     def max_budget(self) -> int:

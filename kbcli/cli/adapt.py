@@ -11,8 +11,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from kbcli.cli import options as opts
 from kbcli.cli.app import (
-    FIGURE_HELP,
     bench_app,
     busy,
     check_io,
@@ -48,41 +48,27 @@ def _snapshots(text: str, max_steps: int) -> tuple[int, ...]:
 
 @command(name="adapt")
 def adapt_cmd(
-    model: Annotated[Path, typer.Option("--model", help="Model artifact (.h5, kind 'model').")],
+    model: opts.model_option(),
     scene: Annotated[Path, typer.Option("--scene", help="Scene artifact (.h5, kind 'scene'): the "
                                         "displaced keyboard, for the simulated world only.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Run artifact to write (.h5).")],
-    config: Annotated[Path | None, typer.Option(
-        "--config", help="TOML file with an [adapt] table (any AdaptConfig option); flags "
-        "override it.")] = None,
-    strategy: Annotated[str | None, typer.Option(
-        "--strategy", help="random, active or infogain [default infogain].")] = None,
-    posterior: Annotated[str | None, typer.Option(
-        "--posterior", help="likelihood or kde (the paper's Eq. 7) [default likelihood].")] = None,
-    family: Annotated[str | None, typer.Option(
-        "--family", help="translation or rigid [default: the scene's family].")] = None,
-    mode: Annotated[str | None, typer.Option(
-        "--mode", help="ideal or dynamics [default ideal].")] = None,
+    output: opts.output_option("Run artifact to write (.h5)."),
+    config: opts.config_option(
+        "TOML file with an [adapt] table (any AdaptConfig option); flags override it.") = None,
+    strategy: opts.strategy_option("infogain") = None,
+    posterior: opts.posterior_option("likelihood") = None,
+    estimator: opts.estimator_option() = None,
+    family: opts.family_option("the scene's family") = None,
+    mode: opts.mode_option("ideal") = None,
     reach_noise: Annotated[float | None, typer.Option(
         "--reach-noise", help="Landing scatter of the arm, px [default 0].")] = None,
     feedback: Annotated[str | None, typer.Option(
         "--feedback", help="landed (the robot feels where it landed) or aim [default landed].")
     ] = None,
-    arm: Annotated[str | None, typer.Option("--arm", help="Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains "
-        "and joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
-        "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields) [default ideal].")] = None,
-    model_blur: Annotated[float | None, typer.Option(
-        "--model-blur", help="Override: fix the blur (px, 0-50) of the model's key edges. "
-        "Default: the robust posterior learns it from the touches (translation: it weighs "
-        "0, 1, 2.5 and 5 px and twice a weak model's own boundary error; rigid: 0 px; "
-        "recorded in the run as robust_blurs); the plain (robust = false) and kde "
-        "posteriors soften a learned model's map by 1 px, the exact one's by 0.")] = None,
-    max_steps: Annotated[int | None, typer.Option(
-        "--max-steps", "-T", help="Observations at most [default 40].")] = None,
-    resolution: Annotated[float | None, typer.Option(
-        "--resolution", help="Hypothesis grid step, px [default 0.5].")] = None,
-    prior_halfwidth: Annotated[float | None, typer.Option(
-        "--prior-halfwidth", help="Prior box of dx and dy, +-px [default 45].")] = None,
+    arm: opts.arm_option("ideal", optional=True) = None,
+    model_blur: opts.ModelBlur = None,
+    max_steps: opts.max_steps_option("Observations at most [default 40].") = None,
+    resolution: opts.Resolution = None,
+    prior_halfwidth: opts.PriorHalfwidth = None,
     stop: Annotated[bool | None, typer.Option(
         "--stop/--no-stop", help="End at the stopping rule (mass within 1 px >= 0.95) instead of "
         "always taking T steps [default --no-stop].")] = None,
@@ -90,7 +76,7 @@ def adapt_cmd(
         "--snapshots", help="Steps at which to store the posterior (0 = prior), or 'all' (every "
         "step: kbcli animate then shows each one).")
     ] = "0,1,2,3,5,10,20,40",
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the robot's and world's draws.")] = 0,
+    seed: opts.seed_option("Seed of the robot's and world's draws.") = 0,
 ) -> None:
     """Recover the scene's displacement by touching and listening.
 
@@ -101,14 +87,11 @@ def adapt_cmd(
     """
     check_io({"--model": model, "--scene": scene, "--config": config, "--arm": arm_file(arm)},
              ("--output", output))
-    values = load_stage_table(config, "adapt") if config is not None else {}
-    flags = {"strategy": strategy, "posterior": posterior, "family": family, "mode": mode,
-             "reach_noise": reach_noise, "feedback": feedback, "model_blur": model_blur,
-             "max_steps": max_steps,
-             "resolution": resolution, "prior_halfwidth": prior_halfwidth, "stop": stop}
-    values.update({k: v for k, v in flags.items() if v is not None})
-    if arm is not None:
-        values["arm"] = load_arm(arm)
+    flags = {"strategy": strategy, "posterior": posterior, "estimator": estimator,
+             "family": family, "mode": mode, "reach_noise": reach_noise, "feedback": feedback,
+             "model_blur": model_blur, "max_steps": max_steps, "resolution": resolution,
+             "prior_halfwidth": prior_halfwidth, "stop": stop}
+    values = _adapt_values(config, flags, arm)
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
     values.setdefault("family", scene_art.config.get("family", "translation"))
@@ -121,6 +104,20 @@ def adapt_cmd(
         art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
                         snapshot_steps=steps, on_step=tick)
     write_artifact(art, output)
+    _report_run(art, cfg, output)
+
+
+def _adapt_values(config: Path | None, flags: dict, arm: str | None) -> dict:
+    """The [adapt] table of ``config`` (if any) with the flags given on top, and the arm."""
+    values = load_stage_table(config, "adapt") if config is not None else {}
+    values.update({k: v for k, v in flags.items() if v is not None})
+    if arm is not None:
+        values["arm"] = load_arm(arm)
+    return values
+
+
+def _report_run(art, cfg, output: Path) -> None:
+    """One line on the run written; a note when the truth lay outside the prior."""
     a = art.attrs
     est = ", ".join(f"{k}={v:.2f}" for k, v in a["estimate"].items())
     truth = ", ".join(f"{k}={v:.2f}" for k, v in a["truth"].items())
@@ -141,7 +138,7 @@ def adapt_cmd(
 @command(plot_app, name="adapt")
 def plot_adapt_cmd(
     run: Annotated[Path, typer.Argument(help="Run artifact (kind 'run') from kbcli adapt.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path(
+    output: opts.Figure = Path(
         "adapt.png"),
 ) -> None:
     """Draw the posterior's evolution (the paper's Fig. 5) and the error and entropy curves.
@@ -182,7 +179,8 @@ def _loadavg() -> str:
 def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: int,
                      con: Console) -> None:
     """Print the KDE step's speed on the learned model (the issue's target: <= 5 ms per step)."""
-    from kbcli.stages.models import default_model_path, load_model
+    from kbcli.io.paths import default_model_path
+    from kbcli.stages.models import load_model
 
     if learned is None:
         model_path = default_model_path()
@@ -214,20 +212,18 @@ def bench_adapt_cmd(
     section: Annotated[list[str] | None, typer.Option(
         "--section", help="exact, noise, rigid, kde, learned or learned-rigid (repeat for several) "
         "[default: exact, noise, rigid and kde, plus learned when --model is given].")] = None,
-    model: Annotated[Path | None, typer.Option(
-        "--model", help="A learned model artifact for the learned section.")] = None,
-    strategy: Annotated[list[str] | None, typer.Option(
-        "--strategy", help="Strategies to run (repeat) [default random, active, infogain].")] = None,
+    model: opts.model_option("A learned model artifact for the learned section.",
+                             optional=True) = None,
+    strategy: opts.strategies_option("random, active, infogain") = None,
     category: Annotated[list[str] | None, typer.Option(
         "--category", help="small, medium, large (repeat) [default all three].")] = None,
     max_steps: Annotated[int, typer.Option("--max-steps", "-T", help="Steps per run.")] = 40,
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of displacements and runs.")] = 0,
+    seed: opts.seed_option("Seed of displacements and runs.") = 0,
     model_blur: Annotated[float | None, typer.Option(
         "--model-blur", help="learned section: soften the model's map by this many px [default "
         "1].")] = None,
-    layout: Annotated[str | None, typer.Option(
-        "--layout", help="Keyboard layout of every section: grid, hex, piano, pads, polygons (its "
-        "default keyboard) [default: the model's keyboard with --model, else grid].")] = None,
+    layout: opts.layout_option("Keyboard layout of every section: {layouts} (its default keyboard) "
+                               "[default: the model's keyboard with --model, else grid].") = None,
     kde_steps: Annotated[int, typer.Option(
         "--kde-steps", min=1, help="kde section: touches timed for the KDE step's speed (on --model, "
         "default data/default-model.h5).")] = 200,
@@ -243,85 +239,28 @@ def bench_adapt_cmd(
     """
     from kbcli.bench import adapt as bench
 
-    learned = None
-    model_art = None
-    kb = None
-    if model is not None:
-        model_art = read_artifact(model, "model")
-        from kbcli.stages import keyboard as keyboard_stage
-        from kbcli.stages.models import load_model
-
-        learned = load_model(model_art)
-        kb = keyboard_stage.load(model_art)
-        if layout is not None and layout != kb.layout:
-            raise ConfigError(f"--layout {layout} but the model {model} was learned on a "
-                              f"{kb.layout} keyboard")
-        layout = kb.layout
-    sections = tuple(section) if section else tuple(
-        s for s in bench.SECTIONS if s == "learned" and model is not None
-        or not s.startswith("learned"))
+    learned, model_art, kb, layout = _bench_model(model, layout)
+    sections = tuple(section) if section else bench.default_sections(model is not None)
     cfg = bench.BenchConfig(
         experiments=experiments, max_steps=max_steps, seed=seed, sections=sections,
         strategies=tuple(strategy) if strategy else bench.STRATEGY_ORDER,
         categories=tuple(category) if category else tuple(bench.CATEGORIES), model_blur=model_blur,
         layout=layout or "grid")
+    # tables are wide: never wrap them at a narrow default width when the output is not a terminal
+    con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
     if "kde" in sections:
-        wide = out if interactive() else Console(width=max(out.width, 200), highlight=False)
-        _kde_speed_table(bench, model, learned, kde_steps, seed, wide)
+        _kde_speed_table(bench, model, learned, kde_steps, seed, con)
     cells = bench.plan(cfg, learned, kb)
     total = sum(len(c.truths) for c in cells)
     for _ in progress(bench.run_cells(cells), total, "adaptation runs"):
         pass
     rows = bench.summarize(cells)
-    titles = {
-        "exact": "exact model, translation, no reach noise",
-        "noise": f"exact model, translation, {cfg.noise:g} px reach noise (aim: the robot knows "
-                 f"only where it aimed; landed: where it landed)",
-        "rigid": "exact model, rigid family (angles up to 5 deg); a threshold of t px also needs "
-                 "the angle within t/2 deg",
-        "kde": "the paper's KDE posterior (Eq. 7) against the likelihood posterior",
-        "learned": "learned model" + (f" ({model})" if model else "")
-                   + (f", map softened by {model_blur:g} px" if model_blur is not None else ""),
-        "learned-rigid": "learned model" + (f" ({model})" if model else "")
-                         + ", rigid family (angles up to 5 deg); a threshold of t px also needs "
-                           "the angle within t/2 deg",
-    }
-    # tables are wide: never wrap them at a narrow default width when the output is not a terminal
-    con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
+    bnd = model_art.attrs.get("boundary_error_px") if model_art is not None else None
     for sec in sections:
         sec_rows = [r for r in rows if r["section"] == sec]
-        if not sec_rows:
-            continue
-        T = sec_rows[0]["T"]
-        t = Table(title=f"{cfg.layout} layout, {titles[sec]}: {experiments} runs per row, T = {T}",
-                  title_justify="left")
-        t.add_column("strategy")
-        t.add_column("category")
-        for thr in bench.THRESHOLDS:
-            t.add_column(f"<{thr:g}px", justify="right")
-        for s in bench.RMSE_STEPS:
-            if s <= T:
-                t.add_column(f"rmse@{s}", justify="right")
-        t.add_column("p vs random, paired (<4/2/1/0.5)", justify="right")
-        t.add_column("ms/step", justify="right")
-        extra = sec in ("rigid", "learned", "learned-rigid")
-        if sec in ("rigid", "learned-rigid"):
-            t.add_column("final angle rmse", justify="right")
-        if sec.startswith("learned"):
-            t.add_column("final err / boundary err", justify="right")
-        bnd = (model_art.attrs.get("boundary_error_px") if model_art is not None else None)
-        for r in sec_rows:
-            cells_txt = [_fmt_med(m, n) for m, n in zip(r["median"], r["never"], strict=True)]
-            rm = [f"{r['rmse'][s]:.2f}" for s in bench.RMSE_STEPS if s <= T]
-            p = " ".join(_fmt_p(v) for v in r["p"]) if r["p"] is not None else ""
-            row = [r["label"], r["category"], *cells_txt, *rm, p, f"{r['ms']:.1f}"]
-            if extra and sec in ("rigid", "learned-rigid"):
-                row.append(f"{r['final_angle_rmse']:.2f} deg")
-            if extra and sec.startswith("learned"):
-                row.append(f"{r['final_rmse']:.2f} / "
-                           + (f"{bnd:.2f} px" if isinstance(bnd, (int, float)) else "n/a"))
-            t.add_row(*row)
-        con.print(t)
+        if sec_rows:
+            con.print(_section_table(bench, cfg, sec, sec_rows, bench.section_title(
+                sec, cfg, str(model) if model else None), bnd))
     err.print("medians: observations until the error first drops below the threshold; (k): runs "
               "that never got there within T; rmse in px over all runs; p: Wilcoxon signed-rank "
               "test of the observation counts against random on the paired runs (same "
@@ -329,16 +268,65 @@ def bench_adapt_cmd(
               f"{2.0 ** (1 - experiments):.0e})", markup=False)
 
 
+def _bench_model(model: Path | None, layout: str | None) -> tuple:
+    """The learned model of ``--model`` (its fitted model, artifact and keyboard; Nones without
+    one) and the layout (the model's; a different ``--layout`` is refused)."""
+    if model is None:
+        return None, None, None, layout
+    from kbcli.stages import keyboard as keyboard_stage
+    from kbcli.stages.models import load_model
+
+    model_art = read_artifact(model, "model")
+    kb = keyboard_stage.load(model_art)
+    if layout is not None and layout != kb.layout:
+        raise ConfigError(f"--layout {layout} but the model {model} was learned on a "
+                          f"{kb.layout} keyboard")
+    return load_model(model_art), model_art, kb, kb.layout
+
+
+def _section_table(bench, cfg, sec: str, sec_rows: list[dict], title: str, bnd) -> Table:
+    """One section's table: per strategy and category the medians to each threshold, the RMSE
+    at steps, the p-values, ms per step (and the angle and boundary columns of its section)."""
+    part = bench.SECTIONS.get(sec)
+    T = sec_rows[0]["T"]
+    t = Table(title=f"{cfg.layout} layout, {title}: {cfg.experiments} runs per row, T = {T}",
+              title_justify="left")
+    t.add_column("strategy")
+    t.add_column("category")
+    for thr in bench.THRESHOLDS:
+        t.add_column(f"<{thr:g}px", justify="right")
+    for s in bench.RMSE_STEPS:
+        if s <= T:
+            t.add_column(f"rmse@{s}", justify="right")
+    t.add_column("p vs random, paired (<4/2/1/0.5)", justify="right")
+    t.add_column("ms/step", justify="right")
+    if part.angle:
+        t.add_column("final angle rmse", justify="right")
+    if part.learned:
+        t.add_column("final err / boundary err", justify="right")
+    for r in sec_rows:
+        cells_txt = [_fmt_med(m, n) for m, n in zip(r["median"], r["never"], strict=True)]
+        rm = [f"{r['rmse'][s]:.2f}" for s in bench.RMSE_STEPS if s <= T]
+        p = " ".join(_fmt_p(v) for v in r["p"]) if r["p"] is not None else ""
+        row = [r["label"], r["category"], *cells_txt, *rm, p, f"{r['ms']:.1f}"]
+        if part.angle:
+            row.append(f"{r['final_angle_rmse']:.2f} deg")
+        if part.learned:
+            row.append(f"{r['final_rmse']:.2f} / "
+                       + (f"{bnd:.2f} px" if isinstance(bnd, (int, float)) else "n/a"))
+        t.add_row(*row)
+    return t
+
+
 @command(bench_app, name="robust")
 def bench_robust_cmd(
-    model: Annotated[Path | None, typer.Option(
-        "--model", help="Model artifact [default: the embedded default model].")] = None,
+    model: opts.model_option("Model artifact [default: the embedded default model].",
+                             optional=True) = None,
     experiments: Annotated[int, typer.Option(
         "--experiments", min=1, help="Runs per category, strategy and posterior.")] = 30,
     max_steps: Annotated[int, typer.Option("--max-steps", "-T", min=1, help="Touches per run.")] = 30,
-    strategy: Annotated[list[str] | None, typer.Option(
-        "--strategy", help="Strategies (repeat) [default random, active, infogain].")] = None,
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of displacements and runs.")] = 0,
+    strategy: opts.strategies_option("random, active, infogain") = None,
+    seed: opts.seed_option("Seed of displacements and runs.") = 0,
 ) -> None:
     """The robust posterior against the plain one on a model: touches to 1 px, final error, time.
 
@@ -349,8 +337,9 @@ def bench_robust_cmd(
     included); then the CPU time of one translation step of the posterior alone.
     """
     from kbcli.bench import robust as bench
+    from kbcli.io.paths import default_model_path
     from kbcli.stages import keyboard as keyboard_stage
-    from kbcli.stages.models import default_model_path, load_model
+    from kbcli.stages.models import load_model
 
     model = default_model_path() if model is None else model
     art = read_artifact(model, "model")

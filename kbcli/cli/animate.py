@@ -7,16 +7,17 @@ from typing import Annotated
 
 import typer
 
+from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, interactive, out
-from kbcli.stages.models import DEFAULT_MODEL, default_model_path
+from kbcli.io.paths import DEFAULT_MODEL, default_model_path
 
 
 @command(name="animate")
 def animate_cmd(
     artifact: Annotated[Path, typer.Argument(help="Run artifact (kbcli adapt, kbcli serve) or "
                                              "closed-loop artifact (kbcli run).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Animation to write: .gif, or "
-                                         ".mp4 where ffmpeg is installed.")] = Path("run.gif"),
+    output: opts.output_option("Animation to write: .gif, or .mp4 where ffmpeg is installed.") = Path(
+        "run.gif"),
     fps: Annotated[float, typer.Option("--fps", min=0.2, max=30.0,
                                        help="Touches per second.")] = 3.0,
     max_frames: Annotated[int, typer.Option(
@@ -48,8 +49,7 @@ def animate_cmd(
 
 @command(bench_app, name="animate")
 def bench_animate_cmd(
-    model: Annotated[Path, typer.Option("--model", help="Model artifact the runs adapt with.")]
-    = Path(DEFAULT_MODEL),
+    model: opts.model_option("Model artifact the runs adapt with.") = Path(DEFAULT_MODEL),
     repeats: Annotated[int, typer.Option("--repeats", min=1, help="Renders per run (the "
                                          "median is reported).")] = 3,
     touches: Annotated[int, typer.Option("--touches", min=1, help="Touches of the "

@@ -163,8 +163,8 @@ def progress(items: Iterable[T], total: int | None, description: str, *,
 
 
 def note_arm(arm: Any, mode: str) -> None:
-    """Say on stderr when ``mode`` ignores part of the arm (:func:`kbcli.sim.arms.ideal_mode_note`)."""
-    from kbcli.sim.arms import ideal_mode_note
+    """Say on stderr when ``mode`` ignores part of the arm (:func:`kbcli.sim.modes.ideal_mode_note`)."""
+    from kbcli.sim.modes import ideal_mode_note
 
     if (line := ideal_mode_note(arm, mode)) is not None:
         err.print(line, markup=False)

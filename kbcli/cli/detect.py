@@ -12,8 +12,9 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, out, progress
-from kbcli.core.detect import DETECTORS, DetectorConfig
+from kbcli.core.detect import DetectorConfig
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import detect as stage
@@ -22,9 +23,8 @@ from kbcli.stages import detect as stage
 @command(name="detect")
 def detect_cmd(
     history: Annotated[Path, typer.Argument(help="History artifact (kbcli play).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Detection artifact to write (.h5).")],
-    detector: Annotated[str, typer.Option(
-        "--detector", help=f"Detector: {', '.join(DETECTORS)} (binomial is the paper's).")] = "binomial",
+    output: opts.output_option("Detection artifact to write (.h5)."),
+    detector: opts.detector_option() = "binomial",
     n_lt: Annotated[int, typer.Option("--n-lt", help="Long-term window N_LT (Eq. 4).")] = 100,
     n_st: Annotated[int, typer.Option("--n-st", help="Short-term window N_ST (Eq. 5), < N_LT.")] = 10,
     threshold: Annotated[float, typer.Option(
@@ -71,9 +71,9 @@ def bench_detect_cmd(
     p_post: Annotated[str | None, typer.Option(
         "--p-post", help="Comma-separated post-change failure rates instead of the displacement "
         "categories (e.g. 0.05,0.2).")] = None,
-    model: Annotated[Path | None, typer.Option(
-        "--model", help="Model artifact whose melody player sets the failure rates "
-        "[default: the exact model of the default keyboard].")] = None,
+    model: opts.model_option("Model artifact whose melody player sets the failure rates "
+                             "[default: the exact model of the default keyboard].",
+                             optional=True) = None,
     streams: Annotated[int, typer.Option("--streams", help="Evaluation streams per category.")] = 400,
     tune_actions: Annotated[int, typer.Option(
         "--tune-actions", help="Change-free actions used to tune every detector.")] = 1_000_000,
@@ -86,7 +86,7 @@ def bench_detect_cmd(
     detectors: Annotated[str, typer.Option(
         "--detectors", help="Comma-separated subset of binomial,cusum,bocpd,fhddm,ddm,adwin.")] =
         "binomial,cusum,bocpd,fhddm,ddm,adwin",
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the simulation.")] = 0,
+    seed: opts.seed_option("Seed of the simulation.") = 0,
 ) -> None:
     """Benchmark the failure detectors against river's FHDDM, DDM and ADWIN on simulated histories.
 
@@ -96,30 +96,10 @@ def bench_detect_cmd(
     --fa-target false alarms per 10,000 actions on separate streams.
     """
     from kbcli.bench import detect as bench
-    from kbcli.core.melody import DEFAULT_MELODY, parse_melody
-    from kbcli.core.play import expected_failure_rate
-    from kbcli.stages import keyboard as keyboard_stage
-    from kbcli.stages.models import load_model
 
     rng = np.random.default_rng(seed)
-    m = kb = None
-    note = ""
-    if model is not None:
-        model_art = read_artifact(model, "model")
-        m, kb = load_model(model_art), keyboard_stage.load(model_art)
-        if p_pre is None:
-            measured = float(expected_failure_rate(
-                m, kb, parse_melody(DEFAULT_MELODY, kb), "translation", None, rng=rng,
-                n_samples=4000)[0])
-            p_pre = measured if measured > 0 else 0.01
-            note = (f"p_pre {measured:.4f}: the model's failure rate on the reference pose"
-                    if measured > 0 else "the model never fails on its reference pose: p_pre 0.01")
-    if p_pre is None:
-        p_pre = 0.01
-    try:
-        posts = None if p_post is None else tuple(float(v) for v in p_post.split(",") if v.strip())
-    except ValueError:
-        raise ConfigError(f"--p-post must be comma-separated numbers, got {p_post!r}") from None
+    m, kb, p_pre, note = _model_rate(model, p_pre, rng)
+    posts = _rates(p_post)
     cfg = bench.BenchConfig(
         p_pre=p_pre, p_post=posts, streams=streams, tune_actions=tune_actions, horizon=horizon,
         fa_target=fa_target, n_lt=n_lt, n_st=n_st,
@@ -144,31 +124,73 @@ def bench_detect_cmd(
               f"10,000 (FA tune); FA eval: false alarms per 10,000 pre-change actions of the "
               f"evaluation streams; misses (no alarm within {cfg.horizon}) count as infinite delays")
     for group, g in res.groups.items():
-        table = Table(title=f"{group}: post-change failure rate median {g['median_p_post']:.2f} "
-                            f"(10-90%: {g['p10']:.2f}-{g['p90']:.2f})", title_justify="left")
-        for col in ("detector", "setting", "FA tune", "FA eval", "median", "p90", "missed"):
-            table.add_column(col, justify="left" if col in ("detector", "setting") else "right",
-                             no_wrap=True)
-        for r in res.rows:
-            if r.group == group:
-                table.add_row(r.detector, r.setting, f"{r.tuned_fa:.2f}", f"{r.fa:.2f}",
-                              _fmt(r.median, cfg.horizon), _fmt(r.p90, cfg.horizon),
-                              f"{r.missed}/{r.streams}")
-        wide.print(table)
+        wide.print(_group_table(res, group, g, cfg.horizon))
     for group in res.groups:
-        rows = {r.detector: r for r in res.rows if r.group == group}
-        river = [r for d, r in rows.items() if d in bench.RIVER and r.tuned_fa <= cfg.fa_target]
-        ours = [r for d, r in rows.items() if d in bench.OURS]
-        if not river or not ours:
-            continue
-        best = min(river, key=lambda r: r.median)
-        fastest = min(ours, key=lambda r: r.median)
-        default = rows.get("binomial")
-        msg = f"{group}: best river {best.detector} median {_fmt(best.median, cfg.horizon)}"
-        if default is not None:
-            verdict = "no worse" if default.median <= best.median else "WORSE"
-            msg += f"; binomial {_fmt(default.median, cfg.horizon)} ({verdict})"
-        beats = "beats it" if fastest.median < best.median else "does not beat it"
-        msg += f"; our fastest {fastest.detector} {_fmt(fastest.median, cfg.horizon)} ({beats})"
-        wide.print(msg)
+        if (line := _verdict(bench, res, group, cfg)) is not None:
+            wide.print(line)
     out.print(f"benchmark took {elapsed:.0f} s")
+
+
+def _model_rate(model: Path | None, p_pre: float | None, rng) -> tuple:
+    """The model and keyboard of ``--model`` (Nones without one), the pre-change failure rate
+    (``--p-pre``, else the model's on its reference pose, else 0.01) and a note on where it came
+    from ("" when given)."""
+    if model is None:
+        return None, None, 0.01 if p_pre is None else p_pre, ""
+    from kbcli.core.melody import DEFAULT_MELODY, parse_melody
+    from kbcli.core.play import expected_failure_rate
+    from kbcli.stages import keyboard as keyboard_stage
+    from kbcli.stages.models import load_model
+
+    model_art = read_artifact(model, "model")
+    m, kb = load_model(model_art), keyboard_stage.load(model_art)
+    if p_pre is not None:
+        return m, kb, p_pre, ""
+    measured = float(expected_failure_rate(
+        m, kb, parse_melody(DEFAULT_MELODY, kb), "translation", None, rng=rng,
+        n_samples=4000)[0])
+    note = (f"p_pre {measured:.4f}: the model's failure rate on the reference pose"
+            if measured > 0 else "the model never fails on its reference pose: p_pre 0.01")
+    return m, kb, measured if measured > 0 else 0.01, note
+
+
+def _rates(p_post: str | None) -> tuple[float, ...] | None:
+    """``--p-post``'s comma-separated rates (None when not given)."""
+    try:
+        return None if p_post is None else tuple(float(v) for v in p_post.split(",") if v.strip())
+    except ValueError:
+        raise ConfigError(f"--p-post must be comma-separated numbers, got {p_post!r}") from None
+
+
+def _group_table(res, group: str, g: dict, horizon: int) -> Table:
+    """One group's table: each detector's setting, false alarms, delays and misses."""
+    table = Table(title=f"{group}: post-change failure rate median {g['median_p_post']:.2f} "
+                        f"(10-90%: {g['p10']:.2f}-{g['p90']:.2f})", title_justify="left")
+    for col in ("detector", "setting", "FA tune", "FA eval", "median", "p90", "missed"):
+        table.add_column(col, justify="left" if col in ("detector", "setting") else "right",
+                         no_wrap=True)
+    for r in res.rows:
+        if r.group == group:
+            table.add_row(r.detector, r.setting, f"{r.tuned_fa:.2f}", f"{r.fa:.2f}",
+                          _fmt(r.median, horizon), _fmt(r.p90, horizon),
+                          f"{r.missed}/{r.streams}")
+    return table
+
+
+def _verdict(bench, res, group: str, cfg) -> str | None:
+    """One line comparing our detectors with the best river one on a group (None when either
+    side is missing)."""
+    rows = {r.detector: r for r in res.rows if r.group == group}
+    river = [r for d, r in rows.items() if d in bench.RIVER and r.tuned_fa <= cfg.fa_target]
+    ours = [r for d, r in rows.items() if d in bench.OURS]
+    if not river or not ours:
+        return None
+    best = min(river, key=lambda r: r.median)
+    fastest = min(ours, key=lambda r: r.median)
+    default = rows.get("binomial")
+    msg = f"{group}: best river {best.detector} median {_fmt(best.median, cfg.horizon)}"
+    if default is not None:
+        verdict = "no worse" if default.median <= best.median else "WORSE"
+        msg += f"; binomial {_fmt(default.median, cfg.horizon)} ({verdict})"
+    beats = "beats it" if fastest.median < best.median else "does not beat it"
+    return msg + f"; our fastest {fastest.detector} {_fmt(fastest.median, cfg.horizon)} ({beats})"

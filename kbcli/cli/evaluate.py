@@ -10,6 +10,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
+from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, out, progress, run_checkpointed
 from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError, KbcliError
@@ -90,23 +91,18 @@ def _summary(art, elapsed: float, n_run: int, step_ms: np.ndarray) -> None:
 
 @command(name="evaluate")
 def evaluate_cmd(
-    output: Annotated[Path, typer.Option("-o", "--output", help="Evaluation artifact to write (.h5).")],
-    model: Annotated[Path | None, typer.Option(
-        "--model", help="Model artifact (.h5, kind 'model') to adapt with [default: the embedded "
-        "default model, data/default-model.h5].")] = None,
-    config: Annotated[Path, typer.Option("--config", help="TOML with an [evaluate] table.")] = DEFAULT_CONFIG,
+    output: opts.output_option("Evaluation artifact to write (.h5)."),
+    model: opts.model_option("Model artifact (.h5, kind 'model') to adapt with [default: the "
+                             "embedded default model, data/default-model.h5].", optional=True) = None,
+    config: opts.config_option("TOML with an [evaluate] table.", optional=False) = DEFAULT_CONFIG,
     method: Annotated[list[str] | None, typer.Option(
         "--method", help="Only this method of the config (repeat for several) [default: all].")] = None,
     experiments: Annotated[int | None, typer.Option(
         "--experiments", help="Repetitions per parametrization, strategy and mode (overrides the config).")] = None,
-    mode: Annotated[str | None, typer.Option(
-        "--mode", help="Only this mode: ideal or dynamics (default: the config's modes).")] = None,
-    arm: Annotated[str | None, typer.Option("--arm", help="Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains "
-        "and joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
-        "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields) [default: the config's [evaluate.arm] per mode].")] = None,
-    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Local worker processes (joblib/loky).")] = 1,
-    scheduler: Annotated[str | None, typer.Option(
-        "--scheduler", help="Run on a Dask cluster: address of its scheduler, tcp://HOST:PORT.")] = None,
+    mode: opts.mode_option("the config's modes", help="Only this mode") = None,
+    arm: opts.arm_option("the config's [evaluate.arm] per mode", optional=True) = None,
+    jobs: opts.Jobs = 1,
+    scheduler: opts.Scheduler = None,
     resume: Annotated[bool, typer.Option(
         "--resume", help="Continue an interrupted run from its checkpoint OUTPUT.ckpt.")] = False,
     checkpoint_every: Annotated[int, typer.Option(
@@ -124,7 +120,7 @@ def evaluate_cmd(
     p-values and playing success, and the speed.
     """
     if model is None:
-        from kbcli.stages.models import default_model_path
+        from kbcli.io.paths import default_model_path
 
         model = default_model_path()
     if config == DEFAULT_CONFIG:
@@ -133,10 +129,8 @@ def evaluate_cmd(
              Output(Checkpoint.beside(output), "checkpoint folder", folder=True, removes=True))
     cfg = _load_config(config, experiments, mode, method)
     if arm is not None:
-        from dataclasses import replace
-
         arm_cfg = load_arm(arm).to_dict()
-        cfg = replace(cfg, arm={m: arm_cfg for m in cfg.modes})
+        cfg = cfg.replace(arm={m: arm_cfg for m in cfg.modes})
     _check_backend(jobs, scheduler)
     if checkpoint_every < 1:
         raise ConfigError(f"--checkpoint-every must be >= 1, got {checkpoint_every}")
@@ -168,12 +162,12 @@ def evaluate_cmd(
 
 @command(bench_app, name="evaluate")
 def bench_evaluate_cmd(
-    config: Annotated[Path, typer.Option("--config", help="TOML with an [evaluate] table.")] = DEFAULT_CONFIG,
-    model: Annotated[Path | None, typer.Option(
-        "--model", help="Model artifact; default: the exact model of the config's keyboard.")] = None,
+    config: opts.config_option("TOML with an [evaluate] table.", optional=False) = DEFAULT_CONFIG,
+    model: opts.model_option("Model artifact; default: the exact model of the config's keyboard.",
+                             optional=True) = None,
     experiments: Annotated[int, typer.Option(
         "--experiments", help="Repetitions per parametrization and strategy.")] = 2,
-    mode: Annotated[str, typer.Option("--mode", help="ideal or dynamics.")] = "ideal",
+    mode: opts.mode_option() = "ideal",
     workers: Annotated[int, typer.Option("--workers", help="Workers of the parallel backends.")] = 2,
 ) -> None:
     """Benchmark the execution backends on a slice of the protocol.

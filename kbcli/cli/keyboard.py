@@ -7,26 +7,21 @@ from typing import Annotated
 
 import typer
 
-from kbcli.cli.app import FIGURE_HELP, busy, check_io, command, figure_output, out, plot_app
+from kbcli.cli import options as opts
+from kbcli.cli.app import busy, check_io, command, figure_output, out, plot_app
 from kbcli.core.keyboard import KeyboardConfig
-from kbcli.core.layouts import LAYOUTS
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml
 from kbcli.stages import keyboard as stage
 
-_LAYOUT_HELP = "; ".join(f"{n}: {lay.summary}" for n, lay in LAYOUTS.items())
-
 
 @command(name="keyboard")
 def keyboard_cmd(
-    output: Annotated[Path, typer.Option("-o", "--output", help="Keyboard artifact to write (.h5).")],
-    config: Annotated[
-        Path | None,
-        typer.Option("--config", help="TOML file with a [keyboard] table (e.g. pipelines/keyboard.toml; "
-                     "pipelines/layouts/*.toml for the other layouts, polygons' keys included)."),
-    ] = None,
-    layout: Annotated[str | None, typer.Option(
-        "--layout", help=f"Layout of the keys [default grid]. {_LAYOUT_HELP}.")] = None,
+    output: opts.output_option("Keyboard artifact to write (.h5)."),
+    config: opts.config_option(
+        "TOML file with a [keyboard] table (e.g. pipelines/keyboard.toml; pipelines/layouts/*.toml "
+        "for the other layouts, polygons' keys included).") = None,
+    layout: opts.layout_option("Layout of the keys [default grid]. {described}.") = None,
     rows: Annotated[int | None, typer.Option(help="Rows of keys: grid, hex, pads [default 4].")] = None,
     cols: Annotated[int | None, typer.Option(
         help="Columns of keys: grid, hex, pads [default 8]; white keys: piano [default 12].")] = None,
@@ -90,7 +85,7 @@ def keyboard_cmd(
 @command(plot_app, name="keyboard")
 def plot_keyboard_cmd(
     artifact: Annotated[Path, typer.Argument(help="Keyboard artifact (or any artifact made from one).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path("keyboard.png"),
+    output: opts.Figure = Path("keyboard.png"),
 ) -> None:
     """Draw the keyboard (any layout): keys labelled with note and tempo, the working area dashed.
     Writes the figure (PNG, PDF or SVG by the suffix of -o)."""

@@ -10,8 +10,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from kbcli.cli import options as opts
 from kbcli.cli.app import (
-    FIGURE_HELP,
     bench_app,
     busy,
     check_io,
@@ -34,35 +34,31 @@ from kbcli.stages import learn as stage
 
 @command(name="learn")
 def learn_cmd(
-    keyboard: Annotated[Path, typer.Option("--keyboard", help="Keyboard artifact (.h5) to learn.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Model artifact to write (.h5).")],
-    mode: Annotated[str, typer.Option(
-        "--mode", help="ideal (the finger lands on the target) or dynamics (pymunk arm).")
-    ] = "ideal",
+    keyboard: opts.keyboard_option(),
+    output: opts.output_option("Model artifact to write (.h5)."),
+    mode: opts.mode_option(note="ideal: the finger lands on the target; dynamics: the pymunk "
+                           "arm") = "ideal",
     strategy: Annotated[str, typer.Option(
-        "--strategy", help="active, random (exploration) or exact (the keyboard's own geometry, "
-        "no learning).")] = "active",
+        "--strategy", help=f"Exploration: {opts.one_of('exploration', 'exact')} (exact: the "
+        "keyboard's own geometry, no learning).")] = "active",
     budget: Annotated[int, typer.Option(
         "--budget", help="Reaches to explore with; a run that hears fewer than two distinct sounds "
         "is refused (nothing written).")] = 800,
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the exploration and arm noise.")] = 0,
+    seed: opts.seed_option("Seed of the exploration and arm noise.") = 0,
     reach_noise: Annotated[float, typer.Option(
         "--reach-noise", help="Landing scatter of a reach, px (motor noise in dynamics mode).")
     ] = 0.0,
-    arm: Annotated[str, typer.Option("--arm", help="Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains "
-        "and joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
-        "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields).")] = "ideal",
+    arm: opts.arm_option() = "ideal",
     batch: Annotated[int, typer.Option("--batch", help="Reaches per model refit.")] = 10,
     explore_radius: Annotated[float, typer.Option(
         "--explore-radius", help="active: first cover the working area to this radius, px.")
     ] = 20.0,
     curve_every: Annotated[int, typer.Option(
         "--curve-every", help="Reaches between learning-curve points.")] = 50,
-    model_class: Annotated[str, typer.Option(
-        "--model-class", help="lines (straight key edges: the grid and other polygon keys) or svc "
-        "(scikit-learn SVMs per pair of neighbouring sounds, straight where a line separates "
-        "them, RBF elsewhere: any key shape, pads included).")
-    ] = "lines",
+    model_class: opts.model_class_option(
+        "Model class: {classes}. lines: straight key edges (the grid and other polygon keys); svc: "
+        "scikit-learn SVMs per pair of neighbouring sounds, straight where a line separates them, "
+        "RBF elsewhere (any key shape, pads included).") = "lines",
 ) -> None:
     """Learn the instrument model by exploring the pad with the simulated arm.
 
@@ -77,9 +73,9 @@ def learn_cmd(
                             model_class=model_class)
     check_io({"--keyboard": keyboard, "--arm": arm_file(arm)}, ("--output", output))
     kb_art = read_artifact(keyboard, "keyboard")
-    if strategy != "exact":  # (the exact model reaches for nothing)
+    if not cfg.exact:  # (the exact model reaches for nothing)
         note_arm(sim.arm, sim.mode)
-    if cfg.strategy == "exact":
+    if cfg.exact:
         art = stage.run(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
         write_artifact(art, output)
         out.print(f"wrote {output}: exact model (the keyboard's own geometry, "
@@ -118,8 +114,7 @@ def learn_cmd(
 @command(plot_app, name="model")
 def plot_model_cmd(
     artifact: Annotated[Path, typer.Argument(help="Model artifact (.h5).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path(
-        "model.png"),
+    output: opts.Figure = Path("model.png"),
 ) -> None:
     """Draw a model: the learned map (predicted key, uncertainty, reaches) beside the true layout,
     and the learning curve. Reads ARTIFACT (kind 'model'); writes the figure (PNG, PDF or SVG by the suffix of -o)."""
@@ -150,18 +145,16 @@ def bench_learn_cmd(
     budgets: Annotated[str, typer.Option(
         "--budgets", help="Budgets at which to report the accuracy, comma-separated.")]
         = "200,400,800,1600",
-    strategy: Annotated[list[str] | None, typer.Option(
-        "--strategy", help="Strategies to run (repeat) [default active, random].")] = None,
-    layout: Annotated[list[str] | None, typer.Option(
-        "--layout", help="Layouts to learn, each its default keyboard (repeat): grid, hex, piano, "
-        "pads, polygons [default grid].")] = None,
-    model_class: Annotated[list[str] | None, typer.Option(
-        "--model-class", help="Model classes to fit (repeat): lines, svc [default lines].")] = None,
-    keyboard: Annotated[Path | None, typer.Option(
-        "--keyboard", help="A keyboard artifact to learn instead of the layouts' defaults.")] = None,
-    mode: Annotated[str, typer.Option("--mode", help="ideal or dynamics.")] = "ideal",
+    strategy: opts.strategies_option("active, random", kind="exploration") = None,
+    layout: opts.layout_option("Layouts to learn, each its default keyboard (repeat): {layouts} "
+                               "[default grid].", many=True) = None,
+    model_class: opts.model_class_option("Model classes to fit (repeat): {classes} [default "
+                                         "lines].", many=True) = None,
+    keyboard: opts.keyboard_option("A keyboard artifact to learn instead of the layouts' "
+                                   "defaults.", optional=True) = None,
+    mode: opts.mode_option(help="Reaching") = "ideal",
     reach_noise: Annotated[float, typer.Option("--reach-noise", help="Landing scatter, px.")] = 0.0,
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the runs.")] = 0,
+    seed: opts.seed_option("Seed of the runs.") = 0,
     boundary_budget: Annotated[int, typer.Option(
         "--boundary-budget", help="Reaches at which the boundary error and the learn wall time "
         "are measured.")] = 800,
@@ -221,11 +214,9 @@ def bench_learn_cmd(
 
 @command(bench_app, name="layouts")
 def bench_layouts_cmd(
-    config: Annotated[Path, typer.Option(
-        "--config", help="TOML file with a [layouts] table (pipelines/layouts.toml).")] = Path(
-        "pipelines/layouts.toml"),
-    output: Annotated[Path, typer.Option(
-        "-o", "--output", help="Folder to write keyboards/, models/, cache/ and report/ in.")] = Path(
+    config: opts.config_option("TOML file with a [layouts] table (pipelines/layouts.toml).",
+                               optional=False) = Path("pipelines/layouts.toml"),
+    output: opts.output_option("Folder to write keyboards/, models/, cache/ and report/ in.") = Path(
         "out/layouts"),
     seeds: Annotated[int | None, typer.Option(
         "--seeds", min=1, help="Learning runs per layout, class and strategy [default: the "
@@ -233,8 +224,8 @@ def bench_layouts_cmd(
     experiments: Annotated[int | None, typer.Option(
         "--experiments", min=2, help="Adaptation runs per strategy and category, translation "
         "[default: the config's].")] = None,
-    layout: Annotated[list[str] | None, typer.Option(
-        "--layout", help="Only these layouts (repeat) [default: the config's].")] = None,
+    layout: opts.layout_option("Only these layouts (repeat): {layouts} [default: the config's].",
+                               many=True) = None,
 ) -> None:
     """Learning and adaptation on every layout: tables and one figure per layout.
 
@@ -244,15 +235,13 @@ def bench_layouts_cmd(
     adaptation tables, each target beside the measured figure, the settings),
     <layout>.png and results.json. Long: hours at the default settings (make reproduce-layouts).
     """
-    from dataclasses import replace
-
     from kbcli.bench.layouts import LayoutsConfig, Pipeline
 
     cfg = LayoutsConfig.from_toml(config)
     over = {k: v for k, v in (("seeds", seeds), ("experiments", experiments),
                               ("layouts", tuple(layout) if layout else None)) if v is not None}
     if over:
-        cfg = replace(cfg, **over)
+        cfg = cfg.replace(**over)
     if output.exists() and not output.is_dir():
         raise ConfigError(f"{output}: exists and is not a folder")
     output.mkdir(parents=True, exist_ok=True)
@@ -280,7 +269,7 @@ def _targets(cfg, res):
 @command(bench_app, name="arm")
 def bench_arm_cmd(
     reaches: Annotated[int, typer.Option("--reaches", min=1, help="Reaches per preset and mode.")] = 500,
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the targets and the noise.")] = 0,
+    seed: opts.seed_option("Seed of the targets and the noise.") = 0,
 ) -> None:
     """How each arm preset errs: landing error and felt-minus-true error.
 
@@ -308,9 +297,9 @@ def bench_arm_cmd(
 def bench_reliability_cmd(
     budgets: Annotated[str, typer.Option(
         "--budgets", help="Reach budgets, comma-separated.")] = "150,300,800,1600",
-    mode: Annotated[str, typer.Option("--mode", help="ideal or dynamics.")] = "ideal",
-    arm: Annotated[str, typer.Option("--arm", help="Arm preset (ideal, servo, realistic).")] = "ideal",
-    seed: Annotated[int, typer.Option("--seed", min=0, help="First seed of the learning runs.")] = 0,
+    mode: opts.mode_option(help="Reaching") = "ideal",
+    arm: opts.arm_option(files=False) = "ideal",
+    seed: opts.seed_option("First seed of the learning runs.") = 0,
     seeds: Annotated[int, typer.Option(
         "--seeds", min=1, help="Learning runs per cell (seeds SEED, SEED+1, ...): the table "
                                "prints medians.")] = 3,

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Annotated
 
 import numpy as np
 import typer
 
+from kbcli.cli import options as opts
 from kbcli.cli.app import check_io, command, err, out
 from kbcli.core.transforms import FAMILIES, wrap_degrees
 from kbcli.errors import ConfigError
@@ -18,8 +18,8 @@ from kbcli.stages import perturb as stage
 
 @command(name="perturb")
 def perturb_cmd(
-    keyboard: Annotated[Path, typer.Option("--keyboard", help="Keyboard artifact (.h5) to move.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Scene artifact to write (.h5).")],
+    keyboard: opts.keyboard_option("Keyboard artifact (.h5) to move."),
+    output: opts.output_option("Scene artifact to write (.h5)."),
     dx: Annotated[float | None, typer.Option("--dx", help="Displacement along x, px.")] = None,
     dy: Annotated[float | None, typer.Option("--dy", help="Displacement along y, px.")] = None,
     angle: Annotated[float | None, typer.Option(
@@ -28,10 +28,9 @@ def perturb_cmd(
     category: Annotated[str | None, typer.Option(
         "--category", help="Draw a random move instead: small, medium or large (translation size, "
         "the Euclidean norm, in (0,10], (10,20] or (20,40] px).")] = None,
-    family: Annotated[str | None, typer.Option(
-        "--family", help="translation or rigid (rigid draws also turn up to 5 degrees) "
-        "[default translation, rigid with --angle].")] = None,
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of a --category draw.")] = 0,
+    family: opts.family_option("translation, rigid with --angle", help="Transform family of the "
+                               "move (rigid draws also turn up to 5 degrees)") = None,
+    seed: opts.seed_option("Seed of a --category draw.") = 0,
 ) -> None:
     """Move the keyboard: explicit --dx/--dy [--angle], or a random --category draw.
 

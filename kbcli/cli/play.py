@@ -9,8 +9,8 @@ from typing import Annotated
 import numpy as np
 import typer
 
+from kbcli.cli import options as opts
 from kbcli.cli.app import (
-    FIGURE_HELP,
     busy,
     check_io,
     command,
@@ -55,8 +55,8 @@ def write_wav(path: Path, samples: np.ndarray, sample_rate: int) -> None:
 
 @command(name="play")
 def play_cmd(
-    model: Annotated[Path, typer.Option("--model", help="Model artifact (.h5, kind 'model').")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="History artifact to write (.h5).")],
+    model: opts.model_option(),
+    output: opts.output_option("History artifact to write (.h5)."),
     scene: Annotated[Path | None, typer.Option(
         "--scene", help="Scene artifact (kbcli perturb): where the keyboard moves at --perturb-at.")] = None,
     melody: Annotated[str, typer.Option(
@@ -65,12 +65,10 @@ def play_cmd(
     steps: Annotated[int, typer.Option("--steps", help="Number of actions.")] = 300,
     perturb_at: Annotated[int | None, typer.Option(
         "--perturb-at", help="Step at which the keyboard moves [default steps/2 with a scene].")] = None,
-    mode: Annotated[str, typer.Option("--mode", help="ideal or dynamics reaching.")] = "ideal",
-    reach_noise: Annotated[float, typer.Option("--reach-noise", help="Landing scatter of the arm, px.")] = 0.0,
-    arm: Annotated[str, typer.Option("--arm", help="Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains "
-        "and joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
-        "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields).")] = "ideal",
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the robot's and the world's randomness.")] = 0,
+    mode: opts.mode_option() = "ideal",
+    reach_noise: opts.ReachNoise = 0.0,
+    arm: opts.arm_option() = "ideal",
+    seed: opts.Seed = 0,
     wav: Annotated[Path | None, typer.Option(
         "--wav", help=f"Also write what was heard as a WAV file (silence where the finger "
         f"missed); at most {MAX_WAV_SECONDS / 60:g} minutes: --steps notes at the keyboard's "
@@ -125,7 +123,7 @@ def plot_play_cmd(
     history: Annotated[Path, typer.Argument(help="History artifact (kbcli play).")],
     detection: Annotated[Path | None, typer.Option(
         "--detection", help="Detection artifact (kbcli detect) to mark where the detector fired.")] = None,
-    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path("play.png"),
+    output: opts.Figure = Path("play.png"),
 ) -> None:
     """Draw a play history: aimed note and result per step, running success rate, the move, and
     (with --detection) the detector's score and firings. Reads HISTORY; writes the figure (PNG, PDF or SVG by the suffix of -o)."""

@@ -8,6 +8,7 @@ from typing import Annotated
 
 import typer
 
+from kbcli.cli import options as opts
 from kbcli.cli.app import check_io, command, err, out, progress, run_checkpointed
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -32,16 +33,15 @@ def _budgets(text: str | None) -> tuple[int, ...] | None:
 
 @command(name="quality")
 def quality_cmd(
-    output: Annotated[Path, typer.Option("-o", "--output", help="model_quality artifact to write (.h5).")],
-    config: Annotated[Path, typer.Option("--config", help="TOML with a [quality] table.")] = DEFAULT_CONFIG,
-    keyboard: Annotated[Path, typer.Option("--keyboard", help="Keyboard artifact the models are learned on.")] = DEFAULT_KEYBOARD,
+    output: opts.output_option("model_quality artifact to write (.h5)."),
+    config: opts.config_option("TOML with a [quality] table.", optional=False) = DEFAULT_CONFIG,
+    keyboard: opts.keyboard_option("Keyboard artifact the models are learned on.") = DEFAULT_KEYBOARD,
     experiments: Annotated[int | None, typer.Option(
         "--experiments", help="Repetitions per displacement, model and row (overrides the config).")] = None,
     budgets: Annotated[str | None, typer.Option(
         "--budgets", help="Reach budgets of the models, comma-separated (overrides the config).")] = None,
-    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Local worker processes (joblib/loky).")] = 1,
-    scheduler: Annotated[str | None, typer.Option(
-        "--scheduler", help="Run on a Dask cluster: address of its scheduler, tcp://HOST:PORT.")] = None,
+    jobs: opts.Jobs = 1,
+    scheduler: opts.Scheduler = None,
     resume: Annotated[bool, typer.Option(
         "--resume", help="Continue an interrupted sweep from OUTPUT.ckpt/.")] = False,
     models_dir: Annotated[Path | None, typer.Option(
@@ -63,30 +63,57 @@ def quality_cmd(
     if keyboard == DEFAULT_KEYBOARD:
         keyboard = checkout_file(keyboard, "--keyboard")
     ckpt_dir = Checkpoint.beside(output)
-    if "arm" in load_toml(config):  # (adapt reads one; here the sweep's arm is quality.arm)
-        raise ConfigError(f"{config}: quality does not read a top-level [arm] table: remove it "
-                          "(the sweep's arm is the arm key of [quality])")
-    cfg = stage.QualityConfig.from_dict(dict(load_toml(config, "quality")))
-    cfg = cfg.with_overrides(experiments=experiments, budgets=_budgets(budgets))
+    cfg = _load_config(config, experiments, budgets)
     names = tuple(f"{n}.h5" for n, _, _ in stage.model_names(cfg))
     check_io({"--config": config, "--keyboard": keyboard}, ("--output", output),
              Output(ckpt_dir, "checkpoint folder", folder=True, removes=True),
              *((Output(models_dir, "--models folder", folder=True, files=names),)
                if models_dir is not None else ()))
+    _check_backend(jobs, scheduler)
+    kb_art = read_artifact(keyboard, "keyboard")
+    fp = {**stage.fingerprint(cfg, kb_art), "source_code": source_digest()}
+    ckpt = Checkpoint(ckpt_dir, fp, every=20)
+    done = ckpt.load(resume)
+    started = time.perf_counter()
+    models = _learn_models(cfg, kb_art, ckpt, resume, jobs, scheduler)
+    learned_s = time.perf_counter() - started
+    tasks, results = _adapt_all(cfg, models, kb_art, ckpt, done, jobs, scheduler)
+    art = stage.assemble(cfg, models, tasks, results, kb_art)
+    write_artifact(art, output)
+    if models_dir is not None:
+        models_dir.mkdir(exist_ok=True)
+        for name, m in models.items():
+            write_artifact(m, models_dir / f"{name}.h5")
+    ckpt.remove()
+    elapsed = time.perf_counter() - started
+    out.print(f"wrote {output}: {len(models)} models, {len(tasks)} adaptations "
+              f"({learned_s:.0f} s learning, {elapsed - learned_s:.0f} s adapting)")
+    _summary(art)
+
+
+def _load_config(config: Path, experiments: int | None, budgets: str | None) -> stage.QualityConfig:
+    """The [quality] table of ``config`` with the command line's overrides."""
+    if "arm" in load_toml(config):  # (adapt reads one; here the sweep's arm is quality.arm)
+        raise ConfigError(f"{config}: quality does not read a top-level [arm] table: remove it "
+                          "(the sweep's arm is the arm key of [quality])")
+    cfg = stage.QualityConfig.from_dict(dict(load_toml(config, "quality")))
+    return cfg.with_overrides(experiments=experiments, budgets=_budgets(budgets))
+
+
+def _check_backend(jobs: int, scheduler: str | None) -> None:
     if jobs < 1:
         raise ConfigError(f"--jobs must be >= 1, got {jobs}")
     if scheduler is not None:
         if jobs != 1:
             raise ConfigError("--jobs and --scheduler exclude each other")
         check_scheduler_address(scheduler)
-    kb_art = read_artifact(keyboard, "keyboard")
-    fp = {**stage.fingerprint(cfg, kb_art), "source_code": source_digest()}
-    ckpt = Checkpoint(ckpt_dir, fp, every=20)
-    done = ckpt.load(resume)
-    started = time.perf_counter()
 
-    # phase 1: the models (kept as artifacts in the checkpoint folder)
-    model_dir = ckpt_dir / "models"
+
+def _learn_models(cfg, kb_art, ckpt: Checkpoint, resume: bool, jobs: int,
+                  scheduler: str | None) -> dict:
+    """Phase 1: every model of the sweep, kept as artifacts in the checkpoint folder (those
+    already there read back with ``resume``). Ctrl-C says how many are kept and exits 130."""
+    model_dir = ckpt.folder / "models"
     ltasks = stage.learn_tasks(cfg)
     models = {}
     for t in ltasks:
@@ -111,9 +138,13 @@ def quality_cmd(
             "nothing was kept"
         err.print(f"kbcli: interrupted; {msg}", markup=False)
         raise typer.Exit(130) from None
-    learned_s = time.perf_counter() - started
+    return models
 
-    # phase 2: the adaptations
+
+def _adapt_all(cfg, models: dict, kb_art, ckpt: Checkpoint, done: dict, jobs: int,
+               scheduler: str | None) -> tuple[list, dict]:
+    """Phase 2: every adaptation with every model (those in the checkpoint kept); the tasks and
+    the results by task row."""
     tasks = stage.plan(cfg)
     ctx = {"models": models, "quality": cfg.to_dict(), "keyboard": kb_art}
     key = "adapt-" + "-".join(str(models[n].sha256)[:12] for n, _, _ in stage.model_names(cfg))
@@ -124,18 +155,7 @@ def quality_cmd(
         err.print(f"resuming: {len(done)} of {len(tasks)} adaptations already done", markup=False)
     fresh = run_checkpointed(execute(job, todo, jobs=jobs, scheduler=scheduler), len(todo), ckpt,
                              kept=len(done), total=len(tasks), what="adaptations")
-    results = {**done, **fresh}
-    art = stage.assemble(cfg, models, tasks, results, kb_art)
-    write_artifact(art, output)
-    if models_dir is not None:
-        models_dir.mkdir(exist_ok=True)
-        for name, m in models.items():
-            write_artifact(m, models_dir / f"{name}.h5")
-    ckpt.remove()
-    elapsed = time.perf_counter() - started
-    out.print(f"wrote {output}: {len(models)} models, {len(tasks)} adaptations "
-              f"({learned_s:.0f} s learning, {elapsed - learned_s:.0f} s adapting)")
-    _summary(art)
+    return tasks, {**done, **fresh}
 
 
 def _summary(art) -> None:

@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from kbcli.cli import options as opts
 from kbcli.cli.app import busy, check_io, command, out
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact
@@ -23,7 +24,7 @@ def _write_text(path: Path, text: str) -> None:
 @command(name="report")
 def report_cmd(
     evaluation: Annotated[Path, typer.Argument(help="Evaluation artifact (.h5) from kbcli evaluate.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Report folder to write (created if needed).")] = Path("report"),
+    output: opts.output_option("Report folder to write (created if needed).") = Path("report"),
     fmt: Annotated[str, typer.Option(
         "--format", help=f"Figure format: {', '.join(FIGURE_FORMATS)}.")] = "png",
 ) -> None:

@@ -8,8 +8,8 @@ from typing import Annotated
 import numpy as np
 import typer
 
+from kbcli.cli import options as opts
 from kbcli.cli.app import (
-    FIGURE_HELP,
     busy,
     check_io,
     command,
@@ -35,26 +35,25 @@ def _pct(v: float | None) -> str:
 
 @command(name="run")
 def run_cmd(
-    model: Annotated[Path, typer.Option("--model", help="Model artifact (kind 'model'), e.g. data/default-model.h5.")],
+    model: opts.model_option("Model artifact (kind 'model'), e.g. data/default-model.h5."),
     scene: Annotated[Path, typer.Option("--scene", help="Scene artifact (kbcli perturb): where the keyboard moves.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Closed-loop artifact to write (.h5).")],
+    output: opts.output_option("Closed-loop artifact to write (.h5)."),
     melody: Annotated[str, typer.Option(help="Notes NOTE:BEATS, looped.")] = DEFAULT_MELODY,
     steps: Annotated[int, typer.Option(help="Play touches (adaptation touches come on top).")] = 600,
     perturb_at: Annotated[int, typer.Option(help="Touches after which the keyboard moves.")] = 200,
-    strategy: Annotated[str, typer.Option(help="Adaptation strategy: random, active or infogain.")] = "infogain",
-    posterior: Annotated[str, typer.Option(help="likelihood or kde (the paper's product of KDEs).")] = "likelihood",
-    family: Annotated[str, typer.Option(help="Transform family the robot estimates: translation or rigid.")] = "translation",
-    mode: Annotated[str, typer.Option(help="ideal or dynamics reaching.")] = "ideal",
-    reach_noise: Annotated[float, typer.Option(help="Landing scatter of the arm, px.")] = 0.0,
-    arm: Annotated[str, typer.Option("--arm", help="Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains "
-        "and joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
-        "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields).")] = "ideal",
+    strategy: opts.strategy_option() = "infogain",
+    posterior: opts.posterior_option() = "likelihood",
+    estimator: opts.estimator_option() = None,
+    family: opts.family_option() = "translation",
+    mode: opts.mode_option() = "ideal",
+    reach_noise: opts.ReachNoise = 0.0,
+    arm: opts.arm_option() = "ideal",
     max_adapt_steps: Annotated[int, typer.Option(help="Touches at most per adaptation.")] = 40,
-    detector: Annotated[str, typer.Option(help="Failure detector: binomial (the paper's), cusum or bocpd.")] = "binomial",
+    detector: opts.detector_option() = "binomial",
     n_lt: Annotated[int, typer.Option(help="Detector long-term window N_LT.")] = 100,
     n_st: Annotated[int, typer.Option(help="Detector short-term window N_ST.")] = 10,
     threshold: Annotated[float, typer.Option(help="Detector threshold, in (0, 1).")] = 0.01,
-    seed: Annotated[int, typer.Option(min=0, help="Seed of the robot's and the world's randomness.")] = 0,
+    seed: opts.Seed = 0,
 ) -> None:
     """Play, notice the move, adapt, resume: the closed loop as the robot lives it.
 
@@ -67,7 +66,8 @@ def run_cmd(
         melody=melody, steps=steps, perturb_at=perturb_at, max_adapt_steps=max_adapt_steps,
         detector=DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold),
         adapt=AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
-                          reach_noise=reach_noise, arm=load_arm(arm), stop=True),
+                               reach_noise=reach_noise, arm=load_arm(arm), stop=True,
+                               **({} if estimator is None else {"estimator": estimator})),
     )
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
@@ -104,7 +104,7 @@ def run_cmd(
 @command(plot_app, name="run")
 def plot_run_cmd(
     artifact: Annotated[Path, typer.Argument(help="Closed-loop artifact (kbcli run).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help=FIGURE_HELP)] = Path("run.png"),
+    output: opts.Figure = Path("run.png"),
 ) -> None:
     """Draw a closed-loop session: success over time, the move, the detection, the adaptation
     touches on the keyboard. Writes the figure (PNG, PDF or SVG by the suffix of -o)."""

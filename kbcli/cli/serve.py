@@ -19,6 +19,7 @@ from typing import Annotated, BinaryIO
 
 import typer
 
+from kbcli.cli import options as opts
 from kbcli.cli.app import check_io, command, err
 
 _HELP = """Adapt with a robot in another process: JSON lines on stdin/stdout (or a local socket).
@@ -126,36 +127,25 @@ def _run(session, rfile: BinaryIO, wfile: BinaryIO, save) -> str:
 
 @command(name="serve", help=_HELP)
 def serve_cmd(
-    model: Annotated[Path, typer.Option("--model", help="Model artifact (kind 'model').")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Run artifact to write (.h5), "
-                                         "rewritten after every touch.")],
-    config: Annotated[Path | None, typer.Option(
-        "--config", help="TOML file with a [serve] table (any adapt option of the robot's side, "
-        "max_steps, stop); flags override it.")] = None,
-    strategy: Annotated[str | None, typer.Option(
-        "--strategy", help="random, active or infogain [default infogain].")] = None,
-    posterior: Annotated[str | None, typer.Option(
-        "--posterior", help="likelihood or kde [default likelihood].")] = None,
-    family: Annotated[str | None, typer.Option(
-        "--family", help="translation or rigid [default translation].")] = None,
-    max_steps: Annotated[int | None, typer.Option(
-        "--max-steps", "-T", help="Touches at most [default 40].")] = None,
+    model: opts.model_option("Model artifact (kind 'model')."),
+    output: opts.output_option("Run artifact to write (.h5), rewritten after every touch."),
+    config: opts.config_option(
+        "TOML file with a [serve] table (any adapt option of the robot's side, max_steps, stop); "
+        "flags override it.") = None,
+    strategy: opts.strategy_option("infogain") = None,
+    posterior: opts.posterior_option("likelihood") = None,
+    estimator: opts.estimator_option() = None,
+    family: opts.family_option("translation") = None,
+    max_steps: opts.max_steps_option("Touches at most [default 40].") = None,
     stop: Annotated[bool | None, typer.Option(
         "--stop/--no-stop", help="Say done at the stopping rule (mass within 1 px >= 0.95), or "
         "only after --max-steps [default --stop].")] = None,
     blur: Annotated[float | None, typer.Option(
         "--blur", help="The robot's reach noise, px, used when it does not send where it felt "
         "it landed [default 0].")] = None,
-    model_blur: Annotated[float | None, typer.Option(
-        "--model-blur", help="Override: fix the blur (px, 0-50) of the model's key edges. "
-        "Default: the robust posterior learns it from the touches (translation: it weighs "
-        "0, 1, 2.5 and 5 px and twice a weak model's own boundary error; rigid: 0 px; "
-        "recorded in the run as robust_blurs); the plain (robust = false) and kde "
-        "posteriors soften a learned model's map by 1 px, the exact one's by 0.")] = None,
-    resolution: Annotated[float | None, typer.Option(
-        "--resolution", help="Hypothesis grid step, px [default 0.5].")] = None,
-    prior_halfwidth: Annotated[float | None, typer.Option(
-        "--prior-halfwidth", help="Prior box of dx and dy, +-px [default 45].")] = None,
+    model_blur: opts.ModelBlur = None,
+    resolution: opts.Resolution = None,
+    prior_halfwidth: opts.PriorHalfwidth = None,
     socket_path: Annotated[Path | None, typer.Option(
         "--socket", help="Listen on this Unix socket for one robot instead of stdin/stdout.")
     ] = None,
@@ -164,12 +154,12 @@ def serve_cmd(
         "stderr) for one robot instead of stdin/stdout.")] = None,
     host: Annotated[str, typer.Option(
         "--host", help="Address to listen on with --port.")] = "127.0.0.1",
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the strategy's draws.")] = 0,
+    seed: opts.seed_option("Seed of the strategy's draws.") = 0,
 ) -> None:
     import numpy as np
 
     from kbcli.errors import KbcliError
-    from kbcli.io.artifact import read_artifact, write_artifact
+    from kbcli.io.artifact import read_artifact
     from kbcli.io.config import load_toml
     from kbcli.stages.serve import ServeConfig, Session
 
@@ -178,9 +168,10 @@ def serve_cmd(
     if socket_path is not None and port is not None:
         raise KbcliError("give either --socket or --port, not both")
     values = dict(load_toml(config, "serve")) if config is not None else {}
-    flags = {"strategy": strategy, "posterior": posterior, "family": family,
-             "max_steps": max_steps, "stop": stop, "blur": blur, "model_blur": model_blur,
-             "resolution": resolution, "prior_halfwidth": prior_halfwidth}
+    flags = {"strategy": strategy, "posterior": posterior, "estimator": estimator,
+             "family": family, "max_steps": max_steps, "stop": stop, "blur": blur,
+             "model_blur": model_blur, "resolution": resolution,
+             "prior_halfwidth": prior_halfwidth}
     values.update({k: v for k, v in flags.items() if v is not None})
     cfg = ServeConfig.from_dict(values)
     model_art = read_artifact(model, "model")
@@ -188,7 +179,13 @@ def serve_cmd(
         ("unix" if socket_path is not None else "tcp")
     session = Session(cfg, model_art, rng=np.random.default_rng(seed), seed=seed,
                       transport=transport)
-    started = False
+    _serve(session, output, socket_path, host, port)
+
+
+def _serve(session, output: Path, socket_path: Path | None, host: str, port: int | None) -> None:
+    """Run ``session`` over its transport; write the artifact after every touch and at the end
+    (however it ends), then say how it ended on stderr."""
+    from kbcli.io.artifact import write_artifact
 
     def save() -> str:
         write_artifact(session.artifact(), output)
@@ -196,9 +193,10 @@ def serve_cmd(
 
     old_term = signal.signal(signal.SIGTERM, _on_sigterm)
     srv = conn = None
+    started = False
     ended = "interrupted"
     try:
-        if transport == "stdio":
+        if session.transport == "stdio":
             started = True
             ended = _run(session, sys.stdin.buffer, sys.stdout.buffer, save)
         else:
@@ -211,19 +209,29 @@ def serve_cmd(
     finally:
         signal.signal(signal.SIGTERM, old_term)
         if started:
-            session.ended = session.ended or ended
-            if ended != "end":  # "end" saved before its reply
-                save()
-            err.print(f"kbcli serve: wrote {output}: {session.steps} touch(es), "
-                      f"{session.errors} bad message(s), ended by {session.ended}", markup=False)
-        if ended == "disconnected" and transport == "stdio":
-            with contextlib.suppress(OSError):  # no error at exit flushing a closed stdout
-                devnull = os.open(os.devnull, os.O_WRONLY)
-                os.dup2(devnull, sys.stdout.fileno())
-        for s in (conn, srv):
-            if s is not None:
-                with contextlib.suppress(OSError):
-                    s.close()
-        if socket_path is not None and srv is not None:
+            _finish(session, ended, save, output)
+        _close(session.transport, ended, (conn, srv), socket_path if srv is not None else None)
+
+
+def _finish(session, ended: str, save, output: Path) -> None:
+    """Record how the session ended, write the artifact (unless "end" already did) and say so."""
+    session.ended = session.ended or ended
+    if ended != "end":  # "end" saved before its reply
+        save()
+    err.print(f"kbcli serve: wrote {output}: {session.steps} touch(es), "
+              f"{session.errors} bad message(s), ended by {session.ended}", markup=False)
+
+
+def _close(transport: str, ended: str, sockets: tuple, socket_path: Path | None) -> None:
+    """Close the sockets, remove a Unix socket's file, and keep a closed stdout quiet at exit."""
+    if ended == "disconnected" and transport == "stdio":
+        with contextlib.suppress(OSError):  # no error at exit flushing a closed stdout
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+    for s in sockets:
+        if s is not None:
             with contextlib.suppress(OSError):
-                socket_path.unlink()
+                s.close()
+    if socket_path is not None:
+        with contextlib.suppress(OSError):
+            socket_path.unlink()

@@ -51,6 +51,51 @@ def _distinct(v: tuple[str, ...]) -> tuple[str, ...]:
 #: A non-empty list of distinct names.
 Names = Annotated[tuple[Name, ...], Field(min_length=1), AfterValidator(_distinct)]
 
+def between(base: Any, low: float | None = None, high: float | None = None, *,
+            low_open: bool = False, high_open: bool = False) -> Any:
+    """``base`` (:data:`Number`, :data:`Whole`, ...) within an interval; a value outside it is
+    refused with the whole interval in the message (``play.steps must be a whole number in
+    [1, 100000], got 1000000000``), where pydantic's own message names one bound only.
+
+    Parameters
+    ----------
+    low, high : float, optional
+        The bounds (None: unbounded on that side).
+    low_open, high_open : bool
+        Whether the bound itself is excluded.
+    """
+    whole = "a whole number" if _is_whole(base) else "a number"
+    lo, hi = _bound(low), _bound(high)
+    if low is not None and high is not None:
+        text = f"in {'(' if low_open else '['}{lo}, {hi}{')' if high_open else ']'}"
+    elif low is not None:
+        text = f"{'>' if low_open else '>='} {lo}"
+    else:
+        text = f"{'<' if high_open else '<='} {hi}"
+
+    def check(v: Any) -> Any:
+        ok = v == v  # not NaN
+        if low is not None:
+            ok = ok and (v > low if low_open else v >= low)
+        if high is not None:
+            ok = ok and (v < high if high_open else v <= high)
+        if not ok:
+            raise ValueError(f"must be {whole} {text}, got {_short(v)}")
+        return v
+
+    return Annotated[base, AfterValidator(check)]
+
+
+def _bound(v: float | None) -> str:
+    if v is None:
+        return ""
+    return str(int(v)) if float(v).is_integer() and abs(v) < 1e15 else f"{v:g}"
+
+
+def _is_whole(base: Any) -> bool:
+    return getattr(base, "__origin__", base) is int
+
+
 _PHRASES = (
     ("Input should be ", "must be "),
     ("Value error, ", ""),
@@ -60,6 +105,8 @@ _PHRASES = (
     ("a valid boolean", "true or false"),
     ("a valid tuple", "a list"),
     ("a valid string", "a string"),
+    ("Tuple should have at least 1 item after validation, not 0", "must not be empty"),
+    ("List should have at least 1 item after validation, not 0", "must not be empty"),
 )
 
 
@@ -75,6 +122,10 @@ def describe_error(exc: ValidationError, what: str, fields: tuple[str, ...] = ()
     """
     e = exc.errors(include_url=False)[0]
     loc = ".".join(str(p) for p in e["loc"] if p != "__root__")
+    inner = (e.get("ctx") or {}).get("error")
+    if isinstance(getattr(inner, "validation", None), tuple):  # a nested config's own error
+        nested_exc, nested_fields = inner.validation
+        return describe_error(nested_exc, f"{what}.{loc}" if loc else what, nested_fields)
     if e["type"] == "extra_forbidden":
         key = e["loc"][-1] if e["loc"] else "?"
         inner = ".".join(str(p) for p in e["loc"][:-1])
@@ -88,7 +139,7 @@ def describe_error(exc: ValidationError, what: str, fields: tuple[str, ...] = ()
         return f"{what}.{loc} is required"
     name = f"{what}.{loc}" if loc else what
     if e["type"] in ("value_error", "assertion_error"):  # a validator's own sentence
-        return f"{name}: {msg}"
+        return f"{name} {msg}" if msg.startswith("must ") else f"{name}: {msg}"
     return f"{name} {msg}, got {_short(e.get('input'))}"
 
 
@@ -114,8 +165,11 @@ class Config(BaseModel):
         try:
             super().__init__(**data)
         except ValidationError as exc:
-            raise ConfigError(describe_error(exc, self.what, tuple(type(self).model_fields))) \
-                from None
+            fields = tuple(type(self).model_fields)
+            err = ConfigError(describe_error(exc, self.what, fields))
+            # kept so that a config nesting this one names the key once: "loop.detector.n_st ..."
+            err.validation = (exc, fields)
+            raise err from None
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Config:

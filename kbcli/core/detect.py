@@ -55,17 +55,26 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from pydantic import field_validator, model_validator
 from scipy import stats
 
-from kbcli.core.config import check_known
+from kbcli.core.config import Config, Name, Number, Positive, Whole, between
+from kbcli.core.registry import Registry
 from kbcli.errors import ConfigError
 
+#: Largest long-term window ``n_lt`` (the binomial detector tabulates (n_lt + 1) x (n_st + 1)
+#: tails, the bocpd detector tracks n_lt + n_st run lengths per step).
+MAX_N_LT = 10_000
+#: Largest short-term window ``n_st``.
+MAX_N_ST = 1_000
 
-@dataclass(frozen=True, kw_only=True)
-class DetectorConfig:
+_Probability = between(Number, 0.0, 1.0, low_open=True, high_open=True)
+
+
+class DetectorConfig(Config):
     """Which detector and its parameters.
 
     Parameters
@@ -73,9 +82,11 @@ class DetectorConfig:
     detector : str
         One of :data:`DETECTORS` (``binomial``, ``cusum``, ``bocpd``).
     n_lt : int
-        Long-term window N_LT (Eq. 4): results older than the short-term window.
+        Long-term window N_LT (Eq. 4): results older than the short-term window; at most
+        :data:`MAX_N_LT`.
     n_st : int
-        Short-term window N_ST (Eq. 5): the most recent results; ``1 <= n_st < n_lt``.
+        Short-term window N_ST (Eq. 5): the most recent results; ``1 <= n_st < n_lt`` and at most
+        :data:`MAX_N_ST`.
     threshold : float
         Fire when the score falls below it; in (0, 1).
     prior : tuple of float
@@ -87,60 +98,39 @@ class DetectorConfig:
         ``bocpd`` only: prior probability of a change at each step; in (0, 1).
     """
 
-    detector: str = "binomial"
-    n_lt: int = 100
-    n_st: int = 10
-    threshold: float = 0.01
-    prior: tuple[float, float] = (1.0, 1.0)
-    shift: float = 0.15
-    hazard: float = 1e-3
+    what = "detector"
 
-    def __post_init__(self) -> None:
-        get(self.detector)
-        for name in ("n_lt", "n_st"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1:
-                raise ConfigError(f"{name} must be a whole number >= 1, got {v!r}")
+    detector: Name = "binomial"
+    n_lt: between(Whole, 1, MAX_N_LT) = 100
+    n_st: between(Whole, 1, MAX_N_ST) = 10
+    threshold: _Probability = 0.01
+    prior: tuple[Positive, Positive] = (1.0, 1.0)
+    shift: _Probability = 0.15
+    hazard: _Probability = 1e-3
+
+    @field_validator("detector")
+    @classmethod
+    def _known(cls, v: str) -> str:
+        return DETECTORS.check(v)
+
+    @field_validator("n_lt", "n_st", mode="before")
+    @classmethod
+    def _numpy_int(cls, v: Any) -> Any:
+        return int(v) if isinstance(v, np.integer) else v
+
+    @model_validator(mode="after")
+    def _windows(self) -> DetectorConfig:
         if self.n_st >= self.n_lt:
             raise ConfigError(
                 f"n_st must be smaller than n_lt (short-term window inside a longer history), "
                 f"got n_st={self.n_st}, n_lt={self.n_lt}"
             )
-        for name in ("threshold", "shift", "hazard"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v < 1):
-                raise ConfigError(f"{name} must be in (0, 1), got {v!r}")
-        if len(self.prior) != 2 or not all(
-            isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in self.prior
-        ):
-            raise ConfigError(f"prior must be two pseudo-counts > 0, got {self.prior!r}")
-        object.__setattr__(self, "n_lt", int(self.n_lt))
-        object.__setattr__(self, "n_st", int(self.n_st))
-        object.__setattr__(self, "prior", (float(self.prior[0]), float(self.prior[1])))
+        return self
 
     @property
     def warmup(self) -> int:
         """Results needed after a reset before the detector may fire (``n_lt + n_st``)."""
         return self.n_lt + self.n_st
-
-    def to_dict(self) -> dict:
-        return {
-            "detector": self.detector,
-            "n_lt": self.n_lt,
-            "n_st": self.n_st,
-            "threshold": self.threshold,
-            "prior": list(self.prior),
-            "shift": self.shift,
-            "hazard": self.hazard,
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict) -> DetectorConfig:
-        check_known(cls, d, "detector")
-        d = dict(d)
-        if "prior" in d:
-            d["prior"] = tuple(d["prior"])
-        return cls(**d)
 
 
 class Bank:
@@ -211,30 +201,12 @@ class Bank:
 
 
 #: name -> factory(cfg, n_streams) -> Bank
-DETECTORS: dict[str, Callable[[DetectorConfig, int], Bank]] = {}
-
-
-def register(name: str) -> Callable:
-    """Decorator adding a detector factory to :data:`DETECTORS`."""
-
-    def deco(fn: Callable[[DetectorConfig, int], Bank]) -> Callable[[DetectorConfig, int], Bank]:
-        DETECTORS[name] = fn
-        return fn
-
-    return deco
-
-
-def get(name: str) -> Callable[[DetectorConfig, int], Bank]:
-    """The factory of detector ``name``; raises ConfigError listing the valid ones."""
-    try:
-        return DETECTORS[name]
-    except KeyError:
-        raise ConfigError(f"unknown detector {name!r}; valid: {', '.join(DETECTORS)}") from None
+DETECTORS: Registry[Callable[[DetectorConfig, int], Bank]] = Registry("detector")
 
 
 def make_bank(cfg: DetectorConfig, n_streams: int) -> Bank:
     """A bank of ``cfg.detector`` on ``n_streams`` streams."""
-    return get(cfg.detector)(cfg, n_streams)
+    return DETECTORS.get(cfg.detector)(cfg, n_streams)
 
 
 # -- the paper's binomial detector (Eq. 4-6) -----------------------------------------------------
@@ -261,7 +233,7 @@ class _Binomial(Bank):
         return self.table[self.k_lt, self.n_f]
 
 
-@register("binomial")
+@DETECTORS.register("binomial")
 def binomial(cfg: DetectorConfig, n_streams: int) -> Bank:
     """The paper's detector (Eq. 4-6): upper binomial tail of recent failures."""
     return _Binomial(cfg, n_streams)
@@ -287,7 +259,7 @@ class _Cusum(Bank):
         return np.exp(-self.s)
 
 
-@register("cusum")
+@DETECTORS.register("cusum")
 def cusum(cfg: DetectorConfig, n_streams: int) -> Bank:
     """Page's Bernoulli CUSUM for ``p0 -> p0 + shift``, ``p0`` from the long-term window."""
     return _Cusum(cfg, n_streams)
@@ -347,7 +319,7 @@ def _logsumexp_rows(v: np.ndarray) -> np.ndarray:
     return np.log(np.exp(v - m[:, None]).sum(axis=1)) + m
 
 
-@register("bocpd")
+@DETECTORS.register("bocpd")
 def bocpd(cfg: DetectorConfig, n_streams: int) -> Bank:
     """Bayesian online changepoint detection with a Beta-Bernoulli model (run lengths truncated)."""
     return _Bocpd(cfg, n_streams)

@@ -5,10 +5,8 @@ reach targets from what has been heard so far; :class:`Exploration` runs the loo
 refit) as an iterator that yields one batch at a time, so a caller can stop early, record a
 learning curve or draw a progress bar without the loop knowing.
 
-Strategies (registry :data:`STRATEGIES`, one signature, see :data:`Strategy`):
-
-``random``
-    Targets uniform over the working area: the baseline.
+Strategies (registry :data:`STRATEGIES`, read with ``STRATEGIES.get(name)``; one signature, see
+:data:`Strategy`):
 
 ``active``
     1. *Cover.* First a hexagonal lattice of spacing ``explore_radius * sqrt(3)`` (randomly shifted
@@ -39,48 +37,37 @@ Strategies (registry :data:`STRATEGIES`, one signature, see :data:`Strategy`):
     bisections at the ends of a long edge pin it down everywhere. Random reaches spend most of the
     budget inside regions whose sound is already known; the active rule reaches 99 % accuracy on
     the default keyboard in about a quarter of the reaches random needs (``kbcli bench learn``).
+
+``random``
+    Targets uniform over the working area: the baseline.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import Annotated, ClassVar
 
 import numpy as np
+from pydantic import AfterValidator
 from scipy.spatial import cKDTree
 
-from kbcli.core.model_classes import DEFAULT_MODEL_CLASS, fit_model, get_model_class
-from kbcli.errors import ConfigError
+from kbcli.core.config import Config, Count, Name, Positive
+from kbcli.core.model_classes import DEFAULT_MODEL_CLASS, check_learned, fit_model
+from kbcli.core.registry import Registry
 
 #: A strategy: ``(exploration, n, rng) -> (k, 2)`` targets inside ``exploration.area``, usually
 #: k = n; more is a plan the exploration carries out over the next batches. It may read
 #: ``exploration.targets``, ``.landed``, ``.perceived``, ``.cfg`` and ``.model`` (fitted on demand).
 Strategy = Callable[["Exploration", int, np.random.Generator], np.ndarray]
-STRATEGIES: dict[str, Strategy] = {}
+STRATEGIES: Registry[Strategy] = Registry("exploration strategy")
 
 
-def register(name: str) -> Callable[[Strategy], Strategy]:
-    """Decorator adding a strategy to :data:`STRATEGIES`."""
-
-    def deco(fn: Strategy) -> Strategy:
-        STRATEGIES[name] = fn
-        return fn
-
-    return deco
+def _strategy(name: str) -> str:
+    return STRATEGIES.check(name)
 
 
-def get_strategy(name: str) -> Strategy:
-    """The strategy called ``name``; ConfigError listing the valid ones otherwise."""
-    try:
-        return STRATEGIES[name]
-    except KeyError:
-        raise ConfigError(
-            f"unknown exploration strategy {name!r}; valid: {', '.join(sorted(STRATEGIES))}"
-        ) from None
-
-
-@dataclass(frozen=True, kw_only=True)
-class ExploreConfig:
+class ExploreConfig(Config):
     """How exploration proceeds.
 
     Parameters
@@ -100,34 +87,14 @@ class ExploreConfig:
         ``active`` strategy bisects its boundary bands, whatever the class.
     """
 
-    strategy: str = "active"
-    budget: int = 800
-    batch: int = 10
-    explore_radius: float = 20.0
-    n_candidates: int = 4000
-    model_class: str = DEFAULT_MODEL_CLASS
+    what: ClassVar[str] = "explore"
 
-    def __post_init__(self) -> None:
-        get_strategy(self.strategy)
-        get_model_class(self.model_class)
-        for name in ("budget", "batch", "n_candidates"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1:
-                raise ConfigError(f"{name} must be a whole number >= 1, got {v!r}")
-        for name in ("explore_radius",):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
-                raise ConfigError(f"{name} must be a positive number of px, got {v!r}")
-
-    def to_dict(self) -> dict:
-        return {
-            "strategy": self.strategy,
-            "budget": int(self.budget),
-            "batch": int(self.batch),
-            "explore_radius": float(self.explore_radius),
-            "n_candidates": int(self.n_candidates),
-            "model_class": self.model_class,
-        }
+    strategy: Annotated[Name, AfterValidator(_strategy)] = "active"
+    budget: Count = 800
+    batch: Count = 10
+    explore_radius: Positive = 20.0
+    n_candidates: Count = 4000
+    model_class: Annotated[Name, AfterValidator(check_learned)] = DEFAULT_MODEL_CLASS
 
 
 def _uniform(area: tuple, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -162,12 +129,6 @@ def farthest_points(candidates: np.ndarray, taken: np.ndarray, n: int) -> np.nda
     return np.array(picks)
 
 
-@register("random")
-def random_strategy(exploration: Exploration, n: int, rng: np.random.Generator) -> np.ndarray:
-    """Uniform targets over the working area (the baseline)."""
-    return _uniform(exploration.area, n, rng)
-
-
 def hex_lattice(area: tuple, spacing: float, rng: np.random.Generator) -> np.ndarray:
     """(m, 2) points of a hexagonal lattice over ``area``, randomly shifted and rotated.
 
@@ -195,7 +156,7 @@ def _cover_candidates(area: tuple, spacing: float, rng: np.random.Generator) -> 
     return np.clip(g, (x0, y0), (x1, y1))
 
 
-@register("active")
+@STRATEGIES.register("active")
 def active_strategy(exploration: Exploration, n: int, rng: np.random.Generator) -> np.ndarray:
     """Cover the area to ``explore_radius``, then the widest places of the boundary bands."""
     taken, area, cfg = exploration.landed, exploration.area, exploration.cfg
@@ -226,6 +187,12 @@ def active_strategy(exploration: Exploration, n: int, rng: np.random.Generator) 
         # the pick will halve the band there; nearby sites gain less the closer they are
         w = np.minimum(w, w[i] / 2 + np.hypot(*(p - p[i]).T))
     return np.array(picks)
+
+
+@STRATEGIES.register("random")
+def random_strategy(exploration: Exploration, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Uniform targets over the working area (the baseline)."""
+    return _uniform(exploration.area, n, rng)
 
 
 @dataclass
@@ -300,18 +267,12 @@ class Exploration:
         self.area = tuple(float(v) for v in area)
         self.match_threshold = match_threshold
         self.rng = rng
-        self.strategy = get_strategy(cfg.strategy)
+        self.strategy = STRATEGIES.get(cfg.strategy)
         self.targets = np.empty((0, 2))
         self.landed = np.empty((0, 2))
         self.perceived = np.empty((0, 0))
         self._model = None
         self._plan = np.empty((0, 2))
-
-    def refit(self, landed: np.ndarray, perceived: np.ndarray, **params):
-        """A fresh model of the same class and settings (``params`` on top) fitted on other
-        samples (cross-validation, calibration)."""
-        return fit_model(self.cfg.model_class, landed, perceived,
-                         match_threshold=self.match_threshold, area=self.area, **params)
 
     @property
     def model(self):

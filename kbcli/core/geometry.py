@@ -11,27 +11,39 @@ goes through this one interface (nothing else assumes square keys):
 - :meth:`KeyShapes.label_points` : a point well inside each key (its "centre");
 - :meth:`KeyShapes.sample` : uniform draws inside one key (rejection from its bounding box);
 - :meth:`KeyShapes.grid_points` : an even grid of points inside each key (playing success);
+- :meth:`KeyShapes.contains` : (n,) whether each point is in one given key (each key on its own);
 - :attr:`KeyShapes.bounds` : the bounding box of all keys.
 
 Points on an edge shared by two polygon keys belong to the key on its right (vertical edge) or above
 it (horizontal edge): the half-open convention of a grid of cells, ``floor((x - x0) / size)``.
 
-The checks a layout's keys must pass (:func:`check_polygon`, :func:`check_overlaps`) raise
-:class:`~kbcli.errors.ConfigError` naming the key: degenerate polygons (fewer than three distinct
-vertices, no area, crossing edges) and keys whose interiors overlap.
+The checks a layout's keys must pass (:func:`check_polygon`, :func:`check_overlaps`,
+:func:`check_in_pad`; shapely 2 for validity and exact intersection areas) raise
+:class:`~kbcli.errors.ConfigError` naming the key: vertices beyond :data:`MAX_COORD`, degenerate
+polygons (fewer than three distinct vertices, no area, crossing edges) and keys whose interiors
+overlap by more than :data:`OVERLAP_AREA` px^2.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Annotated
 
 import numpy as np
+import shapely
+from pydantic import Field, Strict
 from scipy.spatial import cKDTree
 
 from kbcli.errors import ConfigError
 
 DISC_VERTICES = 64  # vertices of a disc's outline polygon
+#: px: the largest |x| or |y| of a key's vertex (the pad is ~800 px; far beyond is a typo).
+MAX_COORD = 10_000.0
+#: A vertex coordinate in a config: a finite number within [-MAX_COORD, MAX_COORD] px.
+Coordinate = Annotated[float, Strict(), Field(ge=-MAX_COORD, le=MAX_COORD, allow_inf_nan=False)]
 MIN_AREA = 1.0  # px^2: a key smaller than this is degenerate
+#: px^2: two keys whose intersection is larger than this overlap (a shared edge has area 0).
+OVERLAP_AREA = 1e-9
 _CHUNK = 1 << 18  # points per block in the crossing test
 
 
@@ -56,7 +68,9 @@ def points_in_polygon(points: np.ndarray, v: np.ndarray) -> np.ndarray:
     """(n,) bool: whether each point is inside the polygon ``v`` (m, 2) (even-odd rule).
 
     Half-open: a point on a vertical edge is inside the polygon to its right, on a horizontal edge
-    inside the polygon above it. Vectorized over points; a loop over the (few) edges.
+    inside the polygon above it. Each edge is evaluated from its lower end, so two keys sharing a
+    slanted edge compute the same crossing bit for bit and a point on it is in exactly one of them.
+    Vectorized over points; a loop over the (few) edges.
     """
     p = np.asarray(points, float).reshape(-1, 2)
     v = np.asarray(v, float)
@@ -65,8 +79,8 @@ def points_in_polygon(points: np.ndarray, v: np.ndarray) -> np.ndarray:
         px, py = p[lo:lo + _CHUNK, 0], p[lo:lo + _CHUNK, 1]
         inside = np.zeros(len(px), dtype=bool)
         for i in range(len(v)):  # the polygon's edges: a handful per key
-            x1, y1 = v[i]
-            x2, y2 = v[(i + 1) % len(v)]
+            (x1, y1), (x2, y2) = sorted((tuple(v[i]), tuple(v[(i + 1) % len(v)])),
+                                        key=lambda q: q[1])  # lower end first: see above
             if y1 == y2:
                 continue
             spans = (y1 > py) != (y2 > py)
@@ -88,33 +102,8 @@ def segment_distance(points: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.hypot(*(p[:, None, :] - foot).transpose(2, 0, 1)).min(axis=1)
 
 
-def _orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (
-        c[..., 0] - a[..., 0])
-
-
-def proper_crossings(a1: np.ndarray, a2: np.ndarray, b1: np.ndarray, b2: np.ndarray,
-                     tol: float = 1e-9) -> np.ndarray:
-    """(m, k) bool: segment i of (a1, a2) and segment j of (b1, b2) cross at a point interior to both.
-
-    Touching at an end, or running along each other (collinear), is not a crossing.
-    """
-    a1, a2 = a1[:, None, :], a2[:, None, :]
-    b1, b2 = b1[None, :, :], b2[None, :, :]
-    d1, d2 = _orient(b1, b2, a1), _orient(b1, b2, a2)
-    d3, d4 = _orient(a1, a2, b1), _orient(a1, a2, b2)
-    scale = tol * (1.0 + np.abs(a1).max() + np.abs(b1).max()) ** 2
-    return ((d1 > scale) & (d2 < -scale) | (d1 < -scale) & (d2 > scale)) & (
-        (d3 > scale) & (d4 < -scale) | (d3 < -scale) & (d4 > scale))
-
-
-def check_polygon(vertices: Sequence, what: str) -> np.ndarray:
-    """A key's polygon, cleaned and counter-clockwise; ConfigError naming ``what`` if degenerate.
-
-    Repeated consecutive vertices (and a closing vertex equal to the first) are dropped. Refused:
-    non-finite coordinates, fewer than three distinct vertices, an area under 1 px^2, and edges
-    that cross each other (a self-intersecting outline).
-    """
+def _as_vertices(vertices: Sequence, what: str) -> np.ndarray:
+    """(m, 2) finite vertices within :data:`MAX_COORD`; ConfigError naming ``what`` otherwise."""
     try:
         v = np.asarray(vertices, dtype=float)
     except (TypeError, ValueError):
@@ -123,22 +112,39 @@ def check_polygon(vertices: Sequence, what: str) -> np.ndarray:
         raise ConfigError(f"{what}: vertices must be a list of [x, y] pairs, got shape {v.shape}")
     if not np.isfinite(v).all():
         raise ConfigError(f"{what}: vertices must be finite numbers")
+    if len(v) and np.abs(v).max() > MAX_COORD:
+        raise ConfigError(f"{what}: vertices must lie within -{MAX_COORD:g}..{MAX_COORD:g} px, "
+                          f"got {np.abs(v).max():g}")
+    return v
+
+
+def _deduplicated(v: np.ndarray) -> np.ndarray:
+    """``v`` without repeated consecutive vertices and without a closing copy of the first."""
     keep = np.ones(len(v), dtype=bool)
     keep[1:] = np.any(v[1:] != v[:-1], axis=1)
     v = v[keep]
     if len(v) > 1 and np.array_equal(v[0], v[-1]):
         v = v[:-1]
+    return v
+
+
+def check_polygon(vertices: Sequence, what: str) -> np.ndarray:
+    """A key's polygon, cleaned and counter-clockwise; ConfigError naming ``what`` if degenerate.
+
+    Repeated consecutive vertices (and a closing vertex equal to the first) are dropped. Refused:
+    non-finite coordinates or beyond :data:`MAX_COORD` (before anything is built from them), fewer
+    than three distinct vertices, an area under 1 px^2, and an outline that is not simple (its
+    edges cross or touch: shapely's ``is_simple`` of the ring).
+    """
+    v = _deduplicated(_as_vertices(vertices, what))
     if len(np.unique(v, axis=0)) < 3:
         raise ConfigError(f"{what}: degenerate polygon: fewer than 3 distinct vertices")
-    a, b = v, np.roll(v, -1, axis=0)
-    cross = proper_crossings(a, b, a, b)
-    m = len(v)
-    i, j = np.nonzero(np.triu(cross, 1))
-    adjacent = (j - i == 1) | ((i == 0) & (j == m - 1))
-    if (~adjacent).any():
-        raise ConfigError(f"{what}: degenerate polygon: its edges {int(i[~adjacent][0])} and "
-                          f"{int(j[~adjacent][0])} cross (a self-intersecting outline)")
     area = polygon_area(v)
+    hull = shapely.MultiPoint(v).convex_hull.area
+    if hull >= MIN_AREA and not shapely.LinearRing(v).is_simple:
+        reason = shapely.is_valid_reason(shapely.Polygon(v))
+        raise ConfigError(f"{what}: degenerate polygon: its edges cross (a self-intersecting "
+                          f"outline: {reason})")
     if abs(area) < MIN_AREA:
         raise ConfigError(f"{what}: degenerate polygon: its area is {abs(area):.3g} px^2 "
                           f"(at least {MIN_AREA:g} needed)")
@@ -212,6 +218,31 @@ class KeyShapes:
                 out[cand[points_in_polygon(p[cand], poly)]] = k
         return out
 
+    def shifted(self, dx: float, dy: float) -> KeyShapes:
+        """The same keys moved by (dx, dy) px."""
+        if self.discs is not None:
+            return KeyShapes(discs=self.discs + (dx, dy, 0.0))
+        return KeyShapes(polygons=[p + (dx, dy) for p in self.polygons])
+
+    def contains(self, k: int, points: np.ndarray) -> np.ndarray:
+        """(n,) bool: whether each of (n, 2) ``points`` is in key ``k`` alone (the same half-open
+        rule as :meth:`key_at`, without looking at the other keys)."""
+        p = np.asarray(points, float).reshape(-1, 2)
+        if self.discs is not None:
+            cx, cy, r = self.discs[k]
+            return np.hypot(p[:, 0] - cx, p[:, 1] - cy) <= r
+        x0, y0, x1, y1 = self.boxes[k]
+        out = np.zeros(len(p), dtype=bool)
+        box = np.flatnonzero((p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1))
+        out[box] = points_in_polygon(p[box], self.polygons[k])
+        return out
+
+    def shapely(self) -> np.ndarray:
+        """(K,) shapely Polygons of the keys (discs as their 64-gon outlines)."""
+        coords = np.vstack(self.polygons)
+        index = np.repeat(np.arange(self.n_keys), [len(p) for p in self.polygons])
+        return shapely.polygons(shapely.linearrings(coords, indices=index))
+
     def outlines(self) -> list[np.ndarray]:
         """The boundary of each key as a counter-clockwise polygon (discs as 64-gons)."""
         return [p.copy() for p in self.polygons]
@@ -284,49 +315,44 @@ class KeyShapes:
 
 
 def check_overlaps(shapes: KeyShapes, names: Sequence[str]) -> None:
-    """ConfigError naming two keys whose interiors overlap (sharing an edge is allowed).
+    """ConfigError naming the first two keys whose interiors overlap (sharing an edge is allowed).
 
     Discs overlap when their centres are closer than the sum of their radii. Polygons overlap when
-    two edges cross, when a vertex of one lies inside the other (off its edges), or when a sample of
-    interior points of one (a 1 px grid, kept 0.25 px off its edges) falls inside the other (two
-    equal or shifted keys whose edges only run along each other).
+    the area of their intersection (shapely) exceeds :data:`OVERLAP_AREA` px^2 (plus 1e-12 of the
+    smaller key's area, for round-off on long shared edges): exact, so keys overlapping by a
+    fraction of a pixel are refused. Pairs are found with an STR-tree, areas computed vectorised.
     """
-
-    def fail(i: int, j: int) -> None:
+    ii, jj = overlapping_pairs(shapes)
+    if len(ii):
+        i, j = int(ii[0]), int(jj[0])
         raise ConfigError(f"keys {i} ({names[i]}) and {j} ({names[j]}) overlap")
 
-    b = shapes.boxes
-    ii, jj = np.triu_indices(shapes.n_keys, 1)
-    touch = ((b[ii, 0] < b[jj, 2]) & (b[jj, 0] < b[ii, 2]) & (b[ii, 1] < b[jj, 3])
-             & (b[jj, 1] < b[ii, 3]))
+
+def overlapping_pairs(shapes: KeyShapes) -> tuple[np.ndarray, np.ndarray]:
+    """(i, j) index arrays, i < j, of the key pairs whose interiors overlap (see
+    :func:`check_overlaps`), in lexicographic order."""
     if shapes.discs is not None:
         d = shapes.discs
+        ii, jj = np.triu_indices(shapes.n_keys, 1)
         gap = np.hypot(d[ii, 0] - d[jj, 0], d[ii, 1] - d[jj, 1]) - d[ii, 2] - d[jj, 2]
-        bad = np.flatnonzero(gap < -1e-9)
-        if len(bad):
-            fail(int(ii[bad[0]]), int(jj[bad[0]]))
-        return
-    interior: dict[int, np.ndarray] = {}
+        bad = gap < -1e-9
+        return ii[bad], jj[bad]
+    polys = shapes.shapely()
+    ii, jj = shapely.STRtree(polys).query(polys, predicate="intersects")
+    keep = ii < jj
+    ii, jj = ii[keep], jj[keep]
+    area = shapely.area(shapely.intersection(polys[ii], polys[jj]))
+    tol = OVERLAP_AREA + 1e-12 * np.minimum(shapely.area(polys[ii]), shapely.area(polys[jj]))
+    bad = area > tol
+    order = np.lexsort((jj[bad], ii[bad]))
+    return ii[bad][order].astype(np.int64), jj[bad][order].astype(np.int64)
 
-    def inner(k: int) -> np.ndarray:
-        if k not in interior:
-            x0, y0, x1, y1 = b[k]
-            g = np.stack(np.meshgrid(np.arange(x0 + 0.5, x1, 1.0), np.arange(y0 + 0.5, y1, 1.0)),
-                         -1).reshape(-1, 2)
-            poly = shapes.polygons[k]
-            g = g[points_in_polygon(g, poly)]
-            interior[k] = g[segment_distance(g, poly) > 0.25] if len(g) else g
-        return interior[k]
 
-    for i, j in zip(ii[touch], jj[touch], strict=True):  # pairs whose boxes meet: a few per key
-        pi, pj = shapes.polygons[i], shapes.polygons[j]
-        if proper_crossings(pi, np.roll(pi, -1, 0), pj, np.roll(pj, -1, 0)).any():
-            fail(int(i), int(j))
-        for a, c in ((pi, pj), (pj, pi)):
-            strictly = points_in_polygon(a, c) & (segment_distance(a, c) > 1e-6)
-            if strictly.any():
-                fail(int(i), int(j))
-        for a, c in ((i, pj), (j, pi)):
-            g = inner(int(a))
-            if len(g) and (points_in_polygon(g, c) & (segment_distance(g, c) > 0.25)).any():
-                fail(int(i), int(j))
+def check_in_pad(shapes: KeyShapes) -> None:
+    """ConfigError unless every key lies inside the pad's coordinate box (|x|, |y| <=
+    :data:`MAX_COORD` px): a far origin is refused before anything is sampled over the keys."""
+    x0, y0, x1, y1 = shapes.bounds
+    far = max(abs(x0), abs(y0), abs(x1), abs(y1))
+    if not far <= MAX_COORD:
+        raise ConfigError(f"the keys must lie within -{MAX_COORD:g}..{MAX_COORD:g} px of the pad's "
+                          f"origin, got a key at {far:g} px: move origin")

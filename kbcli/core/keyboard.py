@@ -21,79 +21,34 @@ known sounds uses the Manhattan distance with a threshold (Eq. 2, Algorithm 1).
 
 from __future__ import annotations
 
-import math
-import re
-from dataclasses import dataclass, field, fields
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
 import numpy as np
+from pydantic import PrivateAttr, field_validator
 
 from kbcli.core import transforms
-from kbcli.core.config import check_known
-from kbcli.core.geometry import check_overlaps
+from kbcli.core.config import Config, Count, Name, NonNegative, Positive
+from kbcli.core.geometry import Coordinate, check_in_pad, check_overlaps
 from kbcli.core.layouts import (
     DEFAULT_CENTRE,
     LAYOUT_FIELDS,
     LAYOUTS,
-    SCALES,
     LayoutGeometry,
     PolygonKey,
-    get_layout,
+    polygon_keys,
 )
+from kbcli.core.notes import DEFAULT_SCALE, SCALES, midi_to_name, name_to_midi, sound_name
 from kbcli.errors import ConfigError
 
-NOTE_NAMES = ("C", "C#", "D", "D#", "E", "F", "F#", "G", "G#", "A", "A#", "B")
-_NOTE_RE = re.compile(r"^([A-Ga-g])([#b]?)(-?\d+)?$")
-DEFAULT_OCTAVE = 4
 FEATURE_NAMES = ("pitch", "tempo")
-DEFAULT_SCALE = "diatonic"
 
 __all__ = ["SCALES", "LAYOUTS", "KeyboardConfig", "Keyboard", "PolygonKey", "match",
-           "midi_to_name", "name_to_midi"]
+           "midi_to_name", "name_to_midi", "sound_name"]
 
 
-def _positive(name: str, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-        raise ConfigError(f"{name} must be a positive finite number, got {value!r}")
-
-
-def _non_negative(name: str, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-        raise ConfigError(f"{name} must be a finite number >= 0, got {value!r}")
-
-
-def midi_to_name(midi: int) -> str:
-    """MIDI note number -> scientific pitch name (60 -> 'C4')."""
-    return f"{NOTE_NAMES[int(midi) % 12]}{int(midi) // 12 - 1}"
-
-
-def sound_name(features) -> str:
-    """A heard sound in words: ``"A4 96 bpm"`` (the pitch's nearest note), ``"silence"`` (NaN)."""
-    f = np.asarray(features, float).reshape(-1)
-    if f.size == 0 or np.isnan(f).all():
-        return "silence"
-    text = midi_to_name(int(np.rint(f[0])))
-    return f"{text} {f[1]:.0f} bpm" if f.size > 1 and np.isfinite(f[1]) else text
-
-
-def name_to_midi(name: str) -> int:
-    """Scientific pitch name -> MIDI number ('C4' -> 60, 'A' -> 69 with the default octave 4).
-
-    Raises
-    ------
-    ConfigError
-        If the name is not a note name such as ``A``, ``F#3`` or ``Bb4``.
-    """
-    m = _NOTE_RE.match(name.strip())
-    if m is None:
-        raise ConfigError(f"unknown note {name!r}: expected a name like A, F#3 or Bb4")
-    letter, accidental, octave = m.groups()
-    pc = NOTE_NAMES.index(letter.upper()) + {"": 0, "#": 1, "b": -1}[accidental]
-    octv = DEFAULT_OCTAVE if octave is None else int(octave)
-    return (octv + 1) * 12 + pc
-
-
-@dataclass(frozen=True, kw_only=True)
-class KeyboardConfig:
+class KeyboardConfig(Config):
     """Layout, geometry and sounds of a keyboard. All lengths in pad pixels.
 
     Fields left ``None`` take the layout's default (see :mod:`kbcli.core.layouts`); a field the
@@ -134,118 +89,123 @@ class KeyboardConfig:
         Manhattan distance below which a perceived sound matches a known one (Eq. 2).
     """
 
-    layout: str = "grid"
-    rows: int | None = None
-    cols: int | None = None
-    key_size: float | None = None
-    key_height: float | None = None
-    black_width: float | None = None
-    black_height: float | None = None
-    pad_radius: float | None = None
+    what: ClassVar[str] = "keyboard"
+    layout: Name = "grid"
+    rows: Count | None = None
+    cols: Count | None = None
+    key_size: Positive | None = None
+    key_height: Positive | None = None
+    black_width: Positive | None = None
+    black_height: Positive | None = None
+    pad_radius: Positive | None = None
     keys: tuple[PolygonKey, ...] | None = None
-    origin: tuple[float, float] | None = None
-    margin: float = 50.0
-    base_note: str = "C3"
-    scale: str | None = None
-    tempo_base: float = 60.0
-    tempo_col_step: float = 4.0
-    tempo_row_step: float = 30.0
-    noise_std: float = 0.0
-    match_threshold: float = 1.5
+    origin: tuple[Coordinate, Coordinate] | None = None
+    margin: NonNegative = 50.0
+    base_note: Name = "C3"
+    scale: Name | None = None
+    tempo_base: Positive = 60.0
+    tempo_col_step: NonNegative = 4.0
+    tempo_row_step: NonNegative = 30.0
+    noise_std: NonNegative = 0.0
+    match_threshold: Positive = 1.5
+    _geometry: LayoutGeometry = PrivateAttr()
 
-    def __post_init__(self) -> None:
-        lay = get_layout(self.layout)
-        for name in LAYOUT_FIELDS:
-            if name not in lay.fields and getattr(self, name) is not None:
-                users = [n for n, v in LAYOUTS.items() if name in v.fields]
-                raise ConfigError(f"{name} does not apply to the {self.layout} layout (it applies "
-                                  f"to: {', '.join(users)})")
-            if name in lay.fields and getattr(self, name) is None:
-                object.__setattr__(self, name, lay.defaults[name])
-        if self.keys is not None:
-            object.__setattr__(self, "keys", tuple(
-                PolygonKey.from_dict(k, i) for i, k in enumerate(self.keys)))
-        if not lay.uses_scale and self.scale is not None:
-            raise ConfigError(f"scale does not apply to the {self.layout} layout (its notes follow "
-                              f"its own lattice)")
-        if lay.uses_scale and self.scale is None:
-            object.__setattr__(self, "scale", DEFAULT_SCALE)
-        if self.scale is not None and self.scale not in SCALES:
-            raise ConfigError(f"unknown scale {self.scale!r}; valid: {', '.join(SCALES)}")
-        _positive("match_threshold", self.match_threshold)
-        _non_negative("margin", self.margin)
-        _non_negative("noise_std", self.noise_std)
-        for name in ("tempo_base", "tempo_col_step", "tempo_row_step"):
-            _non_negative(name, getattr(self, name))
-        if self.tempo_base <= 0:
-            raise ConfigError(f"tempo_base must be > 0 bpm, got {self.tempo_base!r}")
-        name_to_midi(self.base_note)
-        if self.origin is not None:
-            if len(self.origin) != 2 or not all(
-                isinstance(v, (int, float)) and math.isfinite(v) for v in self.origin
-            ):
-                raise ConfigError(f"origin must be two finite numbers, got {self.origin!r}")
-            object.__setattr__(self, "origin", (float(self.origin[0]), float(self.origin[1])))
+    def __init__(self, /, **data: Any) -> None:
+        super().__init__(**_with_layout_defaults(data))
+        lay = LAYOUTS.get(self.layout)
         local = lay.build(self)  # the keys in the keyboard's frame; raises on bad geometry
-        if self.origin is None:
-            if lay.default_origin is not None:
-                origin = lay.default_origin
-            else:
-                x0, y0, x1, y1 = local.bounds
-                origin = (DEFAULT_CENTRE[0] - (x0 + x1) / 2, DEFAULT_CENTRE[1] - (y0 + y1) / 2)
-            object.__setattr__(self, "origin", (float(origin[0]), float(origin[1])))
-        geom = local.moved(self.origin)
-        names = tuple(midi_to_name(p) for p in geom.pitches)
-        top = int(np.max(geom.pitches))
-        if top > 127:
-            raise ConfigError(f"the highest key would be MIDI {top}, above 127: lower base_note")
-        if lay.checks_overlap:
-            check_overlaps(geom.shapes, names)
-        feats = np.column_stack([geom.pitches.astype(float), geom.tempos.astype(float)])
-        _check_distinct(feats, names, self.match_threshold)
-        object.__setattr__(self, "_geometry", geom)
+        if self.origin is None:  # the default origin is filled in once, at construction
+            self.__dict__["origin"] = _default_origin(lay.default_origin, local.bounds)
+        self._geometry = _placed(local, self.origin, self.match_threshold)
+
+    @field_validator("base_note")
+    @classmethod
+    def _note(cls, v: str) -> str:
+        name_to_midi(v)
+        return v
+
+    def __eq__(self, other: object) -> bool:
+        return type(other) is type(self) and self.__dict__ == other.__dict__
+
+    def __hash__(self) -> int:
+        return hash(tuple(self.__dict__.items()))
 
     @property
     def geometry(self) -> LayoutGeometry:
         """The keys on the pad at the reference pose (built and checked by the config)."""
-        return self._geometry  # type: ignore[attr-defined]
+        return self._geometry
 
     def pitches(self) -> np.ndarray:
         """MIDI pitch of every key, (K,) int."""
         return self.geometry.pitches.copy()
 
-    def to_dict(self) -> dict:
-        """The config as a plain mapping: the layout's own fields and the common ones."""
-        lay = get_layout(self.layout)
-        d: dict = {"layout": self.layout}
-        for f in fields(self):
-            if f.name == "layout" or (f.name in LAYOUT_FIELDS and f.name not in lay.fields):
+    def to_dict(self) -> dict[str, Any]:
+        """The config as a plain mapping: the layout's own fields and the common ones (``scale``
+        only where the layout uses it)."""
+        lay = LAYOUTS.get(self.layout)
+        d: dict[str, Any] = {}
+        for name in type(self).model_fields:
+            v = getattr(self, name)
+            if (name in LAYOUT_FIELDS and name not in lay.fields) or (name == "scale" and v is None):
                 continue
-            v = getattr(self, f.name)
-            if f.name == "scale" and v is None:
-                continue
-            if f.name == "keys":
-                v = [k.to_dict() for k in v]
-            elif f.name == "origin":
-                v = list(v)
-            d[f.name] = v
-        return d
+            d[name] = [k.to_dict() for k in v] if name == "keys" else v
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
 
     @classmethod
-    def from_dict(cls, d: dict) -> KeyboardConfig:
+    def from_dict(cls, d: Mapping[str, Any]) -> KeyboardConfig:
         """Build from a mapping (a TOML table, an artifact's config); unknown keys are rejected.
 
         A mapping without ``layout`` (schema 1 keyboard artifacts) is a grid.
         """
-        check_known(cls, d, "keyboard")
-        d = dict(d)
-        if "origin" in d and d["origin"] is not None:
-            d["origin"] = tuple(d["origin"])
-        if "keys" in d and d["keys"] is not None:
-            if not isinstance(d["keys"], (list, tuple)):
-                raise ConfigError("keys must be a list of tables ([[keyboard.keys]])")
-            d["keys"] = tuple(d["keys"])
-        return cls(**d)
+        return super().from_dict(d)  # type: ignore[return-value]
+
+
+def _with_layout_defaults(data: dict[str, Any]) -> dict[str, Any]:
+    """``data`` with the layout's defaults filled in, its polygon keys parsed and its scale set;
+    ConfigError naming a field the layout does not use."""
+    lay = LAYOUTS.get(data.get("layout", "grid"))
+    out = dict(data)
+    for name in LAYOUT_FIELDS:
+        given = out.get(name) is not None
+        if given and name not in lay.fields:
+            users = [n for n, v in LAYOUTS.items() if name in v.fields]
+            raise ConfigError(f"{name} does not apply to the {lay.name} layout (it applies "
+                              f"to: {', '.join(users)})")
+        if not given and name in lay.fields:
+            out[name] = lay.defaults[name]
+    if out.get("keys") is not None:
+        out["keys"] = polygon_keys(out["keys"])
+    if not lay.uses_scale and out.get("scale") is not None:
+        raise ConfigError(f"scale does not apply to the {lay.name} layout (its notes follow "
+                          f"its own lattice)")
+    if lay.uses_scale:
+        out["scale"] = SCALES.check(out.get("scale") or DEFAULT_SCALE)
+    return out
+
+
+def _default_origin(default: tuple[float, float] | None,
+                    bounds: tuple[float, float, float, float]) -> tuple[float, float]:
+    """The layout's default origin, or the one centring keys of ``bounds`` on DEFAULT_CENTRE."""
+    if default is None:
+        x0, y0, x1, y1 = bounds
+        default = (DEFAULT_CENTRE[0] - (x0 + x1) / 2, DEFAULT_CENTRE[1] - (y0 + y1) / 2)
+    return (float(default[0]), float(default[1]))
+
+
+def _placed(local: LayoutGeometry, origin: tuple[float, float],
+            threshold: float) -> LayoutGeometry:
+    """The keys moved to ``origin`` and checked: MIDI range, inside the pad, no overlap, sounds
+    apart (Eq. 2)."""
+    geom = local.moved(origin)
+    names = tuple(midi_to_name(p) for p in geom.pitches)
+    top = int(np.max(geom.pitches))
+    if top > 127:
+        raise ConfigError(f"the highest key would be MIDI {top}, above 127: lower base_note")
+    check_in_pad(geom.shapes)
+    check_overlaps(geom.shapes, names)
+    feats = np.column_stack([geom.pitches.astype(float), geom.tempos.astype(float)])
+    _check_distinct(feats, names, threshold)
+    return geom
 
 
 def _check_distinct(features: np.ndarray, names: tuple[str, ...], threshold: float) -> None:
@@ -416,17 +376,7 @@ class Keyboard:
         """One line: the layout, its keys and their range."""
         c = self.config
         lo, hi = midi_to_name(self.pitches.min()), midi_to_name(self.pitches.max())
-        if c.layout == "grid":
-            what = f"{c.rows} x {c.cols} keys of {c.key_size:g} px"
-        elif c.layout == "hex":
-            what = f"{c.rows} x {c.cols} hexagonal keys {c.key_size:g} px across"
-        elif c.layout == "piano":
-            what = (f"{c.cols} white keys ({c.key_size:g} x {c.key_height:g} px) and "
-                    f"{self.n_keys - c.cols} black keys ({c.black_width:g} x {c.black_height:g} px)")
-        elif c.layout == "pads":
-            what = f"{c.rows} x {c.cols} round pads of radius {c.pad_radius:g} px"
-        else:
-            what = f"{self.n_keys} polygon keys"
+        what = LAYOUTS.get(c.layout).describe(c, self.n_keys)
         return f"{what}, {lo} to {hi}"
 
 

@@ -10,8 +10,10 @@ experiments) or a model learned by exploration (what a real robot has) interchan
 - ``raster(step)`` : a :class:`ProbabilityRaster` of ``predict_proba`` over the working area, which
   the adaptation indexes instead of calling the model in its inner loop.
 
-This module holds the interface, the raster and the ``exact`` model; the learned model lives in
-:mod:`kbcli.core.learned`.
+This module holds the interface, the raster, :class:`ModelBase` (the scikit-learn estimator every
+learned model class derives from: the pairwise contests they share) and the ``exact`` model; the
+learned classes live in :mod:`kbcli.core.learned` (``lines``) and :mod:`kbcli.core.svc_model`
+(``svc``).
 """
 
 from __future__ import annotations
@@ -20,8 +22,11 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+from sklearn.base import BaseEstimator, ClassifierMixin
+from sklearn.exceptions import NotFittedError
 
 from kbcli.core.keyboard import Keyboard, match
+from kbcli.errors import ConfigError
 
 SILENCE = 0
 UNKNOWN = -1
@@ -96,6 +101,8 @@ class SoundModel(Protocol):
     class_features_: np.ndarray
     match_threshold: float
     area: tuple[float, float, float, float]
+    #: True only for the exact model: p(class | point) is the keyboard's own one-hot map.
+    exact_map: bool
 
     def predict_proba(self, points: np.ndarray) -> np.ndarray: ...
 
@@ -135,12 +142,222 @@ def classify_features(
     return out
 
 
+#: Query points per block of a prediction.
+_CHUNK = 16384
+#: Added to both sides of every pairwise contest: log(2 Phi(z)) instead of log Phi(z), so that a
+#: contest the model knows nothing about (z = 0) is neutral instead of penalising the candidates
+#: that take part in more contests (which made wide, honest boundary bands cost accuracy).
+_NEUTRAL = float(np.log(2.0))
+
+
+class ModelBase(ClassifierMixin, BaseEstimator):
+    """Base of the learned model classes: p(sound | action) from pairwise contests.
+
+    A scikit-learn estimator (``get_params`` / ``set_params`` / ``clone`` inherited; ``__init__``
+    only stores the parameters, ``fit`` returns ``self``, fitted attributes end in ``_``,
+    predicting before fitting raises :class:`~sklearn.exceptions.NotFittedError`). The candidate
+    sounds at an action are the classes of its ``n_neighbors`` nearest samples; each pair of
+    candidates with a boundary contests the action, and a candidate's log-score sums
+    ``log 2 p(on its side)`` over its contests; p(sound | action) is their softmax. A subclass fits
+    the contests: after ``fit`` it has
+
+    - ``class_features_`` (C, D), ``actions_`` (n, 2), ``labels_`` (n,), ``reach_sd_``;
+    - ``_tree``: a :class:`scipy.spatial.cKDTree` of ``actions_``;
+    - ``_pairs``: pair code ``lower * C + higher`` -> what decides the pair's contests, for the
+      pairs of sounds that have a boundary;
+
+    and implements ``_pair_logp(code, q) -> (log p(lower's side), log p(higher's side))``.
+    """
+
+    #: True only for the exact model (the keyboard's own geometry, :class:`ExactModel`).
+    exact_map = False
+    n_neighbors: int
+    match_threshold: float
+    area: tuple[float, float, float, float]
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "class_features_"):
+            raise NotFittedError(
+                f"this {type(self).__name__} is not fitted yet: call fit(actions, perceived)")
+
+    @property
+    def n_classes(self) -> int:
+        self._check_fitted()
+        return len(self.class_features_)
+
+    def _check_common(self) -> None:
+        """The checks of every learned class: ``match_threshold`` > 0, a valid ``area``.
+
+        Raises
+        ------
+        ConfigError
+            Naming the parameter and what is allowed.
+        """
+        if not (np.isfinite(self.match_threshold) and self.match_threshold > 0):
+            raise ConfigError(f"match_threshold must be > 0, got {self.match_threshold!r}")
+        x0, y0, x1, y1 = (float(v) for v in self.area)
+        if not (x1 > x0 and y1 > y0):
+            raise ConfigError(
+                f"area must be (xmin, ymin, xmax, ymax) with max > min, got {self.area!r}")
+
+    def _pair_logp(self, code: int, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(log p(on the lower class's side), log p(on the higher's)) of the pair ``code`` at
+        each of the points ``q`` (n, 2): the subclass's contest."""
+        raise NotImplementedError
+
+    # -- prediction -----------------------------------------------------------------------------
+    def _slot_scores(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Candidate classes and their log-scores at each point.
+
+        The candidates are the distinct classes among the ``n_neighbors`` nearest samples; a
+        candidate's log-score is the sum over the other candidates of log p(on its side of their
+        boundary) = log Phi(+-s / sigma). Repeated classes get -inf.
+
+        Returns
+        -------
+        cls : (n, k) int ndarray
+        score : (n, k) ndarray
+        """
+        n = len(q)
+        k = int(min(self.n_neighbors, len(self.actions_)))
+        _, idx = self._tree.query(q, k=k)
+        cls = self.labels_[np.asarray(idx).reshape(n, k)]
+        first = np.ones((n, k), dtype=bool)
+        for c in range(1, k):  # k columns, each vectorized over the points
+            first[:, c] = ~(cls[:, :c] == cls[:, c : c + 1]).any(axis=1)
+        score = np.where(first, 0.0, -np.inf)
+        near = first.sum(axis=1) >= 2
+        if not near.any() or not self._pairs:
+            return cls, score
+        rows_l, sa_l, sb_l = [], [], []
+        for a in range(k):
+            for b in range(a + 1, k):
+                r = np.flatnonzero(near & first[:, a] & first[:, b])
+                rows_l.append(r)
+                sa_l.append(np.full(len(r), a))
+                sb_l.append(np.full(len(r), b))
+        rows, sa, sb = np.concatenate(rows_l), np.concatenate(sa_l), np.concatenate(sb_l)
+        ca, cb = cls[rows, sa], cls[rows, sb]
+        swap = ca > cb
+        slo, shi = np.where(swap, sb, sa), np.where(swap, sa, sb)
+        nc = len(self.class_features_)
+        code = np.minimum(ca, cb) * nc + np.maximum(ca, cb)
+        for c in np.unique(code):
+            if int(c) not in self._pairs:
+                continue  # sounds that never met: no boundary between them to judge by
+            sel = np.flatnonzero(code == c)
+            lp_lo, lp_hi = self._pair_logp(int(c), q[rows[sel]])
+            np.add.at(score, (rows[sel], slo[sel]), lp_lo + _NEUTRAL)
+            np.add.at(score, (rows[sel], shi[sel]), lp_hi + _NEUTRAL)
+        return cls, score
+
+    def _predict(self, points: np.ndarray, proba: bool) -> np.ndarray:
+        self._check_fitted()
+        q = np.asarray(points, float).reshape(-1, 2)
+        nc = self.n_classes
+        out = np.zeros((len(q), nc)) if proba else np.zeros(len(q), dtype=np.int64)
+        for start in range(0, len(q), _CHUNK):
+            blk = slice(start, start + _CHUNK)
+            cls, score = self._slot_scores(q[blk])
+            if proba:
+                m = score.max(axis=1, keepdims=True)
+                w = np.exp(score - m)
+                w /= w.sum(axis=1, keepdims=True)
+                r = np.repeat(np.arange(len(cls)), cls.shape[1])
+                block = np.zeros((len(cls), nc))
+                np.add.at(block, (r, cls.ravel()), w.ravel())
+                out[blk] = block
+            else:
+                # ties (no boundary between two candidates) go to the nearer sample's class
+                tie = -1e-9 * np.arange(cls.shape[1])
+                out[blk] = cls[np.arange(len(cls)), np.argmax(score + tie, axis=1)]
+        return out
+
+    def predict_proba(self, points: np.ndarray) -> np.ndarray:
+        """p(sound class | action) at each point.
+
+        Parameters
+        ----------
+        points : (n, 2) ndarray
+
+        Returns
+        -------
+        (n, C) ndarray
+            Rows sum to 1.
+        """
+        return self._predict(points, proba=True)
+
+    def predict_class(self, points: np.ndarray) -> np.ndarray:
+        """(n,) most probable sound class at each point."""
+        return self._predict(points, proba=False)
+
+    def confusion(self, points: np.ndarray) -> np.ndarray:
+        """(n,) the confusion factor 1 - (p1 - p2): 0 where sure, 1 on a boundary."""
+        p = np.sort(self.predict_proba(points), axis=1)
+        if p.shape[1] < 2:
+            return np.zeros(len(p))
+        return 1.0 - (p[:, -1] - p[:, -2])
+
+    def classify(self, perceived: np.ndarray) -> np.ndarray:
+        """(n,) class of perceived sounds: 0 silence, -1 unknown (Eq. 2 matching)."""
+        self._check_fitted()
+        return classify_features(perceived, self.class_features_, self.match_threshold)
+
+    def sample_actions(self, cls: int, n: int, rng: np.random.Generator) -> np.ndarray:
+        """(n, 2) draws from p(action | sound class ``cls``), uniform prior over the area.
+
+        Rejection sampling: uniform proposals over the box of the class's samples (widened by
+        their spacing; the whole area for silence), accepted with probability p(cls | proposal).
+
+        Raises
+        ------
+        ValueError
+            If ``cls`` is not a class of the model.
+        """
+        self._check_fitted()
+        if not 0 <= cls < self.n_classes:
+            raise ValueError(f"class {cls} out of range 0..{self.n_classes - 1}")
+        x0, y0, x1, y1 = (float(v) for v in self.area)
+        lo, hi = np.array([x0, y0]), np.array([x1, y1])
+        mine = self.actions_[self.labels_ == cls]
+        if cls != SILENCE and len(mine) and len(self.actions_) > 1:
+            pad = float(np.max(self._tree.query(mine, k=2)[0][:, 1])) + 1.0
+            lo = np.maximum(lo, mine.min(axis=0) - pad)
+            hi = np.minimum(hi, mine.max(axis=0) + pad)
+        out = np.empty((0, 2))
+        for _ in range(1000):
+            if len(out) >= n:
+                break
+            prop = rng.uniform(lo, hi, size=(max(4 * (n - len(out)), 64), 2))
+            keep = rng.uniform(size=len(prop)) < self.predict_proba(prop)[:, cls]
+            out = np.vstack([out, prop[keep]])
+        if len(out) < n:
+            raise ValueError(f"class {cls} has (almost) no support in the working area")
+        return out[:n]
+
+    def raster(self, step: float = 1.0) -> ProbabilityRaster:
+        """p(class | point) on a grid of cells of ``step`` px over the working area."""
+        origin, pts = grid_points(tuple(float(v) for v in self.area), step)
+        probs = self.predict_proba(pts.reshape(-1, 2)).astype(np.float32)
+        return ProbabilityRaster(
+            origin=origin, step=float(step), probs=probs.reshape(*pts.shape[:2], -1)
+        )
+
+    def predict(self, points: np.ndarray) -> np.ndarray:
+        """(n,) most probable sound class at each point (scikit-learn's name for
+        :meth:`predict_class`)."""
+        return self.predict_class(points)
+
+
 class ExactModel:
     """The keyboard's own geometry as a model: class ``k + 1`` is key ``k``, class 0 silence.
 
     Used for calibration experiments that separate the estimator's quality from the learned
     model's (``kbcli learn --strategy exact``). Follows the same interface as learned models.
     """
+
+    #: The model is the map itself (callers that can use exact geometry ask this, not the type).
+    exact_map = True
 
     def __init__(self, keyboard: Keyboard) -> None:
         self.keyboard = keyboard

@@ -16,7 +16,8 @@ interface, whatever the class:
 - attributes ``class_features_``, ``match_threshold``, ``area``, ``n_classes``, ``reach_sd_``;
 - ``to_arrays() -> dict`` and ``from_arrays(dict)``: storage as plain arrays, never pickle.
 
-Registered (:data:`MODEL_CLASSES`):
+Registered (:data:`MODEL_CLASSES`, a :class:`~kbcli.core.registry.Registry`; every learned class
+is a scikit-learn estimator deriving from :class:`~kbcli.core.model.ModelBase`):
 
 ``lines`` (:class:`~kbcli.core.learned.LearnedModel`)
     Keys bounded by straight lines shared across keys: exact and sample-efficient for polygon keys
@@ -26,70 +27,135 @@ Registered (:data:`MODEL_CLASSES`):
     straight line separates the pair's samples, RBF elsewhere), probabilities from the margin: any
     key shape, curved boundaries included.
 
-Adding a class is adding an entry with :func:`register`: a factory taking ``match_threshold``,
-``area`` and the class's own keyword parameters, and a ``from_arrays``. Fitting goes through
-:func:`fit_model` (``fit(actions, perceived)`` for every class), so anything that wraps every
-class (a reliability estimate, a calibration) has one place to hook in.
+``exact`` (:class:`~kbcli.core.model.ExactModel`)
+    The keyboard's own geometry (calibration experiments, ``kbcli learn --strategy exact``): not
+    learned (``learned`` False), built from the keyboard, its ``exact_map`` attribute True (every
+    learned model's is False: callers ask the attribute, never the class or its name).
+
+Adding a class is registering a :class:`ModelClass` with ``MODEL_CLASSES.register(name, ...)``:
+a loader of the estimator class (imported lazily), which takes ``match_threshold``, ``area`` and
+its own keyword parameters and has ``from_arrays``. Fitting goes through :func:`fit_model`
+(``fit(actions, perceived)`` for every class), so anything that wraps every class (a reliability
+estimate, a calibration) has one place to hook in.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from kbcli.core.registry import Registry
 from kbcli.errors import ConfigError
+
+#: The class of model artifacts that do not name one (schema 1: every learned model was ``lines``).
+DEFAULT_MODEL_CLASS = "lines"
+#: The class (and the ``learn`` strategy) of the keyboard's own geometry.
+EXACT = "exact"
+_COMMON = ("match_threshold", "area")
 
 
 @dataclass(frozen=True)
 class ModelClass:
-    """A registered model class: how to make one and how to rebuild a stored one."""
+    """A registered model class.
 
-    name: str
-    summary: str
-    factory: Callable[..., Any]
-    from_arrays: Callable[[dict], Any]
-    params: tuple[str, ...] = ()
+    Attributes
+    ----------
+    estimator : callable
+        ``estimator() -> type``: the class (imported on first use: scikit-learn's SVC is slow to
+        import).
+    learned : bool
+        Fitted to exploration samples (``fit``, ``to_arrays`` / ``from_arrays``); False for the
+        exact model, built from the keyboard.
+    """
+
+    estimator: Callable[[], type]
+    learned: bool = True
+
+    @property
+    def params(self) -> tuple[str, ...]:
+        """The class's own keyword parameters (besides ``match_threshold`` and ``area``)."""
+        if not self.learned:
+            return ()
+        return tuple(p for p in self.estimator()._get_param_names() if p not in _COMMON)
+
+    def load(self, arrays: Mapping | None, keyboard: Any = None):
+        """The stored model: ``from_arrays(arrays)`` of a learned class, the exact model of
+        ``keyboard`` otherwise."""
+        if self.learned:
+            return self.estimator().from_arrays(arrays)
+        return self.estimator()(keyboard)
 
 
-MODEL_CLASSES: dict[str, ModelClass] = {}
-#: The class of model artifacts that do not name one (schema 1: every learned model was ``lines``).
-DEFAULT_MODEL_CLASS = "lines"
+MODEL_CLASSES: Registry[ModelClass] = Registry("model class")
 
 
-def register(name: str, summary: str, factory: Callable[..., Any],
-             from_arrays: Callable[[dict], Any], params: tuple[str, ...] = ()) -> None:
-    """Add a model class to :data:`MODEL_CLASSES`."""
-    MODEL_CLASSES[name] = ModelClass(name, summary, factory, from_arrays, params)
+def _lines() -> type:
+    from kbcli.core.learned import LearnedModel
+
+    return LearnedModel
 
 
-def get_model_class(name: str) -> ModelClass:
-    """The model class called ``name``; ConfigError listing the valid ones otherwise."""
-    try:
-        return MODEL_CLASSES[name]
-    except (KeyError, TypeError):
-        raise ConfigError(
-            f"unknown model class {name!r}; valid: {', '.join(MODEL_CLASSES)}") from None
+def _svc() -> type:
+    from kbcli.core.svc_model import SVCModel
+
+    return SVCModel
+
+
+def _exact() -> type:
+    from kbcli.core.model import ExactModel
+
+    return ExactModel
+
+
+MODEL_CLASSES.register("lines", ModelClass(_lines),
+                       summary="straight key edges shared across keys (polygon keys)")
+MODEL_CLASSES.register("svc", ModelClass(_svc), summary="scikit-learn SVMs per pair of "
+                       "neighbouring sounds, linear or RBF (any key shape)")
+MODEL_CLASSES.register(EXACT, ModelClass(_exact, learned=False),
+                       summary="the keyboard's own geometry (not learned)")
+
+
+def learned_classes() -> tuple[str, ...]:
+    """The model classes fitted to exploration samples (valid ``--model-class`` values)."""
+    return tuple(n for n, mc in MODEL_CLASSES.items() if mc.learned)
+
+
+def check_learned(name: str) -> str:
+    """``name`` when it is a learned model class; ConfigError listing them otherwise."""
+    if not MODEL_CLASSES.get(name).learned:
+        raise ConfigError(f"model class {name!r} is not learned from samples; valid: "
+                          f"{', '.join(learned_classes())}")
+    return name
+
+
+def model_class_of(config: Mapping) -> str:
+    """The model class a model artifact's config names: ``exact`` for the exact model (its
+    ``strategy``), else its ``model_class`` (absent in schema 1: ``lines``)."""
+    if config.get("strategy") == EXACT:
+        return EXACT
+    name = config.get("model_class")
+    return DEFAULT_MODEL_CLASS if name is None else name
 
 
 def make_model(name: str, *, match_threshold: float, area: tuple[float, float, float, float],
                **params: Any):
-    """An unfitted model of class ``name``.
+    """An unfitted model of the learned class ``name``.
 
     Raises
     ------
     ConfigError
-        For an unknown class or a parameter the class does not take.
+        For an unknown or not learned class, or a parameter the class does not take.
     """
-    mc = get_model_class(name)
+    mc = MODEL_CLASSES.get(check_learned(name))
     unknown = sorted(set(params) - set(mc.params))
     if unknown:
         raise ConfigError(f"model class {name} takes no parameter {unknown[0]!r}; valid: "
                           f"{', '.join(mc.params) or 'none'}")
-    return mc.factory(match_threshold=float(match_threshold),
-                      area=tuple(float(v) for v in area), **params)
+    return mc.estimator()(match_threshold=float(match_threshold),
+                          area=tuple(float(v) for v in area), **params)
 
 
 def fit_model(name: str, actions: np.ndarray, perceived: np.ndarray, *, match_threshold: float,
@@ -101,36 +167,5 @@ def fit_model(name: str, actions: np.ndarray, perceived: np.ndarray, *, match_th
 
 
 def model_from_arrays(d: dict, name: str | None = None):
-    """Rebuild a stored model of class ``name`` (default ``lines``) from its arrays."""
-    return get_model_class(DEFAULT_MODEL_CLASS if name is None else name).from_arrays(d)
-
-
-def _lines(**kw: Any):
-    from kbcli.core.learned import LearnedModel
-
-    return LearnedModel(**kw)
-
-
-def _lines_from(d: dict):
-    from kbcli.core.learned import LearnedModel
-
-    return LearnedModel.from_arrays(d)
-
-
-def _svc(**kw: Any):
-    from kbcli.core.svc_model import SVCModel
-
-    return SVCModel(**kw)
-
-
-def _svc_from(d: dict):
-    from kbcli.core.svc_model import SVCModel
-
-    return SVCModel.from_arrays(d)
-
-
-register("lines", "straight key edges shared across keys (polygon keys)", _lines, _lines_from,
-         ("n_neighbors", "min_sd", "max_sd", "extrapolation", "merge_angle", "merge_offset",
-          "piece_reach", "sd_scale", "noise_sd", "floor", "noise_tol"))
-register("svc", "scikit-learn SVMs per pair of neighbouring sounds, linear or RBF (any key shape)",
-         _svc, _svc_from, ("length_scale", "C", "local_radius", "n_neighbors", "linear_pairs"))
+    """Rebuild a stored model of the learned class ``name`` (default ``lines``) from its arrays."""
+    return MODEL_CLASSES.get(check_learned(DEFAULT_MODEL_CLASS if name is None else name)).load(d)

@@ -54,20 +54,22 @@ measure 0.006-0.022), hence the one-standard-error margin. The Brier score, boun
 ruled by the rare confident miss as the log-likelihood is. Neither weight uses the keyboard: only
 the samples and the working area.
 
-Any model class works that follows the model interface and exposes ``calibration_grid()`` (a dict
-of parameter name -> candidate values read at prediction time, applied with ``setattr`` on a
-copy) and ``fit_grid()`` (parameters of the fit itself, such as the line model's label-noise
-tolerance: the model is refitted with each) — or neither (then only the reliability is estimated).
+Any learned model class works (a scikit-learn estimator, :class:`~kbcli.core.model.ModelBase`):
+the fold models are ``clone(model).set_params(**fit_params).fit(...)``. A class may expose
+``calibration_grid()`` (a dict of parameter name -> candidate values read at prediction time,
+applied with ``set_params`` on a copy of the fitted model) and ``fit_grid()`` (parameters of the
+fit itself, such as the line model's label-noise tolerance: the model is refitted with each) — or
+neither (then only the reliability is estimated).
 """
 
 from __future__ import annotations
 
 import copy
 import itertools
-from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from sklearn.base import clone
 
 from kbcli.core.accuracy import boundary_error as _boundary_error
 from kbcli.core.model import classify_features, grid_points
@@ -275,18 +277,71 @@ def choose_calibration(scores: np.ndarray, weights: np.ndarray,
     return tuple(int(i) for i in np.unravel_index(int(live[np.argmin(mean[live])]), shape))
 
 
-def assess(fit: Callable[..., object], full_model, actions: np.ndarray,
-           perceived: np.ndarray, *, rng: np.random.Generator, folds: int = FOLDS,
+def _grid(model, method: str, calibrate: bool) -> tuple[list[str], list[tuple]]:
+    """Names and every combination of the candidate values of a model's ``method()`` grid."""
+    cands = getattr(model, method, lambda: {})() if calibrate else {}
+    names = sorted(cands)
+    return names, list(itertools.product(*(cands[nm] for nm in names))) or [()]
+
+
+def _refit(model, x: np.ndarray, s: np.ndarray, params: dict):
+    """A fresh model of ``model``'s class and settings, ``params`` on top, fitted to (x, s)."""
+    return clone(model).set_params(**params).fit(x, s)
+
+
+def _recalibrated(model, params: dict):
+    """A copy of the fitted ``model`` with the prediction-time ``params`` set."""
+    return copy.copy(model).set_params(**params)
+
+
+@dataclass
+class _CrossValidation:
+    """Held-out predictions of every fold under every candidate calibration."""
+
+    held: np.ndarray  # (F, P, n, C) in the full model's classes
+    boundary: list[list[float]]  # per fit candidate, each fold's boundary error
+    fulls: list  # per fit candidate, the model fitted on every sample
+
+
+def _cross_validate(full_model, x: np.ndarray, s: np.ndarray, fold: np.ndarray, k: int,
+                    pts: np.ndarray, grids: tuple) -> _CrossValidation:
+    """Fit the folds with every fit candidate and predict their held-out touches with every
+    prediction-time candidate."""
+    (names, combos), (fit_names, fit_combos) = grids
+    flat = pts.reshape(-1, 2)
+    c_full, thr = full_model.n_classes, full_model.match_threshold
+    cv = _CrossValidation(np.zeros((len(fit_combos), len(combos), len(x), c_full)), [], [])
+    for j, fc in enumerate(fit_combos):  # F x (K + 1) fits
+        fp = dict(zip(fit_names, fc, strict=True))
+        full_j = _refit(full_model, x, s, fp) if fp else full_model
+        cv.fulls.append(full_j)
+        cmap_full = _class_map(full_j.class_features_, full_model.class_features_, thr)
+        full_map = cmap_full[full_j.predict_class(flat)].reshape(pts.shape[:2])
+        cv.boundary.append([])
+        for f in range(k):
+            test = fold == f
+            if test.all() or not test.any():
+                continue
+            m = _refit(full_model, x[~test], s[~test], fp)
+            cmap = _class_map(m.class_features_, full_model.class_features_, thr)
+            fold_map = cmap[m.predict_class(flat)].reshape(pts.shape[:2])
+            cv.boundary[j].append(_boundary_error(fold_map, full_map, BOUNDARY_STEP))
+            for i, combo in enumerate(combos):
+                mc = _recalibrated(m, dict(zip(names, combo, strict=True)))
+                cv.held[j, i, test] = _held_out_probs(mc, x[test], cmap, c_full)
+    return cv
+
+
+def assess(full_model, actions: np.ndarray, perceived: np.ndarray, *,
+           rng: np.random.Generator, folds: int = FOLDS,
            calibrate: bool = True) -> tuple[object, Reliability]:
     """Cross-validate a model class on its samples, calibrate it, and estimate its reliability.
 
     Parameters
     ----------
-    fit : callable
-        ``fit(actions, perceived, **fit_params) -> fitted model`` (a fresh model of the class, same
-        settings; ``fit_params`` from the class's ``fit_grid()``, if it has one).
-    full_model : SoundModel
-        The model fitted on every sample (``fit(actions, perceived)``).
+    full_model : ModelBase
+        The model fitted on every sample; each fold's model is a clone of it (same class and
+        settings) fitted on the other folds.
     actions, perceived : (n, 2), (n, D) ndarrays
         The samples (where the robot felt it touched, what it heard).
     rng : numpy.random.Generator
@@ -300,7 +355,7 @@ def assess(fit: Callable[..., object], full_model, actions: np.ndarray,
 
     Returns
     -------
-    model : SoundModel
+    model : ModelBase
         ``full_model`` with the chosen calibration (a copy or a refit; ``full_model`` itself is
         unchanged).
     reliability : Reliability
@@ -309,46 +364,17 @@ def assess(fit: Callable[..., object], full_model, actions: np.ndarray,
     s = np.asarray(perceived, float).reshape(len(x), -1)
     n = len(x)
     labels = full_model.classify(s)
-    c_full = full_model.n_classes
-    thr = full_model.match_threshold
     k = int(min(folds, n))
-    grid_cands = getattr(full_model, "calibration_grid", lambda: {})() if calibrate else {}
-    names = sorted(grid_cands)
-    combos = list(itertools.product(*(grid_cands[nm] for nm in names))) or [()]
-    fit_cands = getattr(full_model, "fit_grid", lambda: {})() if calibrate else {}
-    fit_names = sorted(fit_cands)
-    fit_combos = list(itertools.product(*(fit_cands[nm] for nm in fit_names))) or [()]
+    names, combos = _grid(full_model, "calibration_grid", calibrate)
+    fit_names, fit_combos = _grid(full_model, "fit_grid", calibrate)
     fold = _fold_ids(n, k, rng)
     _, pts = grid_points(tuple(float(v) for v in full_model.area), BOUNDARY_STEP)
     flat = pts.reshape(-1, 2)
-    held = np.zeros((len(fit_combos), len(combos), n, c_full))
-    berr: list[list[float]] = []
-    fulls = []
-    for j, fc in enumerate(fit_combos):  # F x (K + 1) fits
-        fp = dict(zip(fit_names, fc, strict=True))
-        full_j = fit(x, s, **fp) if fp else full_model
-        fulls.append(full_j)
-        cmap_full = _class_map(full_j.class_features_, full_model.class_features_, thr)
-        full_map = cmap_full[full_j.predict_class(flat)].reshape(pts.shape[:2])
-        berr.append([])
-        for f in range(k):
-            test = fold == f
-            if test.all() or not test.any():
-                continue
-            m = fit(x[~test], s[~test], **fp)
-            cmap = _class_map(m.class_features_, full_model.class_features_, thr)
-            fold_map = cmap[m.predict_class(flat)].reshape(pts.shape[:2])
-            berr[j].append(_boundary_error(fold_map, full_map, BOUNDARY_STEP))
-            for i, combo in enumerate(combos):
-                mc = copy.copy(m)
-                for nm, v in zip(names, combo, strict=True):
-                    setattr(mc, nm, v)
-                held[j, i, test] = _held_out_probs(mc, x[test], cmap, c_full)
+    cv = _cross_validate(full_model, x, s, fold, k, pts, ((names, combos), (fit_names, fit_combos)))
     known = labels >= 0
     w = _area_weights(x)[known]
-    hk = held[:, :, known, :]
-    rows = np.arange(known.sum())
-    p_true = hk[:, :, rows, labels[known]]  # (F, P, n_known)
+    hk = cv.held[:, :, known, :]
+    p_true = hk[:, :, np.arange(known.sum()), labels[known]]  # (F, P, n_known)
     nll = -(np.log(np.maximum(p_true, 1e-12)) @ w)  # (F, P)
     wd = _distance_weights(x, fold, flat)[known]
     wd = wd / wd.sum() if wd.sum() > 0 else wd
@@ -357,13 +383,10 @@ def assess(fit: Callable[..., object], full_model, actions: np.ndarray,
     bj, bi = choose_calibration(scores, wd, own)
     chosen = {**dict(zip(fit_names, fit_combos[bj], strict=True)),
               **dict(zip(names, combos[bi], strict=True))}
-    model = copy.copy(fulls[bj])
-    for nm, v in zip(names, combos[bi], strict=True):
-        setattr(model, nm, v)
-    hp = held[bj, bi, known]
-    pred = hp.argmax(axis=1)
-    hit = pred == labels[known]
-    finite = [b for b in berr[bj] if np.isfinite(b)]
+    model = _recalibrated(cv.fulls[bj], dict(zip(names, combos[bi], strict=True)))
+    hp = cv.held[bj, bi, known]
+    hit = hp.argmax(axis=1) == labels[known]
+    finite = [b for b in cv.boundary[bj] if np.isfinite(b)]
     rel = Reliability(
         folds=k,
         samples=n,

@@ -161,12 +161,6 @@ def mannwhitney_pvalues(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.nd
     return np.where(tied, 0.0, effect), np.where(tied | np.isnan(p), 1.0, p)
 
 
-def ranksum_pvalues(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The Wilcoxon rank-sum test: :func:`mannwhitney_pvalues` (kept for the old name; it used
-    ``scipy.stats.ranksums``, which has no tie correction)."""
-    return mannwhitney_pvalues(a, b)
-
-
 def signed_rank_pvalues(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two-sided Wilcoxon signed-rank test of paired samples per threshold.
 

@@ -4,11 +4,11 @@ M_INST = p(sound, action) for keys of any shape (the ``svc`` model class; ``line
 :mod:`kbcli.core.learned`, assumes straight key edges). From the exploration samples alone (where
 the finger landed, what was heard), the model
 
-1. **finds the sound classes** as the ``lines`` model does (:func:`~kbcli.core.learned.
+1. **finds the sound classes** as the ``lines`` model does (:func:`~kbcli.core.sounds.
    discover_classes`: leader clustering of the perceived features with the Eq. 2 threshold; class 0
    is silence);
 2. **finds the neighbouring sounds**: a Delaunay edge of the samples whose ends were heard as two
-   different sounds i < j crosses their boundary (:func:`~kbcli.core.learned._straddling_edges`);
+   different sounds i < j crosses their boundary (:func:`~kbcli.core.sounds.straddling_edges`);
 3. **fits one scikit-learn** :class:`~sklearn.svm.SVC` **per pair of neighbouring sounds** on the
    samples of the two sounds within ``local_radius`` px of their straddling edges: a hard-margin
    *linear* machine when a straight line separates those samples (``linear_pairs``; a linear
@@ -50,9 +50,10 @@ surrounded by samples) 97.30 / 99.18 and 97.18 / 99.25.
 
 Storage without pickle: :meth:`SVCModel.to_arrays` keeps the samples, the classes and the
 hyper-parameters; :meth:`SVCModel.from_arrays` refits the machines, which is deterministic (libsvm's
-solver has no randomness when probabilities are not asked of it). The estimator follows the
-scikit-learn contract (``fit`` returns ``self``, fitted attributes end in ``_``, predicting before
-fitting raises).
+solver has no randomness when probabilities are not asked of it). The estimator is a scikit-learn
+one (:class:`~kbcli.core.model.ModelBase`: ``fit`` returns ``self``, fitted attributes end in ``_``,
+predicting before fitting raises, ``get_params`` / ``set_params`` / ``clone``); the candidates and
+their softmax are the base's, shared with the ``lines`` class.
 """
 
 from __future__ import annotations
@@ -61,11 +62,10 @@ import numpy as np
 from scipy.optimize import linprog
 from scipy.spatial import cKDTree
 from scipy.special import log_ndtr
-from sklearn.exceptions import NotFittedError
 from sklearn.svm import SVC
 
-from kbcli.core.learned import LearnedModel, _straddling_edges, prepare_samples
-from kbcli.core.model import SILENCE
+from kbcli.core.model import ModelBase
+from kbcli.core.sounds import prepare_samples, straddling_edges
 from kbcli.errors import ArtifactError, ConfigError
 
 _SQRT3 = float(np.sqrt(3.0))
@@ -83,7 +83,7 @@ def _separable(x: np.ndarray, y: np.ndarray) -> bool:
     return res.status == 0
 
 
-class SVCModel:
+class SVCModel(ModelBase):
     """p(sound | action) from pairwise linear or RBF SVMs (see the module docstring).
 
     Parameters
@@ -136,12 +136,7 @@ class SVCModel:
 
     # -- parameters -----------------------------------------------------------------------------
     def _check_params(self) -> None:
-        if not (np.isfinite(self.match_threshold) and self.match_threshold > 0):
-            raise ConfigError(f"match_threshold must be > 0, got {self.match_threshold!r}")
-        x0, y0, x1, y1 = (float(v) for v in self.area)
-        if not (x1 > x0 and y1 > y0):
-            raise ConfigError(
-                f"area must be (xmin, ymin, xmax, ymax) with max > min, got {self.area!r}")
+        self._check_common()
         for name in ("length_scale", "C", "local_radius"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
@@ -150,22 +145,6 @@ class SVCModel:
             raise ConfigError(f"n_neighbors must be >= 2, got {self.n_neighbors!r}")
         if not isinstance(self.linear_pairs, (bool, np.bool_)):
             raise ConfigError(f"linear_pairs must be True or False, got {self.linear_pairs!r}")
-
-    def _check_fitted(self) -> None:
-        if not hasattr(self, "class_features_"):
-            raise NotFittedError("this SVCModel is not fitted yet: call fit(actions, perceived)")
-
-    @property
-    def n_classes(self) -> int:
-        self._check_fitted()
-        return len(self.class_features_)
-
-    def get_params(self) -> dict:
-        """The hyper-parameters (as scikit-learn estimators report them)."""
-        return {"match_threshold": self.match_threshold, "area": tuple(self.area),
-                "length_scale": self.length_scale, "C": self.C,
-                "local_radius": self.local_radius, "n_neighbors": self.n_neighbors,
-                "linear_pairs": self.linear_pairs}
 
     # -- fitting --------------------------------------------------------------------------------
     def fit(self, actions: np.ndarray, perceived: np.ndarray,
@@ -198,11 +177,12 @@ class SVCModel:
         self.labels_ = np.asarray(labels, np.int64)
         self.reach_sd_ = float(reach_sd)
         self._tree = cKDTree(self.actions_)
-        e = _straddling_edges(self.actions_, self.labels_)
+        e = straddling_edges(self.actions_, self.labels_)
         self.edges_ = e[np.lexsort((e[:, 1], e[:, 0]))] if len(e) else e
         nc = len(self.class_features_)
         code = self.labels_[self.edges_[:, 0]] * nc + self.labels_[self.edges_[:, 1]]
-        self._svms: dict[int, SVC] = {}
+        #: pair code -> its machine (the contests of :class:`~kbcli.core.model.ModelBase`)
+        self._pairs: dict[int, SVC] = {}
         self._support: dict[int, tuple[cKDTree, cKDTree, cKDTree]] = {}
         self._edge_code = code
         pairs = []
@@ -214,7 +194,7 @@ class SVCModel:
             idx = idx[np.isin(self.labels_[idx], (i, j))]
             y = (self.labels_[idx] == j).astype(np.int64)
             svm = self._pair_machine(self.actions_[idx] / self.length_scale, y)
-            self._svms[int(c)] = svm
+            self._pairs[int(c)] = svm
             self._support[int(c)] = (cKDTree(self.actions_[idx]), cKDTree(self.actions_[idx][y == 0]),
                                      cKDTree(self.actions_[idx][y == 1]))
             pairs.append((i, j))
@@ -239,7 +219,7 @@ class SVCModel:
         them, beyond half a length scale) into the nearest-sample rule
         ``(d_lower - d_higher) / length_scale``.
         """
-        f = self._svms[code].decision_function(q / self.length_scale)
+        f = self._pairs[code].decision_function(q / self.length_scale)
         both, lo, hi = self._support[code]
         d = both.query(q)[0]
         near = d > 0.5 * self.length_scale
@@ -255,35 +235,6 @@ class SVCModel:
         boundary anywhere in the margin, ``log Phi(-+sqrt(3) f)``."""
         z = _SQRT3 * self._decision(code, q)
         return log_ndtr(-z), log_ndtr(z)
-
-    @property
-    def piece_pair_(self) -> np.ndarray:
-        """(P, 2) the pairs of sounds with a boundary (the ``lines`` model's name for them)."""
-        return self.pairs_
-
-    @property
-    def _pair_pieces(self) -> dict[int, SVC]:
-        """Pair code (``lower * C + higher``) -> its machine: the pairs that contest a point."""
-        return self._svms
-
-    # shared with the lines model, which combines its pairwise contests the same way: the
-    # candidates are the classes of the n_neighbors nearest samples, each candidate's log-score
-    # the sum of its contests (``_pair_logp``), p(sound | action) their softmax; they only read
-    # the fitted attributes and hooks both models have
-    _slot_scores = LearnedModel._slot_scores
-    _predict = LearnedModel._predict
-
-    def predict_proba(self, points: np.ndarray) -> np.ndarray:
-        """(n, C) p(sound class | action) at each of (n, 2) ``points``; rows sum to 1."""
-        return self._predict(points, proba=True)
-
-    def predict_class(self, points: np.ndarray) -> np.ndarray:
-        """(n,) most probable sound class at each point."""
-        return self._predict(points, proba=False)
-    confusion = LearnedModel.confusion
-    classify = LearnedModel.classify
-    sample_actions = LearnedModel.sample_actions
-    raster = LearnedModel.raster
 
     # -- exploration ----------------------------------------------------------------------------
     def boundary_sites(self, step: float = 1.0, extend: float = 25.0,
@@ -358,7 +309,7 @@ class SVCModel:
             "actions": self.actions_.copy(),
             "labels": self.labels_.copy(),
             "pairs": self.pairs_.copy(),
-            "n_support": np.array([int(self._svms[int(c)].n_support_.sum()) for c in
+            "n_support": np.array([int(self._pairs[int(c)].n_support_.sum()) for c in
                                    self.pairs_[:, 0] * self.n_classes + self.pairs_[:, 1]],
                                   np.int64),
             "reach_sd_fitted": np.float64(self.reach_sd_),
@@ -400,4 +351,4 @@ class SVCModel:
         return model
 
 
-__all__ = ["SVCModel", "SILENCE"]
+__all__ = ["SVCModel"]

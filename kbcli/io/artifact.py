@@ -173,6 +173,39 @@ def _kinds(kind: str | tuple[str, ...] | None) -> tuple[str, ...] | None:
     return (kind,) if isinstance(kind, str) else kind
 
 
+def _check_file(path: Path) -> None:
+    """An existing file that starts with the HDF5 signature."""
+    if not path.exists():
+        raise ArtifactError(f"{path}: no such file")
+    if path.is_dir():
+        raise ArtifactError(f"{path}: is a folder, expected a kbcli artifact (.h5 file)")
+    with open(path, "rb") as fh:
+        head = fh.read(8)
+    if head != b"\x89HDF\r\n\x1a\n":
+        raise ArtifactError(f"{path}: not an HDF5 file (expected a kbcli artifact)")
+
+
+def _kind_and_version(f: h5py.File, path: Path, wanted: tuple[str, ...] | None) -> tuple[str, int]:
+    """The artifact's kind (one of ``wanted``) and schema version (one this kbcli reads)."""
+    if "kind" not in f.attrs or "schema_version" not in f.attrs:
+        raise ArtifactError(f"{path}: an HDF5 file but not a kbcli artifact (no kind attribute)")
+    got = _text_attr(f, "kind", path)
+    version = _int_attr(f, "schema_version", path)
+    if wanted is not None and got not in wanted:
+        raise ArtifactError(f"{path}: is a {got} artifact, expected {' or '.join(wanted)}")
+    known = SCHEMA_VERSIONS.get(got)
+    if known is None:
+        raise ArtifactError(f"{path}: unknown artifact kind {got!r}; you may need to update kbcli")
+    if version > known:
+        raise ArtifactError(
+            f"{path}: {got} artifact of schema {version}, newer than this kbcli reads "
+            f"({known}); you may need to update kbcli"
+        )
+    if version < 1:
+        raise ArtifactError(f"{path}: attribute 'schema_version' must be >= 1, got {version}")
+    return got, version
+
+
 def read_artifact(path: str | os.PathLike, kind: str | tuple[str, ...] | None = None, *,
                   validate: bool = True) -> Artifact:
     """Read an artifact, checking that it is one, of the expected kind and of a known schema, and
@@ -193,35 +226,10 @@ def read_artifact(path: str | os.PathLike, kind: str | tuple[str, ...] | None = 
         schema, or (``validate``) a missing or malformed dataset, attribute or config entry.
     """
     path = Path(path)
-    if not path.exists():
-        raise ArtifactError(f"{path}: no such file")
-    if path.is_dir():
-        raise ArtifactError(f"{path}: is a folder, expected a kbcli artifact (.h5 file)")
-    with open(path, "rb") as fh:
-        head = fh.read(8)
-    if head != b"\x89HDF\r\n\x1a\n":
-        raise ArtifactError(f"{path}: not an HDF5 file (expected a kbcli artifact)")
+    _check_file(path)
     try:
         with h5py.File(path, "r") as f:
-            if "kind" not in f.attrs or "schema_version" not in f.attrs:
-                raise ArtifactError(f"{path}: an HDF5 file but not a kbcli artifact (no kind attribute)")
-            got = _text_attr(f, "kind", path)
-            version = _int_attr(f, "schema_version", path)
-            wanted = _kinds(kind)
-            if wanted is not None and got not in wanted:
-                raise ArtifactError(
-                    f"{path}: is a {got} artifact, expected {' or '.join(wanted)}"
-                )
-            known = SCHEMA_VERSIONS.get(got)
-            if known is None:
-                raise ArtifactError(f"{path}: unknown artifact kind {got!r}; you may need to update kbcli")
-            if version > known:
-                raise ArtifactError(
-                    f"{path}: {got} artifact of schema {version}, newer than this kbcli reads "
-                    f"({known}); you may need to update kbcli"
-                )
-            if version < 1:
-                raise ArtifactError(f"{path}: attribute 'schema_version' must be >= 1, got {version}")
+            got, version = _kind_and_version(f, path, _kinds(kind))
             seed = _int_attr(f, "seed", path) if "seed" in f.attrs else -1
             art = Artifact(
                 kind=got,

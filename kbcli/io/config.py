@@ -4,9 +4,35 @@ from __future__ import annotations
 
 import tomllib
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from kbcli.errors import ConfigError
+
+C = TypeVar("C")
+
+
+def load_config(cls: type[C], path: str | Path, table: str | None = None) -> C:
+    """The ``[table]`` of a TOML file read into the config class ``cls``.
+
+    Parameters
+    ----------
+    cls : type
+        A :class:`kbcli.core.config.Config` subclass (or any class with ``from_dict``).
+    table : str, optional
+        The top-level table; default ``cls.what``.
+
+    Raises
+    ------
+    ConfigError
+        As :func:`load_toml`, or a bad value: the one line of ``cls`` (table, key, what is
+        allowed) prefixed with the file's path.
+    """
+    name = table if table is not None else cls.what
+    values = load_toml(path, name)
+    try:
+        return cls.from_dict(values)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
 
 
 def load_arm(value: str | None):

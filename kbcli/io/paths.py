@@ -185,3 +185,19 @@ def checkout_file(relative: PathLike, option: str) -> Path:
         if (base / rel).is_file():
             return base / rel if base != Path.cwd() else rel
     raise KbcliError(f"{rel}: not found here nor in the kbcli checkout: pass {option} FILE")
+
+
+#: The embedded default model (learned in dynamics mode by ``make data``), relative to a checkout.
+DEFAULT_MODEL = "data/default-model.h5"
+
+
+def default_model_path() -> Path:
+    """Where the embedded default model is: ``data/default-model.h5`` of the current folder, else
+    of the kbcli checkout this package runs from.
+
+    Raises
+    ------
+    KbcliError
+        When neither exists (an installed kbcli without its checkout): pass ``--model``.
+    """
+    return checkout_file(DEFAULT_MODEL, "--model")

@@ -25,7 +25,7 @@ stops short of its target by up to ``friction / kp`` rad, on the side it came fr
 drives the joints' *measured* angles (true + ``proprio_bias``) to their targets, so an encoder
 bias moves the landing; the reach ends when both joints are still, or after ``settle_time``.
 Where the robot feels it landed is the forward kinematics of its encoder readings at the end
-(:func:`kbcli.sim.felt_positions`).
+(:func:`kbcli.sim.kinematics.felt_positions`).
 
 Each reach starts from the pose the previous one ended in (a real arm does not teleport); the start
 joint angles of the last batch are kept in :attr:`DynamicsReacher.last_start_angles`, and
@@ -44,17 +44,10 @@ import math
 import numpy as np
 import pymunk
 
-from kbcli.errors import OutOfReachError
-from kbcli.sim import (
-    SimConfig,
-    felt_positions,
-    forward_kinematics,
-    inverse_kinematics,
-    workspace_check,
-)
+from kbcli.sim.kinematics import SimSpec, inverse_kinematics, jacobian, sensed_positions
+from kbcli.sim.reach import check_reachable
 
-__all__ = ["DynamicsReacher", "inverse_kinematics", "forward_kinematics", "jacobian",
-           "check_reachable"]
+__all__ = ["DynamicsReacher"]
 
 DT = 1.0 / 240.0  # physics time step, s
 KP = 40.0  # proportional gain of the servo, 1/s
@@ -67,33 +60,6 @@ SETTLE_STEPS = 12  # torque servo: a reach ends after this many steps with both 
 LINK_MASS = (2.0, 1.5)  # upper arm, forearm
 # pivots: share of a joint's drift left after 1 s (pymunk's default is 0.9**60)
 JOINT_ERROR_BIAS = 0.5**240
-
-
-def jacobian(cfg: SimConfig, angles: np.ndarray) -> np.ndarray:
-    """(n, 2, 2) d fingertip / d (q1, q2) at each pose."""
-    q = np.asarray(angles, float).reshape(-1, 2)
-    l1, l2 = cfg.link_lengths
-    a = q[:, 0] + q[:, 1]
-    j = np.empty((len(q), 2, 2))
-    j[:, 0, 0] = -l1 * np.sin(q[:, 0]) - l2 * np.sin(a)
-    j[:, 0, 1] = -l2 * np.sin(a)
-    j[:, 1, 0] = l1 * np.cos(q[:, 0]) + l2 * np.cos(a)
-    j[:, 1, 1] = l2 * np.cos(a)
-    return j
-
-
-def check_reachable(cfg: SimConfig, targets: np.ndarray) -> np.ndarray:
-    """Raise :class:`OutOfReachError` naming the first target outside the workspace."""
-    t = np.asarray(targets, float).reshape(-1, 2)
-    ok = workspace_check(cfg, t)
-    if not ok.all():
-        bad = t[~ok][0]
-        l1, l2 = cfg.link_lengths
-        raise OutOfReachError(
-            f"target ({bad[0]:.1f}, {bad[1]:.1f}) is outside the arm's workspace "
-            f"({abs(l1 - l2):g} to {l1 + l2:g} px from the shoulder at {cfg.base})"
-        )
-    return t
 
 
 def _wrap(a: float) -> float:
@@ -130,7 +96,7 @@ class DynamicsReacher:
 
     Parameters
     ----------
-    cfg : SimConfig
+    cfg : SimConfig (or any :class:`~kbcli.sim.kinematics.SimSpec`)
         Geometry (``base``, ``link_lengths``) and ``reach_noise`` (px) of the arm.
 
     Attributes
@@ -148,7 +114,7 @@ class DynamicsReacher:
         Joint angles each reach of the last call ended in (the pose at the touch).
     """
 
-    def __init__(self, cfg: SimConfig) -> None:
+    def __init__(self, cfg: SimSpec) -> None:
         self.cfg = cfg
         l1, l2 = cfg.link_lengths
         self._l1, self._l2 = l1, l2
@@ -380,10 +346,6 @@ class DynamicsReacher:
         self.last_start_angles = starts
         self.last_steps = steps
         self.last_angles = ends
-        arm = self.cfg.arm
-        if arm.proprio_noise > 0 or arm.proprio_bias != (0.0, 0.0):
-            self.last_felt = felt_positions(self.cfg, ends, rng)
-        else:
-            self.last_felt = landed.copy()
+        self.last_felt = sensed_positions(self.cfg, ends, landed, rng)
         self.last_end_angles = ends
         return landed

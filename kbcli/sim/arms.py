@@ -32,24 +32,25 @@ apply as in ``dynamics`` mode (the encoders then read the inverse kinematics of 
 
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass, replace
+from collections.abc import Mapping
 from typing import Any
 
-from kbcli.core.config import check_known
+from pydantic import field_validator
+
+from kbcli.core.config import Config, Name, NonNegative, Number, Positive, between
+from kbcli.core.registry import Registry
 from kbcli.errors import ConfigError
 
+#: Longest reach (simulated seconds) an arm may take before it gives up: ``settle_time`` above it
+#: is refused (each second is 240 physics steps).
+MAX_SETTLE_TIME = 60.0
+#: Largest encoder error (rad) of ``proprio_noise`` and of each ``proprio_bias`` component.
+MAX_PROPRIO = 0.1
 
-def _num(name: str, v: Any, *, positive: bool = False) -> float:
-    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-    if not ok or v < 0 or (positive and v == 0):
-        rel = "> 0" if positive else ">= 0"
-        raise ConfigError(f"arm.{name} must be a finite number {rel}, got {v!r}")
-    return float(v)
+_Bias = between(Number, -MAX_PROPRIO, MAX_PROPRIO)
 
 
-@dataclass(frozen=True, kw_only=True)
-class ArmConfig:
+class ArmConfig(Config):
     """How a simulated arm errs (see the module docstring).
 
     Parameters
@@ -65,49 +66,34 @@ class ArmConfig:
     friction : float
         Coulomb friction torque of each joint.
     settle_time : float
-        A reach gives up after this many simulated seconds.
+        A reach gives up after this many simulated seconds, at most :data:`MAX_SETTLE_TIME`.
     finger_radius : float
         Radius (px) of the finger's contact disc on the pad.
     proprio_noise : float
-        Std (rad) of each joint encoder's reading at a touch.
+        Std (rad) of each joint encoder's reading at a touch, at most :data:`MAX_PROPRIO`.
     proprio_bias : tuple of float
-        Constant offset (rad) of the shoulder and elbow encoders.
+        Constant offset (rad) of the shoulder and elbow encoders, each within
+        +-:data:`MAX_PROPRIO`.
     """
 
-    preset: str = "ideal"
-    kp: float | None = None
-    kd: float = 0.0
-    max_torque: float = 5e8
-    friction: float = 0.0
-    settle_time: float = 8.0
-    finger_radius: float = 0.0
-    proprio_noise: float = 0.0
-    proprio_bias: tuple[float, float] = (0.0, 0.0)
+    what = "arm"
 
-    def __post_init__(self) -> None:
-        if not isinstance(self.preset, str) or not self.preset:
-            raise ConfigError(f"arm.preset must be a name, got {self.preset!r}")
-        if self.kp is not None:
-            _num("kp", self.kp, positive=True)
-        _num("kd", self.kd)
-        _num("max_torque", self.max_torque, positive=True)
-        _num("friction", self.friction)
-        _num("settle_time", self.settle_time, positive=True)
-        _num("finger_radius", self.finger_radius)
-        _num("proprio_noise", self.proprio_noise)
-        b = self.proprio_bias
-        if isinstance(b, (str, bytes)) or not hasattr(b, "__len__") or len(b) != 2:
-            raise ConfigError(f"arm.proprio_bias must be two numbers (rad), got {b!r}")
-        vals = []
-        for v in b:
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ConfigError(f"arm.proprio_bias must be two finite numbers (rad), got {b!r}")
-            vals.append(float(v))
-        if max(abs(v) for v in vals) > 0.1:
-            raise ConfigError(f"arm.proprio_bias must be within +-0.1 rad, got {b!r}")
-        if self.proprio_noise > 0.1:
-            raise ConfigError(f"arm.proprio_noise must be at most 0.1 rad, got {self.proprio_noise!r}")
-        object.__setattr__(self, "proprio_bias", tuple(vals))
+    preset: Name = "ideal"
+    kp: Positive | None = None
+    kd: NonNegative = 0.0
+    max_torque: Positive = 5e8
+    friction: NonNegative = 0.0
+    settle_time: between(Positive, high=MAX_SETTLE_TIME) = 8.0
+    finger_radius: NonNegative = 0.0
+    proprio_noise: between(NonNegative, high=MAX_PROPRIO) = 0.0
+    proprio_bias: tuple[_Bias, _Bias] = (0.0, 0.0)
+
+    @field_validator("preset")
+    @classmethod
+    def _named(cls, v: str) -> str:
+        if not v:
+            raise ValueError("must be a name, got ''")
+        return v
 
     @property
     def exact_servo(self) -> bool:
@@ -120,69 +106,41 @@ class ArmConfig:
         return (self.finger_radius == 0 and self.proprio_noise == 0
                 and self.proprio_bias == (0.0, 0.0))
 
-    def to_dict(self) -> dict:
-        d = asdict(self)
-        d["proprio_bias"] = list(self.proprio_bias)
-        return d
-
     @classmethod
-    def from_dict(cls, d: dict) -> ArmConfig:
-        """Build from a table: ``preset`` (default ``ideal``) plus fields overriding it."""
-        check_known(cls, d, "arm")
+    def from_dict(cls, d: Mapping[str, Any]) -> ArmConfig:
+        """Build from a table: ``preset`` (default ``ideal``) plus fields overriding it; the
+        result is named ``custom`` unless the overrides repeat the preset's own values."""
+        if not isinstance(d, Mapping):
+            raise ConfigError(f"arm must be a table, got {d!r}")
         d = dict(d)
         name = d.pop("preset", "ideal")
-        base = ArmConfig(preset="custom") if name == "custom" else preset(name)
+        base = cls(preset="custom") if name == "custom" else PRESETS.get(name)
         if not d:
             return base
-        if "proprio_bias" in d and isinstance(d["proprio_bias"], list):
-            d["proprio_bias"] = tuple(d["proprio_bias"])
-        return replace(base, preset=base.preset if _same(base, d) else "custom", **d)
-
-
-def _same(base: ArmConfig, d: dict) -> bool:
-    cur = base.to_dict()
-    return all(cur.get(k) == (list(v) if isinstance(v, tuple) else v) for k, v in d.items())
+        same = cls(**{**base.to_dict(), **d})
+        return base if same == base else same.replace(preset="custom")
 
 
 #: Name -> the arm it stands for (see the module docstring).
-PRESETS: dict[str, ArmConfig] = {
-    "ideal": ArmConfig(preset="ideal"),
-    "servo": ArmConfig(preset="servo", kp=2.0e7, kd=2.4e6, max_torque=3.0e7, friction=8.0e4,
-                       settle_time=2.0),
-    "realistic": ArmConfig(preset="realistic", kp=2.0e7, kd=2.4e6, max_torque=3.0e7,
-                           friction=8.0e4, settle_time=2.0, finger_radius=2.5,
-                           proprio_noise=3.5e-3, proprio_bias=(1.5e-3, -1.0e-3)),
-}
+PRESETS: Registry[ArmConfig] = Registry("arm preset")
+PRESETS.register("ideal", ArmConfig(preset="ideal"), summary="no error at all")
+PRESETS.register("servo", ArmConfig(preset="servo", kp=2.0e7, kd=2.4e6, max_torque=3.0e7,
+                                    friction=8.0e4, settle_time=2.0),
+                 summary="finite servo gains and joint friction")
+PRESETS.register("realistic", ArmConfig(preset="realistic", kp=2.0e7, kd=2.4e6, max_torque=3.0e7,
+                                        friction=8.0e4, settle_time=2.0, finger_radius=2.5,
+                                        proprio_noise=3.5e-3, proprio_bias=(1.5e-3, -1.0e-3)),
+                 summary="servo plus a finite finger and imperfect proprioception")
 
 
-def ideal_mode_note(arm: ArmConfig, mode: str) -> str | None:
-    """A line for the user when ``mode`` ignores part of ``arm``: ``ideal`` mode has no physics,
-    so a torque servo and its friction do nothing there (the ``servo`` preset is then the ideal
-    arm). None when nothing is ignored."""
-    if mode != "ideal" or arm.exact_servo:
-        return None
-    tail = ("it is the ideal arm here" if arm.senses_exactly else
-            "only its finger and proprioception act here")
-    return (f"note: ideal mode has no physics, so the {arm.preset} arm's servo and friction are "
-            f"ignored and {tail}; --mode dynamics simulates them")
-
-
-def preset(name: str) -> ArmConfig:
-    """The arm preset called ``name``; ConfigError listing the valid ones otherwise."""
-    try:
-        return PRESETS[name]
-    except (KeyError, TypeError):
-        raise ConfigError(f"unknown arm preset {name!r}; valid: {', '.join(PRESETS)}") from None
-
-
-def arm_config(value: str | dict | ArmConfig | None) -> ArmConfig:
+def arm_config(value: str | Mapping | ArmConfig | None) -> ArmConfig:
     """An :class:`ArmConfig` from a preset name, a table or an ArmConfig (None: ``ideal``)."""
     if value is None:
-        return PRESETS["ideal"]
+        return PRESETS.get("ideal")
     if isinstance(value, ArmConfig):
         return value
     if isinstance(value, str):
-        return preset(value)
-    if isinstance(value, dict):
+        return PRESETS.get(value)
+    if isinstance(value, Mapping):
         return ArmConfig.from_dict(value)
     raise ConfigError(f"arm must be a preset name or a table, got {value!r}")

@@ -30,18 +30,19 @@ Schema 3 (schema 2: ``lines`` only, calibrated; schema 1: ``lines``, uncalibrate
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from typing import Annotated, Any, ClassVar
 
 import numpy as np
+from pydantic import AfterValidator, Field, InstanceOf, field_serializer
 
 from kbcli.core import accuracy as scoring
 from kbcli.core import reliability
+from kbcli.core.config import Config, Count, Name, Positive
 from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.model import grid_points
-from kbcli.core.model_classes import DEFAULT_MODEL_CLASS, MODEL_CLASSES, get_model_class
+from kbcli.core.model_classes import DEFAULT_MODEL_CLASS, EXACT, check_learned, learned_classes
 from kbcli.errors import ArtifactError, ConfigError
 from kbcli.sim import SimConfig, World, check_keyboard_reachable, make_reacher
 from kbcli.stages import keyboard as keyboard_stage
@@ -57,17 +58,23 @@ RELIABILITY_KEY = 9
 
 
 def model_classes() -> tuple[str, ...]:
-    """Valid ``--model-class`` values."""
-    return tuple(MODEL_CLASSES)
+    """Valid ``--model-class`` values: the learned model classes."""
+    return learned_classes()
 
 
 def strategies() -> tuple[str, ...]:
-    """Valid ``--strategy`` values: the exploration strategies and ``exact``."""
-    return (*sorted(STRATEGIES), "exact")
+    """Valid ``--strategy`` values: the exploration strategies and ``exact`` (no learning: the
+    exact model class)."""
+    return (*sorted(STRATEGIES), EXACT)
 
 
-@dataclass(frozen=True, kw_only=True)
-class LearnConfig:
+def _strategy(name: str) -> str:
+    if name not in strategies():
+        raise ConfigError(f"unknown strategy {name!r}; valid: {', '.join(strategies())}")
+    return name
+
+
+class LearnConfig(Config):
     """How the model is learned.
 
     Parameters
@@ -86,48 +93,32 @@ class LearnConfig:
     sim : SimConfig
         The arm and its reach mode.
     model_class : str
-        The class of model fitted (``lines`` or ``svc``; :data:`MODEL_CLASSES`).
+        The class of model fitted (``lines`` or ``svc``: a learned class of
+        :data:`~kbcli.core.model_classes.MODEL_CLASSES`).
     """
 
-    strategy: str = "active"
-    budget: int = 800
-    batch: int = 10
-    explore_radius: float = 20.0
-    curve_every: int = 50
-    sim: SimConfig = field(default_factory=SimConfig)
-    model_class: str = DEFAULT_MODEL_CLASS
+    what: ClassVar[str] = "learn"
 
-    def __post_init__(self) -> None:
-        get_model_class(self.model_class)
-        if self.strategy not in strategies():
-            raise ConfigError(
-                f"unknown strategy {self.strategy!r}; valid: {', '.join(strategies())}"
-            )
-        for name in ("budget", "batch", "curve_every"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1:
-                raise ConfigError(f"{name} must be a whole number >= 1, got {v!r}")
-        if not (isinstance(self.explore_radius, (int, float)) and math.isfinite(self.explore_radius)
-                and self.explore_radius > 0):
-            raise ConfigError(f"explore_radius must be > 0 px, got {self.explore_radius!r}")
-        if not isinstance(self.sim, SimConfig):
-            raise ConfigError("sim must be a SimConfig")
+    strategy: Annotated[Name, AfterValidator(_strategy)] = "active"
+    budget: Count = 800
+    batch: Count = 10
+    explore_radius: Positive = 20.0
+    curve_every: Count = 50
+    sim: InstanceOf[SimConfig] = Field(default_factory=SimConfig)
+    model_class: Annotated[Name, AfterValidator(check_learned)] = DEFAULT_MODEL_CLASS
+
+    @field_serializer("sim")
+    def _sim_dict(self, sim: SimConfig) -> dict[str, Any]:
+        return sim.to_dict()
+
+    @property
+    def exact(self) -> bool:
+        """No learning: the exact model (``strategy = "exact"``)."""
+        return self.strategy == EXACT
 
     def explore_config(self) -> ExploreConfig:
-        return ExploreConfig(strategy=self.strategy, budget=int(self.budget), batch=int(self.batch),
-                             explore_radius=float(self.explore_radius),
-                             model_class=self.model_class)
-
-    def to_dict(self) -> dict:
-        return {
-            "strategy": self.strategy,
-            "budget": int(self.budget),
-            "batch": int(self.batch),
-            "explore_radius": float(self.explore_radius),
-            "curve_every": int(self.curve_every),
-            "sim": self.sim.to_dict(),
-            "model_class": self.model_class,
-        }
+        return ExploreConfig(strategy=self.strategy, budget=self.budget, batch=self.batch,
+                             explore_radius=self.explore_radius, model_class=self.model_class)
 
 
 def check_keyboard(art: Artifact) -> Keyboard:
@@ -146,7 +137,7 @@ class Learning:
 
     def __init__(self, cfg: LearnConfig, keyboard_art: Artifact, *, rng: np.random.Generator,
                  seed: int | None = None) -> None:
-        if cfg.strategy == "exact":
+        if cfg.exact:
             raise ConfigError("the exact model is not learned: use run() or exact_artifact()")
         self.cfg = cfg
         self.keyboard_art = keyboard_art
@@ -188,7 +179,7 @@ class Learning:
         ex = self.exploration
         seed = 0 if self.seed is None else int(self.seed)
         rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(RELIABILITY_KEY,)))
-        return reliability.assess(ex.refit, ex.model, ex.landed, ex.perceived, rng=rng)
+        return reliability.assess(ex.model, ex.landed, ex.perceived, rng=rng)
 
     def artifact(self) -> Artifact:
         """The ``model`` artifact (after the last batch)."""
@@ -274,7 +265,7 @@ def run(cfg: LearnConfig, keyboard_art: Artifact, *, rng: np.random.Generator,
     seed : int, optional
         Recorded in the artifact (``rng`` should be ``default_rng(seed)``).
     """
-    if cfg.strategy == "exact":
+    if cfg.exact:
         kb = check_keyboard(keyboard_art)
         check_keyboard_reachable(cfg.sim, kb)
         return exact_artifact(keyboard_art)

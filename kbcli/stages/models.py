@@ -9,7 +9,8 @@ artifacts, which are all ``lines``). The model is rebuilt from plain arrays by i
 
 from __future__ import annotations
 
-from kbcli.core.model import ExactModel
+from kbcli.core.model import SoundModel
+from kbcli.core.model_classes import EXACT, MODEL_CLASSES, model_class_of
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages.artifact import Artifact, ref
 
@@ -18,40 +19,23 @@ def exact_artifact(kb_art: Artifact) -> Artifact:
     """A model artifact for the ``exact`` model of a keyboard artifact."""
     return Artifact(
         kind="model",
-        config={"strategy": "exact", "keyboard": kb_art.config},
+        config={"strategy": EXACT, "keyboard": kb_art.config},
         seed=None,
         inputs={"keyboard": ref(kb_art)},
-        attrs={"strategy": "exact"},
+        attrs={"strategy": EXACT},
     )
 
 
-def load_model(art: Artifact):
-    """The model (:class:`~kbcli.core.model.SoundModel`) stored in a model artifact."""
+def load_model(art: Artifact) -> SoundModel:
+    """The model (:class:`~kbcli.core.model.SoundModel`) stored in a model artifact: its
+    class's ``load`` (:data:`~kbcli.core.model_classes.MODEL_CLASSES`)."""
     kb = keyboard_stage.load(art)
-    if art.config["strategy"] == "exact":
-        return ExactModel(kb)
-    from kbcli.core.model_classes import model_from_arrays
-
-    model = model_from_arrays(art.data["model"], art.config.get("model_class"))
+    mc = MODEL_CLASSES.get(model_class_of(art.config))
+    if not mc.learned:
+        return mc.load(None, kb)
+    model = mc.load(art.data["model"])
     rel = art.attrs.get("reliability")
     #: the model's own estimate of its quality (model schema 2; None before)
     model.reliability_ = dict(rel) if isinstance(rel, dict) else None
     return model
 
-
-#: The embedded default model (learned in dynamics mode by ``make data``), relative to a checkout.
-DEFAULT_MODEL = "data/default-model.h5"
-
-
-def default_model_path():
-    """Where the embedded default model is: ``data/default-model.h5`` of the current folder, else
-    of the kbcli checkout this package runs from.
-
-    Raises
-    ------
-    KbcliError
-        When neither exists (an installed kbcli without its checkout): pass ``--model``.
-    """
-    from kbcli.io.paths import checkout_file
-
-    return checkout_file(DEFAULT_MODEL, "--model")

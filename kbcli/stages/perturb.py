@@ -22,12 +22,11 @@ annular workspace is refused with :class:`~kbcli.errors.OutOfReachError`.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
 import numpy as np
+from pydantic import field_validator, model_validator
 
 from kbcli.core import transforms
+from kbcli.core.config import Config, Name, Number, between
 from kbcli.core.keyboard import Keyboard
 from kbcli.errors import ConfigError, OutOfReachError
 from kbcli.sim import SimConfig, workspace_check
@@ -43,55 +42,54 @@ CATEGORIES: dict[str, tuple[float, float]] = {
 }
 
 
-@dataclass(frozen=True, kw_only=True)
-class PerturbConfig:
+#: Largest rotation (degrees) a rigid draw may be given (``max_angle``).
+MAX_ANGLE = 180.0
+
+
+class PerturbConfig(Config):
     """How to move the keyboard: explicit ``params`` or a random draw of ``category``.
 
     Parameters
     ----------
     family : str
-        ``translation`` or ``rigid``.
+        ``translation`` or ``rigid`` (:data:`kbcli.core.transforms.FAMILIES`).
     params : tuple of float, optional
         The transform parameters (``(dx, dy)`` or ``(angle, dx, dy)``, px and degrees).
     category : str, optional
         ``small``, ``medium`` or ``large``: draw the parameters (needs a seed).
     max_angle : float
-        Largest rotation of a rigid draw, degrees.
+        Largest rotation of a rigid draw, degrees, in [0, :data:`MAX_ANGLE`].
     """
 
-    family: str = "translation"
-    params: tuple[float, ...] | None = None
-    category: str | None = None
-    max_angle: float = 5.0
+    what = "perturb"
 
-    def __post_init__(self) -> None:
-        names = transforms.check_family(self.family)
+    family: Name = "translation"
+    params: tuple[Number, ...] | None = None
+    category: Name | None = None
+    max_angle: between(Number, 0.0, MAX_ANGLE) = 5.0
+
+    @field_validator("family")
+    @classmethod
+    def _family(cls, v: str) -> str:
+        transforms.check_family(v)
+        return v
+
+    @field_validator("category")
+    @classmethod
+    def _category(cls, v: str | None) -> str | None:
+        if v is not None and v not in CATEGORIES:
+            raise ConfigError(f"unknown category {v!r}; valid: {', '.join(CATEGORIES)}")
+        return v
+
+    @model_validator(mode="after")
+    def _one_source(self) -> PerturbConfig:
         if (self.params is None) == (self.category is None):
             raise ConfigError("give either explicit displacement parameters or a category, not both")
-        if self.params is not None:
-            p = tuple(float(v) for v in self.params)
-            if len(p) != len(names):
-                raise ConfigError(
-                    f"a {self.family} displacement takes {len(names)} parameters "
-                    f"({', '.join(names)}), got {len(p)}"
-                )
-            if not all(math.isfinite(v) for v in p):
-                raise ConfigError(f"displacement parameters must be finite, got {p!r}")
-            object.__setattr__(self, "params", p)
-        if self.category is not None and self.category not in CATEGORIES:
-            raise ConfigError(
-                f"unknown category {self.category!r}; valid: {', '.join(CATEGORIES)}"
-            )
-        if not (math.isfinite(self.max_angle) and 0 <= self.max_angle <= 180):
-            raise ConfigError(f"max_angle must be in [0, 180] degrees, got {self.max_angle!r}")
-
-    def to_dict(self) -> dict:
-        return {
-            "family": self.family,
-            "params": None if self.params is None else list(self.params),
-            "category": self.category,
-            "max_angle": self.max_angle,
-        }
+        names = transforms.check_family(self.family)
+        if self.params is not None and len(self.params) != len(names):
+            raise ConfigError(f"a {self.family} displacement takes {len(names)} parameters "
+                              f"({', '.join(names)}), got {len(self.params)}")
+        return self
 
 
 def draw(

@@ -12,25 +12,37 @@ plays a whole session and returns its artifact.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
-from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from pydantic import field_validator, model_validator
 
-from kbcli.core.melody import DEFAULT_MELODY, parse_melody
+from kbcli.core.config import Config, Name, NonNegative, NonNegativeInt, Whole, between
+from kbcli.core.melody import DEFAULT_MELODY, MAX_NOTES, parse_melody
 from kbcli.core.play import NO_MATCH, PlayStep, play
 from kbcli.errors import ConfigError
-from kbcli.sim import MODES, SimConfig, World, make_reacher
-from kbcli.sim.arms import PRESETS, ArmConfig, arm_config
+from kbcli.sim import MODES, PRESETS, ArmConfig, SimConfig, World, arm_config, make_reacher
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import perturb as perturb_stage
 from kbcli.stages.artifact import Artifact, ref
 from kbcli.stages.models import load_model
 
+#: Most actions a play session may take (``steps``).
+MAX_PLAY_STEPS = 100_000
+#: Longest melody text (characters; :func:`~kbcli.core.melody.parse_melody` also allows at most
+#: :data:`~kbcli.core.melody.MAX_NOTES` notes).
+MAX_MELODY_CHARS = 64 * MAX_NOTES
 
-@dataclass(frozen=True, kw_only=True)
-class PlayConfig:
+
+def check_melody_text(v: str) -> str:
+    """``v`` unless it is longer than :data:`MAX_MELODY_CHARS` (a field validator)."""
+    if len(v) > MAX_MELODY_CHARS:
+        raise ValueError(f"must be at most {MAX_MELODY_CHARS} characters, got {len(v)}")
+    return v
+
+
+class PlayConfig(Config):
     """A play session.
 
     Parameters
@@ -38,49 +50,45 @@ class PlayConfig:
     melody : str
         Notes and durations, ``"A:1 D:1 E:0.5 D:2 A:1"`` (see :mod:`kbcli.core.melody`).
     steps : int
-        Number of actions.
+        Number of actions, at most :data:`MAX_PLAY_STEPS`.
     perturb_at : int, optional
         Step from which the keyboard is at the scene's pose (needs a scene; default with a scene:
         ``steps // 2``).
     mode : str
-        ``ideal`` or ``dynamics`` reaching (:class:`kbcli.sim.SimConfig`).
+        A reach mode of :data:`kbcli.sim.MODES` (``ideal`` or ``dynamics``).
     reach_noise : float
         Landing scatter of the arm, px.
     arm : ArmConfig
         How the arm errs (:mod:`kbcli.sim.arms`; a preset name or table is accepted).
     """
 
-    melody: str = DEFAULT_MELODY
-    steps: int = 300
-    perturb_at: int | None = None
-    mode: str = "ideal"
-    reach_noise: float = 0.0
-    arm: ArmConfig = PRESETS["ideal"]
+    what = "play"
 
-    def __post_init__(self) -> None:
-        if not isinstance(self.steps, int) or isinstance(self.steps, bool) or self.steps < 1:
-            raise ConfigError(f"steps must be a whole number >= 1, got {self.steps!r}")
-        if self.perturb_at is not None and not (
-            isinstance(self.perturb_at, int) and 0 <= self.perturb_at < self.steps
-        ):
+    melody: Name = DEFAULT_MELODY
+    steps: between(Whole, 1, MAX_PLAY_STEPS) = 300
+    perturb_at: NonNegativeInt | None = None
+    mode: Name = "ideal"
+    reach_noise: NonNegative = 0.0
+    arm: ArmConfig = PRESETS.get("ideal")
+
+    _melody = field_validator("melody")(check_melody_text)
+
+    @field_validator("mode")
+    @classmethod
+    def _mode(cls, v: str) -> str:
+        return MODES.check(v)
+
+    @field_validator("arm", mode="before")
+    @classmethod
+    def _arm(cls, v: Any) -> ArmConfig:
+        return arm_config(v)
+
+    @model_validator(mode="after")
+    def _perturb_in_session(self) -> PlayConfig:
+        if self.perturb_at is not None and self.perturb_at >= self.steps:
             raise ConfigError(
-                f"perturb_at must be a step in [0, {self.steps - 1}], got {self.perturb_at!r}"
-            )
-        if self.mode not in MODES:
-            raise ConfigError(f"unknown mode {self.mode!r}; valid: {', '.join(MODES)}")
-        if not (math.isfinite(self.reach_noise) and self.reach_noise >= 0):
-            raise ConfigError(f"reach_noise must be >= 0 px, got {self.reach_noise!r}")
-        object.__setattr__(self, "arm", arm_config(self.arm))
-
-    def to_dict(self) -> dict:
-        return {
-            "melody": self.melody,
-            "steps": self.steps,
-            "perturb_at": self.perturb_at,
-            "mode": self.mode,
-            "reach_noise": self.reach_noise,
-            "arm": self.arm.to_dict(),
-        }
+                f"perturb_at must be a step in [0, {self.steps - 1}], got {self.perturb_at!r}")
+        return self
 
 
 class Session:

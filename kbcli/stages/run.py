@@ -15,13 +15,15 @@ it (until the robot adapted) and after adaptation.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
-from dataclasses import dataclass, field
+from collections.abc import Iterator, Mapping
+from typing import Any
 
 import numpy as np
+from pydantic import Field, field_serializer, field_validator, model_validator
 
 from kbcli.core import transforms
 from kbcli.core.adapt import build_table, learning_rate, redundancy_radius, robust_blurs
+from kbcli.core.config import Config, Name, NonNegativeInt, Whole, between
 from kbcli.core.detect import DetectorConfig
 from kbcli.core.loop import ADAPT, PLAY, LoopStep, closed_loop
 from kbcli.core.melody import DEFAULT_MELODY, parse_melody
@@ -32,10 +34,15 @@ from kbcli.stages import perturb as perturb_stage
 from kbcli.stages.adapt import AdaptConfig, check_inputs, end_angles
 from kbcli.stages.artifact import Artifact, ref
 from kbcli.stages.models import load_model
+from kbcli.stages.play import check_melody_text
+
+#: Most play touches a closed-loop session may take (``steps``).
+MAX_LOOP_STEPS = 100_000
+#: Most touches one adaptation may take (``max_adapt_steps``).
+MAX_ADAPT_STEPS = 10_000
 
 
-@dataclass(frozen=True, kw_only=True)
-class LoopConfig:
+class LoopConfig(Config):
     """A closed-loop session.
 
     Parameters
@@ -43,11 +50,12 @@ class LoopConfig:
     melody : str
         The melody played in a loop (see :mod:`kbcli.core.melody`).
     steps : int
-        Play touches in the session (adaptation touches come on top).
+        Play touches in the session (adaptation touches come on top), at most
+        :data:`MAX_LOOP_STEPS`.
     perturb_at : int
         Touches after which the world moves the keyboard to the scene's pose.
     max_adapt_steps : int
-        At most this many touches per adaptation.
+        At most this many touches per adaptation (at most :data:`MAX_ADAPT_STEPS`).
     detector : DetectorConfig
         The failure detector (Sect. III-C).
     adapt : AdaptConfig
@@ -55,35 +63,41 @@ class LoopConfig:
         ``reach_noise`` also set the simulated arm).
     """
 
-    melody: str = DEFAULT_MELODY
-    steps: int = 600
-    perturb_at: int = 200
-    max_adapt_steps: int = 40
-    detector: DetectorConfig = field(default_factory=DetectorConfig)
-    adapt: AdaptConfig = field(default_factory=lambda: AdaptConfig(stop=True))
+    what = "loop"
 
-    def __post_init__(self) -> None:
-        for name in ("steps", "max_adapt_steps"):
-            v = getattr(self, name)
-            if not isinstance(v, int) or isinstance(v, bool) or v < 1:
-                raise ConfigError(f"{name} must be a whole number >= 1, got {v!r}")
-        if not (isinstance(self.perturb_at, int) and 0 <= self.perturb_at < self.steps):
-            raise ConfigError(f"perturb_at must be a step in [0, {self.steps - 1}], got {self.perturb_at!r}")
+    melody: Name = DEFAULT_MELODY
+    steps: between(Whole, 1, MAX_LOOP_STEPS) = 600
+    perturb_at: NonNegativeInt = 200
+    max_adapt_steps: between(Whole, 1, MAX_ADAPT_STEPS) = 40
+    detector: DetectorConfig = Field(default_factory=DetectorConfig)
+    adapt: Any = Field(default_factory=lambda: AdaptConfig(stop=True))
+
+    _melody = field_validator("melody")(check_melody_text)
+
+    @field_validator("adapt", mode="before")
+    @classmethod
+    def _adapt(cls, v: Any) -> AdaptConfig:
+        if isinstance(v, AdaptConfig):
+            return v
+        if isinstance(v, Mapping):
+            return AdaptConfig.from_dict(dict(v))
+        raise ConfigError(f"must be an adapt table, got {type(v).__name__}")
+
+    @field_serializer("adapt")
+    def _adapt_table(self, v: AdaptConfig) -> dict:
+        return v.to_dict()
+
+    @model_validator(mode="after")
+    def _perturb_in_session(self) -> LoopConfig:
+        if self.perturb_at >= self.steps:
+            raise ConfigError(
+                f"perturb_at must be a step in [0, {self.steps - 1}], got {self.perturb_at!r}")
         if self.perturb_at < self.detector.warmup:
             raise ConfigError(
                 f"perturb_at ({self.perturb_at}) must leave the detector its warm-up of "
                 f"n_lt + n_st = {self.detector.warmup} results before the keyboard moves"
             )
-
-    def to_dict(self) -> dict:
-        return {
-            "melody": self.melody,
-            "steps": self.steps,
-            "perturb_at": self.perturb_at,
-            "max_adapt_steps": self.max_adapt_steps,
-            "detector": self.detector.to_dict(),
-            "adapt": self.adapt.to_dict(),
-        }
+        return self
 
 
 def _rate(results: np.ndarray) -> float | None:

@@ -49,13 +49,16 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
+from pydantic import Field, field_validator
 
 from kbcli import __version__
 from kbcli.core import transforms
 from kbcli.core.adapt import Adapter, AdapterConfig, step_record
+from kbcli.core.config import Config, Flag, Whole, between
 from kbcli.core.keyboard import FEATURE_NAMES, sound_name
 from kbcli.core.model import UNKNOWN
 from kbcli.errors import ArtifactError, ConfigError, KbcliError
@@ -75,8 +78,11 @@ FIELDS = {
 }
 
 
-@dataclass(frozen=True, kw_only=True)
-class ServeConfig:
+#: Most touches a session may observe (``max_steps``).
+MAX_SERVE_STEPS = 10_000
+
+
+class ServeConfig(Config):
     """A session with an external robot.
 
     Parameters
@@ -84,35 +90,40 @@ class ServeConfig:
     adapter : AdapterConfig
         The robot-side settings (strategy, posterior, family, grid, stopping rule).
     max_steps : int
-        Touches at most; ``done`` holds once they are observed.
+        Touches at most (at most :data:`MAX_SERVE_STEPS`); ``done`` holds once they are observed.
     stop : bool
         ``done`` also holds when the stopping rule does (else only at ``max_steps``).
     """
 
-    adapter: AdapterConfig = field(default_factory=AdapterConfig)
-    max_steps: int = 40
-    stop: bool = True
+    what = "serve"
 
-    def __post_init__(self) -> None:
-        if not isinstance(self.max_steps, int) or isinstance(self.max_steps, bool) \
-                or self.max_steps < 1:
-            raise ConfigError(f"max_steps must be a whole number >= 1, got {self.max_steps!r}")
-        if not isinstance(self.stop, bool):
-            raise ConfigError(f"stop must be true or false, got {self.stop!r}")
+    adapter: Any = Field(default_factory=AdapterConfig)
+    max_steps: between(Whole, 1, MAX_SERVE_STEPS) = 40
+    stop: Flag = True
+
+    @field_validator("adapter", mode="before")
+    @classmethod
+    def _adapter(cls, v: Any) -> AdapterConfig:
+        if isinstance(v, AdapterConfig):
+            return v
+        if isinstance(v, Mapping):
+            return AdapterConfig.from_dict(dict(v))
+        raise ConfigError(f"must be an adapt table, got {type(v).__name__}")
 
     @classmethod
-    def from_dict(cls, d: dict) -> ServeConfig:
+    def from_dict(cls, d: Mapping[str, Any]) -> ServeConfig:
         """From a flat mapping (a TOML ``[serve]`` table): any AdapterConfig field, ``max_steps``
         and ``stop``; unknown keys are rejected."""
-        own = {"max_steps", "stop"}
-        known = set(AdapterConfig.model_fields) | own
-        unknown = sorted(set(d) - known)
+        if not isinstance(d, Mapping):
+            raise ConfigError(f"serve must be a table, got {d!r}")
+        own = ("max_steps", "stop")
+        known = (*AdapterConfig().to_dict(), *own)
+        unknown = sorted(set(d) - set(known))
         if unknown:
             raise ConfigError(f"unknown serve option(s) {', '.join(unknown)}; valid: "
                               f"{', '.join(sorted(known))}")
         adapter = {k: v for k, v in d.items() if k not in own}
-        return cls(adapter=AdapterConfig(**adapter),
-                   **{k: v for k, v in d.items() if k in own})
+        return cls(adapter=AdapterConfig(**adapter), **{k: v for k, v in d.items() if k in own})
 
     def to_dict(self) -> dict:
         """Flat: the adapter's fields, ``max_steps`` and ``stop`` (what :meth:`from_dict` reads)."""

@@ -15,6 +15,7 @@ the robot's own confidence instead (the posterior mass near the estimate).
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -23,7 +24,7 @@ from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator
 
 from kbcli.core.transforms import FAMILIES
 from kbcli.stages.artifact import Artifact
-from kbcli.viz.common import save
+from kbcli.viz.common import external, save
 
 MAX_PANELS = 6
 DYNAMIC_RANGE = 30.0  # nats of log-posterior shown
@@ -45,98 +46,132 @@ def _steps_axis(ax, n: int) -> None:
     ax.set_xlim(0.5, max(n, 1) + 0.5)
 
 
-def plot_adapt(run: Artifact, path: str | os.PathLike) -> None:
-    """Draw a ``run`` artifact to a figure file (format from the suffix)."""
-    d = run.data
-    a = run.attrs
-    steps = np.asarray(d.get("snapshot_steps", np.zeros(0, int)))
-    snaps = d.get("snapshots")
+@dataclass
+class _Run:
+    """What the figure of a run shows, read once from the artifact."""
+
+    d: dict
+    a: dict
+    steps: np.ndarray
+    snaps: object
+    errors: np.ndarray
+    entropy: np.ndarray
+    tx: float
+    ty: float
+    has_truth: bool
+    means: np.ndarray
+    rigid: bool
+    stop: object
+    dx: np.ndarray
+    dy: np.ndarray
+
+    @property
+    def three(self) -> bool:
+        """A third curve panel: the angle error of a rigid run with ground truth."""
+        return self.rigid and self.has_truth
+
+
+def _read(run: Artifact) -> _Run:
+    d, a = run.data, run.attrs
     errors = np.asarray(d["errors"], float)
-    entropy = np.asarray(d["entropy"], float)
     truth = a.get("truth") or {}
     tx, ty = float(truth.get("dx", np.nan)), float(truth.get("dy", np.nan))
     has_truth = bool(np.isfinite(tx) and np.isfinite(ty)) and bool(np.isfinite(errors).any())
-    means = np.asarray(d["means"], float)
     rigid = any(FAMILIES.get(f).rotates for f in (a.get("family"), a.get("world_family"))
                 if f is not None)
-    stop = a.get("stop_step")
-    pick = np.arange(len(steps)) if snaps is not None else np.arange(0)
-    if len(pick) > MAX_PANELS:
-        pick = np.unique(np.rint(np.linspace(0, len(steps) - 1, MAX_PANELS)).astype(int))
-    n = max(len(pick), 3 if rigid and has_truth else 2)
-    fig = plt.figure(figsize=(2.7 * n + 1.2, 6.9))
-    gs = fig.add_gridspec(2, n + 1, height_ratios=[1.15, 1.0], width_ratios=[1] * n + [0.07])
-    dx, dy = np.asarray(d["dx"], float), np.asarray(d["dy"], float)
-    extent = (dx[0], dx[-1], dy[0], dy[-1])
+    return _Run(d, a, np.asarray(d.get("snapshot_steps", np.zeros(0, int))), d.get("snapshots"),
+                errors, np.asarray(d["entropy"], float), tx, ty, has_truth,
+                np.asarray(d["means"], float), rigid, a.get("stop_step"),
+                np.asarray(d["dx"], float), np.asarray(d["dy"], float))
+
+
+def _zoom(r: _Run, lp: np.ndarray, top: float, est: np.ndarray) -> tuple[np.ndarray, float]:
+    """Centre and half-width of the zoomed panel: the estimate, the truth and the bright part."""
+    lo = est.copy()
+    hi = est.copy()
+    if r.has_truth:
+        lo, hi = np.minimum(lo, (r.tx, r.ty)), np.maximum(hi, (r.tx, r.ty))
+    if lp.ndim == 2 and lp.shape == (len(r.dy), len(r.dx)):  # and the bright part
+        rows, cols = np.nonzero(lp - top > -BRIGHT)
+        if len(rows):
+            lo = np.minimum(lo, (r.dx[cols].min(), r.dy[rows].min()))
+            hi = np.maximum(hi, (r.dx[cols].max(), r.dy[rows].max()))
+    return (lo + hi) / 2, max(ZOOM, float(np.max(hi - lo)) / 2 + MARGIN)
+
+
+def _snapshot(fig, gs, r: _Run, i: int, j: int, last: bool):
+    """Panel ``i``: the posterior at snapshot ``j`` (``last``: zoomed in on the estimate)."""
+    ax = fig.add_subplot(gs[0, i])
+    lp = np.asarray(r.snaps[j], float)
+    top = float(np.max(lp)) if np.isfinite(lp).any() else 0.0
+    image = ax.imshow(lp - top, origin="lower", extent=(r.dx[0], r.dx[-1], r.dy[0], r.dy[-1]),
+                      cmap="magma", aspect="equal", vmin=-DYNAMIC_RANGE, vmax=0.0,
+                      interpolation="nearest")
+    if r.has_truth:
+        ax.plot([r.tx], [r.ty], "x", color="cyan", ms=9, mew=2)
+    t = int(r.steps[j])
+    est = r.means[t - 1, -2:] if 1 <= t <= len(r.means) else None
+    if est is not None:
+        ax.plot([est[0]], [est[1]], "o", mfc="none", mec="lime", ms=9, mew=1.5)
+    zoom = last and est is not None
+    if zoom:  # the last panel zooms in on the estimate, keeping the truth in view
+        centre, half = _zoom(r, lp, top, est)
+        # a wide posterior (a weak model's, tempered) fills the panel: no zoom to show
+        zoom = half < 0.8 * min(r.dx[-1] - r.dx[0], r.dy[-1] - r.dy[0]) / 2
+        if zoom:
+            ax.set_xlim(centre[0] - half, centre[0] + half)
+            ax.set_ylim(centre[1] - half, centre[1] + half)
+    after = f"after {t} observation{'s' if t != 1 else ''}"
+    ax.set_title(after if t else "prior (t = 0)", fontsize=9)
+    if zoom:
+        ax.set_title(f"{after}\n(zoom: +-{half:.3g} px)", fontsize=9)
+    ax.set_xlabel("dx (px)", fontsize=8)
+    if i == 0:
+        ax.set_ylabel("dy (px)", fontsize=8)
+    ax.tick_params(labelsize=7)
+    return image
+
+
+def _posteriors(fig, gs, r: _Run, pick: np.ndarray, n: int) -> None:
+    """The top row: the posterior at the picked snapshots, and its colour bar."""
     image = None
     for i, j in enumerate(pick):
-        ax = fig.add_subplot(gs[0, i])
-        lp = np.asarray(snaps[j], float)
-        top = float(np.max(lp)) if np.isfinite(lp).any() else 0.0
-        image = ax.imshow(lp - top, origin="lower", extent=extent, cmap="magma", aspect="equal",
-                          vmin=-DYNAMIC_RANGE, vmax=0.0, interpolation="nearest")
-        if has_truth:
-            ax.plot([tx], [ty], "x", color="cyan", ms=9, mew=2)
-        t = int(steps[j])
-        est = means[t - 1, -2:] if 1 <= t <= len(means) else None
-        if est is not None:
-            ax.plot([est[0]], [est[1]], "o", mfc="none", mec="lime", ms=9, mew=1.5)
-        zoom = i == len(pick) - 1 and est is not None and len(pick) > 1
-        if zoom:  # the last panel zooms in on the estimate, keeping the truth in view
-            lo = est.copy()
-            hi = est.copy()
-            if has_truth:
-                lo, hi = np.minimum(lo, (tx, ty)), np.maximum(hi, (tx, ty))
-            if lp.ndim == 2 and lp.shape == (len(dy), len(dx)):  # and the bright part
-                rows, cols = np.nonzero(lp - top > -BRIGHT)
-                if len(rows):
-                    lo = np.minimum(lo, (dx[cols].min(), dy[rows].min()))
-                    hi = np.maximum(hi, (dx[cols].max(), dy[rows].max()))
-            centre = (lo + hi) / 2
-            half = max(ZOOM, float(np.max(hi - lo)) / 2 + MARGIN)
-            # a wide posterior (a weak model's, tempered) fills the panel: no zoom to show
-            zoom = half < 0.8 * min(dx[-1] - dx[0], dy[-1] - dy[0]) / 2
-            if zoom:
-                ax.set_xlim(centre[0] - half, centre[0] + half)
-                ax.set_ylim(centre[1] - half, centre[1] + half)
-        ax.set_title(f"after {t} observation{'s' if t != 1 else ''}" if t else "prior (t = 0)",
-                     fontsize=9)
-        if zoom:
-            ax.set_title(f"after {t} observation{'s' if t != 1 else ''}\n(zoom: +-{half:.3g} px)",
-                         fontsize=9)
-        ax.set_xlabel("dx (px)", fontsize=8)
-        if i == 0:
-            ax.set_ylabel("dy (px)", fontsize=8)
-        ax.tick_params(labelsize=7)
+        image = _snapshot(fig, gs, r, i, j, i == len(pick) - 1 and len(pick) > 1)
     if image is not None:
         cax = fig.add_subplot(gs[0, n])
         cb = fig.colorbar(image, cax=cax)
         cb.set_label("log posterior - max (nats)", fontsize=8)
         cb.ax.tick_params(labelsize=7)
 
-    t = np.arange(1, len(errors) + 1)
-    T = len(errors)
-    three = rigid and has_truth
-    cols = [(0, n // 3 if three else n // 2), (n // 3, 2 * n // 3),
-            (2 * n // 3 if three else n // 2, n)]
-    ax = fig.add_subplot(gs[1, cols[0][0]:cols[0][1]])
-    if has_truth:
-        ax.semilogy(t, np.maximum(errors, 1e-3), "-o", ms=3, color="tab:blue")
+
+def _error_panel(ax, r: _Run, t: np.ndarray) -> None:
+    if r.has_truth:
+        ax.semilogy(t, np.maximum(r.errors, 1e-3), "-o", ms=3, color="tab:blue")
         ax.axhline(1.0, color="0.5", ls="--", lw=0.8)
         ax.set_ylabel("translation error (px)")
         ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
         ax.yaxis.set_major_formatter(FuncFormatter(_plain))
         ax.yaxis.set_minor_formatter(FuncFormatter(lambda v, _p: ""))
     else:  # a real robot: no ground truth, show the robot's own confidence
-        ax.plot(t, np.asarray(d.get("mass", np.full_like(errors, np.nan)), float), "-o", ms=3,
-                color="tab:green")
+        ax.plot(t, np.asarray(r.d.get("mass", np.full_like(r.errors, np.nan)), float), "-o",
+                ms=3, color="tab:green")
         ax.set_ylim(-0.02, 1.02)
         ax.set_ylabel("posterior mass near the estimate")
         ax.set_title("ground truth unknown (external robot): no error", fontsize=8)
     ax.set_xlabel("observations")
+
+
+def _curves(fig, gs, r: _Run, n: int) -> None:
+    """The bottom row: the error (or the mass near the estimate), the angle error, the entropy."""
+    T = len(r.errors)
+    t = np.arange(1, T + 1)
+    cols = [(0, n // 3 if r.three else n // 2), (n // 3, 2 * n // 3),
+            (2 * n // 3 if r.three else n // 2, n)]
+    ax = fig.add_subplot(gs[1, cols[0][0]:cols[0][1]])
+    _error_panel(ax, r, t)
     axes = [ax]
-    if rigid and has_truth:
-        ang = np.asarray(d.get("angle_errors", np.full(T, np.nan)), float)
+    if r.three:
+        ang = np.asarray(r.d.get("angle_errors", np.full(T, np.nan)), float)
         ax_a = fig.add_subplot(gs[1, cols[1][0]:cols[1][1]])
         ax_a.plot(t, ang, "-s", ms=3, color="tab:orange")
         ax_a.set_xlabel("observations")
@@ -144,41 +179,63 @@ def plot_adapt(run: Artifact, path: str | os.PathLike) -> None:
         ax_a.set_ylim(bottom=0)
         axes.append(ax_a)
     ax2 = fig.add_subplot(gs[1, cols[2][0]:cols[2][1]])
-    ax2.plot(t, entropy, "-", color="tab:purple", marker="." if T < 15 else None)
+    ax2.plot(t, r.entropy, "-", color="tab:purple", marker="." if T < 15 else None)
     ax2.set_xlabel("observations")
     ax2.set_ylabel("posterior entropy (nats)")
     axes.append(ax2)
     for axx in axes:
         axx.grid(alpha=0.3)
         _steps_axis(axx, T)
-        if stop:
-            axx.axvline(stop, color="tab:green", lw=1.0, ls=":")
+        if r.stop:
+            axx.axvline(r.stop, color="tab:green", lw=1.0, ls=":")
 
+
+def _legend(fig, r: _Run) -> None:
+    """One legend naming every mark."""
     handles = [Line2D([], [], ls="", marker="o", mfc="none", mec="lime", mew=1.5,
                       label="estimate (posterior mean)")]
-    if has_truth:
+    if r.has_truth:
         handles.insert(0, Line2D([], [], ls="", marker="x", color="cyan", mew=2,
                                  label="true displacement"))
-    if has_truth:
         handles.append(Line2D([], [], color="0.5", ls="--", lw=0.8, label="1 px"))
-    if stop:
+    if r.stop:
         handles.append(Line2D([], [], color="tab:green", ls=":", lw=1.0,
-                              label=f"stopping rule met (t = {stop})"))
+                              label=f"stopping rule met (t = {r.stop})"))
     fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0.965),
                ncol=len(handles), fontsize=8, frameon=False)
-    if has_truth:
+
+
+def _title(r: _Run) -> str:
+    a = r.a
+    if r.has_truth:
         final = a.get("final_error_px", np.nan)
         final = np.nan if final is None else final
         angle = (f", angle error {a.get('final_angle_error_deg', np.nan):.2f} deg"
-                 if rigid and isinstance(a.get("final_angle_error_deg"), (int, float)) else "")
+                 if r.rigid and isinstance(a.get("final_angle_error_deg"), (int, float)) else "")
         result = f"final error {final:.2f} px{angle}"
     else:
         est = a.get("estimate") or {}
         result = "estimate " + ", ".join(f"{k} {v:+.2f}" for k, v in est.items()) + \
             " (truth unknown)"
-    source = " (external robot)" if a.get("source") == "external" else ""
-    fig.suptitle(f"adaptation{source}: {a.get('strategy')} strategy, {a.get('posterior')} "
-                 f"posterior, {a.get('family')} family, {T} observation{'s' if T != 1 else ''}; "
-                 f"{result}", fontsize=10, y=0.995)
+    T = len(r.errors)
+    source = " (external robot)" if external(a) else ""
+    return (f"adaptation{source}: {a.get('strategy')} strategy, {a.get('posterior')} "
+            f"posterior, {a.get('family')} family, {T} observation{'s' if T != 1 else ''}; "
+            f"{result}")
+
+
+def plot_adapt(run: Artifact, path: str | os.PathLike) -> None:
+    """Draw a ``run`` artifact to a figure file (format from the suffix)."""
+    r = _read(run)
+    pick = np.arange(len(r.steps)) if r.snaps is not None else np.arange(0)
+    if len(pick) > MAX_PANELS:
+        pick = np.unique(np.rint(np.linspace(0, len(r.steps) - 1, MAX_PANELS)).astype(int))
+    n = max(len(pick), 3 if r.three else 2)
+    fig = plt.figure(figsize=(2.7 * n + 1.2, 6.9))
+    gs = fig.add_gridspec(2, n + 1, height_ratios=[1.15, 1.0], width_ratios=[1] * n + [0.07])
+    _posteriors(fig, gs, r, pick, n)
+    _curves(fig, gs, r, n)
+    _legend(fig, r)
+    fig.suptitle(_title(r), fontsize=10, y=0.995)
     fig.tight_layout(rect=(0, 0, 1, 0.945))
     save(fig, path)

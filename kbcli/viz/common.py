@@ -16,6 +16,11 @@ from kbcli.io.atomic import atomic_path
 from kbcli.io.paths import figure_format
 
 
+def external(attrs: dict) -> bool:
+    """Whether a run came from a robot in another process (``kbcli serve``): no ground truth."""
+    return attrs.get("source") == "external"
+
+
 def save(fig: Figure, path: str | os.PathLike, dpi: int = 110) -> None:
     """Save atomically (temporary file, then rename) and close the figure.
 

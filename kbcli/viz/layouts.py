@@ -19,6 +19,7 @@ from kbcli.viz.common import draw_keyboard, key_colours, save
 MAP_STEP = 2.0  # px
 _STRATEGY_COLOURS = {"random": "tab:grey", "active": "tab:orange", "infogain": "tab:blue"}
 _CLASS_COLOURS = {"lines": "tab:green", "svc": "tab:purple"}
+_EXPLORATION_STYLES = {"active": "-"}  # any other exploration: dotted
 
 
 def _key_colours(n_keys: int) -> np.ndarray:
@@ -27,16 +28,10 @@ def _key_colours(n_keys: int) -> np.ndarray:
     return np.vstack([(0.6, 0.6, 0.6, 1.0), (1, 1, 1, 1), key_colours(n_keys)])
 
 
-def plot_layout(res, model_art: Artifact, cfg, path: str | os.PathLike) -> None:
-    """Draw one layout's results (a :class:`kbcli.bench.layouts.LayoutResult`) to a PNG."""
-    from kbcli.core import stats
-    from kbcli.stages.models import load_model
-
+def _layout_panel(ax, res) -> None:
+    """Top left: the layout and its working area."""
     kb = res.keyboard
     x0, y0, x1, y1 = kb.area
-    fig, axes = plt.subplots(2, 2, figsize=(13, 9.4))
-
-    ax = axes[0, 0]
     draw_keyboard(ax, kb)
     ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ls="--", ec="grey", lw=1))
     ax.set_xlim(x0 - 5, x1 + 5)
@@ -45,7 +40,12 @@ def plot_layout(res, model_art: Artifact, cfg, path: str | os.PathLike) -> None:
     ax.set_title(f"{res.layout}: {kb.describe()}\nlabels: note, tempo (bpm); dashed: working area",
                  fontsize=9)
 
-    ax = axes[0, 1]
+
+def _map_panel(ax, kb, model_art: Artifact) -> None:
+    """Top right: the adaptation model's map, wrong cells red, where the finger landed."""
+    from kbcli.stages.models import load_model
+
+    x0, y0, x1, y1 = kb.area
     model = load_model(model_art)
     _, pts = grid_points(kb.area, MAP_STEP)
     flat = pts.reshape(-1, 2)
@@ -70,7 +70,9 @@ def plot_layout(res, model_art: Artifact, cfg, path: str | os.PathLike) -> None:
                  f"{a.get('boundary_error_px', np.nan):.2f} px\nred: wrong (2 px cells); dots: "
                  "where the finger landed", fontsize=9)
 
-    ax = axes[1, 0]
+
+def _learning_panel(ax, res) -> None:
+    """Bottom left: the median learning curve per model class and exploration."""
     for mc in dict.fromkeys(r.model_class for r in res.learn_runs):
         for strategy in dict.fromkeys(r.strategy for r in res.learn_runs):
             runs = [r for r in res.learn_runs if (r.model_class, r.strategy) == (mc, strategy)]
@@ -78,7 +80,7 @@ def plot_layout(res, model_art: Artifact, cfg, path: str | os.PathLike) -> None:
                 continue
             n = np.array(runs[0].checkpoints)
             acc = np.array([r.accuracy for r in runs if len(r.accuracy) == len(n)])
-            ax.plot(n, 100 * np.median(acc, axis=0), "-" if strategy == "active" else ":",
+            ax.plot(n, 100 * np.median(acc, axis=0), _EXPLORATION_STYLES.get(strategy, ":"),
                     color=_CLASS_COLOURS.get(mc, "black"), lw=1.6,
                     label=f"{mc}, {strategy} ({len(acc)} runs)")
     for level in (97, 99):
@@ -91,7 +93,11 @@ def plot_layout(res, model_art: Artifact, cfg, path: str | os.PathLike) -> None:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="lower right")
 
-    ax = axes[1, 1]
+
+def _adapt_panel(ax, res) -> None:
+    """Bottom right: the median error while adapting with the learned model, per strategy."""
+    from kbcli.core import stats
+
     for cell_label in dict.fromkeys(c.label for c in res.cells):
         for section, ls in (("learned", "-"), ("learned-rigid", "--")):
             cells = [c for c in res.cells if c.label == cell_label and c.section == section]
@@ -114,5 +120,14 @@ def plot_layout(res, model_art: Artifact, cfg, path: str | os.PathLike) -> None:
                  fontsize=9)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, loc="upper right")
+
+
+def plot_layout(res, model_art: Artifact, cfg, path: str | os.PathLike) -> None:
+    """Draw one layout's results (a :class:`kbcli.bench.layouts.LayoutResult`) to a PNG."""
+    fig, axes = plt.subplots(2, 2, figsize=(13, 9.4))
+    _layout_panel(axes[0, 0], res)
+    _map_panel(axes[0, 1], res.keyboard, model_art)
+    _learning_panel(axes[1, 0], res)
+    _adapt_panel(axes[1, 1], res)
     fig.tight_layout()
     save(fig, path)

@@ -77,6 +77,139 @@ def _pose(d: dict) -> tuple[str, np.ndarray]:
     return fam.name, np.array([d.get(k, 0.0) for k in fam.params], float)
 
 
+def _blocks(adapt_t: np.ndarray) -> list[np.ndarray]:
+    """The runs of consecutive adaptation touches."""
+    return np.split(adapt_t, np.flatnonzero(np.diff(adapt_t) > 1) + 1) if len(adapt_t) else []
+
+
+def _success_panel(ax, t: np.ndarray, phase: np.ndarray, result: np.ndarray, attrs: dict,
+                   window: int) -> None:
+    """Top left: the running success, each NO_MATCH, the adaptations, the move, the detection."""
+    play = phase == PLAY
+    ok = 1.0 - result[play]
+    c = np.concatenate([[0.0], np.cumsum(ok)])
+    i = np.arange(1, len(ok) + 1)
+    lo = np.maximum(i - window, 0)
+    running = (c[i] - c[lo]) / np.maximum(i - lo, 1)
+    ax.plot(*_gaps(t[play], running), lw=1.4, color="tab:blue",
+            label=f"success (mean of the last {window} notes)")
+    miss = t[play][ok == 0]
+    ax.plot(miss, np.full(len(miss), -0.05), ls="", marker="|", color="crimson", ms=9,
+            label=f"NO_MATCH ({len(miss)})")
+    adapt_t = t[phase == ADAPT]
+    if len(adapt_t):
+        for blk in _blocks(adapt_t):
+            ax.axvspan(blk.min() - 0.5, blk.max() + 0.5, color="orange", alpha=0.3, lw=0)
+        ax.plot([], [], color="orange", alpha=0.5, lw=8,
+                label=f"adaptation ({len(adapt_t)} touches)")
+    moved = attrs["perturbed_at"]
+    ax.axvline(moved, color="k", ls="--", lw=1, label=f"keyboard moved (touch {moved})")
+    fired = attrs.get("detected_at")
+    if fired is not None:
+        ax.axvline(fired, color="crimson", lw=1,
+                   label=f"detector fired ({attrs.get('detection_delay')} touches later)")
+    ax.set_ylim(-0.12, 1.05)
+    ax.set_ylabel("success")
+    ax.tick_params(labelbottom=False)
+    ax.legend(fontsize=8, loc="lower left", bbox_to_anchor=(0.0, 1.01), ncol=3, frameon=False)
+
+
+def _score_panel(ax2, t: np.ndarray, phase: np.ndarray, score: np.ndarray, attrs: dict,
+                 config: dict | None) -> None:
+    """Bottom left: the detector's score (log) with its threshold."""
+    play = phase == PLAY
+    ax2.semilogy(*_gaps(t[play], np.clip(score[play], 1e-12, 1)), lw=1, color="tab:purple",
+                 label="detector score")
+    thr = None
+    if config is not None:
+        thr = ((config.get("loop") or {}).get("detector") or {}).get("threshold")
+    if isinstance(thr, (int, float)) and thr > 0:
+        ax2.axhline(thr, color="crimson", ls=":", lw=1.2, label=f"threshold {thr:g} (fires below)")
+    ax2.axvline(attrs["perturbed_at"], color="k", ls="--", lw=1)
+    if attrs.get("detected_at") is not None:
+        ax2.axvline(attrs["detected_at"], color="crimson", lw=1)
+    for blk in _blocks(t[phase == ADAPT]):
+        ax2.axvspan(blk.min() - 0.5, blk.max() + 0.5, color="orange", alpha=0.3, lw=0)
+    ax2.set_ylabel("detector score (log)")
+    ax2.set_xlabel("touch")
+    ax2.legend(fontsize=8, loc="lower left")
+    ax2.set_xlim(-1, max(len(t), 1))
+
+
+def _named(d: dict) -> str:
+    return ", ".join(f"{k} {v:+.2f}" for k, v in d.items())
+
+
+def _touches(ax3, pts: np.ndarray) -> Line2D:
+    """The adaptation touches on the keyboard, numbered in order (within 3 px: one label)."""
+    ax3.plot(pts[:, 0], pts[:, 1], "-", color="0.2", lw=0.6, alpha=0.6)
+    ax3.plot(pts[:, 0], pts[:, 1], "o", color="black", ms=4)
+    groups: dict[tuple[int, int], list[int]] = {}  # touches within 3 px share one label
+    for k, (x, y) in enumerate(pts, 1):
+        if np.isfinite(x) and np.isfinite(y):
+            groups.setdefault((int(round(x / 3)), int(round(y / 3))), []).append(k)
+    for ks in groups.values():
+        x, y = pts[ks[0] - 1]
+        ax3.annotate(",".join(map(str, ks)), (x, y), fontsize=9, xytext=(4, 4),
+                     textcoords="offset points",
+                     bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none",
+                           "alpha": 0.8})
+    return Line2D([], [], color="black", marker="o", ms=4, lw=0.6,
+                  label=f"adaptation touches, in order (1-{len(pts)})")
+
+
+def _keyboard_panel(ax3, kb: Keyboard, steps: dict, phase: np.ndarray, attrs: dict) -> None:
+    """Right: the keyboard where the robot learned it, where it is, where the robot believes it
+    is, and the adaptation touches; the keys (both poses) and the touches fill the panel."""
+    draw_keyboard(ax3, kb, labels=False, alpha=0.3)
+    fam, params = _pose(attrs.get("truth") or {})
+    moved_keys = _key_polygons(kb, fam, params)
+    for poly in moved_keys:
+        ax3.add_patch(Polygon(poly, closed=True, fill=False, ec="crimson", lw=1.1))
+    shown = [np.vstack(moved_keys), np.vstack(_key_polygons(kb, "translation", np.zeros(2)))]
+    handles = [Patch(facecolor="0.85", edgecolor="0.4", label="where the robot learned it"),
+               Patch(facecolor="none", edgecolor="crimson",
+                     label="where it is: " + _named(attrs.get("truth") or {}))]
+    corr = attrs.get("correction") or {}
+    if attrs.get("detected_at") is not None and corr:
+        cf, cp = _pose(corr)
+        for poly in _key_polygons(kb, cf, cp):
+            ax3.add_patch(Polygon(poly, closed=True, fill=False, ec="forestgreen", lw=1.0,
+                                  ls="--"))
+        handles.append(Line2D([], [], color="forestgreen", ls="--",
+                              label="where the robot believes it is: " + _named(corr)))
+    if (phase == ADAPT).any():
+        pts = np.asarray(steps["landed"], float)[phase == ADAPT]
+        shown.append(pts[np.isfinite(pts).all(axis=1)])
+        handles.append(_touches(ax3, pts))
+    x0, y0, x1, y1 = kb.area
+    box = np.vstack(shown)
+    lo = np.maximum(box.min(axis=0) - 12, (x0, y0))
+    hi = np.minimum(box.max(axis=0) + 12, (x1, y1))
+    ax3.set_xlim(lo[0], hi[0])
+    ax3.set_ylim(lo[1], hi[1])
+    ax3.set_aspect("equal")
+    ax3.set_xlabel("pad x (px)")
+    ax3.set_ylabel("pad y (px)")
+    ax3.legend(handles=handles, fontsize=8.5, loc="lower center", bbox_to_anchor=(0.5, 1.01),
+               frameon=False, title="the keyboard and the adaptation touches",
+               title_fontsize=10)
+
+
+def _title(phase: np.ndarray, result: np.ndarray, attrs: dict) -> str:
+    """The three success rates, exactly, with their counts when they match them."""
+    counts = _counts(phase, result, attrs)
+
+    def rate(key: str) -> str:
+        v, n = attrs.get(key), counts.get(key)
+        exact = n is not None and v is not None and n[1] and abs(n[0] / n[1] - v) < 1e-9
+        return _pct(v, n if exact else None)
+
+    return (f"closed loop: success before the move {rate('success_before')}, after it "
+            f"{rate('success_after_perturbation')}, after adaptation "
+            f"{rate('success_after_adaptation')}")
+
+
 def plot_loop(steps: dict, attrs: dict, kb: Keyboard, path: str | os.PathLike, window: int = 20,
               config: dict | None = None) -> None:
     """Draw a closed-loop session to a figure file (format from the suffix).
@@ -94,116 +227,12 @@ def plot_loop(steps: dict, attrs: dict, kb: Keyboard, path: str | os.PathLike, w
     result = np.asarray(steps["result"]).astype(int)
     score = np.asarray(steps["score"], float)
     t = np.arange(len(phase))
-    play = phase == PLAY
     fig = plt.figure(figsize=(16, 7.6))
     gs = fig.add_gridspec(2, 2, width_ratios=(1.25, 1.0), height_ratios=(1.25, 1.0))
     ax = fig.add_subplot(gs[0, 0])
-    ok = 1.0 - result[play]
-    c = np.concatenate([[0.0], np.cumsum(ok)])
-    i = np.arange(1, len(ok) + 1)
-    lo = np.maximum(i - window, 0)
-    running = (c[i] - c[lo]) / np.maximum(i - lo, 1)
-    ax.plot(*_gaps(t[play], running), lw=1.4, color="tab:blue",
-            label=f"success (mean of the last {window} notes)")
-    miss = t[play][ok == 0]
-    ax.plot(miss, np.full(len(miss), -0.05), ls="", marker="|", color="crimson", ms=9,
-            label=f"NO_MATCH ({len(miss)})")
-    adapt_t = t[phase == ADAPT]
-    if len(adapt_t):
-        for blk in np.split(adapt_t, np.flatnonzero(np.diff(adapt_t) > 1) + 1):
-            ax.axvspan(blk.min() - 0.5, blk.max() + 0.5, color="orange", alpha=0.3, lw=0)
-        ax.plot([], [], color="orange", alpha=0.5, lw=8,
-                label=f"adaptation ({len(adapt_t)} touches)")
-    moved = attrs["perturbed_at"]
-    ax.axvline(moved, color="k", ls="--", lw=1, label=f"keyboard moved (touch {moved})")
-    fired = attrs.get("detected_at")
-    if fired is not None:
-        ax.axvline(fired, color="crimson", lw=1,
-                   label=f"detector fired ({attrs.get('detection_delay')} touches later)")
-    ax.set_ylim(-0.12, 1.05)
-    ax.set_ylabel("success")
-    ax.tick_params(labelbottom=False)
-    ax.legend(fontsize=8, loc="lower left", bbox_to_anchor=(0.0, 1.01), ncol=3, frameon=False)
-
-    ax2 = fig.add_subplot(gs[1, 0], sharex=ax)
-    ax2.semilogy(*_gaps(t[play], np.clip(score[play], 1e-12, 1)), lw=1, color="tab:purple",
-                 label="detector score")
-    thr = None
-    if config is not None:
-        thr = ((config.get("loop") or {}).get("detector") or {}).get("threshold")
-    if isinstance(thr, (int, float)) and thr > 0:
-        ax2.axhline(thr, color="crimson", ls=":", lw=1.2, label=f"threshold {thr:g} (fires below)")
-    ax2.axvline(moved, color="k", ls="--", lw=1)
-    if fired is not None:
-        ax2.axvline(fired, color="crimson", lw=1)
-    for blk in (np.split(adapt_t, np.flatnonzero(np.diff(adapt_t) > 1) + 1) if len(adapt_t)
-                else []):
-        ax2.axvspan(blk.min() - 0.5, blk.max() + 0.5, color="orange", alpha=0.3, lw=0)
-    ax2.set_ylabel("detector score (log)")
-    ax2.set_xlabel("touch")
-    ax2.legend(fontsize=8, loc="lower left")
-    ax2.set_xlim(-1, max(len(t), 1))
-
-    ax3 = fig.add_subplot(gs[:, 1])
-    draw_keyboard(ax3, kb, labels=False, alpha=0.3)
-    fam, params = _pose(attrs.get("truth") or {})
-    moved_keys = _key_polygons(kb, fam, params)
-    for poly in moved_keys:
-        ax3.add_patch(Polygon(poly, closed=True, fill=False, ec="crimson", lw=1.1))
-    shown = [np.vstack(moved_keys), np.vstack(_key_polygons(kb, "translation", np.zeros(2)))]
-    handles = [Patch(facecolor="0.85", edgecolor="0.4", label="where the robot learned it"),
-               Patch(facecolor="none", edgecolor="crimson",
-                     label="where it is: " + ", ".join(f"{k} {v:+.2f}" for k, v in
-                                                       (attrs.get("truth") or {}).items()))]
-    corr = attrs.get("correction") or {}
-    if fired is not None and corr:
-        cf, cp = _pose(corr)
-        for poly in _key_polygons(kb, cf, cp):
-            ax3.add_patch(Polygon(poly, closed=True, fill=False, ec="forestgreen", lw=1.0,
-                                  ls="--"))
-        handles.append(Line2D([], [], color="forestgreen", ls="--",
-                              label="where the robot believes it is: " + ", ".join(
-                                  f"{k} {v:+.2f}" for k, v in corr.items())))
-    if len(adapt_t):
-        pts = np.asarray(steps["landed"], float)[phase == ADAPT]
-        shown.append(pts[np.isfinite(pts).all(axis=1)])
-        ax3.plot(pts[:, 0], pts[:, 1], "-", color="0.2", lw=0.6, alpha=0.6)
-        ax3.plot(pts[:, 0], pts[:, 1], "o", color="black", ms=4)
-        groups: dict[tuple[int, int], list[int]] = {}  # touches within 3 px share one label
-        for k, (x, y) in enumerate(pts, 1):
-            if np.isfinite(x) and np.isfinite(y):
-                groups.setdefault((int(round(x / 3)), int(round(y / 3))), []).append(k)
-        for ks in groups.values():
-            x, y = pts[ks[0] - 1]
-            ax3.annotate(",".join(map(str, ks)), (x, y), fontsize=9, xytext=(4, 4),
-                         textcoords="offset points",
-                         bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none",
-                               "alpha": 0.8})
-        handles.append(Line2D([], [], color="black", marker="o", ms=4, lw=0.6,
-                              label=f"adaptation touches, in order (1-{len(pts)})"))
-    # the keys (both poses) and the touches fill the panel, within the working area
-    x0, y0, x1, y1 = kb.area
-    box = np.vstack(shown)
-    lo = np.maximum(box.min(axis=0) - 12, (x0, y0))
-    hi = np.minimum(box.max(axis=0) + 12, (x1, y1))
-    ax3.set_xlim(lo[0], hi[0])
-    ax3.set_ylim(lo[1], hi[1])
-    ax3.set_aspect("equal")
-    ax3.set_xlabel("pad x (px)")
-    ax3.set_ylabel("pad y (px)")
-    ax3.legend(handles=handles, fontsize=8.5, loc="lower center", bbox_to_anchor=(0.5, 1.01),
-               frameon=False, title="the keyboard and the adaptation touches",
-               title_fontsize=10)
-
-    counts = _counts(phase, result, attrs)
-
-    def rate(key: str) -> str:
-        v, n = attrs.get(key), counts.get(key)
-        exact = n is not None and v is not None and n[1] and abs(n[0] / n[1] - v) < 1e-9
-        return _pct(v, n if exact else None)
-
-    fig.suptitle(f"closed loop: success before the move {rate('success_before')}, after it "
-                 f"{rate('success_after_perturbation')}, after adaptation "
-                 f"{rate('success_after_adaptation')}", fontsize=11)
+    _success_panel(ax, t, phase, result, attrs, window)
+    _score_panel(fig.add_subplot(gs[1, 0], sharex=ax), t, phase, score, attrs, config)
+    _keyboard_panel(fig.add_subplot(gs[:, 1]), kb, steps, phase, attrs)
+    fig.suptitle(_title(phase, result, attrs), fontsize=11)
     fig.tight_layout()
     save(fig, path)

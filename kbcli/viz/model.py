@@ -23,6 +23,7 @@ from matplotlib.patches import Patch
 from kbcli.core import accuracy as scoring
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.model import grid_points
+from kbcli.io.schema.rules import learned, model_class_of
 from kbcli.stages.artifact import Artifact
 from kbcli.viz.common import draw_keyboard, key_colours, save
 
@@ -39,11 +40,8 @@ def _key_colours(kb: Keyboard) -> np.ndarray:
 SHADE = LinearSegmentedColormap.from_list("confusion", [(0, 0, 0, 0), (0.1, 0.1, 0.1, 0.85)])
 
 
-def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> None:
-    """Draw a ``model`` artifact (with its loaded model and keyboard) to a figure file."""
-    learned = art.config.get("strategy") != "exact"
-    x0, y0, x1, y1 = kb.area
-    extent = (x0, x1, y0, y1)
+def _map(model, kb: Keyboard) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per 2 px cell: the predicted key, the confusion 1 - (p1 - p2), and whether it is wrong."""
     _, pts = grid_points(kb.area, MAP_STEP)
     flat = pts.reshape(-1, 2)
     proba = model.predict_proba(flat)
@@ -52,12 +50,38 @@ def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> N
     top2 = np.sort(proba, axis=1)[:, -2:] if proba.shape[1] > 1 else np.ones((len(flat), 2))
     confusion = (1.0 - (top2[:, 1] - top2[:, 0])).reshape(pts.shape[:2])
     wrong = keys != kb.key_at(flat).reshape(pts.shape[:2])
-    colours = _key_colours(kb)
+    return keys, confusion, wrong
 
-    ncols = 3 if learned else 2
-    fig, axes = plt.subplots(1, ncols, figsize=(6.0 * ncols, 5.2),
-                             gridspec_kw={"width_ratios": [1.3, 1.2, 1.0][:ncols]})
-    ax = axes[0]
+
+def _samples_and_lines(ax, art: Artifact, handles: list) -> str:
+    """A learned model's reaches and fitted boundary lines on its map; the map's title."""
+    d = art.data
+    landed = np.asarray(d["samples"]["landed"], float)
+    ax.plot(landed[:, 0], landed[:, 1], ".", color="black", ms=1.6, alpha=0.7)
+    handles.append(Line2D([], [], ls="", marker=".", color="black",
+                          label=f"reaches ({len(landed)})"))
+    lines = np.asarray(d["model"].get("lines", np.empty((0, 3))), float)
+    t = np.linspace(-1e3, 1e3, 2)
+    for nx, ny, c in lines:
+        xy = np.outer(t, (-ny, nx)) + c * np.array([nx, ny])
+        ax.plot(xy[:, 0], xy[:, 1], color="0.25", lw=0.3, alpha=0.6)
+    if len(lines):
+        handles.append(Line2D([], [], color="0.25", lw=0.6,
+                              label=f"fitted boundaries ({len(lines)})"))
+    a = art.attrs
+    return (f"learned {model_class_of(art)} model: {a.get('strategy')} "
+            f"exploration, {a.get('mode')} mode, "
+            f"{a.get('n_reaches')} reaches\naccuracy {100 * _num(a.get('accuracy')):.2f} %, "
+            f"boundary error {_num(a.get('boundary_error_px')):.2f} px")
+
+
+def _map_panel(fig, ax, art: Artifact, model, kb: Keyboard) -> None:
+    """Left: the predicted key per cell, its uncertainty, wrong cells red; a learned model's
+    reaches and boundary lines."""
+    x0, y0, x1, y1 = kb.area
+    extent = (x0, x1, y0, y1)
+    keys, confusion, wrong = _map(model, kb)
+    colours = _key_colours(kb)
     ax.imshow(keys + 2, origin="lower", extent=extent, interpolation="nearest",
               cmap=ListedColormap(colours), vmin=-0.5, vmax=len(colours) - 0.5)
     shade = ax.imshow(confusion, origin="lower", extent=extent, interpolation="nearest",
@@ -69,25 +93,8 @@ def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> N
     if wrong.any():
         handles.append(Patch(facecolor=(0.9, 0, 0), label=f"wrong key ({100 * wrong.mean():.2f} % "
                                                            f"of cells)"))
-    if learned:
-        d = art.data
-        landed = np.asarray(d["samples"]["landed"], float)
-        ax.plot(landed[:, 0], landed[:, 1], ".", color="black", ms=1.6, alpha=0.7)
-        handles.append(Line2D([], [], ls="", marker=".", color="black",
-                              label=f"reaches ({len(landed)})"))
-        lines = np.asarray(d["model"].get("lines", np.empty((0, 3))), float)
-        t = np.linspace(-1e3, 1e3, 2)
-        for nx, ny, c in lines:
-            xy = np.outer(t, (-ny, nx)) + c * np.array([nx, ny])
-            ax.plot(xy[:, 0], xy[:, 1], color="0.25", lw=0.3, alpha=0.6)
-        if len(lines):
-            handles.append(Line2D([], [], color="0.25", lw=0.6,
-                                  label=f"fitted boundaries ({len(lines)})"))
-        a = art.attrs
-        title = (f"learned {art.config.get('model_class', 'lines')} model: {a.get('strategy')} "
-                 f"exploration, {a.get('mode')} mode, "
-                 f"{a.get('n_reaches')} reaches\naccuracy {100 * _num(a.get('accuracy')):.2f} %, "
-                 f"boundary error {_num(a.get('boundary_error_px')):.2f} px")
+    if learned(art):
+        title = _samples_and_lines(ax, art, handles)
     else:
         title = "exact model: the keyboard's own geometry\n(no learning; predicted key per 2 px cell)"
     ax.set_title(title, fontsize=9)
@@ -103,7 +110,10 @@ def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> N
         cb.set_label("uncertainty: 1 - (p1 - p2)", fontsize=8)
         cb.ax.tick_params(labelsize=7)
 
-    ax = axes[1]
+
+def _layout_panel(ax, kb: Keyboard) -> None:
+    """Middle: the true layout."""
+    x0, y0, x1, y1 = kb.area
     draw_keyboard(ax, kb, fontsize=6 if kb.n_keys > 32 else 6.5)
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
@@ -111,41 +121,59 @@ def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> N
     ax.set_title(f"true layout ({kb.layout}): {kb.n_keys} keys (note, tempo)", fontsize=9)
     ax.set_xlabel("pad x (px)")
 
-    if learned:
-        ax = axes[2]
-        n = np.asarray(art.data["curve"]["reaches"])
-        acc = np.asarray(art.data["curve"]["accuracy"], float)
-        ax.plot(n, 100 * acc, "o-", ms=3, color="tab:blue", label="accuracy")
-        ax.axhline(99.0, ls="--", color="grey", lw=1, label="99 % (the target)")
-        ax.text(0.02, 99.0, " 99 %", transform=ax.get_yaxis_transform(), ha="left", va="bottom",
-                fontsize=8, color="0.35")
-        ax.set_xlabel("reaches")
-        ax.set_ylabel("accuracy (%, 2 px grid)")
-        lo = 100 * float(np.nanmin(acc)) if len(acc) and np.isfinite(acc).any() else 0.0
-        ax.set_ylim(max(0.0, min(lo, 99.0) - 5), 100.5)
-        to99 = art.attrs.get("reaches_to_99")
-        ax.set_title("learning curve: " + (f"99 % after {to99} reaches" if to99 is not None
-                                           else "99 % not reached"), fontsize=9)
-        ax.legend(fontsize=7.5, loc="lower right")
-        ax.grid(alpha=0.3)
-        rel = art.attrs.get("reliability")
-        if rel:  # what the model estimates of itself from its samples (model schema 2)
-            cal = ", ".join(f"{k} {v:g}" for k, v in sorted(rel.get("calibration", {}).items()))
-            wrong = 100 * (1 - _num(a.get("accuracy")))
-            expects = (f"mislabel rate it expects on the pad {100 * rel['expected_error']:.1f} % "
-                       f"(measured {wrong:.1f} %)\n" if rel.get("expected_error") is not None
-                       else "")  # (models learned before it was estimated)
-            ax.text(0.5, -0.13,  # below the axes: inside, it hid a weak model's curve
-                    f"the model's own estimate, from its samples "
-                    f"({rel.get('folds', 'k')}-fold cross-validation, calibrated p):\n"
-                    f"boundary error ~{rel['boundary_error']:.2f} px "
-                    f"(measured {_num(a.get('boundary_error_px')):.2f})\n"
-                    + expects
-                    + f"held-out touches mislabelled {100 * rel['cv_error']:.1f} %"
-                    + ("\n" if expects else f" (pad: {wrong:.1f} %)\n")
-                    + f"calibration error {rel['cv_ece']:.3f}" + (f"; {cal}" if cal else ""),
-                    transform=ax.transAxes, ha="center", va="top", fontsize=7,
-                    bbox={"boxstyle": "round", "fc": "white", "ec": "0.7", "alpha": 0.9})
+
+def _reliability_text(rel: dict, a: dict) -> str:
+    """What the model estimates of itself from its samples (model schema 2), beside what was
+    measured."""
+    cal = ", ".join(f"{k} {v:g}" for k, v in sorted(rel.get("calibration", {}).items()))
+    wrong = 100 * (1 - _num(a.get("accuracy")))
+    expects = (f"mislabel rate it expects on the pad {100 * rel['expected_error']:.1f} % "
+               f"(measured {wrong:.1f} %)\n" if rel.get("expected_error") is not None
+               else "")  # (models learned before it was estimated)
+    return (f"the model's own estimate, from its samples "
+            f"({rel.get('folds', 'k')}-fold cross-validation, calibrated p):\n"
+            f"boundary error ~{rel['boundary_error']:.2f} px "
+            f"(measured {_num(a.get('boundary_error_px')):.2f})\n"
+            + expects
+            + f"held-out touches mislabelled {100 * rel['cv_error']:.1f} %"
+            + ("\n" if expects else f" (pad: {wrong:.1f} %)\n")
+            + f"calibration error {rel['cv_ece']:.3f}" + (f"; {cal}" if cal else ""))
+
+
+def _curve_panel(ax, art: Artifact) -> None:
+    """Right: the learning curve with the 99 % level, and the model's own estimate below it."""
+    n = np.asarray(art.data["curve"]["reaches"])
+    acc = np.asarray(art.data["curve"]["accuracy"], float)
+    ax.plot(n, 100 * acc, "o-", ms=3, color="tab:blue", label="accuracy")
+    ax.axhline(99.0, ls="--", color="grey", lw=1, label="99 % (the target)")
+    ax.text(0.02, 99.0, " 99 %", transform=ax.get_yaxis_transform(), ha="left", va="bottom",
+            fontsize=8, color="0.35")
+    ax.set_xlabel("reaches")
+    ax.set_ylabel("accuracy (%, 2 px grid)")
+    lo = 100 * float(np.nanmin(acc)) if len(acc) and np.isfinite(acc).any() else 0.0
+    ax.set_ylim(max(0.0, min(lo, 99.0) - 5), 100.5)
+    to99 = art.attrs.get("reaches_to_99")
+    ax.set_title("learning curve: " + (f"99 % after {to99} reaches" if to99 is not None
+                                       else "99 % not reached"), fontsize=9)
+    ax.legend(fontsize=7.5, loc="lower right")
+    ax.grid(alpha=0.3)
+    rel = art.attrs.get("reliability")
+    if rel:
+        ax.text(0.5, -0.13,  # below the axes: inside, it hid a weak model's curve
+                _reliability_text(rel, art.attrs),
+                transform=ax.transAxes, ha="center", va="top", fontsize=7,
+                bbox={"boxstyle": "round", "fc": "white", "ec": "0.7", "alpha": 0.9})
+
+
+def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> None:
+    """Draw a ``model`` artifact (with its loaded model and keyboard) to a figure file."""
+    ncols = 3 if learned(art) else 2
+    fig, axes = plt.subplots(1, ncols, figsize=(6.0 * ncols, 5.2),
+                             gridspec_kw={"width_ratios": [1.3, 1.2, 1.0][:ncols]})
+    _map_panel(fig, axes[0], art, model, kb)
+    _layout_panel(axes[1], kb)
+    if learned(art):
+        _curve_panel(axes[2], art)
     fig.tight_layout()
     save(fig, path)
 

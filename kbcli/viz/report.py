@@ -50,6 +50,12 @@ def _snapshot_arrays(ex: dict) -> tuple[np.ndarray, np.ndarray, tuple[float, flo
     return snaps, steps, ext
 
 
+def _shown_mode(modes: list[str]) -> str:
+    """The sim mode whose examples are shown by default: ``ideal`` when measured, else the first
+    (the one place this module names a sim mode)."""
+    return "ideal" if "ideal" in modes else modes[0]
+
+
 def _rows(art: Artifact, mode: str, key: str = "curves") -> list[tuple[str, str]]:
     """(method, strategy) pairs present in ``mode``, in method order."""
     out = []
@@ -79,7 +85,7 @@ def plot_posterior(art: Artifact, path: str | os.PathLike, mode: str | None = No
 
     art = upgrade(art)
     modes = art.attrs["modes"]
-    mode = mode or ("ideal" if "ideal" in modes else modes[0])
+    mode = mode or _shown_mode(modes)
     examples = art.data["examples"].get(mode, {})
     rows = [(x, s) for x, s in _rows(art, mode, "examples") if "snapshots" in examples[x][s]]
     if not rows:

@@ -1,0 +1,219 @@
+"""kbcli's learning against an established active learner, side by side (issue 27).
+
+The peer is scikit-activeml's pool-based uncertainty sampling around plain scikit-learn classifiers,
+with fixed hyper-parameters (:data:`PEERS`). Both learn the same keyboard (each layout's default,
+:func:`kbcli.bench.learn.bench_keyboard`) from the same simulator (``ideal`` mode), with the same
+seeds (``SeedSequence(seed).spawn(seeds)``; run ``i`` of every learner uses seed ``i``), and are scored
+by the same functions (:func:`kbcli.core.accuracy.accuracy_from_maps` and
+:func:`~kbcli.core.accuracy.boundary_error`, on a grid of ``eval_step`` px over the working area) at
+the same budgets of reaches.
+
+What each side knows: kbcli discovers its sound classes from what it hears; the peer is handed each
+touch's key (the heard features matched to the keyboard's, -1 for silence) and the list of all keys
+in advance, an advantage kbcli does not have. The peer's pool is ``pool`` actions uniform over the
+working area (kbcli's active exploration draws as many candidates); it starts from ``init`` random
+reaches and queries ``batch`` reaches per refit, as kbcli does.
+
+scikit-activeml is an optional dependency (``pip install -e '.[bench]'``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from kbcli.bench.learn import bench_keyboard
+from kbcli.core import accuracy as scoring
+from kbcli.core.config import Config, Count, Names, Positive, Whole
+from kbcli.core.explore import Exploration, ExploreConfig
+from kbcli.core.keyboard import Keyboard, match
+from kbcli.core.model import grid_points
+from kbcli.core.registry import Registry
+from kbcli.errors import ConfigError
+from kbcli.sim import SimConfig, World, make_reacher
+
+
+@dataclass(frozen=True)
+class Peer:
+    """A scikit-learn classifier and scikit-activeml's uncertainty measure for it."""
+
+    make: Callable[[int], object]
+    method: str
+
+
+def _forest(seed: int):
+    from sklearn.ensemble import RandomForestClassifier
+    return RandomForestClassifier(n_estimators=100, random_state=seed, n_jobs=1)
+
+
+def _extra(seed: int):
+    from sklearn.ensemble import ExtraTreesClassifier
+    return ExtraTreesClassifier(n_estimators=100, random_state=seed, n_jobs=1)
+
+
+def _knn(seed: int):
+    from sklearn.neighbors import KNeighborsClassifier
+    return KNeighborsClassifier(n_neighbors=5, weights="distance")
+
+
+def _parzen(seed: int):
+    from skactiveml.classifier import ParzenWindowClassifier
+    return ParzenWindowClassifier(metric="rbf", metric_dict={"gamma": 1 / (2 * 15.0 ** 2)})
+
+
+#: The peer configurations (classifier + uncertainty measure), fixed hyper-parameters.
+PEERS: Registry[Peer] = Registry("peer")
+PEERS.register("forest-entropy", Peer(_forest, "entropy"),
+               summary="random forest (100 trees), entropy sampling")
+PEERS.register("extratrees-entropy", Peer(_extra, "entropy"),
+               summary="extra trees (100 trees), entropy sampling")
+PEERS.register("knn-margin", Peer(_knn, "margin_sampling"),
+               summary="k-NN (k = 5, distance-weighted), margin sampling")
+PEERS.register("parzen-entropy", Peer(_parzen, "entropy"),
+               summary="Parzen window (RBF, 15 px), entropy sampling")
+
+
+class PeerConfig(Config):
+    """Settings of ``kbcli bench learn --peer`` (module docstring)."""
+
+    what = "bench peer"
+    layouts: Names = ("grid", "hex", "piano", "pads", "polygons")
+    peers: Names = tuple(PEERS.names())
+    seeds: Count = 5
+    budgets: tuple[Whole, ...] = (150, 300, 800)
+    seed: Whole = 0
+    pool: Count = 4000
+    init: Count = 10
+    batch: Count = 10
+    eval_step: Positive = 1.0
+
+
+def _check(cfg: PeerConfig) -> None:
+    for name in cfg.peers:
+        PEERS.check(name)
+    if any(b < cfg.init for b in cfg.budgets):
+        raise ConfigError(f"bench peer: every budget must be at least init = {cfg.init}")
+
+
+def _scores(predict: Callable[[np.ndarray], np.ndarray], kb: Keyboard, step: float
+            ) -> tuple[float, float]:
+    """Accuracy and boundary error (px) of a key predictor over the working area."""
+    _, pts = grid_points(kb.area, step)
+    flat = pts.reshape(-1, 2)
+    pred = np.asarray(predict(flat)).reshape(pts.shape[:2])
+    true = kb.key_at(flat).reshape(pts.shape[:2])
+    return scoring.accuracy_from_maps(pred, true), scoring.boundary_error(pred, true, step)
+
+
+def _keys_heard(kb: Keyboard, heard: np.ndarray) -> np.ndarray:
+    """Key index of each heard feature row (-1: silence or no key)."""
+    out = np.full(len(heard), -1, dtype=np.int64)
+    sound = ~np.isnan(heard).all(axis=1)
+    if sound.any():
+        out[sound] = match(heard[sound], kb.features, kb.config.match_threshold)
+    return out
+
+
+def peer_run(cfg: PeerConfig, kb: Keyboard, name: str, seed: np.random.SeedSequence
+             ) -> dict[int, tuple[float, float]]:
+    """One peer learner up to the largest budget: {budget: (accuracy, boundary error)}."""
+    from skactiveml.classifier import SklearnClassifier
+    from skactiveml.pool import UncertaintySampling
+    from skactiveml.utils import MISSING_LABEL
+
+    peer = PEERS.get(name)
+    rng = np.random.default_rng(seed)
+    world = World(kb, make_reacher(SimConfig(mode="ideal")))
+    x0, y0, x1, y1 = kb.area
+    pool = rng.uniform((x0, y0), (x1, y1), size=(cfg.pool, 2))
+    y = np.full(cfg.pool, MISSING_LABEL)
+    classes = np.arange(-1, len(kb.features))
+    state = int(rng.integers(2 ** 31))
+    clf = SklearnClassifier(peer.make(state), classes=classes, random_state=state)
+    qs = UncertaintySampling(method=peer.method, random_state=state)
+
+    def label(idx: np.ndarray) -> None:
+        _, heard = world.touch(pool[idx], rng)
+        y[idx] = _keys_heard(kb, heard)
+
+    label(rng.choice(cfg.pool, cfg.init, replace=False))
+    out, n = {}, cfg.init
+    for budget in sorted(cfg.budgets):
+        while n < budget:
+            k = min(cfg.batch, budget - n)
+            clf.fit(pool, y)
+            label(np.atleast_1d(qs.query(pool, y, clf, fit_clf=False, batch_size=k)))
+            n += k
+        clf.fit(pool, y)
+        out[budget] = _scores(clf.predict, kb, cfg.eval_step)
+    return out
+
+
+def kbcli_run(cfg: PeerConfig, kb: Keyboard, seed: np.random.SeedSequence
+              ) -> dict[int, tuple[float, float]]:
+    """kbcli's active exploration with its defaults, scored at each budget."""
+    rng = np.random.default_rng(seed)
+    world = World(kb, make_reacher(SimConfig(mode="ideal")))
+    ex = Exploration(ExploreConfig(budget=max(cfg.budgets)), world.touch, kb.area,
+                     kb.config.match_threshold, rng)
+    out: dict[int, tuple[float, float]] = {}
+    for step in ex:
+        for b in [b for b in cfg.budgets if b not in out and step.n_reaches >= b]:
+            pred, true = scoring.key_maps(step.model, kb, cfg.eval_step)
+            out[b] = (scoring.accuracy_from_maps(pred, true),
+                      scoring.boundary_error(pred, true, cfg.eval_step))
+    return out
+
+
+def runs(cfg: PeerConfig) -> Iterator[tuple[str, str, int, dict[int, tuple[float, float]]]]:
+    """(layout, learner, seed index, scores) for kbcli and every peer, seed by seed."""
+    _check(cfg)
+    seeds = np.random.SeedSequence(cfg.seed).spawn(cfg.seeds)
+    for layout in cfg.layouts:
+        kb = bench_keyboard(layout)
+        for i, s in enumerate(seeds):
+            yield layout, "kbcli", i, kbcli_run(cfg, kb, s)
+            for name in cfg.peers:
+                yield layout, name, i, peer_run(cfg, kb, name, s)
+
+
+def summarize(cfg: PeerConfig, results: list[tuple]) -> list[dict]:
+    """Per layout, learner and budget: the median accuracy and boundary error over the seeds."""
+    rows = []
+    keys = dict.fromkeys((layout, who) for layout, who, _, _ in results)
+    for layout, who in keys:
+        got = [r for lay, w, _, r in results if (lay, w) == (layout, who)]
+        for b in sorted(cfg.budgets):
+            rows.append({"layout": layout, "learner": who, "budget": b, "runs": len(got),
+                         "accuracy": float(np.median([g[b][0] for g in got])),
+                         "boundary_error": float(np.median([g[b][1] for g in got]))})
+    return rows
+
+
+def verdicts(rows: list[dict]) -> list[dict]:
+    """Per layout and budget: kbcli against the best peer on each score (higher accuracy, lower
+    boundary error), and whether kbcli is at or above it on both."""
+    out = []
+    cells = dict.fromkeys((r["layout"], r["budget"]) for r in rows)
+    for layout, b in cells:
+        here = [r for r in rows if (r["layout"], r["budget"]) == (layout, b)]
+        ours = next((r for r in here if r["learner"] == "kbcli"), None)
+        peers = [r for r in here if r["learner"] != "kbcli"]
+        if ours is None or not peers:
+            continue
+        best_acc = max(peers, key=lambda r: r["accuracy"])
+        best_be = min(peers, key=lambda r: r["boundary_error"])
+        out.append({"layout": layout, "budget": b,
+                    "kbcli_accuracy": ours["accuracy"], "peer_accuracy": best_acc["accuracy"],
+                    "peer_accuracy_by": best_acc["learner"],
+                    "kbcli_boundary_error": ours["boundary_error"],
+                    "peer_boundary_error": best_be["boundary_error"],
+                    "peer_boundary_by": best_be["learner"],
+                    "kbcli_wins": bool(ours["accuracy"] >= best_acc["accuracy"]
+                                       and ours["boundary_error"] <= best_be["boundary_error"])})
+    return out
+
+
+__all__ = ["PEERS", "Peer", "PeerConfig", "peer_run", "kbcli_run", "runs", "summarize", "verdicts"]

@@ -1,0 +1,228 @@
+"""Options shared by several commands, declared once.
+
+Each is an ``Annotated`` alias (``seed: Seed = 0``) or, where the help names what the option means
+to one command, a function returning one (``seed: seed_option("Seed of a --category draw.") = 0``).
+The help of an option that names a registered part (posterior, estimator, transform family,
+strategy, layout, model class, detector, arm preset, sim mode) lists the valid names, read from
+the part's registry through :func:`names_of` and :func:`describe_of`. Option names, defaults and
+behaviour are the commands' own: a bad name is refused by the stage's config (one line, exit 1).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from kbcli.core.detect import DETECTORS
+from kbcli.core.estimators import ESTIMATORS
+from kbcli.core.explore import STRATEGIES as EXPLORATIONS
+from kbcli.core.layouts import LAYOUTS
+from kbcli.core.model_classes import MODEL_CLASSES, learned_classes
+from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.strategies import STRATEGIES
+from kbcli.core.transforms import FAMILIES
+from kbcli.sim import MODES
+from kbcli.sim.arms import PRESETS
+
+
+def _learned_classes() -> tuple[str, ...]:
+    """The model classes learned from samples (``--model-class``; the exact model is not one)."""
+    return learned_classes()
+
+
+#: Where each kind of part's names come from: its registry (model classes: the learned ones).
+_SOURCES: dict[str, Callable[[], Iterable[str]]] = {
+    "posterior": lambda: POSTERIORS,
+    "estimator": lambda: ESTIMATORS,
+    "family": lambda: FAMILIES,
+    "layout": lambda: LAYOUTS,
+    "model class": _learned_classes,
+    "strategy": lambda: STRATEGIES,
+    "exploration": lambda: EXPLORATIONS,
+    "detector": lambda: DETECTORS,
+    "arm": lambda: PRESETS,
+    "mode": lambda: MODES,
+}
+#: The registry that describes each kind's parts.
+_REGISTRIES = {"posterior": POSTERIORS, "estimator": ESTIMATORS, "family": FAMILIES,
+               "layout": LAYOUTS, "model class": MODEL_CLASSES, "strategy": STRATEGIES,
+               "exploration": EXPLORATIONS, "detector": DETECTORS, "arm": PRESETS, "mode": MODES}
+
+
+def names_of(kind: str) -> tuple[str, ...]:
+    """The registered names of a kind of part (``"posterior"``, ``"layout"``, ...), in order."""
+    return tuple(_SOURCES[kind]())
+
+
+def describe_of(kind: str) -> str:
+    """``name: summary; ...`` of every registered part of ``kind`` (a name alone without one)."""
+    reg = _REGISTRIES[kind]
+    parts = []
+    for name in names_of(kind):
+        summary = reg.summary(name)
+        parts.append(f"{name}: {summary}" if summary else name)
+    return "; ".join(parts)
+
+
+def one_of(kind: str, *extra: str, sep: str = "or") -> str:
+    """``a, b or c``: the names of ``kind`` (then ``extra``), for a help text."""
+    names = (*names_of(kind), *extra)
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} {sep} {names[-1]}"
+
+
+def _opt(*decls: str, **kw: Any) -> Any:
+    return typer.Option(*decls, **kw)
+
+
+# -- paths ------------------------------------------------------------------------------------------
+def output_option(help: str) -> Any:
+    """``-o/--output``: what the command writes."""
+    return Annotated[Path, _opt("-o", "--output", help=help)]
+
+
+def model_option(help: str = "Model artifact (.h5, kind 'model').", optional: bool = False) -> Any:
+    """``--model``: a model artifact read."""
+    return Annotated[Path | None if optional else Path, _opt("--model", help=help)]
+
+
+def keyboard_option(help: str = "Keyboard artifact (.h5) to learn.", optional: bool = False) -> Any:
+    """``--keyboard``: a keyboard artifact read."""
+    return Annotated[Path | None if optional else Path, _opt("--keyboard", help=help)]
+
+
+def config_option(help: str, optional: bool = True) -> Any:
+    """``--config``: a TOML file read."""
+    return Annotated[Path | None if optional else Path, _opt("--config", help=help)]
+
+
+# -- seeds and workers ------------------------------------------------------------------------------
+def seed_option(help: str = "Seed of the robot's and the world's randomness.") -> Any:
+    """``--seed``: the seed of a command's random draws (a whole number >= 0)."""
+    return Annotated[int, _opt("--seed", min=0, help=help)]
+
+
+Seed = seed_option()
+#: ``--jobs/-j``: local worker processes.
+Jobs = Annotated[int, _opt("--jobs", "-j", help="Local worker processes (joblib/loky).")]
+#: ``--scheduler``: a Dask scheduler's address.
+Scheduler = Annotated[str | None, _opt(
+    "--scheduler", help="Run on a Dask cluster: address of its scheduler, tcp://HOST:PORT.")]
+
+
+# -- the robot's adaptation -------------------------------------------------------------------------
+def _default(text: str | None) -> str:
+    return f" [default {text}]" if text else ""
+
+
+def strategy_option(default: str | None = None) -> Any:
+    """``--strategy``: one adaptation strategy (None: the config's, named in ``default``)."""
+    return Annotated[str | None, _opt(
+        "--strategy", help=f"Adaptation strategy: {one_of('strategy')}{_default(default)}.")]
+
+
+def strategies_option(default: str, kind: str = "strategy") -> Any:
+    """``--strategy`` repeated: the strategies (``kind``: or the explorations) a benchmark runs."""
+    return Annotated[list[str] | None, _opt(
+        "--strategy", help=f"Strategies to run (repeat): {one_of(kind)} [default {default}].")]
+
+
+def posterior_option(default: str | None = None) -> Any:
+    """``--posterior``: the posterior kind."""
+    return Annotated[str | None, _opt(
+        "--posterior", help=f"Posterior{_default(default)}. {describe_of('posterior')}.")]
+
+
+def estimator_option(default: str = "mean") -> Any:
+    """``--estimator``: which point of the posterior the robot acts on (None: the config's)."""
+    return Annotated[str | None, _opt(
+        "--estimator", help=f"Estimate of the displacement the robot acts on{_default(default)}. "
+        f"{describe_of('estimator')}.")]
+
+
+def family_option(default: str | None = None, help: str = "Transform family the robot estimates"
+                  ) -> Any:
+    """``--family``: the transform family."""
+    return Annotated[str | None, _opt(
+        "--family", help=f"{help}{_default(default)}. {describe_of('family')}.")]
+
+
+def mode_option(default: str | None = None, help: str = "Reaching", note: str = "") -> Any:
+    """``--mode``: the simulator's mode (``note``: what the modes mean to the command)."""
+    return Annotated[str | None, _opt(
+        "--mode", help=f"{help}: {one_of('mode')}{f' ({note})' if note else ''}"
+        f"{_default(default)}.")]
+
+
+ARM_HELP = ("Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains and "
+            "joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
+            "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields)")
+
+
+def arm_option(default: str | None = None, optional: bool = False, files: bool = True) -> Any:
+    """``--arm``: an arm preset (or, with ``files``, a TOML file with an ``[arm]`` table)."""
+    names = names_of("arm")
+    if files and set(names) == {"ideal", "servo", "realistic"}:
+        text = ARM_HELP  # (the presets described)
+    elif files:
+        text = f"Arm preset: {one_of('arm')}; or a TOML file with an [arm] table (preset = NAME plus fields)"
+    else:
+        text = f"Arm preset ({', '.join(names)})"
+    return Annotated[str | None if optional else str, _opt("--arm", help=text + _default(default)
+                                                           + ".")]
+
+
+ReachNoise = Annotated[float, _opt("--reach-noise", help="Landing scatter of the arm, px.")]
+
+MODEL_BLUR_HELP = (
+    "Override: fix the blur (px, 0-50) of the model's key edges. Default: the robust posterior "
+    "learns it from the touches (translation: it weighs 0, 1, 2.5 and 5 px and twice a weak "
+    "model's own boundary error; rigid: 0 px; recorded in the run as robust_blurs); the plain "
+    "(robust = false) and kde posteriors soften a learned model's map by 1 px, the exact one's by 0.")
+#: ``--model-blur``: fix the blur of the model's key edges (None: the posterior's own).
+ModelBlur = Annotated[float | None, _opt("--model-blur", help=MODEL_BLUR_HELP)]
+#: ``--resolution``: the hypothesis grid step.
+Resolution = Annotated[float | None, _opt(
+    "--resolution", help="Hypothesis grid step, px [default 0.5].")]
+#: ``--prior-halfwidth``: the prior box.
+PriorHalfwidth = Annotated[float | None, _opt(
+    "--prior-halfwidth", help="Prior box of dx and dy, +-px [default 45].")]
+
+
+def max_steps_option(help: str, optional: bool = True, **kw: Any) -> Any:
+    """``--max-steps/-T``: touches at most."""
+    return Annotated[int | None if optional else int, _opt("--max-steps", "-T", help=help, **kw)]
+
+
+# -- parts named in benchmarks and stages -----------------------------------------------------------
+def layout_option(help: str, many: bool = False) -> Any:
+    """``--layout``: a layout (or, with ``many``, several); the help lists the registered ones."""
+    kind = list[str] | None if many else str | None
+    return Annotated[kind, _opt("--layout", help=help.format(layouts=", ".join(names_of("layout")),
+                                                             described=describe_of("layout")))]
+
+
+def model_class_option(help: str, many: bool = False) -> Any:
+    """``--model-class`` (or, with ``many``, repeated): ``{classes}`` in ``help`` lists the
+    registered model classes."""
+    kind = list[str] | None if many else str
+    return Annotated[kind, _opt("--model-class",
+                                help=help.format(classes=", ".join(names_of("model class"))))]
+
+
+def detector_option(default_note: str = "binomial is the paper's") -> Any:
+    """``--detector``: one of the registered detectors."""
+    return Annotated[str, _opt(
+        "--detector", help=f"Failure detector: {', '.join(names_of('detector'))} ({default_note}).")]
+
+
+def _figure() -> Any:
+    from kbcli.cli.app import FIGURE_HELP
+
+    return output_option(FIGURE_HELP)
+
+
+#: ``-o/--output`` of a plot command: a figure, its format by the suffix.
+Figure = _figure()

@@ -1,0 +1,41 @@
+"""The ``pads`` layout: round pads with silence between them (curved boundaries).
+
+``rows`` x ``cols`` discs of radius ``pad_radius`` centred in cells of ``key_size``; pitches and
+tempi as the grid's. The keyboard's bounds are its cells (as the grid's).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from kbcli.core.geometry import KeyShapes
+from kbcli.core.layouts.base import (
+    KeyboardConfig,
+    LayoutGeometry,
+    base_midi,
+    check_count,
+    layout,
+    rowcol_tempo,
+)
+from kbcli.core.notes import scale_pitches
+from kbcli.errors import ConfigError
+
+
+def _describe(cfg: KeyboardConfig, n_keys: int) -> str:
+    return f"{cfg.rows} x {cfg.cols} round pads of radius {cfg.pad_radius:g} px"
+
+
+@layout("pads", "round pads with silence between them",
+        {"rows": 4, "cols": 8, "key_size": 50.0, "pad_radius": 20.0}, describe=_describe)
+def build(cfg: KeyboardConfig) -> LayoutGeometry:
+    """The pads (discs), their pitches and tempi, and their cells' bounds."""
+    rows, cols = cfg.rows, cfg.cols
+    check_count(rows, cols)
+    s, r = cfg.key_size, cfg.pad_radius
+    if 2 * r > s:
+        raise ConfigError(f"pad_radius ({r:g}) must be at most half of key_size ({s:g}), the "
+                          "distance between pad centres: pads would overlap")
+    k = np.arange(rows * cols)
+    discs = np.column_stack([(k % cols + 0.5) * s, (k // cols + 0.5) * s, np.full(len(k), r)])
+    return LayoutGeometry(KeyShapes(discs=discs), scale_pitches(base_midi(cfg), cfg.scale, len(k)),
+                          rowcol_tempo(cfg, rows, cols), (0.0, 0.0, cols * s, rows * s))

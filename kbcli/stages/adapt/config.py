@@ -1,0 +1,177 @@
+"""The adapt stage's config, :class:`AdaptConfig`: the robot's options beside the simulated
+arm's and the loop's; and :class:`PlayCheck`, the melody replays around an adaptation."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+from pydantic import Field, InstanceOf, field_validator, model_validator
+
+from kbcli.core.adapt import AdapterConfig
+from kbcli.core.config import Count, Flag, Name, Number
+from kbcli.core.melody import DEFAULT_MELODY
+from kbcli.errors import ConfigError
+from kbcli.sim import MODES, SimConfig
+from kbcli.sim.arms import PRESETS, ArmConfig, arm_config
+from kbcli.stages.config import StageConfig, config_fields, replace_config
+
+#: What the robot observes: where its finger landed, or only where it aimed.
+FEEDBACKS = ("landed", "aim")
+#: Steps at which a ``run`` artifact keeps the posterior by default.
+DEFAULT_SNAPSHOTS = (0, 1, 2, 3, 5, 10, 20, 40)
+#: The world-side and loop options of :class:`AdaptConfig` (everything else is the robot's).
+LOOP_FIELDS = ("mode", "reach_noise", "arm", "feedback", "max_steps", "stop")
+
+
+def robot_fields() -> tuple[str, ...]:
+    """The robot's option names (:class:`kbcli.core.adapt.AdapterConfig`)."""
+    return config_fields(AdapterConfig)
+
+
+def _robot(robot: Any, flat: dict[str, Any]) -> AdapterConfig:
+    """The robot's config from a ``robot`` value (None, a table or an AdapterConfig) with the robot
+    options given at the top level (``flat``) applied over it."""
+    if isinstance(robot, AdapterConfig):
+        return replace_config(robot, **flat) if flat else robot
+    if robot is None:
+        robot = {}
+    if not isinstance(robot, Mapping):
+        raise ConfigError("adapt.robot must be a table of adapter options")
+    return AdapterConfig.from_dict({**robot, **flat})
+
+
+class AdaptConfig(StageConfig):
+    """One adaptation: the robot's settings (``robot``, a :class:`kbcli.core.adapt.AdapterConfig`)
+    plus the simulated arm's and the loop's.
+
+    Parameters
+    ----------
+    robot : AdapterConfig
+        How the robot adapts: strategy, posterior, estimator, grid, ... (its defaults are kbcli's
+        best choice).
+    mode : str
+        ``ideal`` or ``dynamics`` (:class:`kbcli.sim.SimConfig`).
+    reach_noise : float
+        Landing scatter of the arm, px.
+    arm : ArmConfig
+        How the simulated arm errs (:mod:`kbcli.sim.arms`; a preset name or a table is accepted):
+        its landing error, its finger and how well it feels where it landed.
+    feedback : str
+        ``landed``: the robot observes where its finger landed (proprioception); ``aim``: only where
+        it aimed, and blurs its likelihood by ``reach_noise`` (``robot.blur`` is then set to it).
+    max_steps : int
+        T, observations at most.
+    stop : bool
+        End at the stopping rule (else always run T steps and record when the rule fired).
+
+    Notes
+    -----
+    The robot's options read through as attributes (``cfg.strategy`` is ``cfg.robot.strategy``).
+    They may also be given at the top level, beside ``mode`` (``AdaptConfig(strategy="random")``,
+    the flat layout of schema-1 artifacts and older TOML files): there they override the same
+    option of ``robot`` (as a command-line flag overrides a TOML file).
+    """
+
+    what: ClassVar[str] = "adapt"
+
+    robot: InstanceOf[AdapterConfig] = Field(default_factory=AdapterConfig)
+    mode: Name = "ideal"
+    reach_noise: Number = 0.0
+    arm: InstanceOf[ArmConfig] = PRESETS.get("ideal")
+    feedback: Name = "landed"
+    max_steps: Count = 40
+    stop: Flag = False
+
+    @model_validator(mode="before")
+    @classmethod
+    def _nest_robot(cls, data: Any) -> Any:
+        """Move the robot options given at the top level into ``robot``."""
+        if not isinstance(data, Mapping):
+            raise ConfigError("the adapt options must be a table")
+        d = dict(data)
+        robot_keys = robot_fields()
+        known = (*cls.model_fields, *robot_keys)
+        unknown = [k for k in d if k not in known]
+        if unknown:
+            raise ConfigError(f"unknown adapt option {unknown[0]!r}; valid: "
+                              f"{', '.join(sorted(known))}")
+        flat = {k: d.pop(k) for k in robot_keys if k in d}
+        d["robot"] = _robot(d.get("robot"), flat)
+        return d
+
+    @field_validator("arm", mode="before")
+    @classmethod
+    def _arm(cls, v: Any) -> ArmConfig:
+        return arm_config(v)
+
+    @field_validator("mode")
+    @classmethod
+    def _mode(cls, v: str) -> str:
+        if v not in MODES:
+            raise ValueError(f"unknown mode {v!r}; valid: {', '.join(MODES)}")
+        return v
+
+    @field_validator("feedback")
+    @classmethod
+    def _feedback(cls, v: str) -> str:
+        if v not in FEEDBACKS:
+            raise ValueError(f"unknown feedback {v!r}; valid: {', '.join(FEEDBACKS)}")
+        return v
+
+    @model_validator(mode="after")
+    def _parts(self) -> AdaptConfig:
+        self.sim_config()  # the arm and the robot check their own settings
+        self.adapter_config()
+        return self
+
+    def __getattr__(self, name: str) -> Any:
+        # the robot's options read through (``cfg.strategy``); only called for missing attributes
+        if not name.startswith("_") and name in robot_fields():
+            return getattr(self.robot, name)
+        return super().__getattr__(name)
+
+    @classmethod
+    def flat(cls, **options: Any) -> AdaptConfig:
+        """Build from one flat set of options (robot and loop options mixed), as flags give them."""
+        return cls.from_dict(options)
+
+    def with_robot(self, **changes: Any) -> AdaptConfig:
+        """A copy with some robot options changed."""
+        return self.replace(robot=replace_config(self.robot, **changes))
+
+    def sim_config(self) -> SimConfig:
+        return SimConfig(mode=self.mode, reach_noise=self.reach_noise, arm=self.arm)
+
+    def adapter_config(self) -> AdapterConfig:
+        """The robot-side config (``blur`` is the reach noise under ``aim`` feedback)."""
+        if self.feedback == "aim":
+            return replace_config(self.robot, blur=float(self.reach_noise))
+        return self.robot
+
+    def to_dict(self) -> dict:
+        """Every resolved option, the robot's nested under ``robot``."""
+        d = {k: getattr(self, k) for k in LOOP_FIELDS}
+        d["arm"] = self.arm.to_dict()
+        return {"robot": self.robot.to_dict(), **d}
+
+
+class PlayCheck(StageConfig):
+    """Playing success measured by replaying the melody (Algorithm 1) around an adaptation.
+
+    Parameters
+    ----------
+    melody : str
+        Notes ``NOTE:BEATS`` (:mod:`kbcli.core.melody`).
+    notes : int
+        Touches per replay.
+    reference : bool
+        Also replay before the displacement and after it without adaptation (else only after
+        adaptation, with the final estimate).
+    """
+
+    what: ClassVar[str] = "play"
+
+    melody: Name = DEFAULT_MELODY
+    notes: Count = 200
+    reference: Flag = True

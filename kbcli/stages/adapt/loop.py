@@ -1,0 +1,183 @@
+"""One adaptation against a simulated world (:func:`experiment`), and the playing success measured
+around it by replaying the melody with Algorithm 1 (:func:`play_success`)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from kbcli.core import transforms
+from kbcli.core.adapt import POSTERIORS, Adapter, adapt, build_samples, build_table
+from kbcli.core.estimators import ESTIMATORS
+from kbcli.core.keyboard import Keyboard
+from kbcli.core.melody import parse_melody
+from kbcli.core.play import MATCH, replay
+from kbcli.core.posterior import ActionSamples, LikelihoodTable
+from kbcli.sim import SimConfig, World, make_reacher
+from kbcli.stages.adapt.config import AdaptConfig, PlayCheck
+from kbcli.stages.adapt.record import Recorder, end_angles
+
+
+def play_success(model, keyboard: Keyboard, sim: SimConfig, family: str, truth: np.ndarray,
+                 estimate: np.ndarray | None, check: PlayCheck, *, rng: np.random.Generator,
+                 pool: ActionSamples | None = None) -> dict[str, float]:
+    """Success rates (MATCH share) of ``check.notes`` touches of Algorithm 1 with the model's
+    actions and the arm of ``sim``: ``before`` (keyboard at its reference pose), ``unadapted``
+    (at ``truth``, no correction) and ``adapted`` (at ``truth``, actions corrected by
+    ``estimate``); NaN for what was not measured. ``pool``: per-class draws of p(action | sound)
+    to resample instead of calling ``model.sample_actions`` (see :func:`kbcli.core.play.replay`).
+    """
+    melody = parse_melody(check.melody, keyboard)
+    n = len(transforms.FAMILIES.get(family).params)
+    out = {"before": math.nan, "unadapted": math.nan, "adapted": math.nan}
+    runs = []
+    if check.reference:
+        runs += [("before", np.zeros(n), None), ("unadapted", truth, None)]
+    if estimate is not None:
+        runs.append(("adapted", truth, np.asarray(estimate, float)))
+    for (name, pose, corr), r in zip(runs, rng.spawn(len(runs)), strict=True):
+        world = World(keyboard, make_reacher(sim), np.asarray(pose, float), family)
+
+        def touch(actions: np.ndarray, world=world, r=r) -> tuple[np.ndarray, np.ndarray]:
+            return world.touch(actions, r)
+
+        hist = replay(model, melody, touch, rng=r, n_notes=check.notes, correction=corr,
+                      family=family, sampler=None if pool is None else pool.draw)
+        out[name] = float(np.mean(hist == MATCH))
+    return out
+
+def _errors(est: np.ndarray, truth: np.ndarray, robot_family: str,
+            world_family: str) -> tuple[float, float]:
+    """Translation error (px) and angle error (deg) of an estimate against the truth."""
+    t_err = float(np.hypot(*(est[-2:] - truth[-2:])))
+    a_est = transforms.FAMILIES.get(robot_family).angle(est)
+    a_true = transforms.FAMILIES.get(world_family).angle(truth)
+    return t_err, abs(transforms.wrap_degrees(a_est - a_true))
+
+def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndarray, *,
+               rng: np.random.Generator, world_family: str | None = None,
+               table: LikelihoodTable | None = None,
+               snapshot_steps: tuple[int, ...] = (), samples: ActionSamples | None = None,
+               play: PlayCheck | None = None,
+               play_pool: ActionSamples | None = None,
+               on_step: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
+    """One adaptation against a world whose keyboard sits at ``true_params``.
+
+    Parameters
+    ----------
+    model : SoundModel
+        The robot's model (exact or learned).
+    keyboard : Keyboard
+        The instrument (world side).
+    true_params : (P,) ndarray
+        The true displacement in ``world_family`` parameters (default: ``cfg.robot.family``).
+    rng : numpy.random.Generator
+        Split into the robot's and the world's generators.
+    table : LikelihoodTable, optional
+        A prebuilt :func:`kbcli.core.adapt.build_table` for ``model`` (rasterise once, reuse).
+    snapshot_steps : tuple of int
+        Steps (0: the prior) at which to keep the posterior.
+    samples : ActionSamples, optional
+        The ``kde`` posterior's per-class samples (:func:`kbcli.core.adapt.build_samples`), shared
+        across experiments; default: drawn per run.
+    play : PlayCheck, optional
+        Also measure the playing success (adds ``play_before``, ``play_unadapted``,
+        ``play_adapted``, each a float, NaN when not measured), from a third child of ``rng``.
+    play_pool : ActionSamples, optional
+        Per-class draws of p(action | sound) the replays resample (default: the model samples).
+    on_step : callable, optional
+        Called with the step number after each observation (a progress bar).
+
+    Returns
+    -------
+    dict of ndarrays, per step t = 1..T (T = ``max_steps``, fewer when ``cfg.stop`` ends early)
+        ``actions`` (T, 2), ``landed`` (T, 2) where the robot felt it landed, ``true_landed``
+        (T, 2) where it did (world side), ``perceived`` (T, D), ``classes`` (T,),
+        ``estimates`` (T, P) maximum-likelihood cell, ``means`` (T, P) posterior mean,
+        ``errors`` (T,) px error of the estimate (``cfg.robot.estimator``) vs truth, ``ml_errors`` (T,),
+        ``angle_errors`` (T,) deg, ``entropy`` (T,) nats, ``ml_prob`` (T,), ``mass`` (T,),
+        ``stop`` (T,) bool, ``step_ms`` (T,); ``joint_angles`` (T, 2) the arm's pose after each
+        touch (dynamics mode); ``snapshot_steps`` (S,), ``snapshots`` (S, ny, nx)
+        log translation marginals, ``snapshot_angles`` (S, A) angle marginals (rigid); ``dx``,
+        ``dy``, ``angles`` grid axes.
+    """
+    world_family = cfg.robot.family if world_family is None else world_family
+    truth = np.asarray(true_params, float)
+    robot_rng, world_rng = rng.spawn(2)
+    adapter = Adapter(model, cfg.adapter_config(), rng=robot_rng, table=table, samples=samples)
+    touch = _Touches(World(keyboard, make_reacher(cfg.sim_config()), truth, world_family),
+                     world_rng)
+    rec = Recorder(adapter, [s for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps])
+    for st in adapt(adapter, touch, cfg.max_steps, use_landed=cfg.feedback == "landed",
+                    stop=cfg.stop):
+        err, aerr = _errors(st.estimate, truth, cfg.robot.family, world_family)
+        ml_err, _ = _errors(st.ml, truth, cfg.robot.family, world_family)
+        rec.add(st, (err, ml_err, aerr), touch.pose())
+        if on_step is not None:
+            on_step(st.t)
+    out = rec.arrays()
+    out["true_landed"] = np.asarray(touch.true_landed, float).reshape(-1, 2)
+    if play is not None:
+        res = _play_after(cfg, model, keyboard, truth, world_family, out, play,
+                          rng=rng.spawn(1)[0], pool=play_pool)
+        out.update({f"play_{k}": np.float64(v) for k, v in res.items()})
+    return out
+
+
+class _Touches:
+    """The world's side of one adaptation, called with each action: touches the world and keeps
+    where the finger truly landed (``true_landed``) and the arm's pose after each touch
+    (dynamics mode)."""
+
+    def __init__(self, world: World, rng: np.random.Generator) -> None:
+        self.world, self.rng = world, rng
+        self.true_landed: list[np.ndarray] = []
+        self.poses: list[np.ndarray] = []
+
+    def __call__(self, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        felt, heard = self.world.touch(action[None, :], self.rng)
+        self.true_landed.append(self.world.last_landed[0])
+        ang = end_angles(self.world.reacher)
+        if ang is not None and len(ang):
+            self.poses.append(ang[-1])
+        return felt[0], heard[0]
+
+    def pose(self) -> np.ndarray | None:
+        """The arm's pose after the last touch (None: not simulated)."""
+        return self.poses[-1] if self.poses else None
+
+
+def _play_after(cfg: AdaptConfig, model, keyboard: Keyboard, truth: np.ndarray,
+                world_family: str, out: dict[str, np.ndarray], play: PlayCheck, *,
+                rng: np.random.Generator, pool: ActionSamples | None) -> dict[str, float]:
+    """:func:`play_success` around an adaptation whose records are ``out``, corrected by its final
+    estimate (``cfg.robot.estimator``'s) in the world's parameters."""
+    final = ESTIMATORS.get(cfg.robot.estimator).final(out)
+    if world_family != cfg.robot.family:  # correct in the world's parameters
+        final = _as_family(final, cfg.robot.family, world_family)
+    return play_success(model, keyboard, cfg.sim_config(), world_family, truth, final, play,
+                        rng=rng, pool=pool)
+
+
+def _as_family(est: np.ndarray, family: str, world_family: str) -> np.ndarray:
+    """An estimate in ``family`` parameters as ``world_family`` parameters (angle 0 added or
+    dropped)."""
+    est = np.asarray(est, float)
+    if family == world_family:
+        return est
+    fam = transforms.FAMILIES.get(family)
+    return transforms.FAMILIES.get(world_family).compose(fam.angle(est), fam.shift(est))
+
+def build_shared_table(cfg: AdaptConfig, model) -> LikelihoodTable:
+    """The model raster for ``cfg`` (to share across many :func:`experiment` calls)."""
+    return build_table(model, cfg.adapter_config())
+
+
+def build_shared_samples(cfg: AdaptConfig, model, seed) -> ActionSamples | None:
+    """The ``kde`` posterior's per-class samples for ``cfg`` (None for other posteriors), drawn
+    from ``seed`` once per class, to share across many :func:`experiment` calls."""
+    if not POSTERIORS.get(cfg.robot.posterior).uses_samples:
+        return None
+    return build_samples(model, cfg.adapter_config(), seed)

@@ -1,0 +1,69 @@
+"""The config base of the stages' tables: :class:`kbcli.core.config.Config` whose validators may
+raise a whole sentence.
+
+A stage table is checked in two ways: its fields by their declared constraints (one line naming the
+table, the key and the accepted range, :func:`kbcli.core.config.describe_error`), and across fields
+or across tables (a method's strategies against the protocol's baseline, a displacement against its
+category's bounds) by validators that say what is wrong in their own words. Such a validator raises
+:class:`~kbcli.errors.ConfigError`; :class:`StageConfig` passes its message through as it is,
+instead of prefixing the key it was checked under (nested tables, :class:`Method` of the evaluation
+protocol, build their own message naming their full key).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any
+
+from pydantic import BaseModel, ValidationError
+
+from kbcli.core.config import Config, describe_error
+from kbcli.errors import ConfigError
+
+
+def message(exc: ValidationError, what: str, fields: tuple[str, ...] = ()) -> str:
+    """One line for the first error of ``exc``: a validator's own :class:`ConfigError` as it is,
+    else :func:`kbcli.core.config.describe_error`'s (``what``: the table's name)."""
+    first = exc.errors(include_url=False)[0]
+    cause = (first.get("ctx") or {}).get("error")
+    if isinstance(cause, ConfigError):
+        return str(cause)
+    return describe_error(exc, what, fields)
+
+
+class StageConfig(Config):
+    """A stage table's config (see the module docstring): frozen, unknown keys refused, errors as
+    one-line :class:`ConfigError` (a validator's own sentence kept as it is)."""
+
+    def __init__(self, /, **data: Any) -> None:
+        try:
+            BaseModel.__init__(self, **data)
+        except ValidationError as exc:
+            cls = type(self)
+            raise ConfigError(message(exc, cls.where(data), tuple(cls.model_fields))) from None
+
+    @classmethod
+    def where(cls, data: Mapping[str, Any]) -> str:
+        """The table's name in messages (:attr:`what`; a named sub-table adds its name)."""
+        return cls.what
+
+    def replace(self, **changes: Any) -> StageConfig:
+        """A validated copy with ``changes`` applied (the other fields as they are)."""
+        return type(self)(**{**dict(self), **changes})
+
+
+def replace_config(cfg: Any, **changes: Any) -> Any:
+    """A copy of a frozen config with ``changes``: :meth:`Config.replace` on a pydantic config,
+    :func:`dataclasses.replace` on a dataclass one (configs not converted yet)."""
+    if dataclasses.is_dataclass(cfg):
+        return dataclasses.replace(cfg, **changes)
+    return cfg.replace(**changes)
+
+
+def config_fields(cls: type) -> tuple[str, ...]:
+    """The option names of a config class (pydantic or dataclass)."""
+    fields = getattr(cls, "model_fields", None)
+    if fields is None:
+        fields = cls.__dataclass_fields__
+    return tuple(fields)

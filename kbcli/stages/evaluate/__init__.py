@@ -1,0 +1,106 @@
+"""Stage ``evaluate``: the paper's evaluation protocol (Sect. IV-B and IV-C, Figs. 5-7), run for
+named *methods*.
+
+A **method** is a named table of adapt options plus the strategies it compares
+(``[evaluate.methods.NAME]`` in ``pipelines/paper.toml``):
+
+- ``paper``: the paper's own method: the product of KDEs of Eq. 7-8 with Algorithm 2's sampling
+  (``posterior = "kde"``), the maximum-likelihood hypothesis as the estimate (``estimator = "ml"``),
+  the model as learned (``model_blur = 0``), strategies ``random`` (the baseline) and ``active``
+  (Sect. III-E; its candidates' confusion and simulated updates use the model's
+  ``p(sound | action)``, see :mod:`kbcli.core.strategies`, while the posterior it reads and the
+  one that is updated are the KDE product);
+- ``kbcli``: our best choice: whatever :class:`kbcli.core.adapt.AdapterConfig`'s defaults are (the
+  likelihood posterior and the posterior mean today), strategies random, active and infogain. Its
+  TOML table names only the strategies, so changing kbcli's defaults changes what ``kbcli`` means;
+- any other name: an ablation (e.g. the paper's strategies and estimator on our posterior).
+
+Every option a method resolves to (defaults included, per mode and strategy) is recorded in the
+artifact (``attrs["methods"]``) and printed by the report.
+
+Fixed displacement parametrizations are grouped in size categories (:mod:`kbcli.stages.perturb`'s
+definition: the Euclidean norm of the translation in (0, 10], (10, 20] or (20, 40] px; keys are
+50 px). Each parametrization is adapted to ``experiments`` times (the paper: 50) by each method and
+strategy in each mode (``ideal``: the finger lands on its target; ``dynamics``: a simulated arm
+reaches for it). One experiment is one call of the adapt stage's ``experiment`` for ``max_steps``
+observations; it also replays the melody with Algorithm 1 (``play_notes`` touches) after adapting,
+with the final estimate as the correction, and, once per (mode, parametrization, repetition),
+before the displacement and after it without adaptation: playing success is measured, not derived.
+Each experiment is seeded by ``SeedSequence(seed, spawn_key=...)`` with a key made of its mode,
+category, parametrization, method, strategy and repetition, so a result depends neither on the
+worker that ran it nor on which modes or methods were selected.
+
+This package holds the config (:mod:`.config`, :mod:`.methods`), plans the experiments
+(:func:`plan`, :mod:`.planning`), runs one in a worker (:func:`setup`, :func:`run_experiment`,
+:mod:`.worker`) and assembles the results into the ``evaluation`` artifact (:func:`assemble`,
+:mod:`.assembly`) with :mod:`kbcli.core.stats`: RMSE against observations per category, method
+and strategy (Fig. 7), observations to each error threshold, tie-corrected Mann-Whitney U p-values
+against the baseline strategy of the same method (and the smallest p-value the design can give),
+entropy per step (Fig. 6), playing success, and one example run's posterior snapshots per method
+and strategy (Fig. 5). Execution (serial, local processes or Dask) and checkpoints are
+:mod:`kbcli.io.runner`'s job.
+"""
+
+
+from __future__ import annotations
+
+from kbcli.stages.artifact import Artifact
+from kbcli.stages.evaluate.assembly import assemble
+from kbcli.stages.evaluate.config import (
+    Category,
+    EvaluateConfig,
+    _paper_categories,
+    adapt_config,
+    resolved_methods,
+)
+from kbcli.stages.evaluate.methods import (
+    DEFAULT_STRATEGIES,
+    KBCLI_METHOD,
+    METHOD_KEYS,
+    PAPER_METHOD,
+    PER_EXPERIMENT,
+    Method,
+    known_strategies,
+)
+from kbcli.stages.evaluate.planning import EXPERIMENT, Task, context, context_key, plan
+from kbcli.stages.evaluate.worker import (
+    EXAMPLE_KEYS,
+    PLAY_KEYS,
+    PLAY_POOL,
+    STEP_KEYS,
+    TIME_KEY,
+    resolve,
+    run_experiment,
+    setup,
+    timing,
+)
+
+
+def fingerprint(cfg: EvaluateConfig, model_art: Artifact, experiment: str = EXPERIMENT) -> dict:
+    """What a checkpoint must match to be resumed: the config, the model and the code version."""
+    from kbcli import __version__
+
+    return {
+        "evaluate": cfg.to_dict(),
+        "model_sha256": model_art.sha256,
+        "experiment": experiment,
+        "kbcli_version": __version__,
+        "n_experiments": len(plan(cfg)),
+    }
+
+
+def run(cfg: EvaluateConfig, model_art: Artifact, experiment: str = EXPERIMENT) -> Artifact:
+    """Run the whole protocol in this process, one experiment after another, and return the
+    artifact (the CLI runs the same functions through :mod:`kbcli.io.runner` instead, for parallel
+    backends and checkpoints)."""
+    tasks = plan(cfg)
+    state = setup(context(cfg, model_art, experiment))
+    results = {t.row: run_experiment(state, t) for t in tasks}
+    return assemble(cfg, tasks, results, model_art, state["keyboard"])
+
+
+__all__ = ["EXPERIMENT", "DEFAULT_STRATEGIES", "PER_EXPERIMENT", "METHOD_KEYS", "EXAMPLE_KEYS",
+           "STEP_KEYS", "PLAY_KEYS", "PLAY_POOL", "TIME_KEY", "PAPER_METHOD", "KBCLI_METHOD",
+           "Category", "Method", "EvaluateConfig", "Task", "known_strategies", "adapt_config",
+           "resolved_methods", "plan", "context", "context_key", "resolve", "setup",
+           "run_experiment", "assemble", "timing", "fingerprint", "run", "_paper_categories"]

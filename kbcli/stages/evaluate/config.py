@@ -1,0 +1,430 @@
+"""The evaluation protocol's config: :class:`EvaluateConfig` (the ``[evaluate]`` table), its
+displacement categories (:class:`Category`) and its named methods (:class:`Method`), and the adapt
+stage's config each experiment runs with (:func:`adapt_config`)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any, ClassVar
+
+import numpy as np
+from pydantic import Field, InstanceOf, field_validator, model_validator
+
+from kbcli.core import transforms
+from kbcli.core.config import Count, Name, Names, NonNegative, NonNegativeInt, Number, Positive
+from kbcli.core.melody import DEFAULT_MELODY
+from kbcli.errors import ConfigError
+from kbcli.sim import MODES
+from kbcli.stages.config import StageConfig
+from kbcli.stages.evaluate.methods import (
+    DEFAULT_STRATEGIES,
+    Method,
+    adapt_stage,
+    check_modes,
+    default_methods,
+)
+from kbcli.stages.perturb import CATEGORIES as SIZE_CATEGORIES
+from kbcli.stages.perturb import displacement_size
+
+
+class Category(StageConfig):
+    """A group of displacement parametrizations of similar size.
+
+    Parameters
+    ----------
+    name : str
+    limit : float, optional
+        Largest displacement size (px) in this category: the Euclidean norm of each
+        parametrization's translation is at most this (and, for the size categories small, medium
+        and large of :data:`kbcli.stages.perturb.CATEGORIES`, above the category's lower bound).
+        Default (and required value) for those three: their upper bound.
+    displacements : tuple of tuples
+        Transform parameters of each parametrization (``(dx, dy)`` for translation,
+        ``(angle, dx, dy)`` for rigid).
+    """
+
+    what: ClassVar[str] = "categories"
+
+    name: Name
+    limit: Positive | None = None
+    displacements: tuple[tuple[Number, ...], ...] = Field(min_length=1)
+
+    @classmethod
+    def where(cls, data: Mapping[str, Any]) -> str:
+        return f"categories.{data.get('name')}"
+
+    @model_validator(mode="before")
+    @classmethod
+    def _size_limit(cls, data: Any) -> Any:
+        """A size category's limit defaults to its upper bound."""
+        if isinstance(data, Mapping) and data.get("limit") is None:
+            known = SIZE_CATEGORIES.get(data.get("name"))
+            if known is not None:
+                data = {**data, "limit": known[1]}
+        return data
+
+    @model_validator(mode="after")
+    def _check_limit(self) -> Category:
+        known = SIZE_CATEGORIES.get(self.name)
+        if self.limit is None:
+            raise ValueError(f"limit is needed: {self.name!r} is not one of the size categories "
+                             f"{', '.join(SIZE_CATEGORIES)}")
+        if known is not None and self.limit != known[1]:
+            raise ValueError(f"limit is {self.limit:g} px but the size category {self.name} is "
+                             f"({known[0]:g}, {known[1]:g}] px (kbcli.stages.perturb.CATEGORIES)")
+        return self
+
+    @classmethod
+    def from_table(cls, name: str, table: Any) -> Category:
+        """A category from its TOML table ``{limit, displacements}``."""
+        if not isinstance(table, Mapping):
+            raise ConfigError(f"categories.{name} must be a table with displacements")
+        extra = sorted(set(table) - {"limit", "displacements"})
+        if extra or "displacements" not in table:
+            raise ConfigError(f"categories.{name} must have displacements (and may have limit)"
+                              + (f" (unknown: {', '.join(extra)})" if extra else ""))
+        return cls(name=name, limit=table.get("limit"), displacements=table["displacements"])
+
+    @property
+    def lower(self) -> float:
+        """Exclusive lower bound of the sizes (px): the size category's, else 0."""
+        return SIZE_CATEGORIES.get(self.name, (0.0, self.limit))[0]
+
+    def check_rows(self, family: str) -> None:
+        """ConfigError unless every displacement has ``family``'s parameters and a size in
+        ``(lower, limit]``."""
+        names = transforms.FAMILIES.get(family).params
+        for row in self.displacements:
+            if len(row) != len(names):
+                raise ConfigError(
+                    f"categories.{self.name}: a {family} displacement has {len(names)} "
+                    f"parameters ({', '.join(names)}), got {list(row)}")
+            size = float(displacement_size(np.asarray(row, float)))
+            if size > self.limit + 1e-9:
+                raise ConfigError(
+                    f"categories.{self.name}: displacement {list(row)} is {size:.2f} px, "
+                    f"beyond the category's limit of {self.limit:g} px")
+            if size <= self.lower:
+                raise ConfigError(
+                    f"categories.{self.name}: displacement {list(row)} is {size:.2f} px, not "
+                    f"above the category's lower bound of {self.lower:g} px (sizes are Euclidean)")
+
+    def to_dict(self) -> dict:
+        return {"limit": self.limit, "displacements": [list(r) for r in self.displacements]}
+
+
+def _paper_categories() -> tuple[Category, ...]:
+    return (
+        Category(name="small", limit=10.0, displacements=(
+            (3.76, 1.37), (-2.05, 5.64), (-7.52, -2.74), (3.42, -9.39))),
+        Category(name="medium", limit=20.0, displacements=(
+            (5.07, 10.88), (-13.59, 6.34), (-7.61, -16.31), (18.12, -8.45))),
+        Category(name="large", limit=40.0, displacements=(
+            (19.15, 16.07), (-19.28, 22.98), (-26.81, -22.5), (25.71, -30.64))),
+    )
+
+
+def _tables(v: Any, build: Any, what: str) -> Any:
+    """``name = {...}`` tables as a tuple of ``build(name, table)``, in file order (anything else
+    is left to the field's type)."""
+    if not isinstance(v, Mapping):
+        return v
+    if not v:
+        raise ConfigError(f"evaluate.{what} must hold at least one table")
+    return tuple(build(name, table) for name, table in v.items())
+
+
+def _unique(items: tuple, what: str) -> tuple:
+    if len({x.name for x in items}) != len(items):
+        raise ValueError(f"a name is used twice in {what}")
+    return items
+
+
+def _legacy_layout(d: dict) -> dict:
+    """The layout before named methods (``strategies = [...]`` and an ``[evaluate.adapt]`` table):
+    one method ``kbcli``, the one the claims are judged on."""
+    legacy = {k: d.pop(k) for k in ("strategies", "adapt") if k in d}
+    if not legacy:
+        return d
+    if "methods" in d:
+        raise ConfigError("evaluate: give methods, or the older strategies and adapt, not both")
+    old = legacy.get("adapt") or {}
+    if not isinstance(old, Mapping):
+        raise ConfigError("evaluate.adapt must be a table of adapt-stage options")
+    strategies = legacy.get("strategies", list(DEFAULT_STRATEGIES))
+    if isinstance(strategies, (str, bytes)) or not isinstance(strategies, (list, tuple)):
+        raise ConfigError(f"evaluate.strategies must be a list, got {strategies!r}")
+    d["methods"] = {"kbcli": {**old, "strategies": list(strategies)}}
+    d.setdefault("judged", "kbcli")
+    return d
+
+
+class EvaluateConfig(StageConfig):
+    """The evaluation protocol (the ``[evaluate]`` table of ``pipelines/paper.toml``).
+
+    Parameters
+    ----------
+    seed : int
+        Root of every experiment's seed (and of the KDE samples, drawn once per class).
+    experiments : int
+        Repetitions per parametrization, method, strategy and mode (the paper: 50).
+    methods : tuple of Method
+        The named methods compared (default: ``paper`` and ``kbcli``, see the package docstring);
+        in TOML, a table of ``name = {strategies, adapt options}``, kept in file order.
+    judged : str
+        The method the paper's claims are judged on (``paper``); the others are shown beside it.
+    baseline : str
+        The strategy each method's others are tested against (in every method's strategies).
+    modes : tuple of str
+        Reaching modes (:data:`kbcli.sim.MODES`).
+    family : str
+        Transform family (:data:`kbcli.core.transforms.FAMILIES`).
+    max_steps : int
+        Observations per experiment (T).
+    thresholds : tuple of float
+        Error thresholds (px) for the observations-to-threshold table and the tests (kept sorted,
+        largest first).
+    example : str
+        Category whose first parametrization's first run, per mode, method and strategy, keeps its
+        posterior snapshots (Fig. 5).
+    snapshot_steps : tuple of int
+        Steps (observations) at which the example runs keep the posterior.
+    reach_noise : mapping
+        Landing scatter of the arm (px) in each mode: ``ideal`` lands exactly (0, the paper's
+        idealised problem); ``dynamics`` adds motor noise to the simulated arm.
+    arm : mapping
+        Arm of each mode: a preset name (``ideal``, ``servo``, ``realistic``) or a table
+        (:mod:`kbcli.sim.arms`); missing modes get ``ideal``.
+    categories : tuple of Category
+        Displacement categories, in order; in TOML, a table of ``name = {limit, displacements}``.
+    play_notes : int
+        Touches of each melody replay (Algorithm 1) measuring the playing success; 0: not measured.
+    melody : str
+        The melody replayed.
+
+    Notes
+    -----
+    The layout before named methods (``strategies = [...]`` and an ``[evaluate.adapt]`` table) is
+    still read, as one method ``kbcli`` that the claims are judged on.
+    """
+
+    what: ClassVar[str] = "evaluate"
+
+    seed: NonNegativeInt = 2013
+    experiments: Count = 50
+    methods: tuple[InstanceOf[Method], ...] = Field(default_factory=default_methods, min_length=1)
+    judged: Name = "paper"
+    baseline: Name = "random"
+    modes: Names = MODES.names()
+    family: Name = "translation"
+    max_steps: Count = 40
+    thresholds: tuple[Positive, ...] = Field((20.0, 15.0, 10.0, 8.0, 6.0, 4.0, 2.0, 1.0),
+                                             min_length=1)
+    example: Name = "small"
+    snapshot_steps: tuple[NonNegativeInt, ...] = (1, 2, 3, 5, 10, 20)
+    reach_noise: Mapping[str, NonNegative] = Field(
+        default_factory=lambda: {"ideal": 0.0, "dynamics": 2.0})
+    arm: Mapping[str, Any] = Field(default_factory=lambda: {"ideal": "ideal", "dynamics": "ideal"})
+    categories: tuple[InstanceOf[Category], ...] = Field(default_factory=_paper_categories,
+                                                         min_length=1)
+    play_notes: NonNegativeInt = 200
+    melody: Name = DEFAULT_MELODY
+
+    @model_validator(mode="before")
+    @classmethod
+    def _layout(cls, data: Any) -> Any:
+        return _legacy_layout(dict(data)) if isinstance(data, Mapping) else data
+
+    @field_validator("methods", mode="before")
+    @classmethod
+    def _method_tables(cls, v: Any) -> Any:
+        return _tables(v, Method.from_table, "methods")
+
+    @field_validator("categories", mode="before")
+    @classmethod
+    def _category_tables(cls, v: Any) -> Any:
+        return _tables(v, Category.from_table, "categories")
+
+    @field_validator("methods", "categories")
+    @classmethod
+    def _distinct(cls, v: tuple, info) -> tuple:
+        return _unique(v, info.field_name)
+
+    @field_validator("modes")
+    @classmethod
+    def _modes(cls, v: tuple[str, ...]) -> tuple[str, ...]:
+        return check_modes(v)
+
+    @field_validator("family")
+    @classmethod
+    def _family(cls, v: str) -> str:
+        return transforms.FAMILIES.check(v)
+
+    @field_validator("thresholds")
+    @classmethod
+    def _thresholds(cls, v: tuple[float, ...]) -> tuple[float, ...]:
+        return tuple(sorted(set(v), reverse=True))
+
+    @field_validator("snapshot_steps")
+    @classmethod
+    def _snapshot_steps(cls, v: tuple[int, ...]) -> tuple[int, ...]:
+        return tuple(sorted(set(v)))
+
+    @field_validator("reach_noise")
+    @classmethod
+    def _reach_noise(cls, v: Mapping[str, float]) -> Mapping[str, float]:
+        check_modes(tuple(v))
+        return MappingProxyType({m: float(v.get(m, 0.0)) for m in MODES})
+
+    @field_validator("arm")
+    @classmethod
+    def _arm(cls, v: Mapping[str, Any]) -> Mapping[str, Any]:
+        from kbcli.sim.arms import arm_config
+
+        check_modes(tuple(v))
+        return MappingProxyType({m: arm_config(v.get(m)).to_dict() for m in MODES})
+
+    @field_validator("melody")
+    @classmethod
+    def _melody(cls, v: str) -> str:
+        if not v.split():
+            raise ValueError(f"must be notes like 'A:1 D:1', got {v!r}")
+        return v
+
+    @model_validator(mode="after")
+    def _across(self) -> EvaluateConfig:
+        """What one table cannot check alone: names that point at other tables, displacements
+        against the family, and each method's adapt options (by the adapt stage)."""
+        self._check_names()
+        for c in self.categories:
+            c.check_rows(self.family)
+        cats = [c.name for c in self.categories]
+        if self.example not in cats:
+            raise ConfigError(f"example {self.example!r} must name a category ({', '.join(cats)})")
+        for meth in self.methods:
+            for s in meth.strategies:
+                for m in self.modes:
+                    adapt_config(self, meth.name, s, m)
+        return self
+
+    def _check_names(self) -> None:
+        names = [m.name for m in self.methods]
+        if self.judged not in names:
+            raise ConfigError(f"judged {self.judged!r} must name a method ({', '.join(names)})")
+        cats = [c.name for c in self.categories]
+        for m in self.methods:
+            if self.baseline not in m.strategies:
+                raise ConfigError(f"baseline {self.baseline!r} must be one of the strategies of "
+                                  f"method {m.name} ({', '.join(m.strategies)})")
+            for c in m.categories or ():
+                if c not in cats:
+                    raise ConfigError(f"methods.{m.name}: unknown category {c!r}; valid: "
+                                      f"{', '.join(cats)}")
+
+    @property
+    def n_params(self) -> int:
+        return len(transforms.FAMILIES.get(self.family).params)
+
+    @property
+    def strategies(self) -> tuple[str, ...]:
+        """Every strategy of any method, in first-seen order."""
+        return tuple(dict.fromkeys(s for m in self.methods for s in m.strategies))
+
+    def method(self, name: str) -> Method:
+        for m in self.methods:
+            if m.name == name:
+                return m
+        raise ConfigError(f"no method {name!r}; valid: {', '.join(m.name for m in self.methods)}")
+
+    def __reduce__(self):  # the read-only mappings do not pickle; the dict form does
+        return (EvaluateConfig.from_dict, (self.to_dict(),))
+
+    def to_dict(self) -> dict:
+        return {
+            "seed": self.seed,
+            "experiments": self.experiments,
+            "methods": {m.name: m.to_dict() for m in self.methods},
+            "judged": self.judged,
+            "baseline": self.baseline,
+            "modes": list(self.modes),
+            "family": self.family,
+            "max_steps": self.max_steps,
+            "thresholds": list(self.thresholds),
+            "example": self.example,
+            "snapshot_steps": list(self.snapshot_steps),
+            "reach_noise": dict(self.reach_noise),
+            "arm": {m: dict(v) for m, v in self.arm.items()},
+            "categories": {c.name: c.to_dict() for c in self.categories},
+            "play_notes": self.play_notes,
+            "melody": self.melody,
+        }
+
+    def with_overrides(self, *, experiments: int | None = None, mode: str | None = None,
+                       methods: tuple[str, ...] | None = None) -> EvaluateConfig:
+        """The config with ``--experiments``, ``--mode`` and ``--method`` applied (validated)."""
+        cfg = self
+        if experiments is not None:
+            cfg = cfg.replace(experiments=experiments)
+        if mode is not None:
+            if mode not in MODES:
+                raise ConfigError(f"unknown mode {mode!r}; valid: {', '.join(MODES.names())}")
+            if mode not in cfg.modes:
+                raise ConfigError(f"mode {mode!r} is not in the config's modes "
+                                  f"({', '.join(cfg.modes)})")
+            cfg = cfg.replace(modes=(mode,))
+        if methods:
+            keep = tuple(cfg.method(n) for n in methods)
+            judged = cfg.judged if cfg.judged in methods else keep[0].name
+            cfg = cfg.replace(methods=keep, judged=judged)
+        return cfg
+
+
+def adapt_config(cfg: EvaluateConfig, method: str, strategy: str, mode: str):
+    """The adapt stage's config for one experiment (None when that stage is not available)."""
+    adapt = adapt_stage()
+    if adapt is None:
+        return None
+    values = {**cfg.method(method).options, "strategy": strategy, "mode": mode,
+              "max_steps": cfg.max_steps, "family": cfg.family,
+              "reach_noise": cfg.reach_noise[mode], "arm": dict(cfg.arm[mode])}
+    if isinstance(values.get("robot"), Mapping):
+        values["robot"] = dict(values["robot"])
+    return adapt.AdaptConfig.from_dict(values)
+
+
+def resolved_methods(cfg: EvaluateConfig, model=None) -> dict:
+    """Every option each method resolves to, defaults included: ``{method: {"strategies": [...],
+    "description": str, "modes": [...], "categories": [...], "options": {mode: {strategy:
+    AdaptConfig.to_dict()}}, "from_model": {...}}}`` (for the artifact and the report).
+
+    ``from_model``: the options a config leaves to the model (None there), as resolved for
+    ``model``: the robust posterior's ``redundancy_radius`` (px), ``robust_blurs`` (px) and
+    ``robust_eta`` (its learning rate); 0, [] and 1 with the plain or KDE posterior. Empty without a model.
+    """
+    from kbcli.core.adapt import learning_rate, redundancy_radius, robust_blurs
+
+    out = {}
+    for m in cfg.methods:
+        opts = {}
+        from_model: dict = {}
+        for mode in cfg.modes:
+            if m.modes is not None and mode not in m.modes:
+                continue
+            opts[mode] = {}
+            for s in m.strategies:
+                acfg = adapt_config(cfg, m.name, s, mode)
+                opts[mode][s] = acfg.to_dict() if acfg is not None else {}
+                if acfg is not None and model is not None and not from_model:
+                    r = acfg.adapter_config()
+                    from_model = {
+                        "redundancy_radius": redundancy_radius(model, r) if r.is_robust else 0.0,
+                        "robust_blurs": list(robust_blurs(model, r)) if r.is_robust else [],
+                        "robust_eta": learning_rate(model, r) if r.is_robust else 1.0}
+        out[m.name] = {"strategies": list(m.strategies), "description": m.description,
+                       "modes": [x for x in cfg.modes if m.modes is None or x in m.modes],
+                       "categories": [c.name for c in cfg.categories
+                                      if m.categories is None or c.name in m.categories],
+                       "options": opts, "from_model": from_model}
+    return out
+

@@ -1,0 +1,156 @@
+"""The evaluation protocol's named methods: :class:`Method` (a ``[evaluate.methods.NAME]`` table:
+adapt options and the strategies compared under them) and the two built in, ``paper`` and
+``kbcli``."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any, ClassVar
+
+from pydantic import Field, field_validator, model_validator
+
+from kbcli.core.config import Name, Names
+from kbcli.errors import ConfigError
+from kbcli.sim import MODES
+from kbcli.stages.config import StageConfig
+
+#: The strategies of the layout before named methods when it names none.
+DEFAULT_STRATEGIES = ("random", "active", "infogain")
+#: Adapt options the protocol sets per experiment (not in a method's table).
+PER_EXPERIMENT = ("strategy", "mode", "max_steps", "family", "reach_noise", "arm")
+#: Keys of a method's table that are not adapt options.
+METHOD_KEYS = ("strategies", "modes", "categories", "description")
+
+#: The paper's method (Sect. III-D, III-E): Eq. 7-8 with Algorithm 2, the maximum-likelihood
+#: hypothesis, the learned model as it is, random and active.
+PAPER_METHOD = {"description": "the paper's: product of KDEs (Eq. 7-8, Algorithm 2), "
+                               "maximum-likelihood estimate, random and active (Sect. III-E)",
+                "strategies": ["random", "active"], "posterior": "kde", "estimator": "ml",
+                "model_blur": 0.0}
+#: Ours: the adapter's defaults, every strategy.
+KBCLI_METHOD = {"description": "kbcli's best: the adapter's defaults", "strategies":
+                ["random", "active", "infogain"]}
+
+
+def adapt_stage():
+    """The adapt stage package, or None while it is not available."""
+    import importlib
+
+    try:
+        return importlib.import_module("kbcli.stages.adapt")
+    except ModuleNotFoundError as exc:
+        if exc.name != "kbcli.stages.adapt":
+            raise
+        return None
+
+
+def known_strategies() -> tuple[str, ...]:
+    """Strategy names the adapter offers (:data:`kbcli.core.strategies.STRATEGIES`)."""
+    from kbcli.core.strategies import STRATEGIES
+
+    return tuple(STRATEGIES)
+
+
+def check_modes(names: tuple[str, ...] | None) -> tuple[str, ...] | None:
+    """``names`` itself when each is a mode of :data:`kbcli.sim.MODES` (for validators)."""
+    for m in names or ():
+        if m not in MODES:
+            raise ValueError(f"unknown mode {m!r}; valid: {', '.join(MODES)}")
+    return names
+
+
+class Method(StageConfig):
+    """A named way to adapt: adapt options and the strategies compared under them.
+
+    Parameters
+    ----------
+    name : str
+    strategies : tuple of str
+        Strategies run with these options (the protocol's ``baseline`` must be one of them).
+    options : mapping
+        Adapt-stage options (:class:`kbcli.stages.adapt.AdaptConfig`: the robot's, such as
+        ``posterior`` or ``estimator``, at the top level or in a ``robot`` table, and the loop's,
+        such as ``feedback``); options left out take the adapt stage's defaults. ``strategy``,
+        ``mode``, ``max_steps``, ``family`` and ``reach_noise`` are set by the protocol.
+    modes, categories : tuple of str, optional
+        Run this method only in these modes / categories (None: all of the protocol's); for
+        ablations that answer one question.
+    description : str
+        One line for the report.
+    """
+
+    what: ClassVar[str] = "methods"
+
+    name: Name
+    strategies: Names
+    options: Mapping[str, Any] = Field(default_factory=dict)
+    modes: Names | None = None
+    categories: Names | None = None
+    description: Name = ""
+
+    @classmethod
+    def where(cls, data: Mapping[str, Any]) -> str:
+        return f"methods.{data.get('name')}"
+
+    @field_validator("strategies")
+    @classmethod
+    def _strategies(cls, v: tuple[str, ...]) -> tuple[str, ...]:
+        known = known_strategies()
+        for st in v:
+            if st not in known:
+                raise ValueError(f"unknown strategy {st!r}; valid: {', '.join(known)}")
+        return v
+
+    @field_validator("modes")
+    @classmethod
+    def _modes(cls, v: tuple[str, ...] | None) -> tuple[str, ...] | None:
+        return check_modes(v)
+
+    @field_validator("options")
+    @classmethod
+    def _options(cls, v: Mapping[str, Any]) -> Mapping[str, Any]:
+        return MappingProxyType(dict(v))
+
+    @model_validator(mode="after")
+    def _not_per_experiment(self) -> Method:
+        fixed = sorted(set(self.options) & set(PER_EXPERIMENT))
+        robot = self.options.get("robot")
+        if isinstance(robot, Mapping):
+            fixed += sorted(set(robot) & set(PER_EXPERIMENT))
+        if fixed:
+            raise ConfigError(
+                f"methods.{self.name}.{fixed[0]} is set per experiment by the protocol: use "
+                "strategies, modes, max_steps, family, reach_noise and arm of [evaluate] instead")
+        return self
+
+    def runs_in(self, mode: str, category: str) -> bool:
+        return ((self.modes is None or mode in self.modes)
+                and (self.categories is None or category in self.categories))
+
+    def to_dict(self) -> dict:
+        d: dict[str, Any] = {"strategies": list(self.strategies)}
+        if self.modes is not None:
+            d["modes"] = list(self.modes)
+        if self.categories is not None:
+            d["categories"] = list(self.categories)
+        if self.description:
+            d["description"] = self.description
+        d.update({k: (dict(v) if isinstance(v, Mapping) else v) for k, v in self.options.items()})
+        return d
+
+    @classmethod
+    def from_table(cls, name: str, table: Any) -> Method:
+        """A method from its TOML table: ``strategies`` (and ``modes``, ``categories``,
+        ``description``) beside the adapt options."""
+        if not isinstance(table, Mapping):
+            raise ConfigError(f"methods.{name} must be a table (strategies and adapt options)")
+        d = dict(table)
+        if "strategies" not in d:
+            raise ConfigError(f"methods.{name} needs strategies = [...]")
+        kw = {k: d.pop(k) for k in METHOD_KEYS if k in d}
+        return cls(name=name, options=d, **kw)
+
+
+def default_methods() -> tuple[Method, ...]:
+    return (Method.from_table("paper", PAPER_METHOD), Method.from_table("kbcli", KBCLI_METHOD))

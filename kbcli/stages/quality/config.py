@@ -1,0 +1,232 @@
+"""The ``[quality]`` table: the sweep's models, rows, displacements and repetitions."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Annotated, Any
+
+from pydantic import Field, Strict, ValidationInfo, field_validator, model_validator
+
+from kbcli.core.config import Config, Count, Flag, Name, Names, NonNegative, NonNegativeInt
+from kbcli.core.model_classes import EXACT  # the reference row's model: the exact class
+from kbcli.errors import ConfigError
+from kbcli.sim import MODES
+from kbcli.sim.arms import arm_config
+from kbcli.stages.evaluate import Category, _paper_categories
+
+#: Rows of the default sweep: name -> adapt options (strategy included).
+DEFAULT_ROWS = {
+    "random": {"strategy": "random"},
+    "active": {"strategy": "active"},
+    "infogain": {"strategy": "infogain"},
+    "infogain-plain": {"strategy": "infogain", "robust": False},
+}
+#: The reference row adapted with the exact model (the keyboard's own map) when ``ideal`` is on.
+IDEAL_ROW = "exact-infogain"
+#: Options the sweep sets itself for every experiment (not allowed in a row or ``adapt``).
+FIXED = ("mode", "arm", "reach_noise", "max_steps", "family", "stop")
+#: Fewest reaches of a learned model.
+MIN_BUDGET = 10
+
+Budget = Annotated[int, Strict(), Field(ge=MIN_BUDGET)]
+
+
+class QualityConfig(Config):
+    """The model-quality sweep (the ``[quality]`` table of ``pipelines/model-quality.toml``).
+
+    Parameters
+    ----------
+    seed : int
+        Root of every model's and experiment's seed.
+    budgets : tuple of int
+        Reaches of each learned model (>= 10; stored sorted, without repeats).
+    explorations : tuple of str
+        Exploration strategies (``active``, ``random``).
+    mode : str
+        Reach mode of learning and adapting (``ideal`` or ``dynamics``).
+    arm : str or table
+        Arm preset (:mod:`kbcli.sim.arms`) of learning and adapting (stored as the resolved table).
+    reach_noise : float
+        Extra landing scatter, px.
+    rows : mapping
+        Name -> adapt options (``strategy`` and any adapt option, e.g. ``robust = false``).
+    baseline : str
+        The row the others are compared with.
+    experiments : int
+        Repetitions per displacement, model and row.
+    max_steps : int
+        Touches per adaptation.
+    categories : tuple of Category
+        The displacements (the paper's by default); from TOML a table of
+        ``name = {limit, displacements}``.
+    adapt : mapping
+        Adapt options shared by every row.
+    ideal : bool
+        Also adapt with the exact model (the keyboard's own map, no model error), with infogain,
+        on the same displacements and seeds: the touches infogain needs to reach each learned
+        model's threshold when the model is perfect, a reference for what a better model could
+        buy (not a strict bound: infogain is greedy, and a lucky run does better).
+    """
+
+    what = "quality"
+
+    # validated in this order: the baseline is checked against the rows above it
+    seed: NonNegativeInt = 2024
+    budgets: tuple[Budget, ...] = (100, 150, 200, 300, 400, 800, 1600)
+    explorations: Names = ("active", "random")
+    mode: Name = "dynamics"
+    arm: Any = "realistic"
+    reach_noise: NonNegative = 0.0
+    experiments: Count = 8
+    max_steps: Count = 30
+    categories: Any = Field(default_factory=_paper_categories)
+    adapt: Any = Field(default_factory=dict)
+    ideal: Flag = True
+    rows: Any = Field(default_factory=lambda: dict(DEFAULT_ROWS))
+    baseline: Name = "random"
+
+    @field_validator("budgets")
+    @classmethod
+    def _sorted_budgets(cls, v: tuple[int, ...]) -> tuple[int, ...]:
+        if not v:
+            raise ValueError("must list at least one budget")
+        return tuple(sorted(set(v)))
+
+    @field_validator("explorations")
+    @classmethod
+    def _known_explorations(cls, v: tuple[str, ...]) -> tuple[str, ...]:
+        from kbcli.stages.learn import strategies as learn_strategies
+
+        for e in v:
+            if e not in learn_strategies() or e == EXACT:
+                raise ValueError(f"unknown exploration {e!r}; valid: active, random")
+        return v
+
+    @field_validator("mode")
+    @classmethod
+    def _known_mode(cls, v: str) -> str:
+        if v not in MODES:
+            raise ValueError(f"unknown mode {v!r}; valid: {', '.join(MODES)}")
+        return v
+
+    @field_validator("arm")
+    @classmethod
+    def _resolved_arm(cls, v: Any) -> dict:
+        return arm_config(v).to_dict()
+
+    @field_validator("categories", mode="before")
+    @classmethod
+    def _categories(cls, v: Any) -> tuple[Category, ...]:
+        return _categories(v)
+
+    @field_validator("adapt")
+    @classmethod
+    def _shared_options(cls, v: Any) -> MappingProxyType:
+        if not isinstance(v, Mapping):
+            raise ValueError("must be a table of adapt options")
+        fixed = sorted(set(v) & set(FIXED + ("strategy",)))
+        if fixed:
+            raise ValueError(f"{fixed[0]} is set by the sweep or its rows")
+        return MappingProxyType(dict(v))
+
+    @field_validator("rows")
+    @classmethod
+    def _rows(cls, v: Any) -> MappingProxyType:
+        return MappingProxyType(_rows(v))
+
+    @field_validator("baseline")
+    @classmethod
+    def _baseline_is_a_row(cls, v: str, info: ValidationInfo) -> str:
+        rows = info.data.get("rows")
+        if rows is not None and v not in rows:
+            raise ValueError(f"{v!r} must name a row ({', '.join(rows)})")
+        return v
+
+    @model_validator(mode="after")
+    def _rows_adapt(self) -> QualityConfig:
+        """Let the adapt stage check every row's options (the shared ones and the row's)."""
+        for name in self.rows:
+            try:
+                adapt_config(self, name)
+            except ConfigError as exc:
+                raise ValueError(f"the adapt options of row {name!r}: {exc}") from None
+        return self
+
+    def to_dict(self) -> dict:
+        """The table as TOML would give it (arm resolved, categories as tables)."""
+        return {
+            "seed": self.seed, "budgets": list(self.budgets),
+            "explorations": list(self.explorations), "mode": self.mode, "arm": dict(self.arm),
+            "reach_noise": float(self.reach_noise),
+            "rows": {k: dict(v) for k, v in self.rows.items()}, "baseline": self.baseline,
+            "experiments": self.experiments, "max_steps": self.max_steps,
+            "categories": {c.name: c.to_dict() for c in self.categories},
+            "adapt": dict(self.adapt), "ideal": self.ideal,
+        }
+
+    def __reduce__(self):  # the read-only mappings do not pickle; the dict form does
+        return (QualityConfig.from_dict, (self.to_dict(),))
+
+    def __deepcopy__(self, memo: dict) -> QualityConfig:  # (pydantic's copies the mappings)
+        return QualityConfig.from_dict(self.to_dict())
+
+    def with_overrides(self, *, experiments: int | None = None,
+                       budgets: tuple[int, ...] | None = None) -> QualityConfig:
+        """A copy with the CLI's ``--experiments`` and ``--budgets`` applied (None: kept)."""
+        changes = {k: v for k, v in (("experiments", experiments), ("budgets", budgets))
+                   if v is not None}
+        return self.replace(**changes) if changes else self
+
+
+def _categories(v: Any) -> tuple[Category, ...]:
+    """Categories from a TOML table ``name = {limit, displacements}`` (or kept as given)."""
+    if isinstance(v, Mapping):
+        out = []
+        for name, t in v.items():
+            if not isinstance(t, Mapping) or "displacements" not in t or \
+                    set(t) - {"limit", "displacements"}:
+                raise ValueError(f"{name} must have displacements (and may have limit)")
+            out.append(Category(name=name, limit=t.get("limit"),
+                                displacements=tuple(tuple(r) for r in t["displacements"])))
+        v = out
+    elif isinstance(v, (str, bytes)) or not isinstance(v, (list, tuple)):
+        raise ValueError("must be a table of name = {limit, displacements}")
+    cats = tuple(v)
+    if not cats or not all(isinstance(c, Category) for c in cats):
+        raise ValueError("must hold at least one category")
+    return cats
+
+
+def _rows(v: Any) -> dict[str, dict]:
+    """The rows' tables, checked: each names a strategy and sets no option the sweep sets."""
+    if not isinstance(v, Mapping) or not v:
+        raise ValueError("must be a table of name = {strategy = ..., ...}")
+    rows = {}
+    for name, opts in v.items():
+        if not isinstance(opts, Mapping) or "strategy" not in opts:
+            raise ValueError(f"{name} must be a table with a strategy")
+        fixed = sorted(set(opts) & set(FIXED))
+        if fixed:
+            raise ValueError(f"{name}.{fixed[0]} is set by the sweep itself")
+        if name == IDEAL_ROW:
+            raise ValueError(f"{name}: the name is kept for the exact model's reference "
+                             "(quality.ideal)")
+        rows[str(name)] = dict(opts)
+    return rows
+
+
+def adapt_config(cfg: QualityConfig, row: str):
+    """The adapt stage's config of one row (or of :data:`IDEAL_ROW`: infogain)."""
+    from kbcli.stages.adapt import AdaptConfig
+
+    opts = {"strategy": "infogain"} if row == IDEAL_ROW else dict(cfg.rows[row])
+    values = {**dict(cfg.adapt), **opts, "mode": cfg.mode, "arm": dict(cfg.arm),
+              "reach_noise": float(cfg.reach_noise), "max_steps": cfg.max_steps,
+              "family": "translation", "stop": False}
+    return AdaptConfig.from_dict(values)
+
+
+def model_names(cfg: QualityConfig) -> list[tuple[str, str, int]]:
+    """(name, exploration, budget) of every model of the sweep, in artifact order."""
+    return [(f"{e}-{b}", e, b) for e in cfg.explorations for b in cfg.budgets]

@@ -1,0 +1,144 @@
+"""The options several commands share (kbcli/cli/options.py): one declaration, the registered
+names in every command's help, an unknown name refused in one line that lists the valid ones."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import one_line_error
+
+from kbcli.cli import app
+from kbcli.cli import options as opts
+from kbcli.core.estimators import ESTIMATORS
+from kbcli.core.keyboard import KeyboardConfig
+from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.transforms import FAMILIES
+from kbcli.io.artifact import write_artifact
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages.models import exact_artifact
+from kbcli.stages.perturb import PerturbConfig
+from kbcli.stages.perturb import run as perturb_run
+
+#: (command, option, kind of part): each command's help of the option lists every registered name.
+LISTED = [
+    (("adapt",), "--posterior", "posterior"),
+    (("serve",), "--posterior", "posterior"),
+    (("run",), "--posterior", "posterior"),
+    (("adapt",), "--estimator", "estimator"),
+    (("serve",), "--estimator", "estimator"),
+    (("run",), "--estimator", "estimator"),
+    (("adapt",), "--family", "family"),
+    (("serve",), "--family", "family"),
+    (("run",), "--family", "family"),
+    (("perturb",), "--family", "family"),
+    (("adapt",), "--strategy", "strategy"),
+    (("serve",), "--strategy", "strategy"),
+    (("run",), "--strategy", "strategy"),
+    (("bench", "adapt"), "--strategy", "strategy"),
+    (("bench", "robust"), "--strategy", "strategy"),
+    (("learn",), "--strategy", "exploration"),
+    (("bench", "learn"), "--strategy", "exploration"),
+    (("adapt",), "--mode", "mode"),
+    (("learn",), "--mode", "mode"),
+    (("play",), "--mode", "mode"),
+    (("run",), "--mode", "mode"),
+    (("evaluate",), "--mode", "mode"),
+    (("bench", "learn"), "--mode", "mode"),
+    (("bench", "evaluate"), "--mode", "mode"),
+    (("bench", "reliability"), "--mode", "mode"),
+    (("adapt",), "--arm", "arm"),
+    (("learn",), "--arm", "arm"),
+    (("play",), "--arm", "arm"),
+    (("run",), "--arm", "arm"),
+    (("evaluate",), "--arm", "arm"),
+    (("bench", "reliability"), "--arm", "arm"),
+    (("keyboard",), "--layout", "layout"),
+    (("bench", "adapt"), "--layout", "layout"),
+    (("bench", "learn"), "--layout", "layout"),
+    (("bench", "layouts"), "--layout", "layout"),
+    (("learn",), "--model-class", "model class"),
+    (("bench", "learn"), "--model-class", "model class"),
+    (("detect",), "--detector", "detector"),
+    (("run",), "--detector", "detector"),
+]
+
+
+def _option_help(runner, command: tuple[str, ...], option: str) -> str:
+    """The help text of ``option`` in ``kbcli COMMAND --help``, on one line."""
+    r = runner.invoke(app, [*command, "--help"], env={"COLUMNS": "80"})
+    assert r.exit_code == 0, r.output
+    text, keep = [], False
+    for line in r.output.splitlines():
+        stripped = line.strip()
+        if stripped.startswith("-"):  # an option's first line
+            keep = option in stripped.split("  ")[0].replace(",", " ").split()
+        if keep:
+            text.append(stripped)
+    assert text, f"{option} not in kbcli {' '.join(command)} --help"
+    return " ".join(" ".join(text).split())
+
+
+@pytest.mark.parametrize(("command", "option", "kind"), LISTED,
+                         ids=[f"{' '.join(c)} {o}" for c, o, _ in LISTED])
+def test_shared_option_help_lists_every_registered_name(runner, command, option, kind):
+    text = _option_help(runner, command, option)
+    names = opts.names_of(kind)
+    assert names
+    for name in names:
+        assert name in text, (name, text)
+
+
+def test_names_come_from_the_registries():
+    assert opts.names_of("posterior") == POSTERIORS.names()
+    assert opts.names_of("estimator") == ESTIMATORS.names()
+    assert opts.names_of("family") == FAMILIES.names()
+    for kind in ("layout", "model class", "strategy", "exploration", "detector", "arm", "mode"):
+        assert opts.names_of(kind), kind
+
+
+def test_a_name_registered_later_appears_in_the_source():
+    with POSTERIORS.temporarily("toy", object(), summary="a toy posterior"):
+        assert "toy" in opts.names_of("posterior")
+        assert "toy: a toy posterior" in opts.describe_of("posterior")
+    assert "toy" not in opts.names_of("posterior")
+
+
+def test_one_of_reads_like_a_sentence():
+    assert opts.one_of("family") == "translation or rigid"
+    assert opts.one_of("mode", "exact") == "ideal, dynamics or exact"
+
+
+@pytest.fixture
+def files(tmp_path):
+    kb_art = keyboard_stage.run(KeyboardConfig())
+    write_artifact(exact_artifact(kb_art), tmp_path / "model.h5")
+    write_artifact(perturb_run(PerturbConfig(params=(8.3, -5.6)), kb_art,
+                               rng=np.random.default_rng(0)), tmp_path / "scene.h5")
+    return tmp_path
+
+
+@pytest.mark.parametrize("command", ["adapt", "run"])
+def test_an_unknown_posterior_is_one_line_listing_the_valid_ones(runner, files, command):
+    r = runner.invoke(app, [command, "--model", str(files / "model.h5"), "--scene",
+                            str(files / "scene.h5"), "-o", str(files / "out.h5"),
+                            "--posterior", "gaussian"])
+    one_line_error(r, "gaussian", *POSTERIORS.names())
+    assert not (files / "out.h5").exists()
+
+
+def test_an_unknown_estimator_is_one_line_listing_the_valid_ones(runner, files):
+    r = runner.invoke(app, ["adapt", "--model", str(files / "model.h5"), "--scene",
+                            str(files / "scene.h5"), "-o", str(files / "out.h5"),
+                            "--estimator", "median"])
+    one_line_error(r, "median", *ESTIMATORS.names())
+
+
+def test_estimator_flag_reaches_the_run(runner, files):
+    from kbcli.io.artifact import read_artifact
+
+    r = runner.invoke(app, ["adapt", "--model", str(files / "model.h5"), "--scene",
+                            str(files / "scene.h5"), "-o", str(files / "out.h5"), "-T", "3",
+                            "--prior-halfwidth", "15", "--estimator", "ml"])
+    assert r.exit_code == 0, r.output
+    cfg = read_artifact(files / "out.h5", "run").config
+    assert cfg["adapt"]["robot"]["estimator"] == "ml"

@@ -1,0 +1,96 @@
+"""The documentation site: generated from its sources, built strictly, its examples run.
+
+The CLI reference is read from the Typer app, so it names every command; the results pages are
+rendered from result files, so regenerating them from the same file gives the same page; the tour's
+commands run as a newcomer types them (on a smaller budget)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import typer
+
+ROOT = Path(__file__).resolve().parent.parent
+_spec = importlib.util.spec_from_file_location("docs_hooks", ROOT / "tools" / "docs_hooks.py")
+hooks = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(hooks)
+
+
+def _command_paths(cmd, path="kbcli"):
+    yield path
+    for name, sub in getattr(cmd, "commands", {}).items():
+        yield from _command_paths(sub, f"{path} {name}")
+
+
+def test_cli_reference_names_every_command_and_option():
+    from kbcli.cli import app
+
+    text = hooks.cli_markdown()
+    tree = typer.main.get_command(app)
+    paths = list(_command_paths(tree))
+    assert len(paths) > 20
+    for p in paths:
+        assert f"`{p}`" in text, p
+    assert "`--max-steps <int range>`" in text or "--max-steps" in text
+    assert "--posterior" in text and "--strategy" in text
+
+
+def test_results_page_renders_a_result_file(tmp_path):
+    d = {"command": "kbcli bench detect", "date": "2026-12-03", "machine": "2 cores",
+         "kbcli_version": "0.1.0",
+         "tables": [{"title": "delay", "columns": ["detector", "delay"],
+                     "rows": [{"detector": "binomial", "delay": 12.25},
+                              {"detector": "a|b", "delay": 3}]}]}
+    (tmp_path / "detect.json").write_text(json.dumps(d))
+    page = hooks.results_markdown("detect", tmp_path)
+    assert "Measured with `kbcli bench detect` on 2026-12-03, kbcli 0.1.0, 2 cores." in page
+    assert "| binomial | 12.25 |" in page and "| a\\|b | 3 |" in page
+    assert hooks.results_markdown("detect", tmp_path) == page     # regenerates identically
+    assert "not there yet" in hooks.results_markdown("missing", tmp_path)
+
+
+def test_markers_are_replaced(monkeypatch):
+    monkeypatch.setattr(hooks, "cli_markdown", lambda: "CLI")
+    monkeypatch.setattr(hooks, "results_markdown", lambda name: f"R[{name}]")
+    out = hooks.on_page_markdown("a <!-- cli-reference --> b <!-- results: learn --> c")
+    assert out == "a CLI b R[learn] c"
+
+
+def _tour() -> list[str]:
+    text = (ROOT / "docs" / "getting-started.md").read_text()
+    block = re.search(r"## A five-minute tour\s*```sh\n(.*?)```", text, re.S).group(1)
+    return [line.split("#")[0].strip() for line in block.splitlines() if line.strip()]
+
+
+def test_the_tour_runs(tmp_path):
+    """Every command of the getting-started tour, as typed (the learning budget made smaller)."""
+    kbcli = Path(sys.executable).parent / "kbcli"
+    exe = str(kbcli) if kbcli.exists() else "kbcli"
+    tour = _tour()
+    assert tour and all(c.startswith("kbcli ") for c in tour)
+    for cmd in tour:
+        argv = shlex.split(cmd.replace("--budget 300", "--budget 60"))
+        r = subprocess.run([exe, *argv[1:]], cwd=tmp_path, capture_output=True, text=True)
+        assert r.returncode == 0, f"{cmd}: {r.stderr}"
+    assert (tmp_path / "run.png").stat().st_size > 0
+
+
+@pytest.mark.skipif(shutil.which("mkdocs") is None and not (Path(sys.executable).parent / "mkdocs").exists(),
+                    reason="mkdocs is in the docs extra, which make test installs")
+def test_the_site_builds_strictly(tmp_path):
+    mk = Path(sys.executable).parent / "mkdocs"
+    env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
+    r = subprocess.run([str(mk) if mk.exists() else "mkdocs", "build", "--strict", "--site-dir",
+                        str(tmp_path / "site")], cwd=ROOT, capture_output=True, text=True, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    cli = (tmp_path / "site" / "reference" / "cli" / "index.html").read_text()
+    assert "kbcli adapt" in cli and "kbcli bench detect" in cli

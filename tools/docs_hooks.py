@@ -1,0 +1,130 @@
+"""MkDocs hook: pages are filled from their sources at build time, never typed by hand.
+
+- ``<!-- cli-reference -->`` becomes the reference of every ``kbcli`` command and option, read from
+  the Typer application itself (its command tree; Typer vendors Click, so the walk is by duck typing);
+- ``<!-- results: NAME -->`` becomes the tables of ``benchmarks/results/NAME.json`` (see
+  :func:`results_markdown`), with the command, date, machine and kbcli version that produced them;
+- ``<!-- serve-transcript -->`` becomes a real ``kbcli serve`` session with the default model.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+
+
+def _command_tree():
+    import typer
+
+    from kbcli.cli import app
+
+    return typer.main.get_command(app)
+
+
+def _option_row(p, ctx) -> str:
+    """One row: the option as ``--help`` shows it, and its help (default and range included)."""
+    record = p.get_help_record(ctx)
+    if record is None:
+        return ""
+    name, text = record
+    if p.param_type_name == "argument":
+        name = name.upper()
+    return f"| `{name}` | {text.replace('|', chr(92) + '|')} |"
+
+
+def _command_md(cmd, path: str, level: int) -> list[str]:
+    out = [f"{'#' * level} `{path}`", ""]
+    if cmd.help:
+        out += [cmd.help.strip(), ""]
+    with cmd.context_class(cmd, info_name=path) as ctx:
+        usage = " ".join(cmd.collect_usage_pieces(ctx))
+        rows = [r for p in cmd.params if not getattr(p, "hidden", False)
+                if (r := _option_row(p, ctx))]
+    out += ["```", f"{path} {usage}".rstrip(), "```", ""]
+    if rows:
+        out += ["| option | what |", "|---|---|", *rows, ""]
+    if hasattr(cmd, "commands"):
+        for name in sorted(cmd.commands):
+            sub = cmd.commands[name]
+            if not getattr(sub, "hidden", False):
+                out += _command_md(sub, f"{path} {name}", min(level + 1, 4))
+    return out
+
+
+def cli_markdown() -> str:
+    """The reference of every command, group by group, from the Typer app."""
+    return "\n".join(_command_md(_command_tree(), "kbcli", 2))
+
+
+def _table(rows: list[dict], columns: list[str]) -> list[str]:
+    out = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    for r in rows:
+        out.append("| " + " | ".join(_cell(r.get(c, "")) for c in columns) + " |")
+    return out
+
+
+def _cell(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v).replace("|", "\\|")
+
+
+def results_markdown(name: str, root: Path = RESULTS) -> str:
+    """The tables of one result file (``{"command", "date", "machine", "kbcli_version", "tables":
+    [{"title", "columns", "rows"}]}``) with where they came from."""
+    path = root / f"{name}.json"
+    if not path.exists():
+        return (f"!!! note \"No stored result\"\n    `benchmarks/results/{name}.json` is not there yet: "
+                "run the command on this page to make it.\n")
+    d = json.loads(path.read_text())
+    out = [f"Measured with `{d['command']}` on {d['date']}, kbcli {d['kbcli_version']}, "
+           f"{d['machine']}.", ""]
+    for t in d["tables"]:
+        out += [f"**{t['title']}**", ""] + _table(t["rows"], t["columns"]) + [""]
+    return "\n".join(out)
+
+
+_RESULTS = re.compile(r"<!--\s*results:\s*([\w.-]+)\s*-->")
+
+
+def on_page_markdown(markdown: str, **_) -> str:
+    if "<!-- cli-reference -->" in markdown:
+        markdown = markdown.replace("<!-- cli-reference -->", cli_markdown())
+    if "<!-- serve-transcript -->" in markdown:
+        markdown = markdown.replace("<!-- serve-transcript -->", serve_transcript())
+    return _RESULTS.sub(lambda m: results_markdown(m.group(1)), markdown)
+
+
+def _rounded(v):
+    if isinstance(v, float):
+        return round(v, 2)
+    if isinstance(v, list):
+        return [_rounded(x) for x in v]
+    if isinstance(v, dict):
+        return {k: _rounded(x) for k, x in v.items()}
+    return v
+
+
+def serve_transcript(steps: int = 2) -> str:
+    """A real ``kbcli serve`` session of ``steps`` touches with the default model, driven by
+    ``examples/external_robot.py`` (ideal mode), floats rounded to 2 decimals for reading."""
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        log = Path(tmp) / "t.txt"
+        subprocess.run([sys.executable, str(ROOT / "examples" / "external_robot.py"),
+                        "--model", str(ROOT / "data" / "default-model.h5"), "--mode", "ideal",
+                        "--max-steps", str(steps), "-o", str(Path(tmp) / "s.h5"),
+                        "--transcript", str(log)], check=True, capture_output=True, cwd=tmp)
+        lines = log.read_text().splitlines()
+    out = []
+    for line in lines:
+        who, _, msg = line.partition(" ")
+        out.append(f"{who:5s} {json.dumps(_rounded(json.loads(msg)))}")
+    return "```\n" + "\n".join(out) + "\n```\n"
