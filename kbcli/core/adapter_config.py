@@ -6,13 +6,20 @@ See :class:`AdapterConfig` for every option; :mod:`kbcli.core.adapter` for how t
 
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass
+from typing import Annotated, Any, ClassVar
 
 import numpy as np
+from pydantic import AfterValidator, Field, Strict, model_validator
 
-from kbcli.core import transforms
-from kbcli.core.config import check_known
+from kbcli.core.config import (
+    Config,
+    Count,
+    Flag,
+    Name,
+    NonNegative,
+    Positive,
+    Rate,
+)
 from kbcli.core.estimators import ESTIMATORS
 from kbcli.core.grid import grid_bytes
 from kbcli.core.posteriors import POSTERIORS
@@ -25,7 +32,7 @@ from kbcli.core.robust import (
     Nuisance,
 )
 from kbcli.core.strategies import STRATEGIES
-from kbcli.errors import ConfigError
+from kbcli.core.transforms import FAMILIES
 
 #: Default softening (px) of a learned model's map (``AdapterConfig.model_blur``).
 LEARNED_BLUR = 1.0
@@ -41,23 +48,31 @@ WIDE_BLUR_FACTOR = 2.0
 MAX_BLUR = 50.0
 
 
-def _num(name: str, v: object, *, lo: float = 0.0, strict: bool = True,
-         hi: float = math.inf) -> None:
-    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-    ok = ok and (v > lo if strict else v >= lo) and v <= hi
-    if not ok:
-        rel = ">" if strict else ">="
-        top = f" and <= {hi:g}" if math.isfinite(hi) else ""
-        raise ConfigError(f"{name} must be a finite number {rel} {lo:g}{top}, got {v!r}")
+def _blur(v: float) -> float:
+    if v > MAX_BLUR:
+        raise ValueError(f"must be a blur in [0, {MAX_BLUR:g}] px (<= {MAX_BLUR:g}: a key's width), "
+                         f"got {v!r}")
+    return v
 
 
-def _int(name: str, v: object, lo: int = 1) -> None:
-    if not isinstance(v, int) or isinstance(v, bool) or v < lo:
-        raise ConfigError(f"{name} must be a whole number >= {lo}, got {v!r}")
+def _angle(v: float) -> float:
+    if v > 180:
+        raise ValueError(f"must be in [0, 180] degrees, got {v!r}")
+    return v
 
 
-@dataclass(frozen=True, kw_only=True)
-class AdapterConfig:
+def _registered(registry) -> AfterValidator:
+    """A field validator: the name must be registered in ``registry`` (ConfigError lists them)."""
+    return AfterValidator(registry.check)
+
+
+#: A blur, px: a finite number in [0, MAX_BLUR].
+Blur = Annotated[float, Strict(), Field(ge=0, allow_inf_nan=False), AfterValidator(_blur)]
+#: A probability in (0, 1].
+Fraction = Annotated[float, Strict(), Field(gt=0, le=1, allow_inf_nan=False)]
+
+
+class AdapterConfig(Config):
     """How the robot adapts (robot side only: nothing about the simulated world).
 
     Parameters
@@ -144,104 +159,63 @@ class AdapterConfig:
         Refuse hypothesis grids (and model rasters) that would need more working memory.
     """
 
-    strategy: str = "infogain"
-    posterior: str = "likelihood"
-    family: str = "translation"
-    resolution: float = 0.5
-    prior_halfwidth: float = 45.0
-    max_angle: float = 5.0
-    angle_resolution: float = 0.25
-    outlier: float = 1e-3
-    blur: float = 0.0
-    robust: bool = True
-    robust_blurs: tuple[float, ...] | None = None
-    robust_outliers: tuple[float, ...] | None = None
-    robust_eta: float | None = None
-    redundancy_radius: float | None = None
-    model_blur: float | None = None
-    cell_average: bool = True
-    raster_step: float | None = None
-    candidates: int = 256
-    hypotheses: int = 512
-    active_keep: int = 8
-    active_hypotheses: int = 2048
-    kde_samples: int = 10000
-    kde_bandwidth: float | None = None
-    estimator: str = "mean"
-    stop_ml: float | None = None
-    stop_mass: float = 0.95
-    stop_radius: float = 1.0
-    stop_angle: float = 0.5
-    max_memory_mb: float = 2048.0
+    what: ClassVar[str] = "adapt"
 
-    def __post_init__(self) -> None:
-        STRATEGIES.get(self.strategy)
-        if self.posterior not in POSTERIORS:
-            raise ConfigError(f"unknown posterior {self.posterior!r}; valid: {', '.join(POSTERIORS)}")
-        transforms.check_family(self.family)
-        if self.estimator not in ESTIMATORS:
-            raise ConfigError(f"unknown estimator {self.estimator!r}; valid: {', '.join(ESTIMATORS)}")
-        _num("resolution", self.resolution)
-        _num("prior_halfwidth", self.prior_halfwidth)
-        _num("max_angle", self.max_angle, strict=False)
-        if self.max_angle > 180:
-            raise ConfigError(f"max_angle must be in [0, 180] degrees, got {self.max_angle!r}")
-        _num("angle_resolution", self.angle_resolution)
+    strategy: Annotated[Name, _registered(STRATEGIES)] = "infogain"
+    posterior: Annotated[Name, _registered(POSTERIORS)] = "likelihood"
+    family: Annotated[Name, _registered(FAMILIES)] = "translation"
+    resolution: Positive = 0.5
+    prior_halfwidth: Positive = 45.0
+    max_angle: Annotated[NonNegative, AfterValidator(_angle)] = 5.0
+    angle_resolution: Positive = 0.25
+    outlier: Rate = 1e-3
+    blur: Blur = 0.0
+    robust: Flag = True
+    robust_blurs: Annotated[tuple[Blur, ...], Field(min_length=1)] | None = None
+    robust_outliers: Annotated[tuple[Rate, ...], Field(min_length=1)] | None = None
+    robust_eta: Fraction | None = None
+    redundancy_radius: NonNegative | None = None
+    model_blur: Blur | None = None
+    cell_average: Flag = True
+    raster_step: Positive | None = None
+    candidates: Count = 256
+    hypotheses: Count = 512
+    active_keep: Count = 8
+    active_hypotheses: Count = 2048
+    kde_samples: Annotated[int, Strict(), Field(ge=10)] = 10000
+    kde_bandwidth: Positive | None = None
+    estimator: Annotated[Name, _registered(ESTIMATORS)] = "mean"
+    stop_ml: Positive | None = None
+    stop_mass: Positive = 0.95
+    stop_radius: Positive = 1.0
+    stop_angle: Positive = 0.5
+    max_memory_mb: Positive = 2048.0
+
+    @model_validator(mode="before")
+    @classmethod
+    def _family_outliers(cls, data: Any) -> Any:
+        """``robust_outliers`` None: the family's default (fewer for a rotating, larger grid)."""
+        if isinstance(data, dict) and data.get("robust_outliers") is None:
+            fam = data.get("family", "translation")
+            rotates = fam in FAMILIES and FAMILIES.get(fam).rotates
+            data = {**data, "robust_outliers": RIGID_OUTLIERS if rotates else DEFAULT_OUTLIERS}
+        return data
+
+    @model_validator(mode="after")
+    def _fits(self) -> AdapterConfig:
+        """The prior holds at least one step, and the grid fits in ``max_memory_mb``."""
         if self.prior_halfwidth < self.resolution:
-            raise ConfigError("prior_halfwidth must be at least one resolution step")
-        _num("blur", self.blur, strict=False, hi=MAX_BLUR)
-        if self.model_blur is not None:
-            _num("model_blur", self.model_blur, strict=False, hi=MAX_BLUR)
-        if self.robust_eta is not None:
-            _num("robust_eta", self.robust_eta)
-            if self.robust_eta > 1:
-                raise ConfigError(f"robust_eta must lie in (0, 1], got {self.robust_eta!r}")
-        if self.redundancy_radius is not None:
-            _num("redundancy_radius", self.redundancy_radius, strict=False)
-        if not isinstance(self.robust, bool):
-            raise ConfigError(f"robust must be true or false, got {self.robust!r}")
-        rigid = self.family == "rigid"
-        if self.robust_outliers is None:
-            object.__setattr__(self, "robust_outliers",
-                               RIGID_OUTLIERS if rigid else DEFAULT_OUTLIERS)
-        for name in ("robust_blurs", "robust_outliers"):
-            v = getattr(self, name)
-            if v is None:  # robust_blurs: resolved with the model (robust_blurs())
-                continue
-            if isinstance(v, (str, bytes)) or not hasattr(v, "__len__") or len(v) == 0:
-                raise ConfigError(f"{name} must be a non-empty list of numbers, got {v!r}")
-            for x in v:
-                _num(name, x, strict=name == "robust_outliers",
-                     hi=MAX_BLUR if name == "robust_blurs" else math.inf)
-            object.__setattr__(self, name, tuple(float(x) for x in v))
-        if any(e >= 1 for e in self.robust_outliers):
-            raise ConfigError(f"robust_outliers must be rates in (0, 1), got {self.robust_outliers!r}")
-        if not isinstance(self.cell_average, bool):
-            raise ConfigError(f"cell_average must be true or false, got {self.cell_average!r}")
-        _num("outlier", self.outlier)
-        if self.outlier >= 1:
-            raise ConfigError(f"outlier must be in (0, 1), got {self.outlier!r}")
-        if self.raster_step is not None:
-            _num("raster_step", self.raster_step)
-        for name in ("candidates", "hypotheses", "active_keep", "active_hypotheses"):
-            _int(name, getattr(self, name))
-        _int("kde_samples", self.kde_samples, 10)
-        if self.kde_bandwidth is not None:
-            _num("kde_bandwidth", self.kde_bandwidth)
-        if self.stop_ml is not None:
-            _num("stop_ml", self.stop_ml)
-        _num("stop_mass", self.stop_mass)
-        _num("stop_radius", self.stop_radius)
-        _num("stop_angle", self.stop_angle)
-        _num("max_memory_mb", self.max_memory_mb)
+            raise ValueError("prior_halfwidth must be at least one resolution step")
         cells, need = grid_bytes(self.family, self.prior_halfwidth, self.resolution,
                                  self.max_angle, self.angle_resolution)
         if need > self.max_memory_mb * 2**20:
-            raise ConfigError(
+            raise ValueError(
                 f"hypothesis grid of {cells:,} cells would need {_size(need)} of working memory, "
                 f"above max_memory_mb = {self.max_memory_mb:g} MB: coarsen the resolution or "
                 f"narrow the prior"
             )
+        return self
+
 
     @property
     def grid_cells(self) -> int:
@@ -257,18 +231,6 @@ class AdapterConfig:
         """The blurs (:func:`robust_blurs` for ``model``) and outlier rates the robust posterior
         marginalises."""
         return Nuisance.build(robust_blurs(model, self), self.robust_outliers)
-
-    def to_dict(self) -> dict:
-        d = asdict(self)
-        d["robust_blurs"] = None if self.robust_blurs is None else list(self.robust_blurs)
-        d["robust_outliers"] = list(self.robust_outliers)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict) -> AdapterConfig:
-        check_known(cls, d, "adapt")
-        return cls(**d)
-
 
 def own_boundary_error(reliability: dict | None) -> float | None:
     """The boundary error (px) a model's own estimate (its ``reliability`` table) gives the robust
