@@ -12,9 +12,6 @@ from pathlib import Path
 
 import pytest
 
-# Issue 25 is landing in steps; the shape checks pass once every step is in. Remove this mark then.
-pytestmark = pytest.mark.xfail(reason="issue 25 refactor in progress: the shape targets are met only once it lands", strict=False)
-
 ROOT = Path(__file__).resolve().parent.parent
 _spec = importlib.util.spec_from_file_location("structure", ROOT / "tools" / "structure.py")
 structure = importlib.util.module_from_spec(_spec)

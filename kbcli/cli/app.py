@@ -28,6 +28,7 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
+import kbcli.cli.record as record
 from kbcli import __version__
 from kbcli.errors import KbcliError
 from kbcli.io.paths import Output, check_outputs, figure_format, probe_writable
@@ -63,8 +64,6 @@ app.add_typer(bench_app, name="bench")
 
 def _bench_done(*_: Any, **__: Any) -> None:
     """After a bench command returned: write the tables it showed where ``--json`` asked."""
-    from kbcli.cli import record
-
     record.finish()
 
 
@@ -76,8 +75,6 @@ def _bench(json_path: Path | None = typer.Option(
                     "documentation's results pages read them (benchmarks/results/NAME.json).")
            ) -> None:
     """Benchmarks: tables of speed and sample efficiency (not tests)."""
-    from kbcli.cli import record
-
     if json_path is not None:
         if json_path.suffix != ".json":  # so it can never be one of the command's inputs
             err.print(f"kbcli bench: --json {json_path}: a result file must end in .json")
