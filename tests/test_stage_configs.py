@@ -57,7 +57,7 @@ def test_adapt_config_errors_are_one_line():
     _error(lambda: AdaptConfig(stop="yes"), "adapt.stop")
     _error(lambda: AdaptConfig(feedback="telepathy"), "adapt.feedback", "unknown feedback",
            "landed, aim")
-    _error(lambda: AdaptConfig(mode="flying"), "unknown mode 'flying'", "ideal, dynamics")
+    _error(lambda: AdaptConfig(mode="flying"), "unknown sim mode 'flying'", "ideal, dynamics")
     # an unknown key lists the robot's options too (they are accepted at the top level)
     _error(lambda: AdaptConfig.from_dict({"speed": 3}), "unknown adapt option 'speed'",
            "strategy", "mode")

@@ -2,13 +2,19 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated
 
-from pydantic import field_validator
+from pydantic import AfterValidator, BeforeValidator, InstanceOf
 
 from kbcli.core.config import Config, Name, NonNegative, Number, Positive
 from kbcli.sim.arms import PRESETS, ArmConfig, arm_config
 from kbcli.sim.modes import MODES
+
+#: A field naming a sim mode, checked against :data:`MODES` ("unknown sim mode 'x'; valid: ...").
+ModeName = Annotated[Name, AfterValidator(MODES.check)]
+#: A field holding an arm: a preset name, a table (``preset = NAME`` plus fields) or an ArmConfig,
+#: resolved by :func:`kbcli.sim.arms.arm_config`.
+Arm = Annotated[InstanceOf[ArmConfig], BeforeValidator(arm_config)]
 
 
 class SimConfig(Config):
@@ -34,18 +40,8 @@ class SimConfig(Config):
 
     what = "sim"
 
-    mode: Name = "ideal"
+    mode: ModeName = "ideal"
     base: tuple[Number, Number] = (400.0, 0.0)
     link_lengths: tuple[Positive, Positive] = (320.0, 280.0)
     reach_noise: NonNegative = 0.0
-    arm: ArmConfig = PRESETS.get("ideal")
-
-    @field_validator("mode")
-    @classmethod
-    def _mode(cls, v: str) -> str:
-        return MODES.check(v)
-
-    @field_validator("arm", mode="before")
-    @classmethod
-    def _arm(cls, v: Any) -> ArmConfig:
-        return arm_config(v)
+    arm: Arm = PRESETS.get("ideal")

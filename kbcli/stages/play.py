@@ -13,7 +13,6 @@ plays a whole session and returns its artifact.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import Any
 
 import numpy as np
 from pydantic import field_validator, model_validator
@@ -22,7 +21,8 @@ from kbcli.core.config import Config, Name, NonNegative, NonNegativeInt, Whole, 
 from kbcli.core.melody import DEFAULT_MELODY, MAX_NOTES, parse_melody
 from kbcli.core.play import NO_MATCH, PlayStep, play
 from kbcli.errors import ConfigError
-from kbcli.sim import MODES, PRESETS, ArmConfig, SimConfig, World, arm_config, make_reacher
+from kbcli.sim import PRESETS, SimConfig, World, make_reacher
+from kbcli.sim.config import Arm, ModeName
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import perturb as perturb_stage
 from kbcli.stages.artifact import Artifact, ref
@@ -67,21 +67,11 @@ class PlayConfig(Config):
     melody: Name = DEFAULT_MELODY
     steps: between(Whole, 1, MAX_PLAY_STEPS) = 300
     perturb_at: NonNegativeInt | None = None
-    mode: Name = "ideal"
+    mode: ModeName = "ideal"
     reach_noise: NonNegative = 0.0
-    arm: ArmConfig = PRESETS.get("ideal")
+    arm: Arm = PRESETS.get("ideal")
 
     _melody = field_validator("melody")(check_melody_text)
-
-    @field_validator("mode")
-    @classmethod
-    def _mode(cls, v: str) -> str:
-        return MODES.check(v)
-
-    @field_validator("arm", mode="before")
-    @classmethod
-    def _arm(cls, v: Any) -> ArmConfig:
-        return arm_config(v)
 
     @model_validator(mode="after")
     def _perturb_in_session(self) -> PlayConfig:

@@ -12,8 +12,9 @@ from kbcli.core.adapt import AdapterConfig
 from kbcli.core.config import Count, Flag, Name, Number
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
-from kbcli.sim import MODES, SimConfig
-from kbcli.sim.arms import PRESETS, ArmConfig, arm_config
+from kbcli.sim import SimConfig
+from kbcli.sim.arms import PRESETS
+from kbcli.sim.config import Arm, ModeName
 from kbcli.stages.config import StageConfig, config_fields, replace_config
 
 #: What the robot observes: where its finger landed, or only where it aimed.
@@ -76,9 +77,9 @@ class AdaptConfig(StageConfig):
     what: ClassVar[str] = "adapt"
 
     robot: InstanceOf[AdapterConfig] = Field(default_factory=AdapterConfig)
-    mode: Name = "ideal"
+    mode: ModeName = "ideal"
     reach_noise: Number = 0.0
-    arm: InstanceOf[ArmConfig] = PRESETS.get("ideal")
+    arm: Arm = PRESETS.get("ideal")
     feedback: Name = "landed"
     max_steps: Count = 40
     stop: Flag = False
@@ -99,18 +100,6 @@ class AdaptConfig(StageConfig):
         flat = {k: d.pop(k) for k in robot_keys if k in d}
         d["robot"] = _robot(d.get("robot"), flat)
         return d
-
-    @field_validator("arm", mode="before")
-    @classmethod
-    def _arm(cls, v: Any) -> ArmConfig:
-        return arm_config(v)
-
-    @field_validator("mode")
-    @classmethod
-    def _mode(cls, v: str) -> str:
-        if v not in MODES:
-            raise ValueError(f"unknown mode {v!r}; valid: {', '.join(MODES)}")
-        return v
 
     @field_validator("feedback")
     @classmethod
