@@ -12,7 +12,7 @@ from kbcli.cli import options as opts
 from kbcli.cli.app import check_io, command, err, out, progress, run_checkpointed
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.io.config import load_toml
+from kbcli.io.config import load_config, load_toml
 from kbcli.io.paths import Output, checkout_file
 from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
 from kbcli.stages import quality as stage
@@ -96,7 +96,7 @@ def _load_config(config: Path, experiments: int | None, budgets: str | None) -> 
     if "arm" in load_toml(config):  # (adapt reads one; here the sweep's arm is quality.arm)
         raise ConfigError(f"{config}: quality does not read a top-level [arm] table: remove it "
                           "(the sweep's arm is the arm key of [quality])")
-    cfg = stage.QualityConfig.from_dict(dict(load_toml(config, "quality")))
+    cfg = load_config(stage.QualityConfig, config)
     return cfg.with_overrides(experiments=experiments, budgets=_budgets(budgets))
 
 

@@ -12,7 +12,6 @@ protocol, build their own message naming their full key).
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
@@ -52,18 +51,3 @@ class StageConfig(Config):
         """A validated copy with ``changes`` applied (the other fields as they are)."""
         return type(self)(**{**dict(self), **changes})
 
-
-def replace_config(cfg: Any, **changes: Any) -> Any:
-    """A copy of a frozen config with ``changes``: :meth:`Config.replace` on a pydantic config,
-    :func:`dataclasses.replace` on a dataclass one (configs not converted yet)."""
-    if dataclasses.is_dataclass(cfg):
-        return dataclasses.replace(cfg, **changes)
-    return cfg.replace(**changes)
-
-
-def config_fields(cls: type) -> tuple[str, ...]:
-    """The option names of a config class (pydantic or dataclass)."""
-    fields = getattr(cls, "model_fields", None)
-    if fields is None:
-        fields = cls.__dataclass_fields__
-    return tuple(fields)

@@ -14,7 +14,6 @@ it (until the robot adapted) and after adaptation.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator, Mapping
 from typing import Any
 
@@ -261,7 +260,3 @@ def run(cfg: LoopConfig, model_art: Artifact, scene_art: Artifact, *, rng: np.ra
         pass
     return session.artifact()
 
-
-def success_rate_ok(a: float | None, b: float | None, tol: float = 0.05) -> bool:
-    """Whether rate ``b`` restores rate ``a`` within ``tol`` (both known)."""
-    return a is not None and b is not None and not math.isnan(b) and b >= a - tol

@@ -15,7 +15,7 @@ from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig
 from kbcli.sim.arms import PRESETS
 from kbcli.sim.config import Arm, ModeName
-from kbcli.stages.config import StageConfig, config_fields, replace_config
+from kbcli.stages.config import StageConfig
 
 #: What the robot observes: where its finger landed, or only where it aimed.
 FEEDBACKS = ("landed", "aim")
@@ -27,14 +27,14 @@ LOOP_FIELDS = ("mode", "reach_noise", "arm", "feedback", "max_steps", "stop")
 
 def robot_fields() -> tuple[str, ...]:
     """The robot's option names (:class:`kbcli.core.adapt.AdapterConfig`)."""
-    return config_fields(AdapterConfig)
+    return tuple(AdapterConfig.model_fields)
 
 
 def _robot(robot: Any, flat: dict[str, Any]) -> AdapterConfig:
     """The robot's config from a ``robot`` value (None, a table or an AdapterConfig) with the robot
     options given at the top level (``flat``) applied over it."""
     if isinstance(robot, AdapterConfig):
-        return replace_config(robot, **flat) if flat else robot
+        return robot.replace(**flat) if flat else robot
     if robot is None:
         robot = {}
     if not isinstance(robot, Mapping):
@@ -127,7 +127,7 @@ class AdaptConfig(StageConfig):
 
     def with_robot(self, **changes: Any) -> AdaptConfig:
         """A copy with some robot options changed."""
-        return self.replace(robot=replace_config(self.robot, **changes))
+        return self.replace(robot=self.robot.replace(**changes))
 
     def sim_config(self) -> SimConfig:
         return SimConfig(mode=self.mode, reach_noise=self.reach_noise, arm=self.arm)
@@ -135,7 +135,7 @@ class AdaptConfig(StageConfig):
     def adapter_config(self) -> AdapterConfig:
         """The robot-side config (``blur`` is the reach noise under ``aim`` feedback)."""
         if self.feedback == "aim":
-            return replace_config(self.robot, blur=float(self.reach_noise))
+            return self.robot.replace(blur=float(self.reach_noise))
         return self.robot
 
     def to_dict(self) -> dict:

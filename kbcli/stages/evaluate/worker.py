@@ -10,7 +10,6 @@ import numpy as np
 from kbcli.core.estimators import ESTIMATORS
 from kbcli.core.posteriors import POSTERIORS
 from kbcli.errors import ConfigError
-from kbcli.stages.config import replace_config
 from kbcli.stages.evaluate.config import EvaluateConfig, adapt_config
 from kbcli.stages.evaluate.methods import adapt_stage
 from kbcli.stages.evaluate.planning import Task, _key
@@ -96,7 +95,7 @@ def _table(state: dict, acfg):
     adapt = adapt_stage()
     if acfg is None or adapt is None:
         return None
-    key = replace_config(acfg.adapter_config(), strategy="random")
+    key = acfg.adapter_config().replace(strategy="random")
     if key not in state["tables"]:
         state["tables"][key] = adapt.build_shared_table(acfg, state["model"])
     return state["tables"][key]
