@@ -1,7 +1,8 @@
 """The Typer application, shared option types and the error boundary.
 
 The CLI only parses, calls stages and reports. Domain errors (:class:`KbcliError`) become one line
-on stderr and exit 1; usage errors keep Click's exit 2; Ctrl-C exits 130 without a traceback.
+on stderr and exit 1, and so do OS errors (a full disk: the path and the cause); usage errors keep
+Click's exit 2; Ctrl-C exits 130 and SIGTERM 143, without a traceback.
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ from rich.progress import (
 
 from kbcli import __version__
 from kbcli.errors import KbcliError
+from kbcli.io import signals
+from kbcli.io.atomic import describe_os_error
 from kbcli.io.paths import Output, check_outputs, figure_format, probe_writable
 
 app = typer.Typer(
@@ -79,18 +82,26 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 
 def handle_errors(fn: F) -> F:
-    """Turn domain errors into one line on stderr and exit 1; Ctrl-C into exit 130."""
+    """Turn domain errors and OS errors into one line on stderr and exit 1; Ctrl-C into exit 130,
+    SIGTERM into exit 143."""
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
+        signals.install()
         try:
             return fn(*args, **kwargs)
         except KbcliError as exc:
             err.print(f"kbcli: error: {exc}", markup=False)
             raise typer.Exit(1) from None
-        except KeyboardInterrupt:
-            err.print("kbcli: interrupted", markup=False)
-            raise typer.Exit(130) from None
+        except OSError as exc:  # the machine (disk full, read-only, I/O error), not a bug
+            if exc.errno is None:
+                raise
+            where = f"{exc.filename}: " if exc.filename is not None else ""
+            err.print(f"kbcli: error: {where}{describe_os_error(exc)}", markup=False)
+            raise typer.Exit(1) from None
+        except KeyboardInterrupt as exc:
+            err.print(f"kbcli: {signals.what(exc)}", markup=False)
+            raise typer.Exit(signals.exit_code(exc)) from None
 
     return wrapper  # type: ignore[return-value]
 
@@ -197,7 +208,7 @@ def run_checkpointed(results: Iterable[tuple[int, dict]], todo: int, ckpt: Any, 
         for i, res in progress(results, todo, what):
             ckpt.add(i, res)
             fresh[i] = res
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         failed = False
         try:
             ckpt.flush()
@@ -212,8 +223,8 @@ def run_checkpointed(results: Iterable[tuple[int, dict]], todo: int, ckpt: Any, 
             msg = f"{len(fresh)} of {total} {what} had finished, but writing them failed; nothing was kept"
         else:
             msg = f"none of {total} {what} had finished; nothing was kept"
-        err.print(f"kbcli: interrupted; {msg}", markup=False)
-        raise typer.Exit(130) from None
+        err.print(f"kbcli: {signals.what(exc)}; {msg}", markup=False)
+        raise typer.Exit(signals.exit_code(exc)) from None
     except BaseException:  # keep what finished, then let the error speak
         with contextlib.suppress(KbcliError):
             ckpt.flush()

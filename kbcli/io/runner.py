@@ -42,7 +42,8 @@ import h5py
 import numpy as np
 
 from kbcli.errors import ConfigError, KbcliError
-from kbcli.io.atomic import atomic_path
+from kbcli.io.artifact import hdf5_image
+from kbcli.io.atomic import atomic_path, describe_os_error, write_bytes
 
 CHECKPOINT_FORMAT = 1
 CONNECT_TIMEOUT_S = 5.0
@@ -420,7 +421,11 @@ class Checkpoint:
 
     def start(self) -> None:
         """Create the folder and its ``meta.json`` (atomically) if they do not exist yet."""
-        self.folder.mkdir(exist_ok=True)
+        try:
+            self.folder.mkdir(exist_ok=True)
+        except OSError as exc:
+            raise KbcliError(f"{self.folder}: cannot create the checkpoint folder "
+                             f"({describe_os_error(exc)})") from None
         if not self.exists():
             self._atomic(self.folder / "meta.json", lambda p: Path(p).write_text(
                 json.dumps({"format": CHECKPOINT_FORMAT, "fingerprint": self.fingerprint},
@@ -441,12 +446,12 @@ class Checkpoint:
         self.start()
         self._parts += 1
 
-        def write(tmp: str) -> None:
-            with h5py.File(tmp, "w") as f:
-                for i in sorted(self._pending):
-                    _write_tree(f.create_group(str(i)), self._pending[i])
+        def fill(f: h5py.File) -> None:
+            for i in sorted(self._pending):
+                _write_tree(f.create_group(str(i)), self._pending[i])
 
-        self._atomic(self.folder / f"part-{self._parts:06d}.h5", write)
+        image = hdf5_image(fill, reproducible=False)  # in memory: a full disk fails cleanly
+        write_bytes(self.folder / f"part-{self._parts:06d}.h5", image)
         self._pending = {}
 
     def remove(self) -> None:
