@@ -31,7 +31,7 @@ from rich.progress import (
 
 from kbcli import __version__
 from kbcli.errors import KbcliError
-from kbcli.io import signals
+from kbcli.io import lock, signals
 from kbcli.io.atomic import describe_os_error
 from kbcli.io.paths import Output, check_outputs, figure_format, probe_writable
 
@@ -102,6 +102,8 @@ def handle_errors(fn: F) -> F:
         except KeyboardInterrupt as exc:
             err.print(f"kbcli: {signals.what(exc)}", markup=False)
             raise typer.Exit(signals.exit_code(exc)) from None
+        finally:
+            lock.release_all()  # the outputs check_io locked
 
     return wrapper  # type: ignore[return-value]
 
@@ -290,8 +292,9 @@ def figure_output(path: Path, what: str = "figure") -> Output:
 
 def check_io(inputs: dict[str, Path | None], *outputs: Output | tuple[str, Path | None]) -> None:
     """Every check on a command's paths, before any work: each file output's folder exists and is
-    writable, a folder output can be made, and no output is one of the inputs (the same path, a
-    symlink or a hard link to it, or a folder holding it that would be overwritten or removed).
+    writable, a folder output can be made, no output is one of the inputs (the same path, a
+    symlink or a hard link to it, or a folder holding it that would be overwritten or removed), and
+    no other kbcli is writing it (each output is locked until the command ends).
 
     Parameters
     ----------
@@ -317,6 +320,8 @@ def check_io(inputs: dict[str, Path | None], *outputs: Output | tuple[str, Path 
             output_path(o.path)
         if o.figure:
             figure_format(o.path)  # ConfigError for a suffix other than .png, .pdf, .svg
+    for o in outs:  # one writer per output: a second command on it is refused until this one ends
+        lock.acquire(o.path)
 
 
 def version_callback(value: bool) -> None:

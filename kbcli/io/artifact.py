@@ -17,7 +17,7 @@ import hashlib
 import json
 import os
 import itertools
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +25,7 @@ import h5py
 import numpy as np
 
 from kbcli.errors import ArtifactError
-from kbcli.io.atomic import write_bytes
+from kbcli.io.atomic import atomic_paths
 from kbcli.io.schema import validate as check_schema
 from kbcli.stages.artifact import SCHEMA_VERSIONS, Artifact
 
@@ -132,8 +132,12 @@ def _fill(art: Artifact) -> Callable[[h5py.File], None]:
     return fill
 
 
-def write_artifact(art: Artifact, path: str | os.PathLike) -> str:
+def write_artifact(art: Artifact, path: str | os.PathLike,
+                   also: Sequence[tuple[str | os.PathLike, bytes]] = ()) -> str:
     """Write ``art`` atomically to ``path`` (mode 0644) and return the file's sha256.
+
+    ``also``: other files (path, bytes) written with it, all or none (e.g. ``play --wav``: a failed
+    WAV leaves no history behind, nor an old one replaced).
 
     Raises
     ------
@@ -147,7 +151,11 @@ def write_artifact(art: Artifact, path: str | os.PathLike) -> str:
     if not folder.is_dir():
         raise ArtifactError(f"{path}: folder {folder} does not exist")
     data = hdf5_image(_fill(art))
-    write_bytes(path, data)
+    files = [(path, data), *((Path(p), b) for p, b in also)]
+    with atomic_paths([p for p, _ in files]) as tmps:
+        for tmp, (_, content) in zip(tmps, files):
+            with open(tmp, "wb") as fh:
+                fh.write(content)
     digest = hashlib.sha256(data).hexdigest()
     art.sha256 = digest
     art.path = str(path)
