@@ -127,6 +127,28 @@ def _no_leak_restarts() -> None:
                                                      16 << 30)
 
 
+_WATCHING: list[int] = []
+
+
+def _watch_parent(parent: int, every: float = 1.0) -> None:
+    """Exit this worker process when its parent ``parent`` dies (a worker never outlives the kbcli
+    that started it, even one killed with SIGKILL): a daemon thread notices the worker being
+    re-parented and ends the process. Started once per process, only in a direct child."""
+    if _WATCHING or os.getppid() != parent:
+        return
+    _WATCHING.append(parent)
+
+    def watch() -> None:
+        while True:
+            time.sleep(every)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    import threading
+
+    threading.Thread(target=watch, name="kbcli-parent-watch", daemon=True).start()
+
+
 def run_tasks(
     setup: str, run: str, context: Any, key: str, items: list[tuple[int, Any]]
 ) -> list[tuple[int, dict]]:
@@ -141,6 +163,32 @@ def run_tasks(
         state = _state_for(setup, context, key)
         fn = resolve(run)
         return [(i, fn(state, task)) for i, task in items]
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity; the machine's count elsewhere)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def cap_jobs(jobs: int) -> tuple[int, str | None]:
+    """``jobs`` capped at :func:`usable_cores` (more processes than cores only run slower, and
+    each one holds a model in memory), and a note saying so (None when not capped). Values below
+    1 pass through, for :func:`execute` to refuse."""
+    cores = usable_cores()
+    if isinstance(jobs, int) and jobs > cores:
+        return cores, (f"--jobs {jobs} is more than the {cores} cores this machine lets kbcli "
+                       f"use: running {cores} worker processes")
+    return jobs, None
+
+
+def run_local_tasks(parent: int, setup: str, run: str, context: Any, key: str,
+                    items: list[tuple[int, Any]]) -> list[tuple[int, dict]]:
+    """:func:`run_tasks` in a local worker process of ``parent``, which it never outlives."""
+    _watch_parent(parent)
+    return run_tasks(setup, run, context, key, items)
 
 
 # -- backends ------------------------------------------------------------------------------------
@@ -192,8 +240,8 @@ def _local(job: Job, todo: list[int], n_jobs: int) -> Iterator[tuple[int, dict]]
     par = Parallel(n_jobs=n_jobs, backend="loky", return_as="generator_unordered",
                    batch_size=1, pre_dispatch="2 * n_jobs")
     calls = (
-        delayed(run_tasks)(job.setup, job.run, job.context, job.context_key,
-                           [(i, job.tasks[i]) for i in piece])
+        delayed(run_local_tasks)(os.getpid(), job.setup, job.run, job.context, job.context_key,
+                                 [(i, job.tasks[i]) for i in piece])
         for piece in chunks(todo, n_jobs)
     )
     for batch in par(calls):
@@ -255,7 +303,8 @@ def execute(
     Parameters
     ----------
     jobs : int
-        1: in this process; N > 1: N local processes (joblib/loky).
+        1: in this process; N > 1: N local processes (joblib/loky), at most the usable cores
+        (:func:`cap_jobs`).
     scheduler : str, optional
         ``tcp://HOST:PORT`` of a running Dask scheduler (overrides ``jobs``).
 
@@ -276,6 +325,7 @@ def execute(
         return _dask(job, todo, scheduler)
     if not todo:
         return iter(())
+    jobs, _ = cap_jobs(jobs)  # (the CLI says so; results do not depend on the worker count)
     if jobs == 1:
         return _serial(job, todo)
     return _local(job, todo, jobs)
