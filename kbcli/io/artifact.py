@@ -14,9 +14,9 @@ file under the final name, and a full disk is one line, never an HDF5 traceback.
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import os
-import itertools
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -153,9 +153,12 @@ def write_artifact(art: Artifact, path: str | os.PathLike,
     data = hdf5_image(_fill(art))
     files = [(path, data), *((Path(p), b) for p, b in also)]
     with atomic_paths([p for p, _ in files]) as tmps:
-        for tmp, (_, content) in zip(tmps, files):
-            with open(tmp, "wb") as fh:
-                fh.write(content)
+        for tmp, (_, content) in zip(tmps, files, strict=True):
+            try:
+                with open(tmp, "wb") as fh:
+                    fh.write(content)
+            except OSError as exc:  # name the file that failed
+                raise OSError(exc.errno, exc.strerror, tmp) from None
     digest = hashlib.sha256(data).hexdigest()
     art.sha256 = digest
     art.path = str(path)
