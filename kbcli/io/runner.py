@@ -33,6 +33,7 @@ import os
 import shutil
 import time
 import uuid
+import warnings
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -236,6 +237,11 @@ def _serial(job: Job, todo: list[int]) -> Iterator[tuple[int, dict]]:
 
 def _local(job: Job, todo: list[int], n_jobs: int) -> Iterator[tuple[int, dict]]:
     from joblib import Parallel, delayed
+
+    # Stopped early (Ctrl-C, SIGTERM, an error), joblib cancels the running tasks and says so in
+    # a warning of several lines; the one line the CLI prints already says what was kept.
+    warnings.filterwarnings("ignore", message=r"\d+ tasks which were still being processed",
+                            category=UserWarning)
 
     par = Parallel(n_jobs=n_jobs, backend="loky", return_as="generator_unordered",
                    batch_size=1, pre_dispatch="2 * n_jobs")
