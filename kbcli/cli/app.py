@@ -210,13 +210,14 @@ def run_checkpointed(results: Iterable[tuple[int, dict]], todo: int, ckpt: Any, 
         for i, res in progress(results, todo, what):
             ckpt.add(i, res)
             fresh[i] = res
+        ckpt.flush()
     except KeyboardInterrupt as exc:
         failed = False
         try:
             ckpt.flush()
         except KbcliError:
             failed = True
-        n = kept + len(fresh) - ckpt.pending  # what is on disk
+        n = kept + ckpt.written  # what is on disk
         lost = f" (writing the last {ckpt.pending} failed)" if failed else ""
         if ckpt.exists():  # (it may hold earlier phases' work even when n is 0)
             msg = (f"{n} of {total} {what} kept in {ckpt.folder}{lost}: rerun with --resume to "
@@ -227,11 +228,18 @@ def run_checkpointed(results: Iterable[tuple[int, dict]], todo: int, ckpt: Any, 
             msg = f"none of {total} {what} had finished; nothing was kept"
         err.print(f"kbcli: {signals.what(exc)}; {msg}", markup=False)
         raise typer.Exit(signals.exit_code(exc)) from None
-    except BaseException:  # keep what finished, then let the error speak
+    except BaseException as exc:  # keep what finished, then let the error speak
         with contextlib.suppress(KbcliError):
             ckpt.flush()
-        raise
-    ckpt.flush()
+        if not isinstance(exc, KbcliError) or not ckpt.exists():
+            raise
+        n = kept + ckpt.written  # what is on disk
+        if all(p.name == "meta.json" for p in ckpt.folder.iterdir()):  # nothing to resume
+            with contextlib.suppress(OSError):
+                ckpt.remove()
+            raise
+        raise KbcliError(f"{exc}; {n} of {total} {what} kept in {ckpt.folder}: rerun with "
+                         "--resume to continue") from None
     return fresh
 
 

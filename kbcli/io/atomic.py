@@ -117,7 +117,7 @@ def atomic_paths(paths: Sequence[str | os.PathLike], suffixes: Sequence[str] | N
     current = paths[0] if paths else Path(".")
     started = False
     try:
-        for path, suffix in zip(paths, suffixes):
+        for path, suffix in zip(paths, suffixes, strict=True):
             current = path
             clean_stale(path)
             fd, tmp = tempfile.mkstemp(prefix=_prefix(path), suffix=suffix, dir=_folder(path))
@@ -125,11 +125,11 @@ def atomic_paths(paths: Sequence[str | os.PathLike], suffixes: Sequence[str] | N
             tmps.append(tmp)
         started = True
         yield list(tmps)
-        for path, tmp in zip(paths, tmps):
+        for path, tmp in zip(paths, tmps, strict=True):
             current = path
             _fsync(tmp)
             os.chmod(tmp, 0o644)
-        for path, tmp in zip(paths, tmps):
+        for path, tmp in zip(paths, tmps, strict=True):
             current = path
             os.replace(tmp, path)
     except BaseException as exc:
@@ -220,6 +220,10 @@ def atomic_folder(path: str | os.PathLike, *, owned: Sequence[str] = ()) -> Iter
     except BaseException as exc:
         _remove(tmp)
         if isinstance(exc, OSError) and exc.errno is not None:
-            raise write_error(path, exc) from None
+            where = path / Path(exc.filename).name if exc.filename is not None and \
+                str(exc.filename).startswith(str(tmp)) else path
+            raise write_error(where, exc) from None
+        if isinstance(exc, KbcliError) and str(tmp) in str(exc):  # name the file, not its draft
+            raise type(exc)(str(exc).replace(str(tmp), str(path))) from None
         raise
     _sync_folder(folder)

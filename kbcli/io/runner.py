@@ -417,6 +417,9 @@ class Checkpoint:
         self._pending: dict[int, dict] = {}
         self._since = time.monotonic()
         self._parts = 0
+        #: results written to parts by this object (what a resumed run gets back, beside the
+        #: results it loaded)
+        self.written = 0
 
     @staticmethod
     def beside(output: str | os.PathLike) -> Path:
@@ -508,6 +511,7 @@ class Checkpoint:
 
         image = hdf5_image(fill, reproducible=False)  # in memory: a full disk fails cleanly
         write_bytes(self.folder / f"part-{self._parts:06d}.h5", image)
+        self.written += len(self._pending)
         self._pending = {}
 
     def remove(self) -> None:
