@@ -665,3 +665,50 @@ def test_serve_stdio_hostile_client(tmp_path):
     art = read_artifact(out)
     assert art.attrs["message_errors"] == 4 and len(art.data["actions"]) == 1
     assert _listing(tmp_path) == ["s.h5"]
+
+
+# -- config files that are not files -----------------------------------------------------------------
+def test_config_folder(tmp_path):
+    from kbcli.errors import ConfigError
+    from kbcli.io.config import load_toml
+
+    with pytest.raises(ConfigError, match="is a folder, expected a TOML config file"):
+        load_toml(tmp_path)
+
+
+def test_config_device():
+    from kbcli.errors import ConfigError
+    from kbcli.io.config import load_toml
+
+    with pytest.raises(ConfigError, match="/dev/null: is a device"):
+        load_toml("/dev/null")
+
+
+def test_config_fifo_does_not_block(tmp_path):
+    from kbcli.errors import ConfigError
+    from kbcli.io.config import load_toml
+
+    fifo = tmp_path / "c.toml"
+    os.mkfifo(fifo)
+    t0 = time.monotonic()
+    with pytest.raises(ConfigError, match="is a FIFO"):
+        load_toml(fifo)
+    assert time.monotonic() - t0 < 1
+
+
+def test_config_oversized(tmp_path):
+    from kbcli.errors import ConfigError
+    from kbcli.io.config import MAX_CONFIG_BYTES, load_toml
+
+    big = tmp_path / "c.toml"
+    big.write_text("# " + "x" * MAX_CONFIG_BYTES)
+    with pytest.raises(ConfigError, match="more than a config file may hold"):
+        load_toml(big)
+
+
+def test_cli_config_folder_one_line(runner, tmp_path):
+    r = runner.invoke(app, ["adapt", "--model", MODEL, "--scene", SCENE, "--config",
+                            str(tmp_path), "-o", str(tmp_path / "r.h5")])
+    assert r.exit_code in (1, 2) and "Traceback" not in r.output
+    assert "no such config file" not in r.output
+    assert not (tmp_path / "r.h5").exists()
