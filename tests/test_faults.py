@@ -473,9 +473,18 @@ def test_a_worker_never_outlives_its_killed_parent():
     assert _wait_gone([wpid], 5.0) == []
 
 
+@pytest.fixture
+def sigint_heard():
+    """Children that hear Ctrl-C (a test suite started in the background inherits an ignored
+    SIGINT, and so would its children; a handled one is reset to the default at exec)."""
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)
+
+
 @pytest.mark.parametrize(("sig", "code", "line"), [(signal.SIGTERM, 143, "kbcli: terminated"),
                                                    (signal.SIGINT, 130, "kbcli: interrupted")])
-def test_learn_signal(tmp_path, sig, code, line):
+def test_learn_signal(tmp_path, sig, code, line, sigint_heard):
     out = tmp_path / "m.h5"
     p = subprocess.Popen([sys.executable, "-m", "kbcli", "learn", "--keyboard", KB, "--budget",
                           "100000", "-o", str(out)], stdout=subprocess.PIPE,
