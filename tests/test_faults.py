@@ -721,3 +721,23 @@ def test_cli_config_folder_one_line(runner, tmp_path):
     assert r.exit_code in (1, 2) and "Traceback" not in r.output
     assert "no such config file" not in r.output
     assert not (tmp_path / "r.h5").exists()
+
+
+def test_sigterm_handler_restored_after_a_command(runner, tmp_path):
+    before = signal.getsignal(signal.SIGTERM)
+    r = runner.invoke(app, ["keyboard", "-o", str(tmp_path / "k.h5")])
+    assert r.exit_code == 0
+    assert signal.getsignal(signal.SIGTERM) is before
+
+
+def test_terminated_inside_a_command_exits_143(runner, tmp_path, monkeypatch):
+    from kbcli.stages import keyboard as keyboard_stage
+
+    def killed(*a, **k):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)
+
+    monkeypatch.setattr(keyboard_stage, "run", killed)
+    r = runner.invoke(app, ["keyboard", "-o", str(tmp_path / "k.h5")])
+    assert r.exit_code == 143 and r.output.strip() == "kbcli: terminated"
+    assert _listing(tmp_path) == []

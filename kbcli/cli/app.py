@@ -87,7 +87,7 @@ def handle_errors(fn: F) -> F:
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        signals.install()
+        old_term = signals.install()
         try:
             return fn(*args, **kwargs)
         except KbcliError as exc:
@@ -104,6 +104,7 @@ def handle_errors(fn: F) -> F:
             raise typer.Exit(signals.exit_code(exc)) from None
         finally:
             lock.release_all()  # the outputs check_io locked
+            signals.restore(old_term)
 
     return wrapper  # type: ignore[return-value]
 

@@ -26,14 +26,23 @@ def _raise(signum: int, frame: FrameType | None) -> None:
     raise Terminated()
 
 
-def install() -> None:
+def install() -> object:
     """Make SIGTERM raise :class:`Terminated` in the main thread (no-op elsewhere, or when SIGTERM
-    is ignored by the parent, e.g. ``nohup``)."""
+    is ignored by the parent, e.g. ``nohup``); returns the handler it replaced (for
+    :func:`restore`), or None when nothing changed."""
     if threading.current_thread() is not threading.main_thread():
-        return
-    if signal.getsignal(signal.SIGTERM) is signal.SIG_IGN:
-        return
+        return None
+    old = signal.getsignal(signal.SIGTERM)
+    if old is signal.SIG_IGN:
+        return None
     signal.signal(signal.SIGTERM, _raise)
+    return signal.SIG_DFL if old is None else old  # (None: a handler not set from Python)
+
+
+def restore(old: object) -> None:
+    """Put back the SIGTERM handler :func:`install` replaced."""
+    if old is not None and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, old)
 
 
 def exit_code(exc: BaseException) -> int:
