@@ -23,7 +23,7 @@ from helpers import one_line_error
 import kbcli.io.artifact as artifact_io
 from kbcli.cli import app
 from kbcli.errors import ArtifactError, KbcliError
-from kbcli.io import atomic, lock, runner, signals
+from kbcli.io import atomic, lock, processes, signals
 from kbcli.io.artifact import read_artifact, sha256_file, write_artifact
 from kbcli.io.runner import Checkpoint
 
@@ -457,8 +457,8 @@ def test_evaluate_sigterm_keeps_the_checkpoint_and_stops_the_workers(tmp_path):
 def test_a_worker_never_outlives_its_killed_parent():
     """A local worker (:func:`kbcli.io.runner.run_local_tasks`) exits when its parent is killed
     with SIGKILL, which no handler can catch."""
-    worker = ("import os, sys, time\nfrom kbcli.io.runner import _watch_parent\n"
-              "_watch_parent(os.getppid(), every=0.05)\nprint('ready', flush=True)\n"
+    worker = ("import os, sys, time\nfrom kbcli.io.processes import watch_parent\n"
+              "watch_parent(os.getppid(), every=0.05)\nprint('ready', flush=True)\n"
               "time.sleep(60)\n")
     parent = ("import subprocess, sys\n"
               f"w = subprocess.Popen([sys.executable, '-c', {worker!r}], stdout=subprocess.PIPE, "
@@ -504,17 +504,17 @@ def test_learn_signal(tmp_path, sig, code, line, sigint_heard):
 
 # -- bounds ------------------------------------------------------------------------------------------
 def test_jobs_capped_with_a_note():
-    cores = runner.usable_cores()
-    jobs, note = runner.cap_jobs(10_000)
+    cores = processes.usable_cores()
+    jobs, note = processes.cap_jobs(10_000)
     assert jobs == cores and f"--jobs 10000 is more than the {cores} cores" in note
-    assert runner.cap_jobs(1) == (1, None)
-    assert runner.cap_jobs(0) == (0, None)  # refused later, with its own message
+    assert processes.cap_jobs(1) == (1, None)
+    assert processes.cap_jobs(0) == (0, None)  # refused later, with its own message
 
 
 def test_jobs_option_notes_on_stderr(capsys):
     from kbcli.cli.options import _cap_jobs
 
-    assert _cap_jobs(10_000) == runner.usable_cores()
+    assert _cap_jobs(10_000) == processes.usable_cores()
     assert "kbcli: --jobs 10000 is more than" in capsys.readouterr().err
 
 

@@ -137,7 +137,7 @@ def seed_option(help: str = "Seed of the robot's and the world's randomness.") -
 Seed = seed_option()
 def _cap_jobs(value: int) -> int:
     """More workers than cores only run slower: cap ``--jobs`` at the core count, with a note."""
-    from kbcli.io.runner import cap_jobs
+    from kbcli.io.processes import cap_jobs
 
     jobs, note = cap_jobs(value)
     if note is not None:

@@ -45,6 +45,7 @@ import numpy as np
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import hdf5_image
 from kbcli.io.atomic import atomic_path, describe_os_error, write_bytes
+from kbcli.io.processes import cap_jobs, watch_parent
 
 CHECKPOINT_FORMAT = 1
 CONNECT_TIMEOUT_S = 5.0
@@ -128,28 +129,6 @@ def _no_leak_restarts() -> None:
                                                      16 << 30)
 
 
-_WATCHING: list[int] = []
-
-
-def _watch_parent(parent: int, every: float = 1.0) -> None:
-    """Exit this worker process when its parent ``parent`` dies (a worker never outlives the kbcli
-    that started it, even one killed with SIGKILL): a daemon thread notices the worker being
-    re-parented and ends the process. Started once per process, only in a direct child."""
-    if _WATCHING or os.getppid() != parent:
-        return
-    _WATCHING.append(parent)
-
-    def watch() -> None:
-        while True:
-            time.sleep(every)
-            if os.getppid() != parent:
-                os._exit(1)
-
-    import threading
-
-    threading.Thread(target=watch, name="kbcli-parent-watch", daemon=True).start()
-
-
 def run_tasks(
     setup: str, run: str, context: Any, key: str, items: list[tuple[int, Any]]
 ) -> list[tuple[int, dict]]:
@@ -166,29 +145,10 @@ def run_tasks(
         return [(i, fn(state, task)) for i, task in items]
 
 
-def usable_cores() -> int:
-    """The cores this process may run on (its CPU affinity; the machine's count elsewhere)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return max(1, os.cpu_count() or 1)
-
-
-def cap_jobs(jobs: int) -> tuple[int, str | None]:
-    """``jobs`` capped at :func:`usable_cores` (more processes than cores only run slower, and
-    each one holds a model in memory), and a note saying so (None when not capped). Values below
-    1 pass through, for :func:`execute` to refuse."""
-    cores = usable_cores()
-    if isinstance(jobs, int) and jobs > cores:
-        return cores, (f"--jobs {jobs} is more than the {cores} cores this machine lets kbcli "
-                       f"use: running {cores} worker processes")
-    return jobs, None
-
-
 def run_local_tasks(parent: int, setup: str, run: str, context: Any, key: str,
                     items: list[tuple[int, Any]]) -> list[tuple[int, dict]]:
     """:func:`run_tasks` in a local worker process of ``parent``, which it never outlives."""
-    _watch_parent(parent)
+    watch_parent(parent)
     return run_tasks(setup, run, context, key, items)
 
 
