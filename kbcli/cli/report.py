@@ -15,7 +15,6 @@ from kbcli.io.atomic import atomic_folder
 from kbcli.io.paths import FIGURE_FORMATS, Output
 from kbcli.stages import report as stage
 
-
 #: The files a report writes (any format): a new report removes those of an older one it did not
 #: write again, and nothing else (the folder is written aside, then moved into place).
 OWNED = ("README.md", *(f"{stem}.{fmt}" for stem in ("fig5_posterior", "fig6_entropy",
