@@ -115,6 +115,11 @@ def main(argv: list[str] | None = None) -> int:
         felt, heard = touch(action)
         link.send({"op": "observe", "action": action, "heard": heard, "felt": felt})
         msg = link.receive()
+        if msg["type"] == "error" and "matches no sound" in msg["error"]:
+            # we did touch: record it as an unknown sound (it does not move the posterior)
+            link.send({"op": "observe", "action": action, "heard": heard, "felt": felt,
+                       "insist": True})
+            msg = link.receive()
         if msg["type"] == "error":
             raise SystemExit(f"kbcli refused a touch: {msg['error']}")
         touches += 1

@@ -237,12 +237,12 @@ def sigint_heard():
     signal.signal(signal.SIGINT, old)
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_serve_interrupted_keeps_the_touches(model_file, tmp_path, sig, sigint_heard):
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_serve_interrupted_keeps_the_touches(model_file, tmp_path, sig, code, sigint_heard):
     out = tmp_path / "session.h5"
     proc = _one_touch(model_file, out)
     proc.send_signal(sig)
-    assert proc.wait(timeout=60) == 130
+    assert proc.wait(timeout=60) == code
     assert "Traceback" not in proc.stderr.read().decode()
     art = read_artifact(out, "run")
     assert art.attrs["steps"] == 1 and art.attrs["ended"] == "interrupted"

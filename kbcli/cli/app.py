@@ -1,7 +1,8 @@
 """The Typer application, shared option types and the error boundary.
 
 The CLI only parses, calls stages and reports. Domain errors (:class:`KbcliError`) become one line
-on stderr and exit 1; usage errors keep Click's exit 2; Ctrl-C exits 130 without a traceback.
+on stderr and exit 1, and so do OS errors (a full disk: the path and the cause); usage errors keep
+Click's exit 2; Ctrl-C exits 130 and SIGTERM 143, without a traceback.
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ from rich.progress import (
 import kbcli.cli.record as record
 from kbcli import __version__
 from kbcli.errors import KbcliError
+from kbcli.io import lock, signals
+from kbcli.io.atomic import describe_os_error
 from kbcli.io.paths import Output, check_outputs, figure_format, probe_writable
 
 app = typer.Typer(
@@ -100,18 +103,29 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 
 def handle_errors(fn: F) -> F:
-    """Turn domain errors into one line on stderr and exit 1; Ctrl-C into exit 130."""
+    """Turn domain errors and OS errors into one line on stderr and exit 1; Ctrl-C into exit 130,
+    SIGTERM into exit 143."""
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
+        old_term = signals.install()
         try:
             return fn(*args, **kwargs)
         except KbcliError as exc:
             err.print(f"kbcli: error: {exc}", markup=False)
             raise typer.Exit(1) from None
-        except KeyboardInterrupt:
-            err.print("kbcli: interrupted", markup=False)
-            raise typer.Exit(130) from None
+        except OSError as exc:  # the machine (disk full, read-only, I/O error), not a bug
+            if exc.errno is None:
+                raise
+            where = f"{exc.filename}: " if exc.filename is not None else ""
+            err.print(f"kbcli: error: {where}{describe_os_error(exc)}", markup=False)
+            raise typer.Exit(1) from None
+        except KeyboardInterrupt as exc:
+            err.print(f"kbcli: {signals.what(exc)}", markup=False)
+            raise typer.Exit(signals.exit_code(exc)) from None
+        finally:
+            lock.release_all()  # the outputs check_io locked
+            signals.restore(old_term)
 
     return wrapper  # type: ignore[return-value]
 
@@ -218,13 +232,14 @@ def run_checkpointed(results: Iterable[tuple[int, dict]], todo: int, ckpt: Any, 
         for i, res in progress(results, todo, what):
             ckpt.add(i, res)
             fresh[i] = res
-    except KeyboardInterrupt:
+        ckpt.flush()
+    except KeyboardInterrupt as exc:
         failed = False
         try:
             ckpt.flush()
         except KbcliError:
             failed = True
-        n = kept + len(fresh) - ckpt.pending  # what is on disk
+        n = kept + ckpt.written  # what is on disk
         lost = f" (writing the last {ckpt.pending} failed)" if failed else ""
         if ckpt.exists():  # (it may hold earlier phases' work even when n is 0)
             msg = (f"{n} of {total} {what} kept in {ckpt.folder}{lost}: rerun with --resume to "
@@ -233,13 +248,20 @@ def run_checkpointed(results: Iterable[tuple[int, dict]], todo: int, ckpt: Any, 
             msg = f"{len(fresh)} of {total} {what} had finished, but writing them failed; nothing was kept"
         else:
             msg = f"none of {total} {what} had finished; nothing was kept"
-        err.print(f"kbcli: interrupted; {msg}", markup=False)
-        raise typer.Exit(130) from None
-    except BaseException:  # keep what finished, then let the error speak
+        err.print(f"kbcli: {signals.what(exc)}; {msg}", markup=False)
+        raise typer.Exit(signals.exit_code(exc)) from None
+    except BaseException as exc:  # keep what finished, then let the error speak
         with contextlib.suppress(KbcliError):
             ckpt.flush()
-        raise
-    ckpt.flush()
+        if not isinstance(exc, KbcliError) or not ckpt.exists():
+            raise
+        n = kept + ckpt.written  # what is on disk
+        if all(p.name == "meta.json" for p in ckpt.folder.iterdir()):  # nothing to resume
+            with contextlib.suppress(OSError):
+                ckpt.remove()
+            raise
+        raise KbcliError(f"{exc}; {n} of {total} {what} kept in {ckpt.folder}: rerun with "
+                         "--resume to continue") from None
     return fresh
 
 
@@ -300,8 +322,9 @@ def figure_output(path: Path, what: str = "figure") -> Output:
 
 def check_io(inputs: dict[str, Path | None], *outputs: Output | tuple[str, Path | None]) -> None:
     """Every check on a command's paths, before any work: each file output's folder exists and is
-    writable, a folder output can be made, and no output is one of the inputs (the same path, a
-    symlink or a hard link to it, or a folder holding it that would be overwritten or removed).
+    writable, a folder output can be made, no output is one of the inputs (the same path, a
+    symlink or a hard link to it, or a folder holding it that would be overwritten or removed), and
+    no other kbcli is writing it (each output is locked until the command ends).
 
     Parameters
     ----------
@@ -327,6 +350,8 @@ def check_io(inputs: dict[str, Path | None], *outputs: Output | tuple[str, Path 
             output_path(o.path)
         if o.figure:
             figure_format(o.path)  # ConfigError for a suffix other than .png, .pdf, .svg
+    for o in outs:  # one writer per output: a second command on it is refused until this one ends
+        lock.acquire(o.path)
 
 
 def version_callback(value: bool) -> None:

@@ -10,6 +10,7 @@ behaviour are the commands' own: a bad name is refused by the stage's config (on
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Annotated, Any
@@ -105,8 +106,20 @@ def seed_option(help: str = "Seed of the robot's and the world's randomness.") -
 
 
 Seed = seed_option()
+def _cap_jobs(value: int) -> int:
+    """More workers than cores only run slower: cap ``--jobs`` at the core count, with a note."""
+    from kbcli.io.processes import cap_jobs
+
+    jobs, note = cap_jobs(value)
+    if note is not None:
+        sys.stderr.write(f"kbcli: {note}\n")
+    return jobs
+
+
 #: ``--jobs/-j``: local worker processes.
-Jobs = Annotated[int, _opt("--jobs", "-j", help="Local worker processes (joblib/loky).")]
+Jobs = Annotated[int, _opt("--jobs", "-j", callback=_cap_jobs,
+                           help="Local worker processes (joblib/loky); at most the number of "
+                           "cores this process may use (more is capped, with a note).")]
 #: ``--scheduler``: a Dask scheduler's address.
 Scheduler = Annotated[str | None, _opt(
     "--scheduler", help="Run on a Dask cluster: address of its scheduler, tcp://HOST:PORT.")]

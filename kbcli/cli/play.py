@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import wave
 from pathlib import Path
 from typing import Annotated
@@ -24,7 +25,6 @@ from kbcli.core.audio import SAMPLE_RATE, to_pcm16
 from kbcli.core.melody import DEFAULT_MELODY, MAX_BEATS, MAX_NOTES, parse_melody
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.io.atomic import atomic_path
 from kbcli.io.config import arm_file, load_arm
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import play as stage
@@ -44,13 +44,15 @@ def wav_seconds_bound(melody_text: str, keyboard, steps: int) -> float:
     return float(total * 60.0 / max(slowest, 1e-9))
 
 
-def write_wav(path: Path, samples: np.ndarray, sample_rate: int) -> None:
-    """Write mono 16-bit PCM atomically (temporary file in the same folder, then rename)."""
-    with atomic_path(path) as tmp, wave.open(tmp, "wb") as w:
+def wav_bytes(samples: np.ndarray, sample_rate: int) -> bytes:
+    """Mono 16-bit PCM as the bytes of a WAV file."""
+    buf = io.BytesIO()
+    with wave.open(buf, "wb") as w:
         w.setnchannels(1)
         w.setsampwidth(2)
         w.setframerate(sample_rate)
         w.writeframes(to_pcm16(samples))
+    return buf.getvalue()
 
 
 @command(name="play")
@@ -97,10 +99,11 @@ def play_cmd(
     for _ in progress(session, cfg.steps, "playing"):
         pass
     art = session.artifact()
-    samples = None
+    samples, also = None, []
     if wav is not None:
         samples = stage.heard_audio(art, session.keyboard.features, sample_rate=SAMPLE_RATE)
-    write_artifact(art, output)
+        also = [(wav, wav_bytes(samples, SAMPLE_RATE))]
+    write_artifact(art, output, also=also)  # both files or neither
     a = art.attrs
 
     def rate(v: float | None) -> str:
@@ -114,7 +117,6 @@ def play_cmd(
         msg += f"; failure rate {rate(a['failure_rate_before'])}"
     out.print(msg)
     if samples is not None:
-        write_wav(wav, samples, SAMPLE_RATE)
         out.print(f"wrote {wav}: {len(samples) / SAMPLE_RATE:.1f} s of what the robot heard")
 
 

@@ -11,6 +11,7 @@ import typer
 from kbcli.cli import options as opts
 from kbcli.cli.app import check_io, command, err, out, progress, run_checkpointed
 from kbcli.errors import ConfigError
+from kbcli.io import signals
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_config, load_toml
 from kbcli.io.paths import Output, checkout_file
@@ -132,12 +133,12 @@ def _learn_models(cfg, kb_art, ckpt: Checkpoint, resume: bool, jobs: int,
             model_dir.mkdir(exist_ok=True)
             write_artifact(art, model_dir / f"{ltasks[i].name}.h5")
             models[ltasks[i].name] = art
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         msg = (f"{len(models)} of {len(ltasks)} models kept in {model_dir}: rerun with --resume "
                "to continue") if models else f"none of {len(ltasks)} models had finished; " \
             "nothing was kept"
-        err.print(f"kbcli: interrupted; {msg}", markup=False)
-        raise typer.Exit(130) from None
+        err.print(f"kbcli: {signals.what(exc)}; {msg}", markup=False)
+        raise typer.Exit(signals.exit_code(exc)) from None
     return models
 
 

@@ -9,16 +9,21 @@ import typer
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import busy, check_io, command, out
-from kbcli.errors import ConfigError, KbcliError
+from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact
-from kbcli.io.atomic import atomic_path
+from kbcli.io.atomic import atomic_folder
 from kbcli.io.paths import FIGURE_FORMATS, Output
 from kbcli.stages import report as stage
 
+#: The files a report writes (any format): a new report removes those of an older one it did not
+#: write again, and nothing else (the folder is written aside, then moved into place).
+OWNED = ("README.md", *(f"{stem}.{fmt}" for stem in ("fig5_posterior", "fig6_entropy",
+                                                     "fig7_error_*", "advantage")
+                        for fmt in FIGURE_FORMATS))
+
 
 def _write_text(path: Path, text: str) -> None:
-    with atomic_path(path) as tmp:
-        Path(tmp).write_text(text, encoding="utf-8")
+    Path(path).write_text(text, encoding="utf-8")
 
 
 @command(name="report")
@@ -54,14 +59,10 @@ def report_cmd(
     names = {f.name: str(Path(f.name).with_suffix("." + fmt)) for f in rep.figures}
     check_io({"EVALUATION": evaluation},
              Output(output, "report folder", folder=True, files=("README.md", *names.values())))
-    try:
-        output.mkdir(exist_ok=True)
-    except OSError as exc:
-        raise KbcliError(f"{output}: cannot create the report folder ({exc.strerror})") from None
     readme = rep.readme
-    with busy("drawing the report's figures"):
+    with atomic_folder(output, owned=OWNED) as tmp, busy("drawing the report's figures"):
         for fig in rep.figures:
-            path = output / names[fig.name]
+            path = tmp / names[fig.name]
             readme = readme.replace(f"]({fig.name})", f"]({names[fig.name]})")
             if fig.name.startswith("fig5"):
                 viz.plot_posterior(art, path)
@@ -69,7 +70,7 @@ def report_cmd(
                 viz.plot_entropy(art, path)
             else:
                 viz.plot_error(art, path, fig.name.removeprefix("fig7_error_").removesuffix(".png"))
-    _write_text(output / "README.md", readme)
+        _write_text(tmp / "README.md", readme)
     out.print(f"wrote {output}/: README.md and {len(rep.figures)} figures ({fmt})")
     for c in rep.claims:
         out.print(f"  [{c.verdict}] {c.paper} -- {c.method}: {c.measured}", markup=False,
@@ -84,13 +85,10 @@ def _quality_report(art, source: Path, output: Path, fmt: str) -> None:
     fig = f"advantage.{fmt}"
     check_io({"EVALUATION": source},
              Output(output, "report folder", folder=True, files=("README.md", fig)))
-    try:
-        output.mkdir(exist_ok=True)
-    except OSError as exc:
-        raise KbcliError(f"{output}: cannot create the report folder ({exc.strerror})") from None
-    with busy("drawing the report's figure"):
-        plot_advantage(art, output / fig)
-    _write_text(output / "README.md", quality.report(art).replace("](advantage.png)", f"]({fig})"))
+    with atomic_folder(output, owned=OWNED) as tmp, busy("drawing the report's figure"):
+        plot_advantage(art, tmp / fig)
+        _write_text(tmp / "README.md",
+                    quality.report(art).replace("](advantage.png)", f"]({fig})"))
     out.print(f"wrote {output}/: README.md and {fig}")
     for r in art.attrs["rows"]:
         if r != art.attrs["baseline"]:

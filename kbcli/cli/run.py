@@ -44,7 +44,7 @@ def run_cmd(
     strategy: opts.strategy_option() = "infogain",
     posterior: opts.posterior_option() = "likelihood",
     estimator: opts.estimator_option() = None,
-    family: opts.family_option() = "translation",
+    family: opts.family_option("the scene's family") = None,
     mode: opts.mode_option() = "ideal",
     reach_noise: opts.ReachNoise = 0.0,
     arm: opts.arm_option() = "ideal",
@@ -62,6 +62,10 @@ def run_cmd(
     detector score) and prints the success rate before the move, after it, and after adaptation.
     """
     check_io({"--model": model, "--scene": scene, "--arm": arm_file(arm)}, ("--output", output))
+    model_art = read_artifact(model, "model")
+    scene_art = read_artifact(scene, "scene")
+    if family is None:  # like adapt: estimate what the scene moved (a rigid move has an angle)
+        family = scene_art.config.get("family", "translation")
     cfg = stage.LoopConfig(
         melody=melody, steps=steps, perturb_at=perturb_at, max_adapt_steps=max_adapt_steps,
         detector=DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold),
@@ -69,8 +73,6 @@ def run_cmd(
                                reach_noise=reach_noise, arm=load_arm(arm), stop=True,
                                **({} if estimator is None else {"estimator": estimator})),
     )
-    model_art = read_artifact(model, "model")
-    scene_art = read_artifact(scene, "scene")
     session = stage.LoopSession(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed)
     note_arm(cfg.adapt.arm, cfg.adapt.mode)
     adapting = [0]

@@ -21,6 +21,7 @@ import typer
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import check_io, command, err
+from kbcli.io.signals import Terminated
 
 _HELP = """Adapt with a robot in another process: JSON lines on stdin/stdout (or a local socket).
 
@@ -84,8 +85,7 @@ def _listen(socket_path: Path | None, host: str, port: int | None) -> tuple[sock
     return srv, f"tcp:{host}:{srv.getsockname()[1]}"
 
 
-class _Terminated(KeyboardInterrupt):
-    """SIGTERM, handled like Ctrl-C (the artifact is written first)."""
+_Terminated = Terminated  # SIGTERM, handled like Ctrl-C (the artifact is written first; exit 143)
 
 
 def _on_sigterm(signum, frame) -> None:

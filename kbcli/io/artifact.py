@@ -6,17 +6,18 @@ input, and ``attrs`` (JSON metadata). Arrays are datasets (nested dicts are grou
 ``track_times=False`` and only the standard gzip + shuffle filters, so identical inputs give
 identical bytes and ``h5dump`` reads every file.
 
-Writes are atomic: a temporary file in the destination folder, fsync, then ``os.replace``; a crash
-or Ctrl-C never leaves a half-written file under the final name.
+Writes are atomic: the file is built in memory, written to a temporary file in the destination
+folder, fsync'ed, then renamed with ``os.replace``; a crash or Ctrl-C never leaves a half-written
+file under the final name, and a full disk is one line, never an HDF5 traceback.
 """
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
+import itertools
 import json
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -24,11 +25,12 @@ import h5py
 import numpy as np
 
 from kbcli.errors import ArtifactError
-from kbcli.io.atomic import atomic_path
+from kbcli.io.atomic import atomic_paths
 from kbcli.io.schema import validate as check_schema
 from kbcli.stages.artifact import SCHEMA_VERSIONS, Artifact
 
 _COMPRESS_ABOVE = 4096  # elements; small datasets stay contiguous
+_IMAGES = itertools.count()
 
 
 def sha256_file(path: str | os.PathLike) -> str:
@@ -81,42 +83,83 @@ def _write_group(group: h5py.Group, data: dict[str, Any]) -> None:
         group.create_dataset(name, data=arr, **kwargs)
 
 
-def write_artifact(art: Artifact, path: str | os.PathLike) -> str:
+def hdf5_image(fill: Callable[[h5py.File], None], *, reproducible: bool = True) -> bytes:
+    """An HDF5 file built in memory by ``fill(file)`` (HDF5's core driver, no backing store).
+
+    Building the file in memory keeps HDF5 away from the disk: a full disk or an I/O error then
+    happens in a plain Python write, which fails cleanly. (Written by HDF5 itself, a failed write
+    leaves dirty metadata in HDF5's cache that every later close or finalisation tries to flush
+    again: pages of ``Can't decrement id ref count`` tracebacks, then a segmentation fault.) The
+    bytes are those HDF5 writes to disk.
+
+    Parameters
+    ----------
+    reproducible : bool
+        The artifact settings: no object times, the earliest file format that holds the data.
+    """
+    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    if reproducible:
+        fapl.set_libver_bounds(h5py.h5f.LIBVER_EARLIEST, h5py.h5f.LIBVER_LATEST)
+    fapl.set_fapl_core(block_size=1 << 16, backing_store=False)
+    fcpl = h5py.h5p.create(h5py.h5p.FILE_CREATE)
+    if reproducible:
+        fcpl.set_obj_track_times(False)
+    name = f"kbcli-image-{os.getpid()}-{next(_IMAGES)}".encode()
+    fid = h5py.h5f.create(name, h5py.h5f.ACC_TRUNC, fcpl=fcpl, fapl=fapl)
+    f = h5py.File(fid)
+    try:
+        fill(f)
+        f.flush()
+        return fid.get_file_image()
+    finally:
+        f.close()
+        del f, fid
+
+
+def _fill(art: Artifact) -> Callable[[h5py.File], None]:
+    def fill(f: h5py.File) -> None:
+        f.attrs["kind"] = art.kind
+        f.attrs["schema_version"] = int(art.schema_version or SCHEMA_VERSIONS[art.kind])
+        f.attrs["kbcli_version"] = art.kbcli_version
+        f.attrs["config"] = _json(art.config)
+        f.attrs["seed"] = -1 if art.seed is None else int(art.seed)
+        f.attrs["inputs"] = _json(art.inputs)
+        for role in sorted(art.inputs):
+            f.attrs[f"input_sha256.{role}"] = str(art.inputs[role].get("sha256"))
+        f.attrs["attrs"] = _json(art.attrs)
+        _write_group(f, art.data)
+
+    return fill
+
+
+def write_artifact(art: Artifact, path: str | os.PathLike,
+                   also: Sequence[tuple[str | os.PathLike, bytes]] = ()) -> str:
     """Write ``art`` atomically to ``path`` (mode 0644) and return the file's sha256.
+
+    ``also``: other files (path, bytes) written with it, all or none (e.g. ``play --wav``: a failed
+    WAV leaves no history behind, nor an old one replaced).
 
     Raises
     ------
     ArtifactError
-        If the destination folder does not exist or is not writable.
+        If the destination folder does not exist or is not writable, or the write fails (disk
+        full, read-only file system, I/O error): one line naming ``path`` and the cause, and no
+        temporary file is left.
     """
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise ArtifactError(f"{path}: folder {folder} does not exist")
-    with atomic_path(path) as tmp:
-        fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
-        fapl.set_libver_bounds(h5py.h5f.LIBVER_EARLIEST, h5py.h5f.LIBVER_LATEST)
-        fcpl = h5py.h5p.create(h5py.h5p.FILE_CREATE)
-        fcpl.set_obj_track_times(False)
-        fid = h5py.h5f.create(tmp.encode(), h5py.h5f.ACC_TRUNC, fcpl=fcpl, fapl=fapl)
-        with h5py.File(fid) as f:
-            f.attrs["kind"] = art.kind
-            f.attrs["schema_version"] = int(art.schema_version or SCHEMA_VERSIONS[art.kind])
-            f.attrs["kbcli_version"] = art.kbcli_version
-            f.attrs["config"] = _json(art.config)
-            f.attrs["seed"] = -1 if art.seed is None else int(art.seed)
-            f.attrs["inputs"] = _json(art.inputs)
-            for role in sorted(art.inputs):
-                f.attrs[f"input_sha256.{role}"] = str(art.inputs[role].get("sha256"))
-            f.attrs["attrs"] = _json(art.attrs)
-            _write_group(f, art.data)
-    with contextlib.suppress(OSError):  # make the rename durable
-        dfd = os.open(folder, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    digest = sha256_file(path)
+    data = hdf5_image(_fill(art))
+    files = [(path, data), *((Path(p), b) for p, b in also)]
+    with atomic_paths([p for p, _ in files]) as tmps:
+        for tmp, (_, content) in zip(tmps, files, strict=True):
+            try:
+                with open(tmp, "wb") as fh:
+                    fh.write(content)
+            except OSError as exc:  # name the file that failed
+                raise OSError(exc.errno, exc.strerror, tmp) from None
+    digest = hashlib.sha256(data).hexdigest()
     art.sha256 = digest
     art.path = str(path)
     return digest

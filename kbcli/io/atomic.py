@@ -1,17 +1,149 @@
-"""Atomic file writes: a temporary file in the destination folder, then ``os.replace``.
+"""Atomic writes: a temporary file (or folder) beside the destination, then ``os.replace``.
 
-A crash or Ctrl-C never leaves a half-written file under the final name; the final file is mode 0644.
+A crash, Ctrl-C or SIGTERM never leaves a half-written file under the final name; the final file is
+mode 0644. Temporary files are named recognisably, ``.NAME.kbcli-tmp-PID-XXXXXXXX.SUFFIX``, so the
+next write of ``NAME`` removes those an earlier run left behind when it was killed (only those whose
+process is gone: a concurrent writer's are never touched).
+
+An operating-system error (a full disk, a read-only file system, an I/O error, a quota) becomes an
+:class:`~kbcli.errors.ArtifactError` naming the destination and the cause, on one line, and the
+temporary file is removed.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno as _errno
+import glob
 import os
+import re
+import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
-from kbcli.errors import ArtifactError
+from kbcli.errors import ArtifactError, KbcliError
+
+#: What every kbcli temporary file or folder has in its name.
+TMP_MARK = ".kbcli-tmp-"
+_PID = re.compile(re.escape(TMP_MARK) + r"(\d+)-")
+
+#: Errors that describe the machine, not kbcli: reported in one line, never as a traceback.
+DISK_ERRNOS = frozenset({_errno.ENOSPC, _errno.EDQUOT, _errno.EROFS, _errno.EIO, _errno.EACCES,
+                         _errno.EPERM, _errno.EFBIG, _errno.ENOENT, _errno.ENOTDIR, _errno.EISDIR,
+                         _errno.ENAMETOOLONG, _errno.EMFILE, _errno.ENFILE, _errno.EXDEV,
+                         _errno.ENXIO, _errno.ESTALE})
+
+
+def describe_os_error(exc: OSError) -> str:
+    """The cause of an OS error in a few words: ``No space left on device``."""
+    text = exc.strerror or (os.strerror(exc.errno) if exc.errno else "") or str(exc)
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _folder(path: Path) -> Path:
+    return path.parent if str(path.parent) else Path(".")
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process: alive
+        return True
+    return True
+
+
+def clean_stale(path: str | os.PathLike) -> list[Path]:
+    """Remove the temporary files and folders an earlier, killed kbcli run left beside ``path``
+    (``.NAME.kbcli-tmp-PID-...`` whose process is gone); returns what was removed."""
+    path = Path(path)
+    removed: list[Path] = []
+    pattern = str(_folder(path) / f".{glob.escape(path.name)}{TMP_MARK}*")
+    for name in glob.glob(pattern):
+        m = _PID.match(Path(name).name[len(path.name) + 1:])
+        if m is None or _alive(int(m.group(1))):
+            continue
+        stale = Path(name)
+        with contextlib.suppress(OSError):
+            if stale.is_dir() and not stale.is_symlink():
+                shutil.rmtree(stale)
+            else:
+                stale.unlink()
+            removed.append(stale)
+    return removed
+
+
+def _prefix(path: Path) -> str:
+    return f".{path.name}{TMP_MARK}{os.getpid()}-"
+
+
+def _remove(tmp: str | os.PathLike) -> None:
+    with contextlib.suppress(OSError):
+        if os.path.isdir(tmp) and not os.path.islink(tmp):
+            shutil.rmtree(tmp)
+        else:
+            os.unlink(tmp)
+
+
+def write_error(path: str | os.PathLike, exc: OSError) -> ArtifactError:
+    """The one-line error for an OS error while writing ``path``."""
+    return ArtifactError(f"{path}: cannot write ({describe_os_error(exc)})")
+
+
+def _fsync(path: str) -> None:
+    with open(path, "rb+") as fh:
+        os.fsync(fh.fileno())
+
+
+@contextlib.contextmanager
+def atomic_paths(paths: Sequence[str | os.PathLike], suffixes: Sequence[str] | None = None
+                 ) -> Iterator[list[str]]:
+    """Yield temporary paths for several files written together: all of them replace ``paths``
+    once every one is written (an error removes them all, and no destination is touched).
+
+    Raises
+    ------
+    ArtifactError
+        A folder that cannot be written, or an OS error while writing (disk full, read-only file
+        system, I/O error): the message names the destination and the cause.
+    """
+    paths = [Path(p) for p in paths]
+    suffixes = list(suffixes) if suffixes is not None else [".tmp"] * len(paths)
+    tmps: list[str] = []
+    current = paths[0] if paths else Path(".")
+    started = False
+    try:
+        for path, suffix in zip(paths, suffixes, strict=True):
+            current = path
+            clean_stale(path)
+            fd, tmp = tempfile.mkstemp(prefix=_prefix(path), suffix=suffix, dir=_folder(path))
+            os.close(fd)
+            tmps.append(tmp)
+        started = True
+        yield list(tmps)
+        for path, tmp in zip(paths, tmps, strict=True):
+            current = path
+            _fsync(tmp)
+            os.chmod(tmp, 0o644)
+        for path, tmp in zip(paths, tmps, strict=True):
+            current = path
+            os.replace(tmp, path)
+    except BaseException as exc:
+        for tmp in tmps:
+            _remove(tmp)
+        if isinstance(exc, OSError) and exc.errno is not None:
+            if exc.filename is not None and str(exc.filename) in tmps:
+                current = paths[tmps.index(str(exc.filename))]
+            if not started:
+                raise ArtifactError(f"{current}: cannot write in {_folder(current)} "
+                                    f"({describe_os_error(exc)})") from None
+            raise write_error(current, exc) from None
+        raise
+    _sync_folder(_folder(paths[0]) if paths else Path("."))
 
 
 @contextlib.contextmanager
@@ -21,24 +153,77 @@ def atomic_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[str]:
     Raises
     ------
     ArtifactError
-        If the folder cannot be written.
+        If the folder cannot be written, or an OS error (disk full, read-only, I/O error) occurs.
+    """
+    with atomic_paths([path], [suffix]) as (tmp,):
+        yield tmp
+
+
+def write_bytes(path: str | os.PathLike, data: bytes, suffix: str = ".tmp") -> None:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_path`)."""
+    with atomic_path(path, suffix) as tmp, open(tmp, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+
+
+def _sync_folder(folder: Path) -> None:
+    """Make a rename durable (best effort)."""
+    with contextlib.suppress(OSError):
+        dfd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+
+
+@contextlib.contextmanager
+def atomic_folder(path: str | os.PathLike, *, owned: Sequence[str] = ()) -> Iterator[Path]:
+    """Yield a temporary folder beside ``path`` to fill; on success its files move into ``path``.
+
+    When ``path`` does not exist, the temporary folder is renamed into place (one atomic step). When
+    it exists, each new file replaces its namesake (``README.md`` last, so a reader never sees a new
+    README beside old figures), and the files an older run wrote there that this one did not
+    (those matching the glob patterns ``owned``) are removed; nothing else in the folder is touched
+    (it may hold the user's own files, even the command's input). An error or an interruption
+    removes the temporary folder and leaves ``path`` as it was (or absent).
+
+    Raises
+    ------
+    KbcliError
+        The folder cannot be created, or an OS error while writing, naming ``path`` and the cause.
     """
     path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
+    folder = _folder(path)
+    clean_stale(path)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=folder)
+        tmp = Path(tempfile.mkdtemp(prefix=_prefix(path), dir=folder))
     except OSError as exc:
-        raise ArtifactError(f"{path}: cannot write in {folder} ({exc.strerror})") from None
-    os.close(fd)
+        raise KbcliError(f"{path}: cannot create the folder in {folder} "
+                         f"({describe_os_error(exc)})") from None
     try:
         yield tmp
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
+        names = sorted(os.listdir(tmp), key=lambda n: (n == "README.md", n))
+        for name in names:
+            _fsync(str(tmp / name))
+        if not path.exists():
+            os.rename(tmp, path)
+        else:
+            for name in names:
+                os.replace(tmp / name, path / name)
+            keep = set(names)
+            for pattern in owned:
+                for old in path.glob(pattern):
+                    if old.name not in keep and old.is_file():
+                        with contextlib.suppress(OSError):
+                            old.unlink()
+            _remove(tmp)
     except BaseException as exc:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+        _remove(tmp)
         if isinstance(exc, OSError) and exc.errno is not None:
-            raise ArtifactError(f"{path}: cannot write ({exc.strerror})") from None
+            where = path / Path(exc.filename).name if exc.filename is not None and \
+                str(exc.filename).startswith(str(tmp)) else path
+            raise write_error(where, exc) from None
+        if isinstance(exc, KbcliError) and str(tmp) in str(exc):  # name the file, not its draft
+            raise type(exc)(str(exc).replace(str(tmp), str(path))) from None
         raise
+    _sync_folder(folder)

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import stat
 import tomllib
 from pathlib import Path
 from typing import Any, TypeVar
 
 from kbcli.errors import ConfigError
+from kbcli.io.atomic import describe_os_error
 
 C = TypeVar("C")
 
@@ -60,6 +62,31 @@ def arm_file(value: str | None) -> Path | None:
     return Path(value)
 
 
+#: Largest config file read, bytes (a config is a few kB; a larger file is not one).
+MAX_CONFIG_BYTES = 1 << 20
+
+
+def _check_config_file(path: Path) -> None:
+    """A regular file of at most :data:`MAX_CONFIG_BYTES` (never a folder, a FIFO that would block
+    the read, or a device); ConfigError naming what it is otherwise."""
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such config file") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the config file ({describe_os_error(exc)})") \
+            from None
+    if stat.S_ISDIR(st.st_mode):
+        raise ConfigError(f"{path}: is a folder, expected a TOML config file")
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a FIFO" if stat.S_ISFIFO(st.st_mode) else "a device" if \
+            stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "not a regular file"
+        raise ConfigError(f"{path}: is {kind}, expected a TOML config file")
+    if st.st_size > MAX_CONFIG_BYTES:
+        raise ConfigError(f"{path}: {st.st_size:,} bytes, more than a config file may hold "
+                          f"({MAX_CONFIG_BYTES:,})")
+
+
 def load_toml(path: str | Path, table: str | None = None) -> dict[str, Any]:
     """Parse a TOML file, optionally returning one top-level table.
 
@@ -69,12 +96,14 @@ def load_toml(path: str | Path, table: str | None = None) -> dict[str, Any]:
         Missing file, invalid TOML, or a missing table.
     """
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: no such config file")
+    _check_config_file(path)
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: invalid TOML ({exc})") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the config file ({describe_os_error(exc)})") \
+            from None
     return doc if table is None else _table(doc, path, table)
 
 

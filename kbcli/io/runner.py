@@ -33,6 +33,7 @@ import os
 import shutil
 import time
 import uuid
+import warnings
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,7 +43,9 @@ import h5py
 import numpy as np
 
 from kbcli.errors import ConfigError, KbcliError
-from kbcli.io.atomic import atomic_path
+from kbcli.io.artifact import hdf5_image
+from kbcli.io.atomic import atomic_path, describe_os_error, write_bytes
+from kbcli.io.processes import cap_jobs, watch_parent
 
 CHECKPOINT_FORMAT = 1
 CONNECT_TIMEOUT_S = 5.0
@@ -142,6 +145,13 @@ def run_tasks(
         return [(i, fn(state, task)) for i, task in items]
 
 
+def run_local_tasks(parent: int, setup: str, run: str, context: Any, key: str,
+                    items: list[tuple[int, Any]]) -> list[tuple[int, dict]]:
+    """:func:`run_tasks` in a local worker process of ``parent``, which it never outlives."""
+    watch_parent(parent)
+    return run_tasks(setup, run, context, key, items)
+
+
 # -- backends ------------------------------------------------------------------------------------
 def check_scheduler_address(address: str) -> str:
     """Validate ``tcp://HOST:PORT`` (or ``tls://``); raises ConfigError otherwise."""
@@ -188,11 +198,16 @@ def _serial(job: Job, todo: list[int]) -> Iterator[tuple[int, dict]]:
 def _local(job: Job, todo: list[int], n_jobs: int) -> Iterator[tuple[int, dict]]:
     from joblib import Parallel, delayed
 
+    # Stopped early (Ctrl-C, SIGTERM, an error), joblib cancels the running tasks and says so in
+    # a warning of several lines; the one line the CLI prints already says what was kept.
+    warnings.filterwarnings("ignore", message=r"\d+ tasks which were still being processed",
+                            category=UserWarning)
+
     par = Parallel(n_jobs=n_jobs, backend="loky", return_as="generator_unordered",
                    batch_size=1, pre_dispatch="2 * n_jobs")
     calls = (
-        delayed(run_tasks)(job.setup, job.run, job.context, job.context_key,
-                           [(i, job.tasks[i]) for i in piece])
+        delayed(run_local_tasks)(os.getpid(), job.setup, job.run, job.context, job.context_key,
+                                 [(i, job.tasks[i]) for i in piece])
         for piece in chunks(todo, n_jobs)
     )
     for batch in par(calls):
@@ -254,7 +269,8 @@ def execute(
     Parameters
     ----------
     jobs : int
-        1: in this process; N > 1: N local processes (joblib/loky).
+        1: in this process; N > 1: N local processes (joblib/loky), at most the usable cores
+        (:func:`cap_jobs`).
     scheduler : str, optional
         ``tcp://HOST:PORT`` of a running Dask scheduler (overrides ``jobs``).
 
@@ -275,6 +291,7 @@ def execute(
         return _dask(job, todo, scheduler)
     if not todo:
         return iter(())
+    jobs, _ = cap_jobs(jobs)  # (the CLI says so; results do not depend on the worker count)
     if jobs == 1:
         return _serial(job, todo)
     return _local(job, todo, jobs)
@@ -360,6 +377,9 @@ class Checkpoint:
         self._pending: dict[int, dict] = {}
         self._since = time.monotonic()
         self._parts = 0
+        #: results written to parts by this object (what a resumed run gets back, beside the
+        #: results it loaded)
+        self.written = 0
 
     @staticmethod
     def beside(output: str | os.PathLike) -> Path:
@@ -420,7 +440,11 @@ class Checkpoint:
 
     def start(self) -> None:
         """Create the folder and its ``meta.json`` (atomically) if they do not exist yet."""
-        self.folder.mkdir(exist_ok=True)
+        try:
+            self.folder.mkdir(exist_ok=True)
+        except OSError as exc:
+            raise KbcliError(f"{self.folder}: cannot create the checkpoint folder "
+                             f"({describe_os_error(exc)})") from None
         if not self.exists():
             self._atomic(self.folder / "meta.json", lambda p: Path(p).write_text(
                 json.dumps({"format": CHECKPOINT_FORMAT, "fingerprint": self.fingerprint},
@@ -441,12 +465,13 @@ class Checkpoint:
         self.start()
         self._parts += 1
 
-        def write(tmp: str) -> None:
-            with h5py.File(tmp, "w") as f:
-                for i in sorted(self._pending):
-                    _write_tree(f.create_group(str(i)), self._pending[i])
+        def fill(f: h5py.File) -> None:
+            for i in sorted(self._pending):
+                _write_tree(f.create_group(str(i)), self._pending[i])
 
-        self._atomic(self.folder / f"part-{self._parts:06d}.h5", write)
+        image = hdf5_image(fill, reproducible=False)  # in memory: a full disk fails cleanly
+        write_bytes(self.folder / f"part-{self._parts:06d}.h5", image)
+        self.written += len(self._pending)
         self._pending = {}
 
     def remove(self) -> None:

@@ -24,8 +24,12 @@ The robot then sends, per touch (``op`` may be left out for an observation)::
 
 ``heard``: the perceived features, null for silence (required). ``felt``: where the robot felt its
 finger land, in pad px: the point the posterior is updated at (optional: without it, the aim is used
-and ``--blur`` should be the reach noise). ``action``: where it aimed (optional: the last suggested
-action; it must lie in the working area). ``id``: echoed in the reply. kbcli answers::
+and ``--blur`` should be the reach noise; it must lie within :data:`FELT_MARGIN` of the area's
+larger side around the working area). ``action``: where it aimed (optional: the last suggested
+action; it must lie in the working area). ``id``: echoed in the reply. Heard features that match
+no sound of the model are refused (an error reply, nothing recorded, the touch budget untouched)
+unless the message says ``"insist": true``: then the touch is recorded with class -1 and does not
+move the posterior. kbcli answers::
 
     {"type": "step", "step": 1, "class": 12, "sound": "A4 96 bpm",
      "estimate": {"dx": 11.9, "dy": -7.1}, "entropy": 2.3, "mass": 0.81, "done": false,
@@ -39,8 +43,9 @@ observed). Other messages: ``{"op": "suggest"}`` (the pending action again), ``{
 (estimate, entropy, mass, done, action: a ``state`` reply), ``{"op": "end"}`` (kbcli writes the
 artifact, replies ``{"type": "bye", "steps": n, "file": ...}`` and exits).
 
-A message kbcli cannot use (not JSON, not an object, an unknown ``op`` or field, non-numeric
-features, an action outside the working area, an observation beyond ``max_steps``) gets
+A message kbcli cannot use (not JSON, not an object, an unknown ``op`` or field, non-numeric or
+non-finite numbers, an action outside the working area, a ``felt`` position far outside it, heard
+features that match no sound, an observation beyond ``max_steps``) gets
 ``{"type": "error", "error": "...", "id": ...}``; nothing is recorded for it and the session goes on.
 """
 
@@ -71,7 +76,7 @@ PROTOCOL = 1
 MAX_LINE = 1 << 16
 #: Fields each ``op`` accepts.
 FIELDS = {
-    "observe": ("op", "heard", "felt", "action", "id"),
+    "observe": ("op", "heard", "felt", "action", "insist", "id"),
     "suggest": ("op", "id"),
     "state": ("op", "id"),
     "end": ("op", "id"),
@@ -80,6 +85,9 @@ FIELDS = {
 
 #: Most touches a session may observe (``max_steps``).
 MAX_SERVE_STEPS = 10_000
+#: How far outside the working area a ``felt`` position may be, as a fraction of the area's
+#: larger side (a finger lands off the aim by the reach error; farther than this is a bad reading).
+FELT_MARGIN = 0.5
 
 
 class ServeConfig(Config):
@@ -291,7 +299,10 @@ class Session:
         heard = msg["heard"]
         heard = None if heard is None else _numbers(heard, "heard", self.n_features)
         felt = msg.get("felt")
-        felt = None if felt is None else _numbers(felt, "felt", 2)
+        felt = None if felt is None else self._check_felt(_numbers(felt, "felt", 2))
+        insist = msg.get("insist", False)
+        if not isinstance(insist, bool):
+            raise MessageError(f"insist must be true or false, got {json.dumps(insist)[:40]}")
         if msg.get("action") is not None:
             action = self.adapter.check_action(_numbers(msg["action"], "action", 2))
         elif self.pending is not None:
@@ -300,6 +311,10 @@ class Session:
             raise MessageError("no action: send the action the robot took")
         ad = self.adapter
         h = ad.check_heard(heard)
+        if not insist and int(self.model.classify(h.reshape(1, -1))[0]) == UNKNOWN:
+            raise MessageError(f"heard {[float(v) for v in h]} matches no sound of the model: not "
+                               "recorded (send it again with \"insist\": true to record it as an "
+                               "unknown touch, which does not move the posterior)")
         t0 = time.perf_counter()
         cls = ad.observe(action, h, felt_position=felt)
         landed = np.full(2, np.nan) if felt is None else np.asarray(felt, float)
@@ -309,6 +324,16 @@ class Session:
         self.pending = self._suggest()
         label = "unknown" if cls == UNKNOWN else sound_name(h)
         return {"type": "step", "class": cls, "sound": label, **self._state()}
+
+    def _check_felt(self, felt: list[float]) -> list[float]:
+        """``felt`` within :data:`FELT_MARGIN` of the working area; MessageError otherwise."""
+        x0, y0, x1, y1 = (float(v) for v in self.adapter.area)
+        m = FELT_MARGIN * max(x1 - x0, y1 - y0)
+        if not (x0 - m <= felt[0] <= x1 + m and y0 - m <= felt[1] <= y1 + m):
+            raise MessageError(f"felt ({felt[0]:g}, {felt[1]:g}) is far outside the working area "
+                               f"({x0:g}, {y0:g})-({x1:g}, {y1:g}) (more than {m:g} px): a "
+                               "bad reading; not recorded")
+        return felt
 
     # -- the record --------------------------------------------------------------------------------
     def artifact(self) -> Artifact:
@@ -330,4 +355,5 @@ class Session:
         )
 
 
-__all__ = ["ServeConfig", "Session", "MessageError", "PROTOCOL", "MAX_LINE", "FIELDS"]
+__all__ = ["ServeConfig", "Session", "MessageError", "PROTOCOL", "MAX_LINE", "FIELDS",
+           "FELT_MARGIN"]
