@@ -52,9 +52,9 @@ def pads_svc():
 
 # -- the registry -----------------------------------------------------------------------------------
 def test_registry_lists_the_classes_and_refuses_unknown_names():
-    assert list(MODEL_CLASSES) == ["lines", "svc", "exact"]
-    assert learned_classes() == ("lines", "svc")
-    with pytest.raises(ConfigError, match="unknown model class 'gp'; valid: lines, svc, exact"):
+    assert list(MODEL_CLASSES) == ["lines", "svc", "forest", "knn", "exact"]
+    assert learned_classes() == ("lines", "svc", "forest", "knn")
+    with pytest.raises(ConfigError, match="unknown model class 'gp'; valid: lines, svc, forest, knn, exact"):
         MODEL_CLASSES.get("gp")
     with pytest.raises(ConfigError, match="takes no parameter 'gamma'"):
         make_model("svc", match_threshold=1.5, area=PADS.area, gamma=3.0)

@@ -27,6 +27,12 @@ is a scikit-learn estimator deriving from :class:`~kbcli.core.model.ModelBase`):
     straight line separates the pair's samples, RBF elsewhere), probabilities from the margin: any
     key shape, curved boundaries included.
 
+``forest`` (:class:`~kbcli.core.sk_models.ForestModel`)
+    scikit-learn's random forest on the two coordinates and oblique projections: p is the share of
+    trees voting for a sound (any key shape; axis-aligned keys exactly).
+``knn`` (:class:`~kbcli.core.sk_models.KNNModel`)
+    scikit-learn's k nearest samples, distance-weighted votes (any key shape).
+
 ``exact`` (:class:`~kbcli.core.model.ExactModel`)
     The keyboard's own geometry (calibration experiments, ``kbcli learn --strategy exact``): not
     learned (``learned`` False), built from the keyboard, its ``exact_map`` attribute True (every
@@ -104,6 +110,18 @@ def _svc() -> type:
     return SVCModel
 
 
+def _forest() -> type:
+    from kbcli.core.sk_models import ForestModel
+
+    return ForestModel
+
+
+def _knn() -> type:
+    from kbcli.core.sk_models import KNNModel
+
+    return KNNModel
+
+
 def _exact() -> type:
     from kbcli.core.model import ExactModel
 
@@ -114,6 +132,10 @@ MODEL_CLASSES.register("lines", ModelClass(_lines),
                        summary="straight key edges shared across keys (polygon keys)")
 MODEL_CLASSES.register("svc", ModelClass(_svc), summary="scikit-learn SVMs per pair of "
                        "neighbouring sounds, linear or RBF (any key shape)")
+MODEL_CLASSES.register("forest", ModelClass(_forest), summary="scikit-learn random forest on the "
+                       "coordinates and oblique projections (any key shape)")
+MODEL_CLASSES.register("knn", ModelClass(_knn), summary="scikit-learn k nearest samples, "
+                       "distance-weighted votes (any key shape)")
 MODEL_CLASSES.register(EXACT, ModelClass(_exact, learned=False),
                        summary="the keyboard's own geometry (not learned)")
 
