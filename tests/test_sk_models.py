@@ -110,7 +110,7 @@ def test_forest_seed_is_stored_and_changes_the_trees():
     ("forest", {"n_estimators": 0}, "n_estimators must be a whole number >= 1, got 0"),
     ("forest", {"n_directions": 1}, "n_directions must be a whole number >= 2"),
     ("forest", {"random_state": -1}, "random_state must be a whole number >= 0"),
-    ("knn", {"k": 2.5}, "k must be a whole number >= 1, got 2.5"),
+    ("knn", {"n_neighbors": 2.5}, "n_neighbors must be a whole number >= 1, got 2.5"),
     ("knn", {"floor": 1.0}, r"floor must be in \[0, 1\)"),
 ])
 def test_bad_hyper_parameters_are_one_line(name, params, msg):
@@ -122,5 +122,5 @@ def test_bad_hyper_parameters_are_one_line(name, params, msg):
 def test_registered_with_their_parameters():
     assert set(MODEL_CLASSES.get("forest").params) == {
         "n_estimators", "n_directions", "min_samples_leaf", "random_state", "floor"}
-    assert set(MODEL_CLASSES.get("knn").params) == {"k", "floor"}
+    assert set(MODEL_CLASSES.get("knn").params) == {"n_neighbors", "floor"}
     assert MODEL_CLASSES.get("knn").estimator() is KNNModel

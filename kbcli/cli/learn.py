@@ -16,6 +16,7 @@ from kbcli.cli.app import (
     busy,
     check_io,
     command,
+    err,
     figure_output,
     interactive,
     note_arm,
@@ -56,9 +57,11 @@ def learn_cmd(
     curve_every: Annotated[int, typer.Option(
         "--curve-every", help="Reaches between learning-curve points.")] = 50,
     model_class: opts.model_class_option(
-        "Model class: {classes}. lines: straight key edges (the grid and other polygon keys); svc: "
-        "scikit-learn SVMs per pair of neighbouring sounds, straight where a line separates them, "
-        "RBF elsewhere (any key shape, pads included).") = "lines",
+        "Model class: auto or one of {classes}. auto: explore with forest, then keep the class "
+        "with the best cross-validated score on the samples (printed on stderr). lines: straight "
+        "key edges (polygon keys); svc: SVMs per pair of neighbouring sounds, straight or RBF (any "
+        "key shape); forest: random forest on oblique projections; knn: nearest samples.")
+        = "auto",
 ) -> None:
     """Learn the instrument model by exploring the pad with the simulated arm.
 
@@ -100,9 +103,13 @@ def learn_cmd(
             f"fewer than the {MIN_SOUNDS} a model needs to find a moved keyboard; nothing written: "
             f"raise --budget")
     write_artifact(art, output)
+    if "model_selection" in a:
+        from kbcli.core.select import Selection
+
+        err.print(Selection(**a["model_selection"]).summary())
     to99 = a["reaches_to_99"]
     out.print(
-        f"wrote {output}: {a['layout']} layout, {model_class} model, {strategy} exploration, "
+        f"wrote {output}: {a['layout']} layout, {a['model_class']} model, {strategy} exploration, "
         f"{mode} mode, {a['n_reaches']} reaches: "
         f"{a['n_classes'] - 1} sounds + silence, accuracy {100 * a['accuracy']:.2f} %, "
         f"boundary error {a['boundary_error_px']:.2f} px, "

@@ -60,6 +60,9 @@ from kbcli.errors import ConfigError
 DEFAULT_MODEL_CLASS = "lines"
 #: The class (and the ``learn`` strategy) of the keyboard's own geometry.
 EXACT = "exact"
+#: Not a class: ``kbcli learn --model-class auto`` chooses one by cross-validation on the samples
+#: (:mod:`kbcli.core.select`).
+AUTO = "auto"
 _COMMON = ("match_threshold", "area")
 
 
@@ -151,6 +154,16 @@ def check_learned(name: str) -> str:
         raise ConfigError(f"model class {name!r} is not learned from samples; valid: "
                           f"{', '.join(learned_classes())}")
     return name
+
+
+def check_choice(name: str) -> str:
+    """``name`` when it is ``auto`` or a learned model class; ConfigError listing them otherwise."""
+    if name == AUTO:
+        return name
+    if name not in MODEL_CLASSES:
+        raise ConfigError(f"unknown model class {name!r}; valid: "
+                          f"{', '.join((AUTO, *learned_classes()))}")
+    return check_learned(name)
 
 
 def model_class_of(config: Mapping) -> str:

@@ -20,7 +20,7 @@ M_INST = p(sound | action) from a general-purpose classifier fitted to the explo
        edge (hex, polygons); with oblique projections a split can follow it.
    ``knn`` (:class:`KNNModel`)
        scikit-learn's :class:`~sklearn.neighbors.KNeighborsClassifier`, distance-weighted votes of
-       the ``k`` nearest samples: any key shape, no fitting beyond the samples.
+       the ``n_neighbors`` nearest samples: any key shape, no fitting beyond the samples.
 
 3. **boundary sites** for active exploration (:meth:`SklearnModel.boundary_sites`): wherever the
    predicted class changes between neighbouring cells of a 2 px grid over the working area (shifted
@@ -190,6 +190,8 @@ class SklearnModel(ModelBase):
             "match_threshold": np.float64(self.match_threshold),
             "area": np.asarray(self.area, float),
             "floor": np.float64(self.floor),
+            # every stored learned model has it (the artifact schema); 0: no neighbours looked at
+            "n_neighbors": np.int64(getattr(self, "n_neighbors", 0)),
         }
         for name, typ in self._PARAMS:
             d[name] = (np.int64 if typ is int else np.float64)(getattr(self, name))
@@ -283,36 +285,36 @@ class ForestModel(SklearnModel):
 
 
 class KNNModel(SklearnModel):
-    """p(sound | action) from the distance-weighted votes of the ``k`` nearest samples.
+    """p(sound | action) from the distance-weighted votes of the ``n_neighbors`` nearest samples.
 
     Parameters
     ----------
     match_threshold, area
         As every class.
-    k : int
+    n_neighbors : int
         Neighbours that vote.
     floor : float
         Probability spread evenly over the sounds (calibration).
     """
 
     kind = "knn"
-    _PARAMS = (("k", int),)
+    _PARAMS = (("n_neighbors", int),)
 
     def __init__(self, *, match_threshold: float = 1.5,
                  area: tuple[float, float, float, float] = (150.0, 200.0, 650.0, 500.0),
-                 k: int = 5, floor: float = 0.0) -> None:
+                 n_neighbors: int = 5, floor: float = 0.0) -> None:
         self.match_threshold = match_threshold
         self.area = area
-        self.k = k
+        self.n_neighbors = n_neighbors
         self.floor = floor
 
     def _check_own(self) -> None:
-        _positive_int(self, "k")
+        _positive_int(self, "n_neighbors")
 
     def _classifier(self):
         from sklearn.neighbors import KNeighborsClassifier
 
-        return _KNN(KNeighborsClassifier, int(self.k))
+        return _KNN(KNeighborsClassifier, int(self.n_neighbors))
 
 
 class _KNN:
