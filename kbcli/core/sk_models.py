@@ -37,6 +37,8 @@ p(action | sound), the raster and the confusion factor are the base's
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -150,7 +152,10 @@ class SklearnModel(ModelBase):
         self.reach_sd_ = float(reach_sd)
         self._tree = cKDTree(self.actions_)
         self._pairs = {}
-        self.classifier_ = self._classifier().fit(self._features(self.actions_), self.labels_)
+        with warnings.catch_warnings():  # a few reaches heard as many sounds is no regression
+            warnings.filterwarnings("ignore", "The number of unique classes", UserWarning)
+            self.classifier_ = self._classifier().fit(self._features(self.actions_),
+                                                      self.labels_)
 
     # -- prediction -----------------------------------------------------------------------------
     def _predict(self, points: np.ndarray, proba: bool) -> np.ndarray:
