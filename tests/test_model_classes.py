@@ -245,9 +245,10 @@ def test_learn_cli_model_class_and_bad_names(runner, tmp_path):
     r = runner.invoke(app, ["plot", "model", str(out), "-o", str(tmp_path / "m.png")])
     assert r.exit_code == 0, r.output
     bad = tmp_path / "bad.h5"
-    r = runner.invoke(app, ["learn", "--keyboard", str(kb), "--model-class", "forest", "-o",
+    r = runner.invoke(app, ["learn", "--keyboard", str(kb), "--model-class", "tree", "-o",
                             str(bad)])
-    assert r.exit_code == 1 and "unknown model class 'forest'; valid: lines, svc" in r.output
+    assert r.exit_code == 1
+    assert "unknown model class 'tree'; valid: auto, lines, svc, forest, knn" in r.output
     assert not bad.exists()
 
 
