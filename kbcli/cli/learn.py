@@ -57,10 +57,9 @@ def learn_cmd(
     curve_every: Annotated[int, typer.Option(
         "--curve-every", help="Reaches between learning-curve points.")] = 50,
     model_class: opts.model_class_option(
-        "Model class: auto or one of {classes}. auto: explore with forest, then keep the class "
-        "with the best cross-validated score on the samples (printed on stderr). lines: straight "
-        "key edges (polygon keys); svc: SVMs per pair of neighbouring sounds, straight or RBF (any "
-        "key shape); forest: random forest on oblique projections; knn: nearest samples.")
+        "Model class: auto or one of {classes}. auto: explore with forest, keep the class with the "
+        "best cross-validated score on the samples (on stderr); lines: straight key edges; svc, "
+        "forest, knn: scikit-learn SVMs, random forest, nearest samples (any key shape).")
         = "auto",
 ) -> None:
     """Learn the instrument model by exploring the pad with the simulated arm.
@@ -103,10 +102,7 @@ def learn_cmd(
             f"fewer than the {MIN_SOUNDS} a model needs to find a moved keyboard; nothing written: "
             f"raise --budget")
     write_artifact(art, output)
-    if "model_selection" in a:
-        from kbcli.core.select import Selection
-
-        err.print(Selection(**a["model_selection"]).summary())
+    _note_selection(a)
     to99 = a["reaches_to_99"]
     out.print(
         f"wrote {output}: {a['layout']} layout, {a['model_class']} model, {strategy} exploration, "
@@ -116,6 +112,14 @@ def learn_cmd(
         + (f"99 % accuracy after {to99} reaches" if to99 is not None
            else "99 % accuracy not reached")
     )
+
+
+def _note_selection(attrs: dict) -> None:
+    """Under ``--model-class auto``: the class chosen and every candidate's score, on stderr."""
+    if "model_selection" in attrs:
+        from kbcli.core.select import Selection
+
+        err.print(Selection(**attrs["model_selection"]).summary())
 
 
 @command(plot_app, name="model")
@@ -191,17 +195,13 @@ def bench_learn_cmd(
     """
     from kbcli.bench import learn as bench
 
-    if peer:
-        _bench_peer(seeds, budgets or "150,300,800", layout, seed, eval_step, json_path)
+    if _bench_peer(peer, seeds, budgets, layout, seed, eval_step, json_path):
         return
-    if json_path is not None:
-        raise ConfigError("--json is written by --peer only")
-    budgets = budgets or "200,400,800,1600"
     kb = None
     if keyboard is not None:
         kb = keyboard_stage.load(read_artifact(keyboard, "keyboard"))
         layout = [kb.layout]
-    cfg = bench.BenchConfig(seeds=seeds, budgets=_budgets(budgets), mode=mode,
+    cfg = bench.BenchConfig(seeds=seeds, budgets=_budgets(budgets or "200,400,800,1600"), mode=mode,
                             reach_noise=reach_noise, seed=seed, boundary_budget=boundary_budget,
                             strategies=tuple(strategy) if strategy else bench.STRATEGY_ORDER,
                             layouts=tuple(layout) if layout else ("grid",),
@@ -233,9 +233,15 @@ def bench_learn_cmd(
     con.print(f"dynamics simulator: {rate:.0f} reaches/s (1000 reaches, one core)")
 
 
-def _bench_peer(seeds: int, budgets: str, layout: list[str] | None, seed: int, eval_step: float,
-                json_path: Path | None) -> None:
-    """``kbcli bench learn --peer``: run, print and (with ``--json``) write the tables."""
+def _bench_peer(peer: bool, seeds: int, budgets: str | None, layout: list[str] | None, seed: int,
+                eval_step: float, json_path: Path | None) -> bool:
+    """``kbcli bench learn --peer``: run, print and (with ``--json``) write the tables; False
+    (nothing done) without ``--peer``."""
+    if not peer:
+        if json_path is not None:
+            raise ConfigError("--json is written by --peer only")
+        return False
+    budgets = budgets or "150,300,800"
     import datetime
     import json
     import platform
@@ -274,6 +280,7 @@ def _bench_peer(seeds: int, budgets: str, layout: list[str] | None, seed: int, e
         with atomic_path(json_path, suffix=".json") as tmp:
             Path(tmp).write_text(json.dumps(doc, indent=2) + "\n")
         out.print(f"wrote {json_path}")
+    return True
 
 
 @command(bench_app, name="layouts")

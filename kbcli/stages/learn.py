@@ -41,12 +41,11 @@ import numpy as np
 from pydantic import AfterValidator, Field, InstanceOf, field_serializer
 
 from kbcli.core import accuracy as scoring
-from kbcli.core import reliability
+from kbcli.core import reliability, select
 from kbcli.core.config import Config, Count, Name, Positive
 from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.model import grid_points
-from kbcli.core import select
 from kbcli.core.model_classes import AUTO, EXACT, check_choice, fit_model, learned_classes
 from kbcli.errors import ArtifactError, ConfigError
 from kbcli.sim import SimConfig, World, check_keyboard_reachable, make_reacher
