@@ -50,3 +50,35 @@ def test_bad_settings_are_refused():
         peer._check(peer.PeerConfig(budgets=(5,)))
     with pytest.raises(ConfigError):
         peer.PeerConfig(seeds=0)
+
+
+def test_tables_hold_plain_rows_and_a_verdict_per_cell():
+    cfg = peer.PeerConfig(layouts=("grid",), peers=("knn-margin",), seeds=1, budgets=(150,))
+    rows = [{"layout": "grid", "learner": "kbcli", "budget": 150, "runs": 1, "accuracy": 0.9,
+             "boundary_error": 2.0, "classes": "forest x1"},
+            {"layout": "grid", "learner": "knn-margin", "budget": 150, "runs": 1,
+             "accuracy": 0.95, "boundary_error": 1.0}]
+    learners, verdict = peer.tables(cfg, rows)
+    assert [r["learner"] for r in learners["rows"]] == ["kbcli", "knn-margin"]
+    assert learners["rows"][0]["accuracy %"] == 90.0
+    assert learners["rows"][0]["kbcli classes"] == "forest x1"
+    (v,) = verdict["rows"]
+    assert v["verdict"] == "peer better" and set(verdict["columns"]) == set(v)
+
+
+def test_bench_learn_peer_cli_writes_the_result_file(runner, tmp_path):
+    import json
+
+    from kbcli.cli import app
+
+    path = tmp_path / "learn-peer.json"
+    r = runner.invoke(app, ["bench", "learn", "--peer", "--seeds", "1", "--budgets", "20",
+                            "--layout", "grid", "--eval-step", "5", "--json", str(path)])
+    assert r.exit_code == 0, r.output
+    assert "verdict per layout and budget" in r.output
+    d = json.loads(path.read_text())
+    assert set(d) == {"command", "date", "machine", "kbcli_version", "tables"}
+    assert d["command"].startswith("kbcli bench learn --peer --seeds 1 --budgets 20")
+    assert [len(t["rows"]) for t in d["tables"]] == [1 + len(peer.PEERS), 1]
+    r = runner.invoke(app, ["bench", "learn", "--json", str(path)])
+    assert r.exit_code == 1 and "--json is written by --peer only" in r.output

@@ -9,6 +9,7 @@ from helpers import one_line_error as _one_line_error
 from kbcli.cli import app
 from kbcli.core.keyboard import KeyboardConfig
 from kbcli.core.learned import LearnedModel
+from kbcli.core.model_classes import MODEL_CLASSES
 from kbcli.core.model import ExactModel
 from kbcli.errors import ArtifactError, ConfigError, OutOfReachError
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -47,7 +48,14 @@ def test_learn_writes_a_model_artifact_and_plots_it(runner, files):
     assert a["accuracy"] == pytest.approx(
         float(np.mean(d["evaluation"]["predicted_keys"] == _truth(art))))
     model = load_model(art)
-    assert isinstance(model, LearnedModel) and model.n_classes == 7
+    # the default class is auto: chosen by cross-validation, named in the config and the attrs
+    sel = a["model_selection"]
+    assert art.config["model_class_requested"] == "auto"
+    assert a["model_class"] == art.config["model_class"] == sel["chosen"]
+    assert set(sel["cv_error"]) == {"lines", "forest", "svc", "knn"}
+    assert sel["cv_error"][sel["chosen"]] == min(sel["cv_error"].values())
+    assert type(model) is MODEL_CLASSES.get(sel["chosen"]).estimator() and model.n_classes == 7
+    assert r.stderr.count("model class: ") == 1 and "chosen by 5-fold cross-validation" in r.stderr
     r = runner.invoke(app, ["plot", "model", str(out), "-o", str(files / "m.png")])
     assert r.exit_code == 0, r.output
     assert (files / "m.png").read_bytes()[:4] == b"\x89PNG"

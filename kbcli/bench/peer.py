@@ -30,7 +30,9 @@ from kbcli.core.config import Config, Count, Names, Positive, Whole
 from kbcli.core.explore import Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard, match
 from kbcli.core.model import grid_points
+from kbcli.core.model_classes import AUTO, fit_model
 from kbcli.core.registry import Registry
+from kbcli.core.select import choose, explore_class
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig, World, make_reacher
 
@@ -153,17 +155,29 @@ def peer_run(cfg: PeerConfig, kb: Keyboard, name: str, seed: np.random.SeedSeque
 
 def kbcli_run(cfg: PeerConfig, kb: Keyboard, seed: np.random.SeedSequence
               ) -> dict[int, tuple[float, float]]:
-    """kbcli's active exploration with its defaults, scored at each budget."""
+    """kbcli's default learner (``kbcli learn``: active exploration, ``--model-class auto``),
+    scored at each budget: the exploration refits the class ``auto`` explores with, and at each
+    budget the class is chosen by cross-validation on the samples so far
+    (:func:`kbcli.core.select.choose`, folds from a generator spawned off ``seed``) and fitted
+    to them (without the learn stage's calibration, which leaves the most probable sound alone
+    but for the ``lines`` class's label-noise tolerance)."""
     rng = np.random.default_rng(seed)
     world = World(kb, make_reacher(SimConfig(mode="ideal")))
-    ex = Exploration(ExploreConfig(budget=max(cfg.budgets)), world.touch, kb.area,
-                     kb.config.match_threshold, rng)
+    ex = Exploration(ExploreConfig(budget=max(cfg.budgets), model_class=AUTO), world.touch,
+                     kb.area, kb.config.match_threshold, rng)
+    pick = np.random.default_rng(np.random.SeedSequence(seed.entropy,
+                                                        spawn_key=(*seed.spawn_key, 10)))
     out: dict[int, tuple[float, float]] = {}
     for step in ex:
         for b in [b for b in cfg.budgets if b not in out and step.n_reaches >= b]:
-            pred, true = scoring.key_maps(step.model, kb, cfg.eval_step)
+            sel = choose(ex.landed, ex.perceived, match_threshold=kb.config.match_threshold,
+                         area=kb.area, rng=pick, explored_with=explore_class(AUTO))
+            model = fit_model(sel.chosen, ex.landed, ex.perceived,
+                              match_threshold=kb.config.match_threshold, area=kb.area,
+                              targets=ex.targets)
+            pred, true = scoring.key_maps(model, kb, cfg.eval_step)
             out[b] = (scoring.accuracy_from_maps(pred, true),
-                      scoring.boundary_error(pred, true, cfg.eval_step))
+                      scoring.boundary_error(pred, true, cfg.eval_step), sel.chosen)
     return out
 
 
@@ -186,9 +200,14 @@ def summarize(cfg: PeerConfig, results: list[tuple]) -> list[dict]:
     for layout, who in keys:
         got = [r for lay, w, _, r in results if (lay, w) == (layout, who)]
         for b in sorted(cfg.budgets):
-            rows.append({"layout": layout, "learner": who, "budget": b, "runs": len(got),
-                         "accuracy": float(np.median([g[b][0] for g in got])),
-                         "boundary_error": float(np.median([g[b][1] for g in got]))})
+            row = {"layout": layout, "learner": who, "budget": b, "runs": len(got),
+                   "accuracy": float(np.median([g[b][0] for g in got])),
+                   "boundary_error": float(np.median([g[b][1] for g in got]))}
+            chosen = [g[b][2] for g in got if len(g[b]) > 2]
+            if chosen:  # kbcli's auto: the classes it chose, how often
+                row["classes"] = ", ".join(f"{c} x{chosen.count(c)}" for c in
+                                           sorted(set(chosen), key=chosen.index))
+            rows.append(row)
     return rows
 
 
@@ -216,4 +235,35 @@ def verdicts(rows: list[dict]) -> list[dict]:
     return out
 
 
-__all__ = ["PEERS", "Peer", "PeerConfig", "peer_run", "kbcli_run", "runs", "summarize", "verdicts"]
+def tables(cfg: PeerConfig, rows: list[dict]) -> list[dict]:
+    """The two tables ``kbcli bench learn --peer`` prints and writes (``{"title", "columns",
+    "rows"}``, rows of plain values): every learner's medians, and the per-layout verdicts."""
+    learners = [{"layout": r["layout"], "budget": r["budget"], "learner": r["learner"],
+                 "accuracy %": round(100 * r["accuracy"], 2),
+                 "boundary error px": round(r["boundary_error"], 3),
+                 "kbcli classes": r.get("classes", "")}
+                for r in sorted(rows, key=lambda r: (cfg.layouts.index(r["layout"])
+                                                     if r["layout"] in cfg.layouts else 0,
+                                                     r["budget"], r["learner"] != "kbcli"))]
+    verdict = [{"layout": v["layout"], "budget": v["budget"],
+                "kbcli accuracy %": round(100 * v["kbcli_accuracy"], 2),
+                "best peer accuracy %": round(100 * v["peer_accuracy"], 2),
+                "accuracy by": v["peer_accuracy_by"],
+                "kbcli boundary px": round(v["kbcli_boundary_error"], 3),
+                "best peer boundary px": round(v["peer_boundary_error"], 3),
+                "boundary by": v["peer_boundary_by"],
+                "verdict": "kbcli at or above" if v["kbcli_wins"] else
+                ("accuracy only" if v["kbcli_accuracy"] >= v["peer_accuracy"] else
+                 "boundary only" if v["kbcli_boundary_error"] <= v["peer_boundary_error"]
+                 else "peer better")} for v in verdicts(rows)]
+    head = (f"{cfg.seeds} seeds, medians, ideal mode, scored on a {cfg.eval_step:g} px grid")
+    return [
+        {"title": f"kbcli (auto, active) and scikit-activeml peers: {head}",
+         "columns": list(learners[0]) if learners else [], "rows": learners},
+        {"title": "verdict per layout and budget: kbcli against the best peer on each score",
+         "columns": list(verdict[0]) if verdict else [], "rows": verdict},
+    ]
+
+
+__all__ = ["PEERS", "Peer", "PeerConfig", "peer_run", "kbcli_run", "runs", "summarize", "verdicts",
+           "tables"]

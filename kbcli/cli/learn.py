@@ -16,6 +16,7 @@ from kbcli.cli.app import (
     busy,
     check_io,
     command,
+    err,
     figure_output,
     interactive,
     note_arm,
@@ -57,9 +58,10 @@ def learn_cmd(
     curve_every: Annotated[int, typer.Option(
         "--curve-every", help="Reaches between learning-curve points.")] = 50,
     model_class: opts.model_class_option(
-        "Model class: {classes}. lines: straight key edges (the grid and other polygon keys); svc: "
-        "scikit-learn SVMs per pair of neighbouring sounds, straight where a line separates them, "
-        "RBF elsewhere (any key shape, pads included).") = "lines",
+        "Model class: auto or one of {classes}. auto: explore with forest, keep the class with the "
+        "best cross-validated score on the samples (on stderr); lines: straight key edges; svc, "
+        "forest, knn: scikit-learn SVMs, random forest, nearest samples (any key shape).")
+        = "auto",
 ) -> None:
     """Learn the instrument model by exploring the pad with the simulated arm.
 
@@ -101,15 +103,24 @@ def learn_cmd(
             f"fewer than the {MIN_SOUNDS} a model needs to find a moved keyboard; nothing written: "
             f"raise --budget")
     write_artifact(art, output)
+    _note_selection(a)
     to99 = a["reaches_to_99"]
     out.print(
-        f"wrote {output}: {a['layout']} layout, {model_class} model, {strategy} exploration, "
+        f"wrote {output}: {a['layout']} layout, {a['model_class']} model, {strategy} exploration, "
         f"{mode} mode, {a['n_reaches']} reaches: "
         f"{a['n_classes'] - 1} sounds + silence, accuracy {100 * a['accuracy']:.2f} %, "
         f"boundary error {a['boundary_error_px']:.2f} px, "
         + (f"99 % accuracy after {to99} reaches" if to99 is not None
            else "99 % accuracy not reached")
     )
+
+
+def _note_selection(attrs: dict) -> None:
+    """Under ``--model-class auto``: the class chosen and every candidate's score, on stderr."""
+    if "model_selection" in attrs:
+        from kbcli.core.select import Selection
+
+        err.print(Selection(**attrs["model_selection"]).summary())
 
 
 @command(plot_app, name="model")
@@ -143,9 +154,9 @@ def _budgets(text: str) -> tuple[int, ...]:
 @command(bench_app, name="learn")
 def bench_learn_cmd(
     seeds: Annotated[int, typer.Option("--seeds", min=1, help="Runs per row.")] = 5,
-    budgets: Annotated[str, typer.Option(
-        "--budgets", help="Budgets at which to report the accuracy, comma-separated.")]
-        = "200,400,800,1600",
+    budgets: Annotated[str | None, typer.Option(
+        "--budgets", help="Budgets at which to report the accuracy, comma-separated [default "
+        "200,400,800,1600; with --peer 150,300,800].")] = None,
     strategy: opts.strategies_option("active, random", kind="exploration") = None,
     layout: opts.layout_option("Layouts to learn, each its default keyboard (repeat): {layouts} "
                                "[default grid].", many=True) = None,
@@ -164,6 +175,14 @@ def bench_learn_cmd(
     cache: Annotated[Path | None, typer.Option(
         "--cache", help="Folder keeping each run's result: a run already there (same settings) is "
         "read back, not run again.")] = None,
+    peer: Annotated[bool, typer.Option(
+        "--peer", help="Instead: kbcli's default learner (auto, active) beside scikit-activeml's "
+        "uncertainty sampling around scikit-learn classifiers, same simulator, seeds and scorer, "
+        "with a verdict per layout and budget [layouts default grid, hex, piano, pads, "
+        "polygons].")] = False,
+    json_path: Annotated[Path | None, typer.Option(
+        "--json", help="With --peer: also write the tables to this JSON file (command, date, "
+        "machine, kbcli version, tables).")] = None,
 ) -> None:
     """Benchmark learning the model: sample efficiency and speed, per layout, model class and
     strategy.
@@ -177,11 +196,13 @@ def bench_learn_cmd(
     """
     from kbcli.bench import learn as bench
 
+    if _bench_peer(peer, seeds, budgets, layout, seed, eval_step, json_path):
+        return
     kb = None
     if keyboard is not None:
         kb = keyboard_stage.load(read_artifact(keyboard, "keyboard"))
         layout = [kb.layout]
-    cfg = bench.BenchConfig(seeds=seeds, budgets=_budgets(budgets), mode=mode,
+    cfg = bench.BenchConfig(seeds=seeds, budgets=_budgets(budgets or "200,400,800,1600"), mode=mode,
                             reach_noise=reach_noise, seed=seed, boundary_budget=boundary_budget,
                             strategies=tuple(strategy) if strategy else bench.STRATEGY_ORDER,
                             layouts=tuple(layout) if layout else ("grid",),
@@ -211,6 +232,56 @@ def bench_learn_cmd(
               f"{cfg.boundary_budget}, one core): {wall:.1f} s")
     rate = bench.dynamics_rate()
     con.print(f"dynamics simulator: {rate:.0f} reaches/s (1000 reaches, one core)")
+
+
+def _bench_peer(peer: bool, seeds: int, budgets: str | None, layout: list[str] | None, seed: int,
+                eval_step: float, json_path: Path | None) -> bool:
+    """``kbcli bench learn --peer``: run, print and (with ``--json``) write the tables; False
+    (nothing done) without ``--peer``."""
+    if not peer:
+        if json_path is not None:
+            raise ConfigError("--json is written by --peer only")
+        return False
+    budgets = budgets or "150,300,800"
+    import datetime
+    import json
+    import platform
+
+    from kbcli import __version__
+    from kbcli.bench import peer as bench
+    from kbcli.io.atomic import atomic_path
+
+    fields = {"seeds": seeds, "budgets": _budgets(budgets), "seed": seed, "eval_step": eval_step}
+    if layout:
+        fields["layouts"] = tuple(layout)
+    cfg = bench.PeerConfig(**fields)
+    if json_path is not None:
+        check_io({}, ("--json", json_path))
+    n = len(cfg.layouts) * cfg.seeds * (1 + len(cfg.peers))
+    results = list(progress(bench.runs(cfg), n, "learning runs (kbcli and peers)"))
+    tables = bench.tables(cfg, bench.summarize(cfg, results))
+    con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
+    for tb in tables:
+        t = Table(title=tb["title"], title_justify="left")
+        for c in tb["columns"]:
+            t.add_column(c, justify="right" if c in ("budget",) or "%" in c
+                         or "px" in c else "left")
+        for r in tb["rows"]:
+            t.add_row(*(str(r[c]) for c in tb["columns"]))
+        con.print(t)
+    if json_path is not None:
+        command_text = (f"kbcli bench learn --peer --seeds {seeds} --budgets {budgets} "
+                        + " ".join(f"--layout {name}" for name in cfg.layouts)
+                        + (f" --seed {seed}" if seed else "")
+                        + (f" --eval-step {eval_step:g}" if eval_step != 1.0 else ""))
+        doc = {"command": command_text, "date": datetime.date.today().isoformat(),
+               "machine": f"{platform.machine()}, {platform.system()}, Python "
+                          f"{platform.python_version()}",
+               "kbcli_version": __version__, "tables": tables}
+        with atomic_path(json_path, suffix=".json") as tmp:
+            Path(tmp).write_text(json.dumps(doc, indent=2) + "\n")
+        out.print(f"wrote {json_path}")
+    return True
 
 
 @command(bench_app, name="layouts")

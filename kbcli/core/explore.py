@@ -53,8 +53,9 @@ from pydantic import AfterValidator
 from scipy.spatial import cKDTree
 
 from kbcli.core.config import Config, Count, Name, Positive
-from kbcli.core.model_classes import DEFAULT_MODEL_CLASS, check_learned, fit_model
+from kbcli.core.model_classes import DEFAULT_MODEL_CLASS, check_choice, fit_model
 from kbcli.core.registry import Registry
+from kbcli.core.select import explore_class
 
 #: A strategy: ``(exploration, n, rng) -> (k, 2)`` targets inside ``exploration.area``, usually
 #: k = n; more is a plan the exploration carries out over the next batches. It may read
@@ -84,7 +85,9 @@ class ExploreConfig(Config):
         ``active``: uniform candidates from which to spread reaches while no boundary is known.
     model_class : str
         The model fitted to the samples (:data:`kbcli.core.model_classes.MODEL_CLASSES`): the
-        ``active`` strategy bisects its boundary bands, whatever the class.
+        ``active`` strategy bisects its boundary bands, whatever the class. ``auto``: the
+        exploration refits :data:`kbcli.core.select.EXPLORE_CLASS` (the final class is chosen by
+        cross-validation once the samples are in, :func:`kbcli.core.select.choose`).
     """
 
     what: ClassVar[str] = "explore"
@@ -94,7 +97,7 @@ class ExploreConfig(Config):
     batch: Count = 10
     explore_radius: Positive = 20.0
     n_candidates: Count = 4000
-    model_class: Annotated[Name, AfterValidator(check_learned)] = DEFAULT_MODEL_CLASS
+    model_class: Annotated[Name, AfterValidator(check_choice)] = DEFAULT_MODEL_CLASS
 
 
 def _uniform(area: tuple, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -276,14 +279,14 @@ class Exploration:
 
     @property
     def model(self):
-        """The model (of ``cfg.model_class``) fitted to every sample so far (None before the
+        """The model (of ``cfg.model_class``; ``auto``: of the class it explores with) fitted to every sample so far (None before the
         first reach)."""
         if len(self.landed) == 0:
             return None
         if self._model is None:
-            self._model = fit_model(self.cfg.model_class, self.landed, self.perceived,
-                                    match_threshold=self.match_threshold, area=self.area,
-                                    targets=self.targets)
+            self._model = fit_model(explore_class(self.cfg.model_class), self.landed,
+                                    self.perceived, match_threshold=self.match_threshold,
+                                    area=self.area, targets=self.targets)
         return self._model
 
     def __iter__(self) -> Iterator[ExploreStep]:

@@ -27,6 +27,12 @@ is a scikit-learn estimator deriving from :class:`~kbcli.core.model.ModelBase`):
     straight line separates the pair's samples, RBF elsewhere), probabilities from the margin: any
     key shape, curved boundaries included.
 
+``forest`` (:class:`~kbcli.core.sk_models.ForestModel`)
+    scikit-learn's random forest on the two coordinates and oblique projections: p is the share of
+    trees voting for a sound (any key shape; axis-aligned keys exactly).
+``knn`` (:class:`~kbcli.core.sk_models.KNNModel`)
+    scikit-learn's k nearest samples, distance-weighted votes (any key shape).
+
 ``exact`` (:class:`~kbcli.core.model.ExactModel`)
     The keyboard's own geometry (calibration experiments, ``kbcli learn --strategy exact``): not
     learned (``learned`` False), built from the keyboard, its ``exact_map`` attribute True (every
@@ -54,6 +60,9 @@ from kbcli.errors import ConfigError
 DEFAULT_MODEL_CLASS = "lines"
 #: The class (and the ``learn`` strategy) of the keyboard's own geometry.
 EXACT = "exact"
+#: Not a class: ``kbcli learn --model-class auto`` chooses one by cross-validation on the samples
+#: (:mod:`kbcli.core.select`).
+AUTO = "auto"
 _COMMON = ("match_threshold", "area")
 
 
@@ -104,6 +113,18 @@ def _svc() -> type:
     return SVCModel
 
 
+def _forest() -> type:
+    from kbcli.core.sk_models import ForestModel
+
+    return ForestModel
+
+
+def _knn() -> type:
+    from kbcli.core.sk_models import KNNModel
+
+    return KNNModel
+
+
 def _exact() -> type:
     from kbcli.core.model import ExactModel
 
@@ -114,6 +135,10 @@ MODEL_CLASSES.register("lines", ModelClass(_lines),
                        summary="straight key edges shared across keys (polygon keys)")
 MODEL_CLASSES.register("svc", ModelClass(_svc), summary="scikit-learn SVMs per pair of "
                        "neighbouring sounds, linear or RBF (any key shape)")
+MODEL_CLASSES.register("forest", ModelClass(_forest), summary="scikit-learn random forest on the "
+                       "coordinates and oblique projections (any key shape)")
+MODEL_CLASSES.register("knn", ModelClass(_knn), summary="scikit-learn k nearest samples, "
+                       "distance-weighted votes (any key shape)")
 MODEL_CLASSES.register(EXACT, ModelClass(_exact, learned=False),
                        summary="the keyboard's own geometry (not learned)")
 
@@ -129,6 +154,16 @@ def check_learned(name: str) -> str:
         raise ConfigError(f"model class {name!r} is not learned from samples; valid: "
                           f"{', '.join(learned_classes())}")
     return name
+
+
+def check_choice(name: str) -> str:
+    """``name`` when it is ``auto`` or a learned model class; ConfigError listing them otherwise."""
+    if name == AUTO:
+        return name
+    if name not in MODEL_CLASSES:
+        raise ConfigError(f"unknown model class {name!r}; valid: "
+                          f"{', '.join((AUTO, *learned_classes()))}")
+    return check_learned(name)
 
 
 def model_class_of(config: Mapping) -> str:

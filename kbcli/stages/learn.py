@@ -3,9 +3,13 @@
 The simulated arm (``ideal`` or ``dynamics`` mode, :mod:`kbcli.sim`) reaches for targets chosen by
 an exploration strategy (:mod:`kbcli.core.explore`) on the pad where the keyboard lies at its
 reference pose; the robot hears what its finger played and fits a model of p(sound | action) of the
-chosen class (:mod:`kbcli.core.model_classes`: ``lines``, :class:`~kbcli.core.learned.LearnedModel`,
-the default; ``svc``, :class:`~kbcli.core.svc_model.SVCModel`, for any key shape). The ground truth
-(the keyboard) is
+chosen class (:mod:`kbcli.core.model_classes`: ``lines``, :class:`~kbcli.core.learned.LearnedModel`;
+``svc``, :class:`~kbcli.core.svc_model.SVCModel`; ``forest`` and ``knn``,
+:mod:`kbcli.core.sk_models`) or, by default (``auto``), explores with the ``forest`` class and then
+fits the class whose cross-validated mislabel rate on the samples is lowest
+(:mod:`kbcli.core.select`; the artifact's config then names the class chosen, its
+``model_class_requested`` is ``auto``, and its attrs' ``model_selection`` hold every candidate's
+score). The ground truth (the keyboard) is
 used only to score the model: the learning curve (accuracy on a 2 px grid over the working area
 every ``curve_every`` reaches) and the final accuracy and boundary error on a 1 px grid
 (:mod:`kbcli.core.accuracy`).
@@ -37,12 +41,12 @@ import numpy as np
 from pydantic import AfterValidator, Field, InstanceOf, field_serializer
 
 from kbcli.core import accuracy as scoring
-from kbcli.core import reliability
+from kbcli.core import reliability, select
 from kbcli.core.config import Config, Count, Name, Positive
 from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.model import grid_points
-from kbcli.core.model_classes import DEFAULT_MODEL_CLASS, EXACT, check_learned, learned_classes
+from kbcli.core.model_classes import AUTO, EXACT, check_choice, fit_model, learned_classes
 from kbcli.errors import ArtifactError, ConfigError
 from kbcli.sim import SimConfig, World, check_keyboard_reachable, make_reacher
 from kbcli.stages import keyboard as keyboard_stage
@@ -55,11 +59,13 @@ TARGET_ACCURACY = 0.99
 LEVELS = (0.97, 0.99)  # accuracies whose first crossing the artifact records
 #: Spawn key of the generator that assigns samples to cross-validation folds.
 RELIABILITY_KEY = 9
+#: Spawn key of the generator of the folds that choose the class under ``auto``.
+SELECT_KEY = 10
 
 
 def model_classes() -> tuple[str, ...]:
-    """Valid ``--model-class`` values: the learned model classes."""
-    return learned_classes()
+    """Valid ``--model-class`` values: ``auto`` and the learned model classes."""
+    return (AUTO, *learned_classes())
 
 
 def strategies() -> tuple[str, ...]:
@@ -93,8 +99,10 @@ class LearnConfig(Config):
     sim : SimConfig
         The arm and its reach mode.
     model_class : str
-        The class of model fitted (``lines`` or ``svc``: a learned class of
-        :data:`~kbcli.core.model_classes.MODEL_CLASSES`).
+        The class of model fitted (a learned class of
+        :data:`~kbcli.core.model_classes.MODEL_CLASSES`), or ``auto`` (the default): explore with
+        :data:`kbcli.core.select.EXPLORE_CLASS`, then fit the class with the best cross-validated
+        score on the samples (:func:`kbcli.core.select.choose`; never the simulator's truth).
     """
 
     what: ClassVar[str] = "learn"
@@ -105,7 +113,7 @@ class LearnConfig(Config):
     explore_radius: Positive = 20.0
     curve_every: Count = 50
     sim: InstanceOf[SimConfig] = Field(default_factory=SimConfig)
-    model_class: Annotated[Name, AfterValidator(check_learned)] = DEFAULT_MODEL_CLASS
+    model_class: Annotated[Name, AfterValidator(check_choice)] = AUTO
 
     @field_serializer("sim")
     def _sim_dict(self, sim: SimConfig) -> dict[str, Any]:
@@ -173,13 +181,33 @@ class Learning:
             self.curve_accuracy.append(scoring.accuracy(step.model, self.keyboard, CURVE_STEP))
         return n
 
-    def reliability(self):
-        """The final model, calibrated, and its own estimate of how good it is, from its samples
-        alone (:func:`kbcli.core.reliability.assess`: 5-fold cross-validation)."""
-        ex = self.exploration
-        seed = 0 if self.seed is None else int(self.seed)
-        rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(RELIABILITY_KEY,)))
-        return reliability.assess(ex.model, ex.landed, ex.perceived, rng=rng)
+    def selection(self) -> select.Selection | None:
+        """Under ``auto``, the class chosen by cross-validation on the samples (None otherwise)."""
+        if self.cfg.model_class != AUTO:
+            return None
+        ex, kb = self.exploration, self.keyboard
+        rng = np.random.default_rng(np.random.SeedSequence(self._seed, spawn_key=(SELECT_KEY,)))
+        return select.choose(ex.landed, ex.perceived, match_threshold=kb.config.match_threshold,
+                             area=kb.area, rng=rng,
+                             explored_with=select.explore_class(self.cfg.model_class))
+
+    @property
+    def _seed(self) -> int:
+        return 0 if self.seed is None else int(self.seed)
+
+    def reliability(self, chosen: str | None = None):
+        """The final model (of class ``chosen``, default the one explored with), calibrated, and
+        its own estimate of how good it is, from its samples alone
+        (:func:`kbcli.core.reliability.assess`: 5-fold cross-validation)."""
+        ex, kb = self.exploration, self.keyboard
+        model = ex.model
+        if chosen is not None and chosen != select.explore_class(self.cfg.model_class):
+            model = fit_model(chosen, ex.landed, ex.perceived,
+                              match_threshold=kb.config.match_threshold, area=kb.area,
+                              targets=ex.targets)
+        rng = np.random.default_rng(np.random.SeedSequence(self._seed,
+                                                           spawn_key=(RELIABILITY_KEY,)))
+        return reliability.assess(model, ex.landed, ex.perceived, rng=rng)
 
     def artifact(self) -> Artifact:
         """The ``model`` artifact (after the last batch)."""
@@ -187,7 +215,9 @@ class Learning:
         if len(ex.targets) < self.cfg.budget:
             raise RuntimeError("learning is not finished: iterate to the end first")
         kb = self.keyboard
-        model, rel = self.reliability()
+        sel = self.selection()
+        model_class = self.cfg.model_class if sel is None else sel.chosen
+        model, rel = self.reliability(model_class)
         pred, true = scoring.key_maps(model, kb, EVAL_STEP)
         acc = scoring.accuracy_from_maps(pred, true)
         berr = scoring.boundary_error(pred, true, EVAL_STEP)
@@ -208,7 +238,10 @@ class Learning:
         return Artifact(
             kind="model",
             config={**self.cfg.to_dict(), "keyboard": kb.config.to_dict(),
-                    "curve_step": CURVE_STEP, "eval_step": EVAL_STEP},
+                    "curve_step": CURVE_STEP, "eval_step": EVAL_STEP,
+                    # the class that reads model/...; under auto, the one chosen
+                    "model_class": model_class,
+                    **({"model_class_requested": AUTO} if sel is not None else {})},
             seed=self.seed,
             data={
                 "samples": samples,
@@ -219,7 +252,8 @@ class Learning:
             },
             attrs={
                 "strategy": self.cfg.strategy,
-                "model_class": self.cfg.model_class,
+                "model_class": model_class,
+                **({"model_selection": sel.to_dict()} if sel is not None else {}),
                 "layout": kb.layout,
                 "mode": self.cfg.sim.mode,
                 "n_reaches": int(len(ex.targets)),

@@ -69,7 +69,10 @@ def _samples_and_lines(ax, art: Artifact, handles: list) -> str:
         handles.append(Line2D([], [], color="0.25", lw=0.6,
                               label=f"fitted boundaries ({len(lines)})"))
     a = art.attrs
-    return (f"learned {model_class_of(art)} model: {a.get('strategy')} "
+    sel = a.get("model_selection")
+    chosen = (f" (auto: lowest cross-validated mislabel rate, "
+              f"{100 * _num(sel['cv_error'][sel['chosen']]):.1f} %)" if sel else "")
+    return (f"learned {model_class_of(art)} model{chosen}: {a.get('strategy')} "
             f"exploration, {a.get('mode')} mode, "
             f"{a.get('n_reaches')} reaches\naccuracy {100 * _num(a.get('accuracy')):.2f} %, "
             f"boundary error {_num(a.get('boundary_error_px')):.2f} px")

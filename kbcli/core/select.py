@@ -1,0 +1,138 @@
+"""``--model-class auto``: the model class chosen by its own cross-validated score (issue 27).
+
+No class is best on every layout: straight lines shared across keys (``lines``) are exact on the
+grid; a random forest on oblique projections (``forest``) wins on the piano's axis-aligned keys and
+on hex; pairwise SVMs (``svc``) bend around round pads. The robot does not know the layout, and
+must never be told by the simulator's ground truth, so it asks its own samples: with ``K``-fold
+cross-validation (the same folds for every candidate; each fold's model fitted on the other folds),
+each candidate class is scored by its **held-out mislabel rate**, every held-out touch weighted by
+the area it stands for (:func:`kbcli.core.reliability._area_weights`: active exploration puts most
+touches near boundaries, and the weights make them describe the working area as a uniform grid
+would). Ties (within ``TIE`` of the best) go to the earlier class in :data:`CANDIDATES`.
+
+Exploration needs a model while it explores, before the choice can be made: under ``auto`` it
+explores with :data:`EXPLORE_CLASS` (``forest``: fast to refit, any key shape, and the best
+explorer of the classes measured, ``kbcli bench learn --peer``), and the final model is refitted
+with the chosen class on every sample (:func:`choose`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from kbcli.core.model_classes import AUTO, fit_model, learned_classes
+from kbcli.core.reliability import FOLDS, _area_weights, _class_map, _fold_ids, _held_out_probs
+from kbcli.errors import ConfigError
+
+#: The classes ``auto`` chooses between, in order of preference on a tie.
+CANDIDATES = ("lines", "forest", "svc", "knn")
+#: The class ``auto`` explores with (the choice is made once the samples are in).
+EXPLORE_CLASS = "forest"
+#: Held-out mislabel rates within this of the best count as a tie.
+TIE = 1e-9
+
+
+@dataclass(frozen=True)
+class Selection:
+    """The class ``auto`` chose, and why.
+
+    Attributes
+    ----------
+    chosen : str
+    explored_with : str
+        The class the exploration ran with.
+    cv_error : dict
+        Each candidate's area-weighted held-out mislabel rate.
+    folds : int
+    """
+
+    chosen: str
+    explored_with: str
+    cv_error: dict
+    folds: int
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def summary(self) -> str:
+        """One line: the choice and every candidate's score."""
+        scores = ", ".join(f"{k} {100 * v:.2f} %" for k, v in
+                           sorted(self.cv_error.items(), key=lambda kv: kv[1]))
+        return (f"model class: {self.chosen}, chosen by {self.folds}-fold cross-validation on its "
+                f"samples (held-out mislabel rate, area-weighted: {scores})")
+
+
+def explore_class(name: str) -> str:
+    """The class an exploration with model class ``name`` refits while it explores."""
+    return EXPLORE_CLASS if name == AUTO else name
+
+
+def cv_errors(names: tuple[str, ...], actions: np.ndarray, perceived: np.ndarray, *,
+              match_threshold: float, area: tuple[float, float, float, float],
+              rng: np.random.Generator, folds: int = FOLDS) -> dict[str, float]:
+    """Area-weighted held-out mislabel rate of each class (the same folds for all).
+
+    Parameters
+    ----------
+    names : tuple of str
+        Learned model classes.
+    actions, perceived : (n, 2), (n, D) ndarrays
+        The samples.
+    rng : numpy.random.Generator
+        Assigns samples to folds.
+
+    Returns
+    -------
+    dict
+        name -> rate in [0, 1].
+    """
+    x = np.asarray(actions, float).reshape(-1, 2)
+    s = np.asarray(perceived, float).reshape(len(x), -1)
+    k = int(min(folds, len(x)))
+    fold = _fold_ids(len(x), k, rng)
+    out = {}
+    for name in names:
+        full = fit_model(name, x, s, match_threshold=match_threshold, area=area)
+        labels = full.classify(s)
+        known = labels >= 0
+        w = _area_weights(x)
+        wrong = np.zeros(len(x))
+        for f in range(k):
+            test = fold == f
+            if test.all() or not test.any():
+                continue
+            m = fit_model(name, x[~test], s[~test], match_threshold=match_threshold, area=area)
+            cmap = _class_map(m.class_features_, full.class_features_, match_threshold)
+            p = _held_out_probs(m, x[test], cmap, full.n_classes)
+            wrong[test] = p.argmax(axis=1) != labels[test]
+        out[name] = float((wrong * w)[known].sum() / max(w[known].sum(), 1e-300))
+    return out
+
+
+def choose(actions: np.ndarray, perceived: np.ndarray, *, match_threshold: float,
+           area: tuple[float, float, float, float], rng: np.random.Generator,
+           explored_with: str = EXPLORE_CLASS, candidates: tuple[str, ...] = CANDIDATES,
+           folds: int = FOLDS) -> Selection:
+    """The candidate class with the lowest held-out mislabel rate on the samples.
+
+    Raises
+    ------
+    ConfigError
+        If a candidate is not a learned model class.
+    """
+    valid = learned_classes()
+    for name in candidates:
+        if name not in valid:
+            raise ConfigError(f"model class {name!r} is not learned from samples; valid: "
+                              f"{', '.join(valid)}")
+    err = cv_errors(tuple(candidates), actions, perceived, match_threshold=match_threshold,
+                    area=area, rng=rng, folds=folds)
+    best = min(err.values())
+    chosen = next(n for n in candidates if err[n] <= best + TIE)
+    return Selection(chosen=chosen, explored_with=explored_with, cv_error=err,
+                     folds=int(min(folds, len(np.asarray(actions).reshape(-1, 2)))))
+
+
+__all__ = ["CANDIDATES", "EXPLORE_CLASS", "Selection", "choose", "cv_errors", "explore_class"]

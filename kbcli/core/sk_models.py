@@ -1,0 +1,340 @@
+"""Model classes on plain scikit-learn classifiers: a random forest (``forest``) and k-NN (``knn``).
+
+M_INST = p(sound | action) from a general-purpose classifier fitted to the exploration samples
+(where the finger landed, what was heard), behind the same interface as the bespoke classes
+(:mod:`kbcli.core.learned`, :mod:`kbcli.core.svc_model`; issue 27):
+
+1. **the sound classes** are found as every class finds them (:func:`~kbcli.core.sounds.
+   prepare_samples`: leader clustering with the Eq. 2 threshold; class 0 is silence);
+2. **p(sound | action)** is the classifier's ``predict_proba`` in those classes, mixed with a
+   uniform ``floor`` (a calibration parameter, :func:`kbcli.core.reliability.assess` chooses it by
+   held-out Brier score):
+
+   ``forest`` (:class:`ForestModel`)
+       scikit-learn's :class:`~sklearn.ensemble.RandomForestClassifier` (fully grown trees on
+       bootstrap samples, each split at the midpoint between the samples on either side): p is the
+       share of trees voting for a sound, which spreads across a boundary where the bootstrap
+       moves it (between sparse samples). The trees split on the two coordinates and
+       on ``n_directions - 2`` more projections ``x cos t + y sin t`` (t evenly spaced in [0, pi)):
+       axis-aligned splits alone fit the grid and the piano keys exactly but staircase a slanted
+       edge (hex, polygons); with oblique projections a split can follow it.
+   ``knn`` (:class:`KNNModel`)
+       scikit-learn's :class:`~sklearn.neighbors.KNeighborsClassifier`, distance-weighted votes of
+       the ``n_neighbors`` nearest samples: any key shape, no fitting beyond the samples.
+
+3. **boundary sites** for active exploration (:meth:`SklearnModel.boundary_sites`): wherever the
+   predicted class changes between neighbouring cells of a 2 px grid over the working area (shifted
+   by ``phase``), with the width of the band the boundary is known to lie in there (the distance to
+   the nearest sample of either sound, summed), as the ``svc`` class does between its straddling
+   edges.
+
+Storage without pickle: :meth:`SklearnModel.to_arrays` keeps the samples, their classes and the
+hyper-parameters (``random_state`` included); :meth:`SklearnModel.from_arrays` refits the
+classifier, which is deterministic for a fixed ``random_state`` and ``n_jobs = 1``. Sampling
+p(action | sound), the raster and the confusion factor are the base's
+(:class:`~kbcli.core.model.ModelBase`), from :meth:`SklearnModel.predict_proba`.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from kbcli.core.model import ModelBase
+from kbcli.core.sounds import prepare_samples
+from kbcli.errors import ArtifactError, ConfigError
+
+SITE_GRID = 2.0  # px, grid on which boundary sites are looked for
+_CHUNK = 65536  # query points per block of a prediction
+
+
+def class_distance(actions: np.ndarray, labels: np.ndarray, pts: np.ndarray,
+                   cls: np.ndarray) -> np.ndarray:
+    """(m,) distance from each point ``pts[i]`` to the nearest sample of class ``cls[i]``
+    (inf when the class has no sample)."""
+    out = np.full(len(pts), np.inf)
+    for c in np.unique(cls):  # one tree per class present
+        sel = np.flatnonzero(cls == c)
+        mine = actions[labels == c]
+        if len(mine):
+            out[sel] = cKDTree(mine).query(pts[sel])[0]
+    return out
+
+
+def grid_boundary_sites(model, phase: float = 0.0, step: float = SITE_GRID) -> dict:
+    """Boundary sites of any fitted model: where its predicted class changes between neighbouring
+    cells of a ``step`` px grid (shifted by ``phase`` of a cell), each with the width of its band
+    (distance to the nearest sample of either sound, summed).
+
+    Returns
+    -------
+    dict with ``points`` (m, 2), ``width`` (m,), ``pair`` (m, 2)
+    """
+    x0, y0, x1, y1 = (float(v) for v in model.area)
+    g = np.stack(np.meshgrid(np.arange(x0 + phase * step, x1, step),
+                             np.arange(y0 + phase * step, y1, step)), -1)
+    cl = model.predict_class(g.reshape(-1, 2)).reshape(g.shape[:2])
+    iy, ix = np.nonzero(cl[:, 1:] != cl[:, :-1])
+    jy, jx = np.nonzero(cl[1:, :] != cl[:-1, :])
+    pts = np.vstack([(g[iy, ix] + g[iy, ix + 1]) / 2, (g[jy, jx] + g[jy + 1, jx]) / 2])
+    cc = np.vstack([np.column_stack([cl[iy, ix], cl[iy, ix + 1]]),
+                    np.column_stack([cl[jy, jx], cl[jy + 1, jx]])]).astype(np.int64)
+    la, lb = cc.min(axis=1), cc.max(axis=1)
+    width = (class_distance(model.actions_, model.labels_, pts, la)
+             + class_distance(model.actions_, model.labels_, pts, lb))
+    return {"points": pts.reshape(-1, 2), "width": width, "pair": np.column_stack([la, lb])}
+
+
+class SklearnModel(ModelBase):
+    """Base of the model classes on one scikit-learn classifier (see the module docstring).
+
+    A subclass sets ``kind`` (its registry name, for messages), ``_PARAMS`` ((name, type) of its
+    own hyper-parameters, stored by :meth:`to_arrays`) and implements ``_check_own()``,
+    ``_classifier()`` and, optionally, ``_features(points)``.
+    """
+
+    kind = "sklearn"
+    _PARAMS: tuple[tuple[str, type], ...] = ()
+
+    # -- parameters -----------------------------------------------------------------------------
+    @staticmethod
+    def calibration_grid() -> dict[str, tuple[float, ...]]:
+        """Candidate values of the prediction-time calibration (a uniform floor mixed in)."""
+        return {"floor": (0.0, 0.002, 0.01, 0.03)}
+
+    def _check_params(self) -> None:
+        self._check_common()
+        if not (np.isfinite(self.floor) and 0 <= self.floor < 1):
+            raise ConfigError(f"floor must be in [0, 1), got {self.floor!r}")
+        self._check_own()
+
+    def _check_own(self) -> None:
+        raise NotImplementedError
+
+    def _classifier(self):
+        raise NotImplementedError
+
+    def _features(self, points: np.ndarray) -> np.ndarray:
+        """(n, F) the classifier's features of points (n, 2): the points themselves."""
+        return points
+
+    # -- fitting --------------------------------------------------------------------------------
+    def fit(self, actions: np.ndarray, perceived: np.ndarray,
+            targets: np.ndarray | None = None) -> SklearnModel:
+        """Learn the sound classes and p(sound | action) from exploration samples.
+
+        Parameters
+        ----------
+        actions : (n, 2) ndarray
+            Where the finger landed (proprioception).
+        perceived : (n, D) ndarray
+            What was heard there (NaN rows: silence).
+        targets : (n, 2) ndarray, optional
+            Where the reaches aimed; gives the landing scatter ``reach_sd_`` (else 0).
+
+        Returns
+        -------
+        self
+        """
+        self._check_params()
+        x, features, labels, reach_sd = prepare_samples(actions, perceived, targets,
+                                                        self.match_threshold)
+        self._set_fitted(features, x, labels, reach_sd)
+        return self
+
+    def _set_fitted(self, features: np.ndarray, actions: np.ndarray, labels: np.ndarray,
+                    reach_sd: float) -> None:
+        self.class_features_ = np.asarray(features, float)
+        self.actions_ = np.asarray(actions, float).reshape(-1, 2)
+        self.labels_ = np.asarray(labels, np.int64)
+        self.reach_sd_ = float(reach_sd)
+        self._tree = cKDTree(self.actions_)
+        self._pairs = {}
+        with warnings.catch_warnings():  # a few reaches heard as many sounds is no regression
+            warnings.filterwarnings("ignore", "The number of unique classes", UserWarning)
+            self.classifier_ = self._classifier().fit(self._features(self.actions_),
+                                                      self.labels_)
+
+    # -- prediction -----------------------------------------------------------------------------
+    def _predict(self, points: np.ndarray, proba: bool) -> np.ndarray:
+        self._check_fitted()
+        q = np.asarray(points, float).reshape(-1, 2)
+        nc = self.n_classes
+        p = np.zeros((len(q), nc))
+        cols = np.asarray(self.classifier_.classes_, np.int64)
+        for start in range(0, len(q), _CHUNK):
+            blk = slice(start, start + _CHUNK)
+            p[blk, cols] = self.classifier_.predict_proba(self._features(q[blk]))
+        if not proba:
+            return np.argmax(p, axis=1)
+        if self.floor > 0:
+            p = (1.0 - self.floor) * p + self.floor / nc
+        return p
+
+    # -- exploration ----------------------------------------------------------------------------
+    def boundary_sites(self, step: float = 1.0, extend: float = 25.0,
+                       phase: float = 0.0) -> dict[str, np.ndarray]:
+        """Where the model places each boundary, and how uncertain it is there
+        (:func:`grid_boundary_sites`; ``step`` and ``extend`` are accepted for the ``lines``
+        model's signature)."""
+        self._check_fitted()
+        return grid_boundary_sites(self, phase)
+
+    # -- storage --------------------------------------------------------------------------------
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """The fitted model as named arrays: the samples, their classes and the hyper-parameters
+        (:meth:`from_arrays` refits the classifier, deterministically)."""
+        self._check_fitted()
+        d = {
+            "class_features": self.class_features_.copy(),
+            "actions": self.actions_.copy(),
+            "labels": self.labels_.copy(),
+            "reach_sd_fitted": np.float64(self.reach_sd_),
+            "match_threshold": np.float64(self.match_threshold),
+            "area": np.asarray(self.area, float),
+            "floor": np.float64(self.floor),
+            # every stored learned model has it (the artifact schema); 0: no neighbours looked at
+            "n_neighbors": np.int64(getattr(self, "n_neighbors", 0)),
+        }
+        for name, typ in self._PARAMS:
+            d[name] = (np.int64 if typ is int else np.float64)(getattr(self, name))
+        return d
+
+    @classmethod
+    def from_arrays(cls, d: dict) -> SklearnModel:
+        """Rebuild a fitted model from :meth:`to_arrays` output (the same predictions: the
+        classifier is refitted on the stored samples with the stored ``random_state``)."""
+        try:
+            model = cls(match_threshold=float(d["match_threshold"]),
+                        area=tuple(float(v) for v in np.asarray(d["area"]).reshape(4)),
+                        floor=float(d["floor"]),
+                        **{name: typ(np.asarray(d[name]).item()) for name, typ in cls._PARAMS})
+            model._check_params()
+            model._set_fitted(np.asarray(d["class_features"], float),
+                              np.asarray(d["actions"], float).reshape(-1, 2),
+                              np.asarray(d["labels"], np.int64), float(d["reach_sd_fitted"]))
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise ArtifactError(
+                f"not a stored {cls.kind} model ({type(exc).__name__}: {exc})") from None
+        return model
+
+
+def _positive_int(model, name: str, least: int = 1) -> None:
+    v = getattr(model, name)
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < least:
+        raise ConfigError(f"{name} must be a whole number >= {least}, got {v!r}")
+
+
+class ForestModel(SklearnModel):
+    """p(sound | action) from a random forest on the coordinates and oblique projections.
+
+    Parameters
+    ----------
+    match_threshold : float
+        Manhattan distance under which two perceived sounds are the same sound (Eq. 2).
+    area : tuple of float
+        (xmin, ymin, xmax, ymax) working area.
+    n_estimators : int
+        Trees.
+    n_directions : int
+        Directions the trees split along: x, y and ``n_directions - 2`` oblique projections
+        (``n_directions`` >= 2; directions evenly spaced in [0, pi), x and y among them when
+        ``n_directions`` is even).
+    min_samples_leaf : int
+        Fewest samples in a leaf (1: fully grown trees).
+    random_state : int
+        Seed of the trees' bootstrap samples and features (fixed: a stored model refits to the
+        same trees).
+    floor : float
+        Probability spread evenly over the sounds (calibration).
+    """
+
+    kind = "forest"
+    _PARAMS = (("n_estimators", int), ("n_directions", int), ("min_samples_leaf", int),
+               ("random_state", int))
+
+    def __init__(self, *, match_threshold: float = 1.5,
+                 area: tuple[float, float, float, float] = (150.0, 200.0, 650.0, 500.0),
+                 n_estimators: int = 60, n_directions: int = 6, min_samples_leaf: int = 1,
+                 random_state: int = 0, floor: float = 0.0) -> None:
+        self.match_threshold = match_threshold
+        self.area = area
+        self.n_estimators = n_estimators
+        self.n_directions = n_directions
+        self.min_samples_leaf = min_samples_leaf
+        self.random_state = random_state
+        self.floor = floor
+
+    def _check_own(self) -> None:
+        _positive_int(self, "n_estimators")
+        _positive_int(self, "n_directions", 2)
+        _positive_int(self, "min_samples_leaf")
+        _positive_int(self, "random_state", 0)
+
+    def _classifier(self):
+        from sklearn.ensemble import RandomForestClassifier
+
+        return RandomForestClassifier(n_estimators=int(self.n_estimators),
+                                      min_samples_leaf=int(self.min_samples_leaf),
+                                      random_state=int(self.random_state), n_jobs=1)
+
+    def _features(self, points: np.ndarray) -> np.ndarray:
+        """(n, n_directions) projections of the points on directions evenly spaced in [0, pi),
+        relative to the centre of the working area."""
+        x0, y0, x1, y1 = (float(v) for v in self.area)
+        t = np.arange(int(self.n_directions)) * np.pi / int(self.n_directions)
+        u = np.column_stack([np.cos(t), np.sin(t)])
+        return (np.asarray(points, float) - ((x0 + x1) / 2, (y0 + y1) / 2)) @ u.T
+
+
+class KNNModel(SklearnModel):
+    """p(sound | action) from the distance-weighted votes of the ``n_neighbors`` nearest samples.
+
+    Parameters
+    ----------
+    match_threshold, area
+        As every class.
+    n_neighbors : int
+        Neighbours that vote.
+    floor : float
+        Probability spread evenly over the sounds (calibration).
+    """
+
+    kind = "knn"
+    _PARAMS = (("n_neighbors", int),)
+
+    def __init__(self, *, match_threshold: float = 1.5,
+                 area: tuple[float, float, float, float] = (150.0, 200.0, 650.0, 500.0),
+                 n_neighbors: int = 5, floor: float = 0.0) -> None:
+        self.match_threshold = match_threshold
+        self.area = area
+        self.n_neighbors = n_neighbors
+        self.floor = floor
+
+    def _check_own(self) -> None:
+        _positive_int(self, "n_neighbors")
+
+    def _classifier(self):
+        from sklearn.neighbors import KNeighborsClassifier
+
+        return _KNN(KNeighborsClassifier, int(self.n_neighbors))
+
+
+class _KNN:
+    """k-NN with ``k`` capped by the number of samples (a handful of reaches is a valid model)."""
+
+    def __init__(self, factory, k: int) -> None:
+        self.factory, self.k = factory, k
+
+    def fit(self, x: np.ndarray, y: np.ndarray) -> _KNN:
+        self.clf = self.factory(n_neighbors=min(self.k, len(x)), weights="distance").fit(x, y)
+        self.classes_ = self.clf.classes_
+        return self
+
+    def predict_proba(self, x: np.ndarray) -> np.ndarray:
+        return self.clf.predict_proba(x)
+
+
+__all__ = ["ForestModel", "KNNModel", "SklearnModel", "grid_boundary_sites", "class_distance"]

@@ -1,0 +1,67 @@
+"""``--model-class auto`` (issue 27): the class chosen by its own cross-validated score."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kbcli.core.explore import Exploration, ExploreConfig
+from kbcli.core.model_classes import check_choice
+from kbcli.core.select import CANDIDATES, EXPLORE_CLASS, Selection, choose, explore_class
+from kbcli.core.sk_models import ForestModel
+from kbcli.errors import ConfigError
+
+AREA = (150.0, 200.0, 650.0, 500.0)
+G = np.stack(np.meshgrid(np.arange(160.0, 650.0, 12.0), np.arange(210.0, 500.0, 12.0)),
+             -1).reshape(-1, 2)
+
+
+def _two_discs() -> np.ndarray:
+    heard = np.full((len(G), 2), np.nan)
+    heard[np.hypot(G[:, 0] - 300, G[:, 1] - 350) < 70] = [10.0, 10.0]
+    heard[np.hypot(G[:, 0] - 500, G[:, 1] - 350) < 70] = [20.0, 20.0]
+    return heard
+
+
+def test_round_keys_choose_a_class_that_bends():
+    """Two round pads in silence: straight lines cannot follow the circles, the SVMs can."""
+    sel = choose(G, _two_discs(), match_threshold=1.5, area=AREA, rng=np.random.default_rng(0))
+    assert sel.chosen == "svc" and sel.explored_with == EXPLORE_CLASS and sel.folds == 5
+    assert set(sel.cv_error) == set(CANDIDATES)
+    assert sel.cv_error["lines"] > 3 * sel.cv_error["svc"]
+    assert sel.summary().startswith("model class: svc, chosen by 5-fold cross-validation")
+
+
+def test_a_slanted_straight_edge_chooses_lines():
+    """A straight slanted edge: lines is exact (a tie with svc goes to the earlier candidate),
+    the trees' and the neighbours' boundaries are ragged."""
+    heard = np.where((G[:, 0] + 0.5 * G[:, 1] < 560)[:, None], [[10.0, 10.0]], [[20.0, 20.0]])
+    sel = choose(G, heard, match_threshold=1.5, area=AREA, rng=np.random.default_rng(0))
+    assert sel.chosen == "lines" and sel.cv_error["lines"] == 0.0
+    assert sel.cv_error["forest"] > 0 and sel.cv_error["knn"] > 0
+    same = choose(G, heard, match_threshold=1.5, area=AREA, rng=np.random.default_rng(0))
+    assert same == sel  # same folds, same scores
+    assert Selection(**sel.to_dict()) == sel
+
+
+def test_candidates_must_be_learned_classes_and_auto_is_a_valid_choice():
+    with pytest.raises(ConfigError, match="'exact' is not learned"):
+        choose(G, _two_discs(), match_threshold=1.5, area=AREA, rng=np.random.default_rng(0),
+               candidates=("lines", "exact"))
+    assert check_choice("auto") == "auto" and check_choice("svc") == "svc"
+    with pytest.raises(ConfigError, match="unknown model class 'tree'; valid: auto, lines, svc"):
+        check_choice("tree")
+
+
+def test_auto_explores_with_the_explore_class():
+    assert explore_class("auto") == EXPLORE_CLASS and explore_class("svc") == "svc"
+    from kbcli.bench.learn import bench_keyboard
+    from kbcli.sim import SimConfig, World, make_reacher
+
+    kb = bench_keyboard("grid")
+    ex = Exploration(ExploreConfig(budget=30, model_class="auto"),
+                     World(kb, make_reacher(SimConfig())).touch, kb.area,
+                     kb.config.match_threshold, np.random.default_rng(0))
+    for _ in ex:
+        pass
+    assert isinstance(ex.model, ForestModel)
