@@ -13,7 +13,6 @@ from kbcli.stages import report as stage
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.models import exact_artifact
 
-
 #: Observations to each threshold (10 runs x 3 thresholds) per category, (active, random): the
 #: advantage A = P(active needs fewer) is 1 on small, about 0.8 on medium, 0.5 on large.
 SHRINKING = {"small": (np.ones((10, 3)), np.full((10, 3), 6.0)),

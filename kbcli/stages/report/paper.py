@@ -5,7 +5,7 @@ from __future__ import annotations
 from functools import partial
 
 from kbcli.stages.artifact import Artifact
-from kbcli.stages.report import effects
+from kbcli.stages.report.effects import shrinks
 from kbcli.stages.report.judge import (
     beside,
     combine,
@@ -79,7 +79,7 @@ def _entropy_claims(art: Artifact, ideal: str | None) -> list[Claim]:
 def rule_fn(art: Artifact, mode: str, cat: str, rule: tuple, sfx: str = ""):
     """The claim's rule as ``fn(method, strategy) -> (measured, verdict)``; ``sfx`` reads another
     estimate of the same runs. A rule with a fourth element (a category) is judged whole: also
-    'the advantage is smaller than on that category' (:func:`effects.shrinks`)."""
+    'the advantage is smaller than on that category' (:func:`~kbcli.stages.report.effects.shrinks`)."""
     if rule[0] != "sig":
         return lambda x, s: not_significant(art, mode, x, cat, s, sfx)
     sig = partial(significance, art, mode, upto=rule[1], bound=rule[2], sfx=sfx, category=cat)
@@ -90,7 +90,7 @@ def rule_fn(art: Artifact, mode: str, cat: str, rule: tuple, sfx: str = ""):
         m1, v1 = sig(method=x, strategy=s)
         if m1 == "not evaluated":
             return m1, v1
-        m2, v2 = effects.shrinks(art, mode, x, s, [rule[3], cat], upto=rule[1], sfx=sfx)
+        m2, v2 = shrinks(art, mode, x, s, [rule[3], cat], upto=rule[1], sfx=sfx)
         return (f"significant: {m1} [{v1}]; smaller than on {rule[3]} displacements: {m2} "
                 f"[{v2}]"), whole([v1, v2])
     return both
@@ -98,7 +98,7 @@ def rule_fn(art: Artifact, mode: str, cat: str, rule: tuple, sfx: str = ""):
 
 def _trend_fn(art: Artifact, mode: str, sfx: str = ""):
     cats = [c for c, *_ in DISPLACEMENT_CLAIMS]
-    return lambda x, s: effects.shrinks(art, mode, x, s, cats, sfx=sfx)
+    return lambda x, s: shrinks(art, mode, x, s, cats, sfx=sfx)
 
 
 def _other_estimate(art: Artifact, method: str, fn_of_sfx, s: str, verdict: str) -> str:
