@@ -13,13 +13,21 @@ from kbcli.stages import report as stage
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.models import exact_artifact
 
+#: Observations to each threshold (10 runs x 3 thresholds) per category, (active, random): the
+#: advantage A = P(active needs fewer) is 1 on small, about 0.8 on medium, 0.5 on large.
+SHRINKING = {"small": (np.ones((10, 3)), np.full((10, 3), 6.0)),
+             "medium": (np.tile([1.0, 2, 3, 4, 5], (3, 2)).T, np.tile([3.0, 4, 5, 6, 6], (3, 2)).T),
+             "large": (np.tile([2.0, 3, 4, 5, 6], (3, 2)).T, np.tile([2.0, 3, 4, 5, 6], (3, 2)).T)}
+
 
 def _evaluation(pvalues: dict, stats_sign: float = -1.0, reached: float = 1.0,
                 play: float = 1.0, modes=("ideal",), min_p: float = 1e-30,
-                before: float = 0.99, entropy_active=None) -> Artifact:
+                before: float = 0.99, entropy_active=None, counts=None) -> Artifact:
     """A hand-made evaluation artifact: methods ``paper`` (judged) and ``kbcli`` with random and
     active; thresholds 10, 8, 4 px; ``paper``'s p-values per category as given, ``kbcli``'s all
-    1e-9; playing success after adaptation ``play``, before ``before``."""
+    1e-9; playing success after adaptation ``play``, before ``before``; per-run observations to
+    each threshold ``counts`` (category -> (active, random); default :data:`SHRINKING`)."""
+    counts = SHRINKING if counts is None else counts
     thr = np.array([10.0, 8.0, 4.0])
     cats = ["small", "medium", "large"]
     strategies = ["random", "active"]
@@ -45,7 +53,8 @@ def _evaluation(pvalues: dict, stats_sign: float = -1.0, reached: float = 1.0,
     data = {
         "thresholds": thr,
         "experiments": exp,
-        "curves": {m: {x: {c: {s: dict(curve) for s in strategies} for c in cats}
+        "curves": {m: {x: {c: {s: {**curve, "samples_to_threshold": counts[c][i]}
+                               for i, s in enumerate(("active", "random"))} for c in cats}
                        for x in methods} for m in modes},
         "pvalues": {m: {x: {c: pv(x, c) for c in cats} for x in methods} for m in modes},
         "entropy": {m: {x: {"random": {"mean": np.arange(T, 0, -1.0), "q25": np.zeros(T),
@@ -76,6 +85,8 @@ PAPER_LIKE = {"small": [1e-7, 1e-6, 1e-6], "medium": [0.5, 1e-4, 1e-4], "large":
 
 
 def _key(claim) -> str:
+    if claim.paper.startswith("the advantage shrinks"):
+        return "trend"
     if claim.source.startswith("Sect. IV-B"):
         return claim.paper.split(" ")[0]  # small, medium, large
     if claim.source.startswith("Sect. IV-A"):
@@ -91,7 +102,7 @@ def test_claims_agree_with_paper_like_numbers():
     v = _verdicts(_evaluation(PAPER_LIKE))
     # medium: p at 10 px is 0.5 but the claim is only "up to 8 px"
     assert v == {"entropy": "agrees", "small": "agrees", "medium": "agrees", "large": "agrees",
-                 "restores": "not measured", "dynamics_ns": "not measured"}
+                 "trend": "agrees", "restores": "not measured", "dynamics_ns": "not measured"}
     # every claim row names the method it judged and its options
     for c in stage.claims(_evaluation(PAPER_LIKE)):
         assert c.method == "paper"
@@ -158,7 +169,7 @@ def test_readme_has_every_table_and_claim():
                     "Large displacements: representation, estimator or strategy?"):
         assert heading in text
     assert "p < 1e-05 at 10 px (p=1.0e-07)" in text
-    assert text.count("| Sect. IV-") == 6
+    assert text.count("| Sect. IV-") == 7
     # the other method beside the judged one, and the options that differ in bold
     assert "kbcli active:" in text and "| **posterior** | kde | likelihood |" in text
     assert [f.name for f in rep.figures] == ["fig6_entropy.png", "fig7_error_ideal.png",
@@ -266,3 +277,37 @@ def test_point_labels_never_overlap():
     assert place_labels(ax, np.array([[1.0, 1.0], [5.0, 5.0], [np.nan, 3.0]]), list("abc")) == 1
     assert [t.get_text() for t in ax.texts] == ["a", "b"]
     plt.close(fig)
+
+
+def test_medium_is_judged_whole_and_the_trend_on_effect_sizes():
+    """Medium agrees only when its advantage is also smaller than on small displacements; the
+    trend row agrees only when the advantage falls small -> medium -> large (known counts)."""
+    same = {c: SHRINKING["small"] for c in SHRINKING}  # A = 1 everywhere: nothing shrinks
+    v = _verdicts(_evaluation(PAPER_LIKE, counts=same))
+    assert v["medium"] == "differs" and v["trend"] == "differs" and v["small"] == "agrees"
+    medium = next(c for c in stage.claims(_evaluation(PAPER_LIKE, counts=same))
+                  if _key(c) == "medium")
+    assert "significant: p < 0.001" in medium.measured and "[agrees]" in medium.measured
+    assert "1.00 -> 1.00" in medium.measured and medium.measured.endswith("[differs]")
+    inverted = {"small": SHRINKING["large"], "medium": SHRINKING["medium"],
+                "large": SHRINKING["small"]}  # the advantage grows with the displacement
+    assert _verdicts(_evaluation(PAPER_LIKE, counts=inverted))["trend"] == "differs"
+    trend = next(c for c in stage.claims(_evaluation(PAPER_LIKE)) if _key(c) == "trend")
+    assert "1.00 -> 0.82 -> 0.50" in trend.measured and trend.verdict == "agrees"
+
+
+def test_an_ml_verdict_is_shown_with_the_posterior_mean_too():
+    """The judged method estimates by the ML cell: each verdict that reads an estimate also gives
+    the posterior mean's reading of the same runs, and says when the two disagree."""
+    art = _evaluation(PAPER_LIKE)
+    for x in ("paper", "kbcli"):
+        for c in art.data["curves"]["ideal"][x].values():
+            for cur in c.values():
+                cur["reached_mean"] = cur["reached"]
+        for c in art.data["pvalues"]["ideal"][x].values():
+            c["active"]["pvalue_mean"] = np.full(3, 0.5)
+            c["active"]["statistic_mean"] = np.full(3, -0.1)
+    small = next(c for c in stage.claims(art) if _key(c) == "small")
+    assert small.verdict == "agrees"
+    assert "the posterior mean of the same runs: not at 10 px (p=5.0e-01)" in small.measured
+    assert "[differs] (this verdict differs from the ML estimate's" in small.measured

@@ -33,7 +33,7 @@ def significance(art: Artifact, mode: str, method: str, category: str, strategy:
     thr = art.array("thresholds")
     base = art.attrs["baseline"]
     cur, pvs = cell(art, mode, method, category)
-    if cur is None or strategy not in pvs:
+    if cur is None or strategy not in pvs or f"pvalue{sfx}" not in pvs[strategy]:
         return "not evaluated", "not measured"
     pv = pvs[strategy]
     min_p = float(pv.get("min_pvalue", 0.0))
@@ -69,22 +69,22 @@ def significance(art: Artifact, mode: str, method: str, category: str, strategy:
 
 
 def not_significant(art: Artifact, mode: str, method: str, category: str,
-                    strategy: str) -> tuple[str, str]:
+                    strategy: str, sfx: str = "") -> tuple[str, str]:
     """(measured text, verdict) of 'no threshold has p < 0.01 in the strategy's favour'."""
     thr = art.array("thresholds")
     base = art.attrs["baseline"]
     cur, pvs = cell(art, mode, method, category)
-    if cur is None or strategy not in pvs:
+    if cur is None or strategy not in pvs or f"pvalue{sfx}" not in pvs[strategy]:
         return "not evaluated", "not measured"
     pv = pvs[strategy]
     sig = []
     informative = 0
     for j, t in enumerate(thr):
-        if max(cur[strategy]["reached"][j], cur[base]["reached"][j]) < 0.5:
+        if max(cur[strategy][f"reached{sfx}"][j], cur[base][f"reached{sfx}"][j]) < 0.5:
             continue
         informative += 1
-        if pv["pvalue"][j] < NOT_SIGNIFICANT and pv["statistic"][j] < 0:
-            sig.append(f"{t:g} px (p={fmt_p(pv['pvalue'][j])})")
+        if pv[f"pvalue{sfx}"][j] < NOT_SIGNIFICANT and pv[f"statistic{sfx}"][j] < 0:
+            sig.append(f"{t:g} px (p={fmt_p(pv[f'pvalue{sfx}'][j])})")
     if not informative:
         return "no informative threshold", "not measured"
     if sig:
@@ -102,6 +102,15 @@ def combine(verdicts: list[str]) -> str:
         if v in verdicts:
             return v
     return "not measured"
+
+
+def whole(verdicts: list[str]) -> str:
+    """The verdict of a claim made of several halves, each of which must hold: differs when one
+    differs, not measured when one is not measured, then underpowered, then agrees."""
+    for v in ("differs", "not measured", "underpowered"):
+        if v in verdicts:
+            return v
+    return "agrees"
 
 
 def entropy_claim(art: Artifact, mode: str, method: str, strategy: str) -> tuple[str, str]:
