@@ -8,9 +8,8 @@ from helpers import one_line_error as _one_line_error
 
 from kbcli.cli import app
 from kbcli.core.keyboard import KeyboardConfig
-from kbcli.core.learned import LearnedModel
-from kbcli.core.model_classes import MODEL_CLASSES
 from kbcli.core.model import ExactModel
+from kbcli.core.model_classes import MODEL_CLASSES
 from kbcli.errors import ArtifactError, ConfigError, OutOfReachError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.sim import SimConfig
