@@ -126,7 +126,7 @@ def test_stage_refuses_mismatched_inputs(files):
         ((), {"model": "scene.h5"}, ["scene artifact, expected model"]),
         ((), {"scene": "model.h5"}, ["model artifact, expected scene"]),
         ((), {"scene": "other_scene.h5"}, ["keyboard does not match"]),
-        (("--max-steps", "0"), {}, ["adapt.max_steps", "greater than or equal to 1"]),
+        (("--max-steps", "0"), {}, ["adapt.max_steps", "a whole number in [1, 10000]"]),
         (("--strategy", "greedy"), {}, ["unknown strategy", "infogain"]),
         (("--posterior", "particles"), {}, ["unknown posterior", "kde"]),
         (("--resolution", "0.005"), {}, ["would need", "GB"]),

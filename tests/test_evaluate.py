@@ -334,7 +334,7 @@ def test_seeds_do_not_depend_on_selected_modes():
     [
         ({"bogus": 1}, "unknown evaluate option 'bogus'"),
         ({"strategies": ["random", "psychic"]}, "unknown strategy 'psychic'"),
-        ({"experiments": 0}, "evaluate.experiments must be greater than or equal to 1"),
+        ({"experiments": 0}, "evaluate.experiments must be a whole number in [1, 10000], got 0"),
         ({"modes": ["telepathy"]}, "unknown mode 'telepathy'"),
         ({"baseline": "infogain"}, "baseline 'infogain' must be one of"),
         ({"thresholds": [-1.0]}, "thresholds"),
@@ -506,7 +506,7 @@ def test_cli_refuses_checkpoint_of_other_config(runner, tmp_path, model_path, fa
 @pytest.mark.parametrize(
     ("extra", "fragment"),
     [
-        (["--experiments", "0"], "evaluate.experiments must be greater than or equal to 1"),
+        (["--experiments", "0"], "evaluate.experiments must be a whole number in [1, 10000], got 0"),
         (["--mode", "dynamics"], "not in the config's modes"),
         (["--jobs", "0"], "--jobs must be >= 1"),
         (["--scheduler", "tcp://127.0.0.1:9"], "cannot reach the Dask scheduler"),

@@ -105,7 +105,7 @@ def test_exact_strategy_gives_the_exact_model(runner, files):
 @pytest.mark.parametrize(
     "args, fragments",
     [
-        (["--budget", "0"], ["learn.budget", "greater than or equal to 1"]),
+        (["--budget", "0"], ["learn.budget", "a whole number in [1, 20000]"]),
         (["--budget", "-5"], ["budget"]),
         (["--strategy", "greedy"], ["strategy", "active", "random", "exact"]),
         (["--mode", "teleport"], ["mode", "ideal", "dynamics"]),

@@ -78,7 +78,7 @@ def test_bad_quality_configs_are_refused(table):
 
 
 @pytest.mark.parametrize("table,fragments", [
-    ({"budgets": [100, 5]}, ["quality.budgets", "greater than or equal to 10", "got 5"]),
+    ({"budgets": [100, 5]}, ["quality.budgets", "a whole number in [10, 20000]", "got 5"]),
     ({"budgets": []}, ["quality.budgets", "at least one budget"]),
     ({"budgets": [True]}, ["quality.budgets", "whole number"]),
     ({"seed": -1}, ["quality.seed", "greater than or equal to 0", "got -1"]),

@@ -53,7 +53,7 @@ def test_adapt_config_replace_and_with_robot():
 
 
 def test_adapt_config_errors_are_one_line():
-    _error(lambda: AdaptConfig(max_steps=0), "adapt.max_steps", "greater than or equal to 1")
+    _error(lambda: AdaptConfig(max_steps=0), "adapt.max_steps", "a whole number in [1, 10000]")
     _error(lambda: AdaptConfig(stop="yes"), "adapt.stop")
     _error(lambda: AdaptConfig(feedback="telepathy"), "adapt.feedback", "unknown feedback",
            "landed, aim")
@@ -63,7 +63,7 @@ def test_adapt_config_errors_are_one_line():
            "strategy", "mode")
     _error(lambda: AdaptConfig.from_dict({"robot": 3}), "adapt.robot must be a table")
     _error(lambda: AdaptConfig(strategy="psychic"), "unknown strategy 'psychic'")
-    _error(lambda: PlayCheck(notes=0), "play.notes", "greater than or equal to 1")
+    _error(lambda: PlayCheck(notes=0), "play.notes", "a whole number in [1, 100000]")
 
 
 # -- EvaluateConfig ------------------------------------------------------------------------------

@@ -20,6 +20,17 @@ from pydantic import BaseModel, ValidationError
 from kbcli.core.config import Config, describe_error
 from kbcli.errors import ConfigError
 
+#: Upper bounds of the counts a user types into a stage's table or flags (issue 29: a typo such as
+#: 1e9 is refused in one line before any work, never run at full CPU until killed).
+#: Reaches of one learning run (the paper's models take 800; the sweep's largest 1600).
+MAX_BUDGET = 20_000
+#: Touches of one adaptation.
+MAX_ADAPT_STEPS = 10_000
+#: Experiments per cell of an evaluation or a sweep.
+MAX_EXPERIMENTS = 10_000
+#: Notes replayed after an adaptation.
+MAX_REPLAY_NOTES = 100_000
+
 
 def message(exc: ValidationError, what: str, fields: tuple[str, ...] = ()) -> str:
     """One line for the first error of ``exc``: a validator's own :class:`ConfigError` as it is,

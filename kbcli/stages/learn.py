@@ -42,7 +42,7 @@ from pydantic import AfterValidator, Field, InstanceOf, field_serializer
 
 from kbcli.core import accuracy as scoring
 from kbcli.core import reliability, select
-from kbcli.core.config import Config, Count, Name, Positive
+from kbcli.core.config import Config, Name, Positive, Whole, between
 from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.model import grid_points
@@ -51,6 +51,7 @@ from kbcli.errors import ArtifactError, ConfigError
 from kbcli.sim import SimConfig, World, check_keyboard_reachable, make_reacher
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages.artifact import Artifact, ref
+from kbcli.stages.config import MAX_BUDGET
 from kbcli.stages.models import exact_artifact
 
 CURVE_STEP = 2.0  # px, grid of the learning curve's accuracy
@@ -108,10 +109,10 @@ class LearnConfig(Config):
     what: ClassVar[str] = "learn"
 
     strategy: Annotated[Name, AfterValidator(_strategy)] = "active"
-    budget: Count = 800
-    batch: Count = 10
+    budget: between(Whole, 1, MAX_BUDGET) = 800
+    batch: between(Whole, 1, MAX_BUDGET) = 10
     explore_radius: Positive = 20.0
-    curve_every: Count = 50
+    curve_every: between(Whole, 1, MAX_BUDGET) = 50
     sim: InstanceOf[SimConfig] = Field(default_factory=SimConfig)
     model_class: Annotated[Name, AfterValidator(check_choice)] = AUTO
 

@@ -32,13 +32,12 @@ from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import perturb as perturb_stage
 from kbcli.stages.adapt import AdaptConfig, check_inputs, end_angles
 from kbcli.stages.artifact import Artifact, ref
+from kbcli.stages.config import MAX_ADAPT_STEPS
 from kbcli.stages.models import load_model
 from kbcli.stages.play import check_melody_text
 
 #: Most play touches a closed-loop session may take (``steps``).
 MAX_LOOP_STEPS = 100_000
-#: Most touches one adaptation may take (``max_adapt_steps``).
-MAX_ADAPT_STEPS = 10_000
 
 
 class LoopConfig(Config):

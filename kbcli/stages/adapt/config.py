@@ -9,13 +9,13 @@ from typing import Any, ClassVar
 from pydantic import Field, InstanceOf, field_validator, model_validator
 
 from kbcli.core.adapt import AdapterConfig
-from kbcli.core.config import Count, Flag, Name, Number
+from kbcli.core.config import Flag, Name, Number, Whole, between
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig
 from kbcli.sim.arms import PRESETS
 from kbcli.sim.config import Arm, ModeName
-from kbcli.stages.config import StageConfig
+from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_REPLAY_NOTES, StageConfig
 
 #: What the robot observes: where its finger landed, or only where it aimed.
 FEEDBACKS = ("landed", "aim")
@@ -81,7 +81,7 @@ class AdaptConfig(StageConfig):
     reach_noise: Number = 0.0
     arm: Arm = PRESETS.get("ideal")
     feedback: Name = "landed"
-    max_steps: Count = 40
+    max_steps: between(Whole, 1, MAX_ADAPT_STEPS) = 40
     stop: Flag = False
 
     @model_validator(mode="before")
@@ -162,5 +162,5 @@ class PlayCheck(StageConfig):
     what: ClassVar[str] = "play"
 
     melody: Name = DEFAULT_MELODY
-    notes: Count = 200
+    notes: between(Whole, 1, MAX_REPLAY_NOTES) = 200
     reference: Flag = True

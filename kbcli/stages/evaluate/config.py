@@ -12,11 +12,20 @@ import numpy as np
 from pydantic import Field, InstanceOf, field_validator, model_validator
 
 from kbcli.core import transforms
-from kbcli.core.config import Count, Name, Names, NonNegative, NonNegativeInt, Number, Positive
+from kbcli.core.config import (
+    Name,
+    Names,
+    NonNegative,
+    NonNegativeInt,
+    Number,
+    Positive,
+    Whole,
+    between,
+)
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
 from kbcli.sim import MODES
-from kbcli.stages.config import StageConfig
+from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_EXPERIMENTS, StageConfig
 from kbcli.stages.evaluate.methods import (
     DEFAULT_STRATEGIES,
     Method,
@@ -212,13 +221,13 @@ class EvaluateConfig(StageConfig):
     what: ClassVar[str] = "evaluate"
 
     seed: NonNegativeInt = 2013
-    experiments: Count = 50
+    experiments: between(Whole, 1, MAX_EXPERIMENTS) = 50
     methods: tuple[InstanceOf[Method], ...] = Field(default_factory=default_methods, min_length=1)
     judged: Name = "paper"
     baseline: Name = "random"
     modes: Names = MODES.names()
     family: Name = "translation"
-    max_steps: Count = 40
+    max_steps: between(Whole, 1, MAX_ADAPT_STEPS) = 40
     thresholds: tuple[Positive, ...] = Field((20.0, 15.0, 10.0, 8.0, 6.0, 4.0, 2.0, 1.0),
                                              min_length=1)
     example: Name = "small"

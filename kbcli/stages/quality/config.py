@@ -4,15 +4,25 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from types import MappingProxyType
-from typing import Annotated, Any
+from typing import Any
 
-from pydantic import Field, Strict, ValidationInfo, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from kbcli.core.config import Config, Count, Flag, Name, Names, NonNegative, NonNegativeInt
+from kbcli.core.config import (
+    Config,
+    Flag,
+    Name,
+    Names,
+    NonNegative,
+    NonNegativeInt,
+    Whole,
+    between,
+)
 from kbcli.core.model_classes import EXACT  # the reference row's model: the exact class
 from kbcli.errors import ConfigError
 from kbcli.sim.arms import arm_config
 from kbcli.sim.config import ModeName
+from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_BUDGET, MAX_EXPERIMENTS
 from kbcli.stages.evaluate import Category, _paper_categories
 
 #: Rows of the default sweep: name -> adapt options (strategy included).
@@ -29,7 +39,7 @@ FIXED = ("mode", "arm", "reach_noise", "max_steps", "family", "stop")
 #: Fewest reaches of a learned model.
 MIN_BUDGET = 10
 
-Budget = Annotated[int, Strict(), Field(ge=MIN_BUDGET)]
+Budget = between(Whole, MIN_BUDGET, MAX_BUDGET)
 
 
 class QualityConfig(Config):
@@ -78,8 +88,8 @@ class QualityConfig(Config):
     mode: ModeName = "dynamics"
     arm: Any = "realistic"
     reach_noise: NonNegative = 0.0
-    experiments: Count = 8
-    max_steps: Count = 30
+    experiments: between(Whole, 1, MAX_EXPERIMENTS) = 8
+    max_steps: between(Whole, 1, MAX_ADAPT_STEPS) = 30
     categories: Any = Field(default_factory=_paper_categories)
     adapt: Any = Field(default_factory=dict)
     ideal: Flag = True
