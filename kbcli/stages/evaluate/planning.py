@@ -25,7 +25,7 @@ class Task:
     spawning from a ``SeedSequence`` mutates it, so a shared object would seed a rerun differently.
     ``play_reference``: this experiment also replays the melody before the displacement and after it
     without adaptation (once per mode, parametrization and repetition: the first method and strategy
-    that runs there).
+    that runs there), from :attr:`reference_seed` (not from the experiment's own seed).
     """
 
     row: int
@@ -46,6 +46,16 @@ class Task:
     def seed(self) -> np.random.SeedSequence:
         """A fresh ``SeedSequence`` for this experiment."""
         return np.random.SeedSequence(self.entropy, spawn_key=self.spawn_key)
+
+    @property
+    def reference_seed(self) -> np.random.SeedSequence:
+        """The seed of the reference replays (before the displacement, unadapted):
+        ``SeedSequence(seed, spawn_key=(mode, category, parametrization, "reference",
+        repetition))``, without method or strategy, so they measure the same whichever
+        experiment runs them."""
+        mode, cat, p = self.spawn_key[:3]
+        return np.random.SeedSequence(self.entropy,
+                                      spawn_key=(mode, cat, p, _key("reference"), self.rep))
 
 
 def _key(name: str) -> int:
