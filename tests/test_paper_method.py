@@ -152,7 +152,7 @@ def test_common_experiments_identical_whatever_methods_are_selected(model_path):
     paper = {"strategies": ["random", "paper-active"], "posterior": "kde", "estimator": "ml",
              "model_blur": 0.0, "kde_draw": "fresh", "kde_sampler": "raster", "kde_floor": 0.0,
              "ml_ties": "random", "random_actions": "model", "kde_samples": 500,
-             "candidates": 32, "stop_ml": 0.2, "stop_mass": None}
+             "candidates": 32, "stop_ml": 0.2, "stop_mass": 0.0}
     common = dict(seed=5, experiments=1, modes=["ideal"], max_steps=3, play_notes=10,
                   thresholds=[10.0], snapshot_steps=[1], example="small",
                   categories={"small": {"limit": 10.0, "displacements": [[3.0, -4.0]]}})

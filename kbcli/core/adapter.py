@@ -359,7 +359,7 @@ class Adapter:
             return False
         if self.cfg.stop_ml is not None and self.posterior.ml_prob() >= self.cfg.stop_ml:
             return True
-        if self.cfg.stop_mass is None:
+        if not self.cfg.stop_mass:  # 0 or None: ours is off
             return False
         return self.mass_near_estimate() >= self.cfg.stop_mass
 

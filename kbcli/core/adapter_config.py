@@ -203,7 +203,7 @@ class AdapterConfig(Config):
         The paper's rule: stop when the most probable cell holds at least this probability.
     stop_mass, stop_radius, stop_angle : float
         Ours: stop when ``stop_mass`` of the posterior lies within ``stop_radius`` px (and
-        ``stop_angle`` deg) of the estimate; ``stop_mass`` None: ours is off (the paper's alone).
+        ``stop_angle`` deg) of the estimate; ``stop_mass`` 0 (or None): ours is off (the paper's alone).
     max_memory_mb : float
         Refuse hypothesis grids (and model rasters) that would need more working memory.
     """
@@ -240,7 +240,7 @@ class AdapterConfig(Config):
     estimator: Annotated[Name, _registered(ESTIMATORS)] = "mean"
     ml_ties: Annotated[Name, _choice(*ML_TIES)] = "first"
     stop_ml: Positive | None = None
-    stop_mass: Positive | None = 0.95
+    stop_mass: Annotated[float, Strict(), Field(ge=0, le=1, allow_inf_nan=False)] | None = 0.95
     stop_radius: Positive = 1.0
     stop_angle: Positive = 0.5
     max_memory_mb: Positive = 2048.0

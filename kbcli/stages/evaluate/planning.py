@@ -67,7 +67,7 @@ def plan(cfg: EvaluateConfig) -> list[Task]:
     strategy, repetition), each with its seed.
 
     The seed is ``SeedSequence(cfg.seed, spawn_key=(mode, category, parametrization, method,
-    strategy, repetition))`` (names as CRC-32 numbers), so an experiment gets the same seed whatever
+    strategy, repetition))`` (names as CRC-32 numbers; the method's ``seed_name``), so an experiment gets the same seed whatever
     else is selected. ``seed_index`` numbers the experiments in that order.
     """
     tasks: list[Task] = []
@@ -80,7 +80,7 @@ def plan(cfg: EvaluateConfig) -> list[Task]:
                         continue
                     for strategy in meth.strategies:
                         for rep in range(cfg.experiments):
-                            key = (_key(mode), _key(cat.name), p, _key(meth.name), _key(strategy),
+                            key = (_key(mode), _key(cat.name), p, _key(meth.seed_name), _key(strategy),
                                    rep)
                             ref_key = (mode, cat.name, p, rep)
                             tasks.append(Task(
