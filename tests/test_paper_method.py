@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from kbcli.core.action_sampler import FreshSamples, RasterSampler
-from kbcli.core.adapt import Adapter, AdapterConfig, build_table
+from kbcli.core.adapt import Adapter, AdapterConfig
 from kbcli.core.grid import HypothesisGrid
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.model import ExactModel

@@ -23,7 +23,6 @@ import numpy as np
 
 from kbcli.core.kde import scott_bandwidth
 
-
 #: Raster cells below this fraction of a class's largest p(sound | cell) are left out of its
 #: support. A learned model is positive everywhere: the default model gives every class an
 #: outlier floor of 3e-4 per cell, 1.7 % of a key's mass spread over the whole working area. The

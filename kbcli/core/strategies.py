@@ -297,7 +297,8 @@ def paper_active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     ml = grid.params(np.array([post.ml_index()]))
     mx, my = inverse_points(ctx.family, ml, kept, ctx.centre)
     simulated = table.classes_at(mx, my)[0]  # (k,)
-    after = [post.update(ctx.simulate(a, int(c))).entropy() for a, c in zip(kept, simulated)]
+    after = [post.update(ctx.simulate(a, int(c))).entropy()
+             for a, c in zip(kept, simulated, strict=True)]
     return kept[int(np.argmin(after))]
 
 

@@ -19,7 +19,6 @@ from kbcli.sim import SimConfig, World, make_reacher
 from kbcli.stages.adapt.config import AdaptConfig, PlayCheck
 from kbcli.stages.adapt.record import Recorder, end_angles
 
-
 #: The replays of :func:`play_success`, in the order their generators are spawned.
 PLAY_RUNS = ("before", "unadapted", "adapted")
 
