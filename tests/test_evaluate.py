@@ -272,21 +272,28 @@ def test_paper_config_parses_and_plans():
     cfg = stage.EvaluateConfig.from_dict(load_toml("pipelines/paper.toml", "evaluate"))
     assert cfg.experiments == 50 and [c.name for c in cfg.categories] == ["small", "medium", "large"]
     assert [c.limit for c in cfg.categories] == [10.0, 20.0, 40.0]
-    assert [m.name for m in cfg.methods] == ["paper", "kbcli", "paper-likelihood"]
+    assert [m.name for m in cfg.methods] == ["paper", "paper-v1", "kbcli", "paper-likelihood"]
     assert cfg.judged == "paper"
-    paper = stage.adapt_config(cfg, "paper", "active", "ideal")
+    paper = stage.adapt_config(cfg, "paper", "paper-active", "ideal")
     assert (paper.robot.posterior, paper.robot.estimator) == ("kde", "ml")
+    assert (paper.robot.kde_draw, paper.robot.kde_floor, paper.robot.ml_ties) == \
+        ("fresh", 0.0, "random")
+    v1 = stage.adapt_config(cfg, "paper-v1", "active", "ideal")
+    assert (v1.robot.kde_draw, v1.robot.kde_eps, v1.robot.ml_ties) == ("shared", 1e-3, "first")
     ours = stage.adapt_config(cfg, "kbcli", "infogain", "dynamics")
     from kbcli.core.adapt import AdapterConfig
 
     # kbcli is the adapter's defaults: what they are, it is
     assert ours.robot == AdapterConfig(strategy="infogain")
     tasks = stage.plan(cfg.with_overrides(experiments=2))
-    # ideal: paper 2 + kbcli 3 strategies (+ the ablation's 2 on the 4 large displacements);
-    # dynamics: paper 2 + kbcli 3
-    assert len(tasks) == 2 * (12 * (5 + 5) + 4 * 2)
+    # ideal: paper 2 + paper-v1 2 + kbcli 3 strategies (+ the ablation's 2 on the 4 large
+    # displacements); dynamics: the same without the ablation
+    assert len(tasks) == 2 * (12 * (7 + 7) + 4 * 2)
+    # paper-v1 is seeded as the old `paper` was
+    v1_task = next(t for t in tasks if t.method == "paper-v1" and t.strategy == "active")
+    assert v1_task.spawn_key[3] == stage.planning._key("paper")
     resolved = stage.resolved_methods(cfg)
-    assert resolved["paper"]["options"]["ideal"]["active"]["robot"]["kde_samples"] == 10000
+    assert resolved["paper"]["options"]["ideal"]["paper-active"]["robot"]["kde_samples"] == 10000
     assert resolved["paper-likelihood"]["modes"] == ["ideal"]
     # options left to the model are resolved with it: a model that rates its boundaries 4 px off
     # gets a 16 px spot radius and a blur grid up to 8 px on the robust posterior, none on the KDE

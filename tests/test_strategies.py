@@ -39,8 +39,8 @@ def make_touch(truth, family="translation", noise=0.0, seed=0):
 
 
 def test_registry_and_unknown_name():
-    assert set(STRATEGIES) == {"random", "active", "infogain"}
-    with pytest.raises(ConfigError, match="random, active, infogain"):
+    assert set(STRATEGIES) == {"random", "active", "paper-active", "infogain"}
+    with pytest.raises(ConfigError, match="random, active, paper-active, infogain"):
         STRATEGIES.get("greedy")
     with pytest.raises(ConfigError, match="valid"):
         AdapterConfig(strategy="greedy")

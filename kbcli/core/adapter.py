@@ -22,7 +22,8 @@ Choices
 - The first decision on the flat prior is the most expensive (resampling the full grid); later
   ones work on the shrinking support of the posterior.
 - The estimate is the posterior mean (``estimator = "mean"``, the RMSE-optimal choice) or the
-  maximum-likelihood cell (``"ml"``, the paper's).
+  maximum-likelihood cell (``"ml"``, the paper's); ties of that cell go to the lowest grid index
+  (``ml_ties = "first"``) or to one of the tied cells at random (``"random"``, seeded).
 - Stopping rules (:meth:`Adapter.should_stop`): the paper's, the probability of the
   maximum-likelihood cell above ``stop_ml`` (off by default: at 0.5 px a well-pinned posterior still
   spreads over a few cells); and ours, the posterior mass within ``stop_radius`` px (and
@@ -35,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from kbcli.core.action_sampler import FreshSamples
 from kbcli.core.adapt_setup import build_samples, build_table, spot_count
 from kbcli.core.adapter_config import AdapterConfig, learning_rate, redundancy_radius
 from kbcli.core.estimators import ESTIMATORS
@@ -78,6 +80,8 @@ class Adapter:
     samples : ActionSamples, optional
         The ``kde`` posterior's samples of p(action | sound), drawn once per class and shared (see
         :func:`build_samples`); default: a cache of this adapter's own, seeded from ``rng``.
+        Ignored with ``cfg.kde_draw = "fresh"`` (new draws for every observation, from a child of
+        ``rng``: :class:`~kbcli.core.action_sampler.FreshSamples`).
     max_steps : int, optional
         A touch budget: :meth:`done` holds once this many touches were observed (None: only the
         stopping rule ends the adaptation).
@@ -117,7 +121,13 @@ class Adapter:
                                          max_angle=cfg.max_angle,
                                          angle_resolution=cfg.angle_resolution)
         self.table = build_table(model, cfg, self.area) if table is None else table
-        self.posterior = Posterior.uniform(self.grid)
+        # the adapter's own generators, by name (spawning does not move ``rng``'s stream, so the
+        # historical options draw exactly as before): ties of the ML cell, and fresh KDE samples
+        own = dict(zip(("ties", "kde"), rng.spawn(2), strict=True)) \
+            if cfg.ml_ties == "random" or cfg.kde_draw == "fresh" else {}
+        #: seed of the ML cell's tie-breaking (None: the lowest index wins, ``ml_ties = "first"``)
+        self.tie_seed = int(own["ties"].integers(2**63)) if cfg.ml_ties == "random" else None
+        self.posterior = Posterior.uniform(self.grid, tie_seed=self.tie_seed)
         #: the robust posterior (None with the plain one); ``posterior`` is then its marginal
         self.robust: RobustPosterior | None = (
             RobustPosterior(self.grid, cfg.nuisance(model), eta=learning_rate(model, cfg))
@@ -132,7 +142,10 @@ class Adapter:
         self.bandwidths: list[float] = []
         #: the kind of posterior (:data:`kbcli.core.posteriors.POSTERIORS`)
         self.kind = POSTERIORS.get(cfg.posterior)
-        if self.kind.uses_samples and samples is None:
+        if self.kind.uses_samples and cfg.kde_draw == "fresh":  # Algorithm 2: new every touch
+            samples = FreshSamples(self.action_source(), cfg.kde_samples, own["kde"],
+                                   bandwidth=cfg.kde_bandwidth, resolution=cfg.resolution)
+        elif self.kind.uses_samples and samples is None:
             samples = build_samples(model, cfg, [int(v) for v in rng.integers(2**32, size=2)])
         self.samples = samples
 
@@ -195,12 +208,25 @@ class Adapter:
         nz = self.robust.nuisance
         return planning_table(self.table, float(nz.blurs[i]), float(nz.outliers[j]))
 
+    def action_source(self):
+        """What draws actions from p(action | sound) (``cfg.kde_sampler``): the model's own
+        sampler, or the model's raster (:class:`~kbcli.core.action_sampler.RasterSampler`)."""
+        return self.table.sampler() if self.cfg.kde_sampler == "raster" else self.model
+
+    def simulate(self, action: np.ndarray, cls: int) -> np.ndarray:
+        """The log term a touch read at ``action`` that gave ``cls`` would multiply the posterior
+        by (this adapter's kind of posterior, plain: a KDE term drawn as ``kde_draw`` says)."""
+        obs = Observation(self.grid, self.table, self.model, self.cfg, self.samples,
+                          np.asarray(action, float).reshape(2), int(cls))
+        return self.kind.term(obs)[0]
+
     def context(self) -> Context:
         if self._edges is None:
             self._edges, self._corners = self.table.boundary_points()
         return Context(self.posterior, self.planning_table(), self.area, self._edges,
                        self._corners, self.cfg, touched=self.touched(),
-                       redundancy_radius=self.redundancy_radius)
+                       redundancy_radius=self.redundancy_radius,
+                       sampler=self.action_source(), simulate=self.simulate)
 
     def touched(self) -> np.ndarray:
         """(k, 2) where the observed touches were read (felt positions, or the aims)."""
@@ -306,6 +332,8 @@ class Adapter:
         self.points.append(obs.action)
         self.robust = self.robust.update(terms)
         self.posterior = self.robust.marginal()
+        if self.tie_seed is not None:
+            self.posterior = self.posterior.with_tie_seed(self.tie_seed)
 
     # -- reading -----------------------------------------------------------------------------------
     def estimates(self) -> Estimate:
@@ -331,6 +359,8 @@ class Adapter:
             return False
         if self.cfg.stop_ml is not None and self.posterior.ml_prob() >= self.cfg.stop_ml:
             return True
+        if not self.cfg.stop_mass:  # 0 or None: ours is off
+            return False
         return self.mass_near_estimate() >= self.cfg.stop_mass
 
     def done(self) -> bool:

@@ -70,6 +70,27 @@ def _registered(registry) -> AfterValidator:
 Blur = Annotated[float, Strict(), Field(ge=0, allow_inf_nan=False), AfterValidator(_blur)]
 #: A probability in (0, 1].
 Fraction = Annotated[float, Strict(), Field(gt=0, le=1, allow_inf_nan=False)]
+#: A mixing weight in [0, 1).
+Floor = Annotated[float, Strict(), Field(ge=0, lt=1, allow_inf_nan=False)]
+
+
+def _choice(*names: str) -> AfterValidator:
+    """A field validator: the value must be one of ``names``."""
+    def check(v: str) -> str:
+        if v not in names:
+            raise ValueError(f"must be one of {', '.join(names)}, got {v!r}")
+        return v
+    return AfterValidator(check)
+
+
+#: How the KDE posterior gets its samples of p(action | sound) (``AdapterConfig.kde_draw``).
+KDE_DRAWS = ("shared", "fresh")
+#: What draws those samples (``AdapterConfig.kde_sampler``).
+KDE_SAMPLERS = ("model", "raster")
+#: How ties of the maximum-likelihood cell are broken (``AdapterConfig.ml_ties``).
+ML_TIES = ("first", "random")
+#: Where the ``random`` strategy's actions come from (``AdapterConfig.random_actions``).
+RANDOM_ACTIONS = ("area", "model")
 
 
 class AdapterConfig(Config):
@@ -138,23 +159,51 @@ class AdapterConfig(Config):
         Cell of the model raster, px (None: the grid resolution; half of it for the exact model
         with the rigid family, whose cell-averaged likelihood needs a finer map).
     candidates : int
-        Candidate actions per decision (active, infogain).
+        Candidate actions per decision (active, paper-active, infogain).
     hypotheses : int
         Posterior cells on which infogain evaluates its candidates.
     active_keep, active_hypotheses : int
-        Most confusing candidates kept by ``active``, and the cells its simulated updates use.
+        Most confusing candidates kept by ``active`` and ``paper-active``, and the cells
+        ``active``'s simulated updates use (``paper-active`` updates the whole posterior).
+    random_actions : str
+        Where the ``random`` strategy touches: ``area`` (uniform over the working area, the
+        historical baseline) or ``model`` (a sound uniform over the model's sounds, then an action
+        from p(action | sound), drawn as ``kde_sampler`` says: the paper's "random selection of
+        samples", the samples the paper's other strategy draws its candidates from).
     kde_samples : int
-        N, actions drawn from p(action | sound) per sound class, once (kde posterior; see
-        :class:`kbcli.core.kde.ActionSamples`).
+        N, actions drawn from p(action | sound) per KDE term (kde posterior; Algorithm 2, line 3).
+    kde_draw : str
+        ``shared``: each class's N actions are drawn once and reused by every touch (and, in the
+        evaluation, by every experiment of a process; :class:`kbcli.core.kde.ActionSamples`).
+        ``fresh``: Algorithm 2 as written, N new actions for every observation, from the
+        adapter's own generator (so from the experiment's seed;
+        :class:`kbcli.core.action_sampler.FreshSamples`).
+    kde_sampler : str
+        What draws fresh samples of p(action | sound), and the ``model`` actions of ``random``
+        and ``paper-active``: ``model`` (``model.sample_actions``, the model's own rejection
+        sampler: exact, ~250 ms per 10,000 draws of the default learned model) or ``raster`` (the
+        model rasterised at ``resolution``: a cell drawn with weight p(sound | cell), then a point
+        uniform in it; ~1 ms; :class:`kbcli.core.action_sampler.RasterSampler`). Silence is drawn
+        like any sound, over the working area the model was learned on (where the model can say a
+        touch is silent), never beyond it.
+    kde_floor : float or None
+        Weight of the uniform floor mixed into each KDE term (``(1 - w) KDE + w / |prior|``);
+        0: none (Eq. 7 as written: a hypothesis that no sample supports is ruled out by that
+        touch); None: ``outlier`` (the historical 1e-3).
     kde_bandwidth : float or None
         Kernel std, px; None: Scott's rule (see :mod:`kbcli.core.posterior`).
     estimator : str
         ``mean`` or ``ml``: which estimate :meth:`Adapter.estimate` returns.
+    ml_ties : str
+        Which of several equally probable cells is the maximum-likelihood one: ``first`` (the
+        lowest grid index: the corner of the prior box on a flat posterior, historical) or
+        ``random`` (uniformly among the tied cells, seeded from the adapter's generator: no
+        positional bias).
     stop_ml : float or None
         The paper's rule: stop when the most probable cell holds at least this probability.
     stop_mass, stop_radius, stop_angle : float
         Ours: stop when ``stop_mass`` of the posterior lies within ``stop_radius`` px (and
-        ``stop_angle`` deg) of the estimate.
+        ``stop_angle`` deg) of the estimate; ``stop_mass`` 0 (or None): ours is off (the paper's alone).
     max_memory_mb : float
         Refuse hypothesis grids (and model rasters) that would need more working memory.
     """
@@ -182,11 +231,16 @@ class AdapterConfig(Config):
     hypotheses: Count = 512
     active_keep: Count = 8
     active_hypotheses: Count = 2048
+    random_actions: Annotated[Name, _choice(*RANDOM_ACTIONS)] = "area"
     kde_samples: Annotated[int, Strict(), Field(ge=10)] = 10000
+    kde_draw: Annotated[Name, _choice(*KDE_DRAWS)] = "shared"
+    kde_sampler: Annotated[Name, _choice(*KDE_SAMPLERS)] = "model"
+    kde_floor: Floor | None = None
     kde_bandwidth: Positive | None = None
     estimator: Annotated[Name, _registered(ESTIMATORS)] = "mean"
+    ml_ties: Annotated[Name, _choice(*ML_TIES)] = "first"
     stop_ml: Positive | None = None
-    stop_mass: Positive = 0.95
+    stop_mass: Annotated[float, Strict(), Field(ge=0, le=1, allow_inf_nan=False)] | None = 0.95
     stop_radius: Positive = 1.0
     stop_angle: Positive = 0.5
     max_memory_mb: Positive = 2048.0
@@ -221,6 +275,11 @@ class AdapterConfig(Config):
     def grid_cells(self) -> int:
         return grid_bytes(self.family, self.prior_halfwidth, self.resolution, self.max_angle,
                           self.angle_resolution)[0]
+
+    @property
+    def kde_eps(self) -> float:
+        """The KDE term's floor weight: ``kde_floor``, or ``outlier`` when it is None."""
+        return float(self.outlier if self.kde_floor is None else self.kde_floor)
 
     @property
     def is_robust(self) -> bool:

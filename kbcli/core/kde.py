@@ -4,11 +4,13 @@ Draw ``N`` actions ``a_i ~ p(action | s_t)`` from the model, map each onto ``a_t
 ``computeTransform`` (:func:`kbcli.core.transforms.translation_mapping`; for the rigid family, once
 per grid angle), bin the hypotheses linearly onto the grid and convolve with a Gaussian kernel by
 FFT (:func:`binned_kde`, ``scipy.fft``, O(G log G), the binned-KDE trick of fast KDE libraries;
-checked against the direct sum in the tests), then mix with the outlier floor (a uniform density
-over the prior with weight ``eps``) and take the log. The samples of ``p(action | s)`` do not depend
-on the posterior, so they are drawn once per sound class and reused (:class:`ActionSamples`; per
-run, or per model in the evaluation): a KDE step then costs a binning and two FFTs (a few ms)
-instead of thousands of model evaluations.
+checked against the direct sum in the tests), then mix with a floor (a uniform density
+over the prior with weight ``eps``; ``AdapterConfig.kde_floor``, 0 for none, :func:`floored_log`)
+and take the log. The samples of ``p(action | s)`` do not depend on the posterior, so they can be
+drawn once per sound class and reused (:class:`ActionSamples`; per run, or per model in the
+evaluation; ``kde_draw = "shared"``): a KDE step then costs a binning and two FFTs (a few ms)
+instead of thousands of model evaluations. Algorithm 2 as written draws them anew for every
+observation (``kde_draw = "fresh"``, :class:`kbcli.core.action_sampler.FreshSamples`).
 
 Bandwidth rule: Scott's ``sigma_hat * N^(-1/6)`` (d = 2) with Silverman's robust spread
 ``sigma_hat = min(std, IQR / 1.349)`` averaged over both axes of the sampled actions, clipped to
@@ -16,8 +18,9 @@ Bandwidth rule: Scott's ``sigma_hat * N^(-1/6)`` (d = 2) with Silverman's robust
 silence, a ring around the keyboard). The angle axis is not smoothed: each angle slice is its own
 2-D KDE. With a uniform prior over actions, ``KDE_t`` is a sampled and smoothed version of the
 likelihood term (:mod:`kbcli.core.likelihood`), which the benchmark compares. One limitation is
-inherited from Algorithm 2: actions for a silence are drawn from the model's working area only, so
-hypotheses that put the touch beyond it get the floor, not the silence they would in fact give (the
+inherited from Algorithm 2: actions for a silence are drawn from the model's working area only (the
+actions the model knows, :mod:`kbcli.core.action_sampler`), so hypotheses that put the touch beyond
+it get the floor (without a floor: are ruled out), not the silence they would in fact give (the
 likelihood term knows the outside is silent).
 """
 
@@ -176,7 +179,8 @@ def kde_term(grid: HypothesisGrid, model, action: np.ndarray, cls: int,
              rng: np.random.Generator | None = None, *, n_samples: int, eps: float,
              bandwidth: float | None = None, max_bandwidth: float = 4.0,
              samples: ActionSamples | None = None) -> tuple[np.ndarray, float]:
-    """``log KDE_t(h)`` of Algorithm 2 / Eq. 7 on the grid, with the outlier floor.
+    """``log KDE_t(h)`` of Algorithm 2 / Eq. 7 on the grid, with the floor ``eps`` (0: none;
+    :func:`floored_log`).
 
     Parameters
     ----------
@@ -220,6 +224,23 @@ def kde_term(grid: HypothesisGrid, model, action: np.ndarray, cls: int,
         hyp = (a - drawn)[None]
     dens = binned_kde(hyp, float(grid.dx[0]), float(grid.dy[0]), res, len(grid.dx),
                       float(bandwidth))
-    prior_density = 1.0 / (float(grid.dx[-1] - grid.dx[0]) + res) ** 2
-    out = np.log((1 - eps) * dens + eps * prior_density)
-    return out.reshape(grid.shape), float(bandwidth)
+    return floored_log(dens, grid, eps).reshape(grid.shape), float(bandwidth)
+
+
+#: Without a floor, densities below this fraction of a term's peak are read as zero: the
+#: single-precision FFT's rounding (:func:`binned_kde`) is about 1e-7 of the peak.
+ZERO_RTOL = 1e-6
+#: The density a ruled-out hypothesis gets without a floor: a stand-in for zero that keeps the
+#: posterior defined when every cell has been ruled out by some touch (those ruled out by the
+#: fewest touches then lead; log(1e-300) = -690.8 per ruling-out).
+ZERO_DENSITY = 1e-300
+
+
+def floored_log(dens: np.ndarray, grid: HypothesisGrid, eps: float) -> np.ndarray:
+    """``log((1 - eps) KDE + eps / |prior box|)``; with ``eps`` 0, ``log KDE`` with densities
+    below ``ZERO_RTOL`` of the peak read as ``ZERO_DENSITY`` (Eq. 7 without a floor)."""
+    if eps > 0:
+        prior_density = 1.0 / (float(grid.dx[-1] - grid.dx[0]) + grid.resolution) ** 2
+        return np.log((1 - eps) * dens + eps * prior_density)
+    peak = float(np.max(dens)) if dens.size else 0.0
+    return np.log(np.where(dens > ZERO_RTOL * peak, dens, ZERO_DENSITY))

@@ -67,6 +67,20 @@ def log_normalise(logw: np.ndarray, axis: int | None = None) -> tuple[np.ndarray
     return logw - (m + np.log(total)), p
 
 
+#: Cells within this relative distance of the most probable one tie with it (``fair_argmax``).
+TIE_RTOL = 1e-9
+
+
+def fair_argmax(p: np.ndarray, seed) -> int:
+    """Index of the largest of ``p`` (1-D), ties (within ``TIE_RTOL``) broken uniformly at random
+    from ``numpy.random.default_rng(seed)``: no positional bias (``np.argmax`` gives the first)."""
+    m = float(np.max(p))
+    tied = np.flatnonzero(p >= m * (1 - TIE_RTOL)) if m > 0 else np.flatnonzero(p == m)
+    if len(tied) == 1:
+        return int(tied[0])
+    return int(tied[np.random.default_rng(seed).integers(len(tied))])
+
+
 class Posterior:
     """A normalised log-posterior on a :class:`HypothesisGrid`; immutable, ``update`` returns a new one.
 
@@ -79,9 +93,10 @@ class Posterior:
         ``exp(logp)``.
     """
 
-    __slots__ = ("grid", "logp", "probs", "_entropy", "n_obs", "_ml", "_marg")
+    __slots__ = ("grid", "logp", "probs", "_entropy", "n_obs", "_ml", "_marg", "tie_seed")
 
-    def __init__(self, grid: HypothesisGrid, logp: np.ndarray, n_obs: int = 0) -> None:
+    def __init__(self, grid: HypothesisGrid, logp: np.ndarray, n_obs: int = 0,
+                 tie_seed: int | None = None) -> None:
         logp, p = log_normalise(np.asarray(logp, float).reshape(grid.shape))
         logp.setflags(write=False)
         p.setflags(write=False)
@@ -93,15 +108,27 @@ class Posterior:
         self._entropy = float(-np.einsum("i,i->", p.reshape(-1), logp.reshape(-1)))
         self._ml: int | None = None
         self._marg: tuple | None = None
+        #: None: ties of the most probable cell go to the lowest index; else they are broken
+        #: uniformly at random, from ``SeedSequence([tie_seed, n_obs])`` (:func:`fair_argmax`)
+        self.tie_seed = tie_seed
 
     @classmethod
-    def uniform(cls, grid: HypothesisGrid) -> Posterior:
+    def uniform(cls, grid: HypothesisGrid, tie_seed: int | None = None) -> Posterior:
         """The flat prior over the grid."""
-        return cls(grid, np.zeros(grid.shape))
+        return cls(grid, np.zeros(grid.shape), tie_seed=tie_seed)
 
     def update(self, term: np.ndarray) -> Posterior:
         """Multiply in one observation's term (Eq. 8: add its log)."""
-        return Posterior(self.grid, self.logp + term, self.n_obs + 1)
+        return Posterior(self.grid, self.logp + term, self.n_obs + 1, self.tie_seed)
+
+    def with_tie_seed(self, tie_seed: int | None) -> Posterior:
+        """The same posterior (same arrays, no renormalisation) with another tie rule."""
+        out = object.__new__(Posterior)
+        for k in ("grid", "logp", "probs", "_entropy", "n_obs", "_marg"):
+            setattr(out, k, getattr(self, k))
+        out._ml = None
+        out.tie_seed = tie_seed
+        return out
 
     # -- summaries -------------------------------------------------------------------------------
     def entropy(self) -> float:
@@ -109,9 +136,12 @@ class Posterior:
         return self._entropy
 
     def ml_index(self) -> int:
-        """Flat index of the most probable cell."""
+        """Flat index of the most probable cell (ties: see ``tie_seed``)."""
         if self._ml is None:
-            self._ml = int(np.argmax(self.probs))
+            if self.tie_seed is None:
+                self._ml = int(np.argmax(self.probs))
+            else:
+                self._ml = fair_argmax(self.probs.reshape(-1), [self.tie_seed, self.n_obs])
         return self._ml
 
     def ml(self) -> np.ndarray:

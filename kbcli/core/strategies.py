@@ -9,12 +9,19 @@ It sees the robot's side only: the current posterior, the rasterised model, the 
 the model's class boundaries (never the true pose). Registered:
 
 - ``random`` (the paper's baseline): uniform over the working area (the model's ``area``: the
-  keyboard's reference bounds plus the margin, where the displaced keyboard can plausibly be).
-- ``active`` (the paper's): draw ``candidates`` uniform actions; keep the ``active_keep`` most
+  keyboard's reference bounds plus the margin, where the displaced keyboard can plausibly be;
+  ``random_actions = "area"``), or sampled from the model (``"model"``: a sound, then an action
+  from p(action | sound), the paper's "random selection of samples").
+- ``active`` (our first reading of the paper's): draw ``candidates`` uniform actions; keep the ``active_keep`` most
   *confusing* ones, confusion being the entropy of the outcome the model predicts under the current
   posterior (a coarse subsample of 128 hypotheses); simulate each kept action's outcome under the
   best (maximum-likelihood) hypothesis, update the posterior with it (on a weighted subsample of up
   to ``active_hypotheses`` cells) and pick the action whose simulated posterior has the lowest entropy.
+- ``paper-active`` (the paper's, as Sect. III-E writes it): ``candidates`` actions sampled from
+  the model, the ``active_keep`` with the largest confusion factor of the model kept, each
+  simulated under the maximum-likelihood hypothesis and the posterior updated with the simulated
+  sound by the adapter's own term (the KDE of Algorithm 2 with the ``kde`` posterior), the largest
+  entropy reduction chosen (:func:`paper_active_strategy`).
 - ``infogain`` (ours): the action with the largest expected information gain
   ``I(S; H | a) = H[p(s | a)] - E_h H[p(s | a, h)]``, the mutual information between the outcome and
   the transform over the whole posterior predictive (not only the best hypothesis). It is evaluated
@@ -73,6 +80,11 @@ class Context:
         Where the touches so far were read (felt positions).
     redundancy_radius : float
         Touches within this radius (px) count as one spot (0: off; ``AdapterConfig``).
+    sampler : object
+        Draws actions from p(action | sound) (``random`` with ``random_actions = "model"``,
+        ``paper-active``).
+    simulate : callable
+        The adapter's own posterior term of a simulated touch (``paper-active``).
     """
 
     posterior: Posterior
@@ -83,6 +95,10 @@ class Context:
     cfg: Any
     touched: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
     redundancy_radius: float = 0.0
+    #: ``sample_actions(cls, n, rng)``: draws of p(action | sound) (the model or its raster)
+    sampler: Any = None
+    #: ``simulate(action (2,), cls) -> log term``: the term a touch would multiply the posterior by
+    simulate: Callable[[np.ndarray, int], np.ndarray] | None = None
 
     @property
     def family(self) -> str:
@@ -202,9 +218,28 @@ def boundary_candidates(ctx: Context, n_edges: int, n_corners: int, hyp: np.ndar
 # ---------------------------------------------------------------------------------------------
 # The strategies
 # ---------------------------------------------------------------------------------------------
+def model_actions(ctx: Context, n: int, rng: np.random.Generator) -> np.ndarray:
+    """(n, 2) actions sampled from the model as Algorithm 1 plays: a sound uniform over the model's
+    sounds (silence excluded: the robot plays notes), then an action from p(action | sound)
+    (``ctx.sampler``), clipped to the working area."""
+    c = ctx.table.n_classes
+    if c < 2:
+        return uniform_actions(ctx.area, n, rng)
+    cls = rng.integers(1, c, size=n)
+    out = np.empty((n, 2))
+    for k in np.unique(cls):  # one draw per sound heard, in class order
+        sel = np.flatnonzero(cls == k)
+        out[sel] = ctx.sampler.sample_actions(int(k), len(sel), rng)
+    return _clip(ctx.area, out)
+
+
 @STRATEGIES.register("random")
 def random_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
-    """Uniform over the working area (the paper's baseline)."""
+    """The paper's baseline, "random selection of samples": uniform over the working area
+    (``random_actions = "area"``) or an action sampled from the model (``"model"``:
+    :func:`model_actions`)."""
+    if getattr(ctx.cfg, "random_actions", "area") == "model":
+        return model_actions(ctx, 1, rng)[0]
     return uniform_actions(ctx.area, 1, rng)[0]
 
 
@@ -230,6 +265,40 @@ def active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     logw = np.log(w2)[:, None] + table.log_prob(x, y, simulated[None, :])
     _, q = log_normalise(logw, axis=0)
     after = entropy_rows(q.T)
+    return kept[int(np.argmin(after))]
+
+
+@STRATEGIES.register("paper-active")
+def paper_active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
+    """Sect. III-E as the paper writes it.
+
+    1. ``candidates`` actions sampled from the model (:func:`model_actions`: a sound, then an
+       action from p(action | sound));
+    2. each ranked by the model's confusion factor at the action, ``1 - (p1 - p2)``, its own
+       uncertainty over which sound is heard there (:meth:`LikelihoodTable.confusion_at`, read in
+       the model's frame, as the action is sampled); the ``active_keep`` most confusing are kept
+       (stable order: ties, e.g. an exact model that is never unsure, keep the sampling order);
+    3. each kept action's outcome simulated under the best (maximum-likelihood) hypothesis so far
+       (its most probable sound);
+    4. the current posterior updated with each simulated outcome by the adapter's own term
+       (``ctx.simulate``: with the KDE posterior, Algorithm 2 on the simulated sound), on the
+       whole grid;
+    5. the action with the largest entropy reduction (lowest entropy after) chosen.
+
+    Choices the paper leaves open: the number of candidates and kept ones (``candidates`` 256,
+    ``active_keep`` 8), the distribution of the sampled sounds (uniform over the model's sounds),
+    the frame of the confusion factor (the model's).
+    """
+    cfg, post, table = ctx.cfg, ctx.posterior, ctx.table
+    cands = model_actions(ctx, cfg.candidates, rng)
+    confusion = table.confusion_at(cands[:, 0], cands[:, 1])
+    kept = cands[np.argsort(-confusion, kind="stable")[: cfg.active_keep]]
+    grid = post.grid
+    ml = grid.params(np.array([post.ml_index()]))
+    mx, my = inverse_points(ctx.family, ml, kept, ctx.centre)
+    simulated = table.classes_at(mx, my)[0]  # (k,)
+    after = [post.update(ctx.simulate(a, int(c))).entropy()
+             for a, c in zip(kept, simulated, strict=True)]
     return kept[int(np.argmin(after))]
 
 

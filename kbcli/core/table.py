@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from kbcli.core.action_sampler import RasterSampler
 from kbcli.core.model import SILENCE, ExactModel, grid_points
 
 #: Classes kept per raster cell of a soft table for the strategies' predictive distributions (a
@@ -68,6 +69,7 @@ class LikelihoodTable:
     _cell_entropy: np.ndarray | None = field(init=False, repr=False, default=None)
     _top_classes: np.ndarray | None = field(init=False, repr=False, default=None)
     _top_probs: np.ndarray | None = field(init=False, repr=False, default=None)
+    _sampler: object | None = field(init=False, repr=False, default=None, compare=False)
 
     def __post_init__(self) -> None:
         if (self.classes is None) == (self.probs is None):
@@ -234,6 +236,24 @@ class LikelihoodTable:
             cl = np.where(inside[..., None], cl, out_c)
             p = np.where(inside[..., None], p, out_p)
         return cl, p
+
+    def confusion_at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The model's confusion factor ``1 - (p1 - p2)`` at coordinates (broadcast): its own
+        uncertainty over which sound a touch there gives (paper Sect. III-E; the
+        ``LearnedModel.confusion`` of the raster cell, no floor). 0 where one sound is sure (a
+        hard table everywhere, silence outside the raster), 1 where two are equally likely."""
+        _, p = self.top_at(x, y)
+        if p.shape[-1] < 2:
+            return np.zeros(p.shape[:-1])
+        top2 = np.sort(p, axis=-1)[..., -2:].astype(np.float64)
+        return 1.0 - (top2[..., 1] - top2[..., 0])
+
+    def sampler(self):
+        """A :class:`~kbcli.core.action_sampler.RasterSampler` of this raster (built once, kept
+        with the table so every adaptation sharing the table shares its per-class weights)."""
+        if self._sampler is None:
+            object.__setattr__(self, "_sampler", RasterSampler(self))
+        return self._sampler
 
     def prob_all(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """``p_eps(. | (x, y))`` for all classes: shape ``broadcast(x, y).shape + (C,)``."""

@@ -22,9 +22,10 @@ class KdePosterior:
     robust: bool = False
 
     def term(self, obs: Observation) -> tuple[np.ndarray, float]:
-        """``log KDE_t(h)`` with the outlier floor, and the kernel bandwidth (px) it used."""
+        """``log KDE_t(h)`` with the floor ``cfg.kde_eps`` (``kde_floor``, or ``outlier`` when
+        that is None), and the kernel bandwidth (px) it used."""
         return kde_term(obs.grid, obs.model, obs.action, obs.cls, n_samples=obs.cfg.kde_samples,
-                        eps=obs.cfg.outlier, samples=obs.samples)
+                        eps=obs.cfg.kde_eps, samples=obs.samples)
 
 
 POSTERIORS.register("kde", KdePosterior(),

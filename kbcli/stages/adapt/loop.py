@@ -19,6 +19,9 @@ from kbcli.sim import SimConfig, World, make_reacher
 from kbcli.stages.adapt.config import AdaptConfig, PlayCheck
 from kbcli.stages.adapt.record import Recorder, end_angles
 
+#: The replays of :func:`play_success`, in the order their generators are spawned.
+PLAY_RUNS = ("before", "unadapted", "adapted")
+
 
 def play_success(model, keyboard: Keyboard, sim: SimConfig, family: str, truth: np.ndarray,
                  estimate: np.ndarray | None, check: PlayCheck, *, rng: np.random.Generator,
@@ -26,7 +29,8 @@ def play_success(model, keyboard: Keyboard, sim: SimConfig, family: str, truth: 
     """Success rates (MATCH share) of ``check.notes`` touches of Algorithm 1 with the model's
     actions and the arm of ``sim``: ``before`` (keyboard at its reference pose), ``unadapted``
     (at ``truth``, no correction) and ``adapted`` (at ``truth``, actions corrected by
-    ``estimate``); NaN for what was not measured. ``pool``: per-class draws of p(action | sound)
+    ``estimate``); NaN for what was not measured. Each replay has its own child of ``rng``, by
+    name (``PLAY_RUNS``), whichever others run. ``pool``: per-class draws of p(action | sound)
     to resample instead of calling ``model.sample_actions`` (see :func:`kbcli.core.play.replay`).
     """
     melody = parse_melody(check.melody, keyboard)
@@ -37,7 +41,11 @@ def play_success(model, keyboard: Keyboard, sim: SimConfig, family: str, truth: 
         runs += [("before", np.zeros(n), None), ("unadapted", truth, None)]
     if estimate is not None:
         runs.append(("adapted", truth, np.asarray(estimate, float)))
-    for (name, pose, corr), r in zip(runs, rng.spawn(len(runs)), strict=True):
+    # one generator per replay by name, never by count: a replay's touches do not depend on
+    # which others are measured
+    gens = dict(zip(PLAY_RUNS, rng.spawn(len(PLAY_RUNS)), strict=True))
+    for name, pose, corr in runs:
+        r = gens[name]
         world = World(keyboard, make_reacher(sim), np.asarray(pose, float), family)
 
         def touch(actions: np.ndarray, world=world, r=r) -> tuple[np.ndarray, np.ndarray]:
@@ -62,6 +70,7 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
                snapshot_steps: tuple[int, ...] = (), samples: ActionSamples | None = None,
                play: PlayCheck | None = None,
                play_pool: ActionSamples | None = None,
+               reference_rng: np.random.Generator | None = None,
                on_step: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
     """One adaptation against a world whose keyboard sits at ``true_params``.
 
@@ -87,6 +96,11 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         ``play_adapted``, each a float, NaN when not measured), from a third child of ``rng``.
     play_pool : ActionSamples, optional
         Per-class draws of p(action | sound) the replays resample (default: the model samples).
+    reference_rng : numpy.random.Generator, optional
+        Generator of the reference replays (``play.reference``: before the displacement and
+        unadapted), which do not depend on the adaptation; default: children of the same third
+        child of ``rng`` as the adapted replay (the evaluation gives them a seed without method
+        and strategy, so they measure the same whichever experiment runs them).
     on_step : callable, optional
         Called with the step number after each observation (a progress bar).
 
@@ -121,7 +135,7 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     out["true_landed"] = np.asarray(touch.true_landed, float).reshape(-1, 2)
     if play is not None:
         res = _play_after(cfg, model, keyboard, truth, world_family, out, play,
-                          rng=rng.spawn(1)[0], pool=play_pool)
+                          rng=rng.spawn(1)[0], pool=play_pool, reference_rng=reference_rng)
         out.update({f"play_{k}": np.float64(v) for k, v in res.items()})
     return out
 
@@ -151,14 +165,24 @@ class _Touches:
 
 def _play_after(cfg: AdaptConfig, model, keyboard: Keyboard, truth: np.ndarray,
                 world_family: str, out: dict[str, np.ndarray], play: PlayCheck, *,
-                rng: np.random.Generator, pool: ActionSamples | None) -> dict[str, float]:
+                rng: np.random.Generator, pool: ActionSamples | None,
+                reference_rng: np.random.Generator | None = None) -> dict[str, float]:
     """:func:`play_success` around an adaptation whose records are ``out``, corrected by its final
-    estimate (``cfg.robot.estimator``'s) in the world's parameters."""
+    estimate (``cfg.robot.estimator``'s) in the world's parameters; the reference replays from
+    ``reference_rng`` when given."""
     final = ESTIMATORS.get(cfg.robot.estimator).final(out)
     if world_family != cfg.robot.family:  # correct in the world's parameters
         final = _as_family(final, cfg.robot.family, world_family)
-    return play_success(model, keyboard, cfg.sim_config(), world_family, truth, final, play,
-                        rng=rng, pool=pool)
+    sim = cfg.sim_config()
+    if reference_rng is None or not play.reference:
+        return play_success(model, keyboard, sim, world_family, truth, final, play, rng=rng,
+                            pool=pool)
+    adapted = PlayCheck(melody=play.melody, notes=play.notes, reference=False)
+    res = play_success(model, keyboard, sim, world_family, truth, final, adapted, rng=rng,
+                       pool=pool)
+    ref = play_success(model, keyboard, sim, world_family, truth, None, play, rng=reference_rng,
+                       pool=pool)
+    return {**res, "before": ref["before"], "unadapted": ref["unadapted"]}
 
 
 def _as_family(est: np.ndarray, family: str, world_family: str) -> np.ndarray:

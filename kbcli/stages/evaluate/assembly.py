@@ -44,7 +44,10 @@ def assemble(cfg: EvaluateConfig, tasks: list[Task], results: dict[int, dict],
     thresholds; ``T`` steps):
 
     - ``experiments/``: the experiment table: ``mode``, ``category``, ``method``, ``strategy`` (n,)
-      str; ``param_index``, ``rep``, ``seed_index``, ``steps_taken`` (n,) int; ``params`` (n, P);
+      str; ``param_index``, ``rep``, ``seed_index``, ``steps_taken`` (n,) int; ``stop_step`` (n,)
+      int: the first observation at which the method's stopping rule held (``stop_ml``, the
+      paper's, and ``stop_mass``, ours, when set), 0 never within ``max_steps``, -1 not recorded;
+      ``params`` (n, P);
       ``play_before``, ``play_unadapted``, ``play_adapted`` (n,): measured playing success (share
       of MATCH in ``play_notes`` touches of Algorithm 1) before the displacement, after it without
       adaptation (both measured once per mode, parametrization and repetition, and repeated on
@@ -96,6 +99,7 @@ def _experiment_table(tasks: list[Task], results: dict[int, dict],
         "rep": np.array([t.rep for t in tasks], np.int64),
         "seed_index": np.array([t.seed_index for t in tasks], np.int64),
         "steps_taken": np.array([results[i]["steps_taken"] for i in range(n)], np.int64),
+        "stop_step": np.array([results[i].get("stop_step", -1) for i in range(n)], np.int64),
         "params": np.array([t.params for t in tasks], float).reshape(n, n_params),
         **_play_columns(tasks, results),
     }

@@ -20,14 +20,22 @@ DEFAULT_STRATEGIES = ("random", "active", "infogain")
 #: Adapt options the protocol sets per experiment (not in a method's table).
 PER_EXPERIMENT = ("strategy", "mode", "max_steps", "family", "reach_noise", "arm")
 #: Keys of a method's table that are not adapt options.
-METHOD_KEYS = ("strategies", "modes", "categories", "description")
+METHOD_KEYS = ("strategies", "modes", "categories", "description", "seeds_of")
 
-#: The paper's method (Sect. III-D, III-E): Eq. 7-8 with Algorithm 2, the maximum-likelihood
-#: hypothesis, the learned model as it is, random and active.
-PAPER_METHOD = {"description": "the paper's: product of KDEs (Eq. 7-8, Algorithm 2), "
-                               "maximum-likelihood estimate, random and active (Sect. III-E)",
-                "strategies": ["random", "active"], "posterior": "kde", "estimator": "ml",
-                "model_blur": 0.0}
+#: The paper's method as the paper writes it (Sect. III-D, III-E; ``pipelines/paper.toml`` names
+#: the choices it leaves open): Eq. 7-8 with Algorithm 2's fresh samples and no floor, the
+#: maximum-likelihood hypothesis (ties at random), the learned model as it is, the random selection
+#: of samples from the model and the active strategy of Sect. III-E (``paper-active``).
+PAPER_METHOD = {"description": "the paper's text: product of KDEs (Eq. 7-8) with Algorithm 2's "
+                               "fresh samples, no floor, maximum-likelihood estimate, random "
+                               "samples of the model and the active strategy of Sect. III-E",
+                "strategies": ["random", "paper-active"], "posterior": "kde", "kde_draw": "fresh",
+                "kde_sampler": "raster", "kde_floor": 0.0, "estimator": "ml", "ml_ties": "random",
+                "random_actions": "model", "stop_ml": 0.02, "stop_mass": 0.0, "model_blur": 0.0}
+#: The ``paper`` method before issue 26 (seeded as ``paper`` was: the same numbers).
+PAPER_V1_METHOD = {"description": "the paper method before issue 26", "seeds_of": "paper",
+                   "strategies": ["random", "active"], "posterior": "kde", "estimator": "ml",
+                   "model_blur": 0.0}
 #: Ours: the adapter's defaults, every strategy.
 KBCLI_METHOD = {"description": "kbcli's best: the adapter's defaults", "strategies":
                 ["random", "active", "infogain"]}
@@ -78,6 +86,10 @@ class Method(StageConfig):
         ablations that answer one question.
     description : str
         One line for the report.
+    seeds_of : str, optional
+        Seed the experiments as the method of this name would be (its experiments' seeds contain
+        the method's name): a method renamed keeps its numbers (``paper-v1``, the ``paper``
+        method before issue 26). None: its own name.
     """
 
     what: ClassVar[str] = "methods"
@@ -88,6 +100,12 @@ class Method(StageConfig):
     modes: Names | None = None
     categories: Names | None = None
     description: Name = ""
+    seeds_of: Name | None = None
+
+    @property
+    def seed_name(self) -> str:
+        """The name in the experiments' seeds (``seeds_of``, or the method's own)."""
+        return self.name if self.seeds_of is None else self.seeds_of
 
     @classmethod
     def where(cls, data: Mapping[str, Any]) -> str:
@@ -136,6 +154,8 @@ class Method(StageConfig):
             d["categories"] = list(self.categories)
         if self.description:
             d["description"] = self.description
+        if self.seeds_of is not None:
+            d["seeds_of"] = self.seeds_of
         d.update({k: (dict(v) if isinstance(v, Mapping) else v) for k, v in self.options.items()})
         return d
 

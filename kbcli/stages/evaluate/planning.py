@@ -25,7 +25,7 @@ class Task:
     spawning from a ``SeedSequence`` mutates it, so a shared object would seed a rerun differently.
     ``play_reference``: this experiment also replays the melody before the displacement and after it
     without adaptation (once per mode, parametrization and repetition: the first method and strategy
-    that runs there).
+    that runs there), from :attr:`reference_seed` (not from the experiment's own seed).
     """
 
     row: int
@@ -47,6 +47,16 @@ class Task:
         """A fresh ``SeedSequence`` for this experiment."""
         return np.random.SeedSequence(self.entropy, spawn_key=self.spawn_key)
 
+    @property
+    def reference_seed(self) -> np.random.SeedSequence:
+        """The seed of the reference replays (before the displacement, unadapted):
+        ``SeedSequence(seed, spawn_key=(mode, category, parametrization, "reference",
+        repetition))``, without method or strategy, so they measure the same whichever
+        experiment runs them."""
+        mode, cat, p = self.spawn_key[:3]
+        return np.random.SeedSequence(self.entropy,
+                                      spawn_key=(mode, cat, p, _key("reference"), self.rep))
+
 
 def _key(name: str) -> int:
     return zlib.crc32(name.encode())
@@ -57,7 +67,7 @@ def plan(cfg: EvaluateConfig) -> list[Task]:
     strategy, repetition), each with its seed.
 
     The seed is ``SeedSequence(cfg.seed, spawn_key=(mode, category, parametrization, method,
-    strategy, repetition))`` (names as CRC-32 numbers), so an experiment gets the same seed whatever
+    strategy, repetition))`` (names as CRC-32 numbers; the method's ``seed_name``), so an experiment gets the same seed whatever
     else is selected. ``seed_index`` numbers the experiments in that order.
     """
     tasks: list[Task] = []
@@ -70,7 +80,7 @@ def plan(cfg: EvaluateConfig) -> list[Task]:
                         continue
                     for strategy in meth.strategies:
                         for rep in range(cfg.experiments):
-                            key = (_key(mode), _key(cat.name), p, _key(meth.name), _key(strategy),
+                            key = (_key(mode), _key(cat.name), p, _key(meth.seed_name), _key(strategy),
                                    rep)
                             ref_key = (mode, cat.name, p, rep)
                             tasks.append(Task(

@@ -74,6 +74,8 @@ def run_experiment(state: dict, task: Task) -> dict[str, np.ndarray]:
     if cfg.play_notes > 0 and adapt is not None and hasattr(adapt, "PlayCheck"):
         kw["play"] = adapt.PlayCheck(melody=cfg.melody, notes=cfg.play_notes,
                                      reference=task.play_reference)
+        if task.play_reference:  # a seed of their own: the same whichever task runs them
+            kw["reference_rng"] = np.random.default_rng(task.reference_seed)
         if "play_pool" not in state:  # Algorithm 1's actions: a pool per class, resampled
             from kbcli.core.posterior import ActionSamples
 
@@ -82,6 +84,9 @@ def run_experiment(state: dict, task: Task) -> dict[str, np.ndarray]:
     truth = np.asarray(task.params, float)
     out = state["experiment"](acfg, state["model"], state["keyboard"], truth, rng=rng, **kw)
     out = dict(out)
+    if "stop" in out:  # the first step at which the method's stopping rule held (0: never)
+        hit = np.flatnonzero(np.asarray(out["stop"], bool))
+        out["stop_step"] = int(hit[0]) + 1 if len(hit) else 0
     if "means" in out:  # both estimates' errors, whichever the method reports
         out["mean_errors"] = np.hypot(*(np.asarray(out["means"])[:, -2:] - truth[-2:]).T)
         est = ESTIMATORS.get(getattr(acfg, "estimator", "mean"))
@@ -109,6 +114,8 @@ def _samples(state: dict, acfg, seed: int):
     if acfg is None or adapt is None or not POSTERIORS.get(getattr(acfg, "posterior", "likelihood")).uses_samples:
         return None
     r = acfg.adapter_config()
+    if r.kde_draw != "shared":  # drawn anew for every observation, by the adapter itself
+        return None
     key = (r.kde_samples, r.kde_bandwidth, r.resolution)
     if key not in state["samples"]:
         state["samples"][key] = adapt.build_shared_samples(acfg, state["model"], [seed])
@@ -127,6 +134,7 @@ def _normalise(out: dict, steps: int, n_params: int, keep_extra: bool) -> dict[s
     res: dict[str, Any] = {}
     taken = len(np.asarray(out["errors"]))
     res["steps_taken"] = np.int64(taken)
+    res["stop_step"] = np.int64(out.get("stop_step", -1))
     shapes = {"errors": (), "ml_errors": (), "mean_errors": (), "entropy": (),
               "estimates": (n_params,), "actions": (2,), "classes": (), "angle_errors": ()}
     for k in STEP_KEYS:

@@ -1,0 +1,136 @@
+"""Drawing actions from p(action | sound) (Algorithm 2, line 3; Algorithm 1's ``sampleAction``).
+
+Two sources, both with ``sample_actions(cls, n, rng) -> (n, 2)`` (the model's own signature, so
+either stands where a model's sampler is expected):
+
+- the model itself (``model.sample_actions``: rejection sampling, exact, slow for a learned model);
+- :class:`RasterSampler`: the model rasterised (a :class:`~kbcli.core.table.LikelihoodTable`, no
+  floor): a raster cell drawn with weight p(sound | cell) (the uniform prior over actions makes
+  p(action | sound) proportional to it), then a point uniform within the cell. It is the model's
+  p(action | sound) to within one raster cell, at about 1 ms per 10,000 draws.
+
+Silence is drawn like any sound, over the raster (the model's working area, where it was learned
+and where it can say that a touch is silent), never beyond it: so is the model's own sampler.
+
+:class:`FreshSamples` serves the KDE posterior's terms with new draws at every observation
+(Algorithm 2 as written, ``AdapterConfig.kde_draw = "fresh"``), where
+:class:`~kbcli.core.kde.ActionSamples` draws each class once and reuses it (``"shared"``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from kbcli.core.kde import scott_bandwidth
+
+#: Raster cells below this fraction of a class's largest p(sound | cell) are left out of its
+#: support. A learned model is positive everywhere: the default model gives every class an
+#: outlier floor of 3e-4 per cell, 1.7 % of a key's mass spread over the whole working area. The
+#: model's own sampler leaves it out too (it proposes only within the box of the class's training
+#: touches); kept, it would act as a random, patchy floor in every KDE term.
+TAIL = 1e-2
+
+
+class RasterSampler:
+    """Draws of p(action | sound) from a rasterised model (see the module docstring).
+
+    Rejection sampling over the class's support on the raster (cells holding at least ``TAIL``, 1 %,
+    of its largest p(sound | cell)): a cell proposed uniformly among them is accepted with probability
+    ``p(sound | cell) / max``, then a point is drawn uniformly within it. Exact for the raster, and
+    O(n) (the support's acceptance rate is high: a key's cells are nearly sure of it).
+
+    Parameters
+    ----------
+    table : LikelihoodTable
+        The model raster; its raw probabilities (no outlier floor) weigh the cells.
+    """
+
+    def __init__(self, table) -> None:
+        self.table = table
+        self._support: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
+
+    def support(self, cls: int) -> tuple[np.ndarray, np.ndarray, float]:
+        """(flat cell indices, acceptance probabilities, acceptance rate) of class ``cls``
+        (built once)."""
+        if cls not in self._support:
+            t = self.table
+            if not 0 <= cls < t.n_classes:
+                raise ValueError(f"class {cls} out of range 0..{t.n_classes - 1}")
+            w = (t.classes == cls).reshape(-1).astype(np.float32) if t.hard else \
+                t.probs[..., cls].reshape(-1)
+            top = float(w.max()) if w.size else 0.0
+            if top <= 0:
+                raise ValueError(f"class {cls} has no support in the model raster")
+            cells = np.flatnonzero(w >= TAIL * top)
+            acc = w[cells] / np.float32(top)
+            self._support[cls] = (cells, acc, float(acc.mean()))
+        return self._support[cls]
+
+    def sample_actions(self, cls: int, n: int, rng: np.random.Generator) -> np.ndarray:
+        """(n, 2) draws from p(action | sound class ``cls``), pad px.
+
+        Raises
+        ------
+        ValueError
+            If ``cls`` is not a class of the model, or has no support in the raster.
+        """
+        cells, acc, rate = self.support(int(cls))
+        n = int(n)
+        picked: list[np.ndarray] = []
+        have = 0
+        while have < n:
+            m = int((n - have) / rate * 1.1) + 16
+            idx = rng.integers(len(cells), size=m)
+            ok = idx[rng.random(m) < acc[idx]]
+            picked.append(ok)
+            have += len(ok)
+        pick = cells[np.concatenate(picked)[:n]]
+        t = self.table
+        row, col = np.divmod(pick, t.shape[1])
+        centre = np.column_stack([t.origin[0] + col * t.step, t.origin[1] + row * t.step])
+        return centre + rng.uniform(-0.5, 0.5, size=(n, 2)) * t.step
+
+
+class FreshSamples:
+    """The KDE terms' samples drawn anew at every call (Algorithm 2 as written).
+
+    Same interface as :class:`~kbcli.core.kde.ActionSamples` (``get(cls) -> (samples, bandwidth)``),
+    but every :meth:`get` draws ``n_samples`` new actions from ``source`` with ``rng`` (the
+    adapter's own generator: the samples depend on the experiment's seed alone, differ between
+    experiments and between observations, and repeat exactly for the same seed).
+
+    Parameters
+    ----------
+    source : object
+        ``sample_actions(cls, n, rng)``: the model or a :class:`RasterSampler`.
+    n_samples : int
+        N, actions per term.
+    rng : numpy.random.Generator
+    bandwidth : float, optional
+        Kernel std in px; None: Scott's rule on each draw, clipped to
+        ``[resolution, max_bandwidth]`` (:mod:`kbcli.core.kde`).
+    resolution, max_bandwidth : float
+        The clip of the bandwidth rule, px.
+    """
+
+    def __init__(self, source, n_samples: int, rng: np.random.Generator, *,
+                 bandwidth: float | None = None, resolution: float = 0.5,
+                 max_bandwidth: float = 4.0) -> None:
+        self.source = source
+        self.n_samples = int(n_samples)
+        self.rng = rng
+        self.bandwidth = bandwidth
+        self.resolution = float(resolution)
+        self.max_bandwidth = float(max_bandwidth)
+        #: draws made so far
+        self.draws = 0
+
+    def get(self, cls: int) -> tuple[np.ndarray, float]:
+        """``(samples (N, 2), bandwidth px)``: N new draws of p(action | sound ``cls``)."""
+        s = np.asarray(self.source.sample_actions(int(cls), self.n_samples, self.rng), float)
+        self.draws += 1
+        bw = self.bandwidth
+        if bw is None:
+            res = self.resolution
+            bw = float(np.clip(scott_bandwidth(s), res, max(res, self.max_bandwidth)))
+        return s, float(bw)
