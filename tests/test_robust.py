@@ -217,7 +217,7 @@ def test_the_expected_mislabel_rate_is_not_fooled_by_touches_on_the_boundaries()
     from kbcli.stages import keyboard as keyboard_stage
     from kbcli.stages import learn as learn_stage
 
-    cfg = learn_stage.LearnConfig(strategy="active", budget=300)
+    cfg = learn_stage.LearnConfig(strategy="active", budget=300, model_class="lines")
     art = learn_stage.run(cfg, keyboard_stage.run(KeyboardConfig()),
                           rng=np.random.default_rng(0), seed=0)
     rel, error_rate = art.attrs["reliability"], 1 - art.attrs["accuracy"]

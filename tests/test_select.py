@@ -65,3 +65,27 @@ def test_auto_explores_with_the_explore_class():
     for _ in ex:
         pass
     assert isinstance(ex.model, ForestModel)
+
+
+def test_balanced_exploration_covers_early_and_then_seeks_boundaries():
+    """The balanced strategy's first reaches are a coarse cover (many sounds heard in 30 reaches),
+    the next ones fill the widest holes."""
+    from kbcli.bench.learn import bench_keyboard
+    from kbcli.sim import SimConfig, World, make_reacher
+
+    kb = bench_keyboard("grid")
+    ex = Exploration(ExploreConfig(strategy="balanced", budget=150, model_class="forest"),
+                     World(kb, make_reacher(SimConfig())).touch, kb.area,
+                     kb.config.match_threshold, np.random.default_rng(0))
+    steps = list(ex)
+    assert steps[-1].n_reaches == 150
+    heard = ex.model.classify(ex.perceived[:30])
+    assert len(set(heard.tolist())) >= 12  # 32 keys of 50 px: a coarse cover hears many
+    from scipy.spatial import cKDTree
+
+    first = cKDTree(ex.landed[:40]).query(ex.targets[40:60])[0]
+    assert first.min() > 30.0  # the next picks fill the widest holes
+    d = cKDTree(ex.landed).query(np.stack(np.meshgrid(np.arange(155.0, 650.0, 5.0),
+                                                      np.arange(205.0, 500.0, 5.0)), -1)
+                                 .reshape(-1, 2))[0]
+    assert d.max() < 40.0  # 150 reaches leave no hole wider than a key

@@ -38,6 +38,10 @@ Strategies (registry :data:`STRATEGIES`, read with ``STRATEGIES.get(name)``; one
     budget inside regions whose sound is already known; the active rule reaches 99 % accuracy on
     the default keyboard in about a quarter of the reaches random needs (``kbcli bench learn``).
 
+``balanced``
+    Boundary seeking and coverage weighed in one greedy rule (:func:`balanced_strategy`): a coarse
+    cover first, then the widest gap, a boundary band or an unexplored hole, whichever is wider.
+
 ``random``
     Targets uniform over the working area: the baseline.
 """
@@ -189,6 +193,54 @@ def active_strategy(exploration: Exploration, n: int, rng: np.random.Generator) 
         picks.append(p[i])
         # the pick will halve the band there; nearby sites gain less the closer they are
         w = np.minimum(w, w[i] / 2 + np.hypot(*(p - p[i]).T))
+    return np.array(picks)
+
+
+@STRATEGIES.register("balanced")
+def balanced_strategy(exploration: Exploration, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Boundary seeking and coverage weighed in one rule (issue 27), instead of ``active``'s
+    cover-then-bisect.
+
+    First a coarse hexagonal lattice (covering radius ``2 explore_radius``, about a quarter of
+    ``active``'s first reaches), so that every sound large enough is heard early. Then every batch
+    picks, greedily, the widest of two kinds of gap: a boundary site of the model (its band width
+    w, capped as ``active`` caps it) and a hole, a point of the working area at distance d from
+    every landing, worth ``2 d`` (a band as wide as the hole could hide there). A pick of width w
+    caps every site's width at ``w / 2 + distance`` and every hole's at ``2 distance``. Early the
+    holes are wide and coverage wins; as the pad fills, the widest bands take over, and a band
+    found late still competes with the holes left (no phase waits for another to finish).
+
+    Measured (grid, forest, seed 0 of ``kbcli bench learn``'s, accuracy on a 2 px grid): 85.39 %
+    at 150 reaches and 93.56 % at 300, against ``active``'s 84.95 % and 94.00 %; sounds heard
+    after 30 reaches 17 (``active`` 13), after 60 21 (25). Band widths stay below the holes'
+    ``2 d`` for the first ~150 reaches, so in practice it still covers first: not the default.
+    """
+    taken, area, cfg = exploration.landed, exploration.area, exploration.cfg
+    if len(taken) == 0:
+        lattice = hex_lattice(area, 2 * cfg.explore_radius * np.sqrt(3), rng)
+        return farthest_points(lattice, np.empty((0, 2)), len(lattice))
+    tree = cKDTree(taken)
+    holes = _cover_candidates(area, cfg.explore_radius / 5, rng)
+    hw = 2 * tree.query(holes)[0]
+    p, w = np.empty((0, 2)), np.empty(0)
+    model = exploration.model
+    if model is not None and model.n_classes >= 2:
+        sites = model.boundary_sites(step=1.0, phase=float(rng.uniform()))
+        x0, y0, x1, y1 = area
+        p, w = sites["points"], sites["width"]
+        inside = (p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1)
+        p, w = p[inside], w[inside]
+        w = np.minimum(w, 2 * tree.query(p)[0]) if len(p) else w
+    pts = np.vstack([p, holes])
+    width = np.concatenate([w, hw])
+    is_hole = np.r_[np.zeros(len(p), bool), np.ones(len(holes), bool)]
+    picks = []
+    for _ in range(min(n, len(pts))):  # loop over picks; each is vectorized over the candidates
+        i = int(np.argmax(width))
+        picks.append(pts[i])
+        dist = np.hypot(*(pts - pts[i]).T)
+        width = np.where(is_hole, np.minimum(width, 2 * dist),
+                         np.minimum(width, width[i] / 2 + dist))
     return np.array(picks)
 
 
