@@ -93,7 +93,7 @@ data-files:
 	$(PY) -m kbcli.io.platform -o $(DATA)/platform.json
 	$(KBCLI) keyboard --config pipelines/keyboard.toml -o $(DATA)/keyboard.h5
 	$(KBCLI) learn --keyboard $(DATA)/keyboard.h5 --mode dynamics --strategy active --budget 800 \
-	    --seed 0 -o $(DATA)/default-model.h5
+	    --model-class lines --seed 0 -o $(DATA)/default-model.h5
 	cp $(DATA)/keyboard.h5 $(G)/keyboard.h5
 	cp $(DATA)/default-model.h5 $(G)/model.h5
 	$(KBCLI) perturb --keyboard $(G)/keyboard.h5 --dx 12 --dy -7 -o $(G)/scene.h5
