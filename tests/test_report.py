@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from test_evaluate import FAKE, small_config
@@ -169,7 +171,7 @@ def test_readme_has_every_table_and_claim():
                     "Large displacements: representation, estimator or strategy?"):
         assert heading in text
     assert "p < 1e-05 at 10 px (p=1.0e-07)" in text
-    assert text.count("| Sect. IV-") == 7
+    assert text.split("## Departures")[0].count("| Sect. IV-") == 7
     # the other method beside the judged one, and the options that differ in bold
     assert "kbcli active:" in text and "| **posterior** | kde | likelihood |" in text
     assert [f.name for f in rep.figures] == ["fig6_entropy.png", "fig7_error_ideal.png",
@@ -311,3 +313,30 @@ def test_an_ml_verdict_is_shown_with_the_posterior_mean_too():
     assert small.verdict == "agrees"
     assert "the posterior mean of the same runs: not at 10 px (p=5.0e-01)" in small.measured
     assert "[differs] (this verdict differs from the ML estimate's" in small.measured
+
+
+PAPER_TEXT = Path(__file__).resolve().parents[1] / ".." / "shared" / "paper" / \
+    "where-is-my-keyboard.md"
+
+
+def test_departures_quote_the_paper_and_follow_the_options():
+    from kbcli.stages.report.departures import DEPARTURES, departures
+
+    if PAPER_TEXT.exists():  # the paper sits beside the clone in the project's workspace
+        paper = PAPER_TEXT.read_text(encoding="utf-8")
+        for d in DEPARTURES:
+            assert d.quote in paper, d.quote
+    art = _evaluation(PAPER_LIKE)
+    rows = {d.quote: does for d, does in departures(art)}
+    assert any("ties go to the lowest grid index" in v for v in rows.values())
+    assert any("off: every run takes 5 observations" in v for v in rows.values())
+    # a method that sets the paper's stopping rule and a floorless KDE has neither departure
+    for by_s in art.attrs["methods"]["paper"]["options"].values():
+        for d in by_s.values():
+            d["robot"].update(stop_ml=0.9, kde_floor=0.0)
+    rows = {d.quote: does for d, does in departures(art)}
+    assert not any("off: every run" in v or "floor" in v for v in rows.values())
+    text = stage.build(_evaluation(PAPER_LIKE)).readme
+    assert "## Departures from the paper" in text
+    assert '| Sect. IV-A | "a baseline strategy, consisting in the random selection of samples" |' \
+        in text

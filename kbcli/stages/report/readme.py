@@ -6,6 +6,7 @@ import numpy as np
 
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.report.captions import figures
+from kbcli.stages.report.departures import departures_table
 from kbcli.stages.report.paper import claims
 from kbcli.stages.report.source import (
     ENTROPY_STEPS,
@@ -35,7 +36,7 @@ def build(art: Artifact) -> Report:
     cl = claims(art)
     figs = figures(art)
     lines = [*_header(art), *_claims_section(cl), "", _how_judged(), "",
-             *_methods_section(art), *_figures_section(figs), *_ablation_section(art)]
+             *departures_table(art), *_methods_section(art), *_figures_section(figs), *_ablation_section(art)]
     for m in art.attrs["modes"]:
         lines += _mode_sections(art, m)
     lines += ["## Playing success (measured; median and interquartile range over runs)", "",
