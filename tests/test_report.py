@@ -340,3 +340,53 @@ def test_departures_quote_the_paper_and_follow_the_options():
     assert "## Departures from the paper" in text
     assert '| Sect. IV-A | "a baseline strategy, consisting in the random selection of samples" |' \
         in text
+
+
+def _ladder(rungs) -> Artifact:
+    """A synthetic ablation ladder: rungs ``(name, robot options, small p-values)`` built on
+    :func:`_evaluation` (every other claim as PAPER_LIKE)."""
+    import copy
+
+    art = _evaluation(PAPER_LIKE)
+    base = art.attrs["methods"]["paper"]
+    methods, order = {}, []
+    for tree in ("curves", "pvalues", "entropy"):
+        paper = art.data[tree]["ideal"]["paper"]
+        art.data[tree]["ideal"] = {}
+        for name, _, small in rungs:
+            t = copy.deepcopy(paper)
+            if tree == "pvalues":
+                t["small"]["active"]["pvalue"] = np.asarray(small, float)
+            art.data[tree]["ideal"][name] = t
+    for name, opts, _ in rungs:
+        m = copy.deepcopy(base)
+        for by_s in m["options"].values():
+            for s, d in by_s.items():
+                d["robot"] = {**opts, "strategy": s}
+        methods[name] = m
+        order.append(name)
+    art.attrs.update(methods=methods, method_order=order, judged=order[0])
+    return art
+
+
+def test_what_explains_each_difference_on_a_known_ladder():
+    """The small claim differs with the KDE and agrees once the posterior is the likelihood: the
+    section names the posterior (and only it) as what flips it, computed from the options."""
+    bad, good = [1e-7, 1e-3, 1e-6], [1e-9] * 3
+    kde = {"posterior": "kde", "estimator": "ml", "model_blur": 0.0}
+    rungs = [("paper", kde, bad), ("r-estimator", {**kde, "estimator": "mean"}, bad),
+             ("r-posterior", {**kde, "estimator": "mean", "posterior": "likelihood"}, good),
+             ("kbcli", {"posterior": "likelihood", "estimator": "mean"}, good)]
+    main = _evaluation({**PAPER_LIKE, "small": bad})
+    rep = stage.build(main, ablations=_ladder(rungs))
+    section = rep.readme.split("## What explains each difference")[1].split("\n## ")[0]
+    row = next(r for r in section.splitlines() if r.startswith("| small displacements"))
+    assert "`paper` (active) differs -> `r-estimator` (active) differs -> `r-posterior` " \
+        "(active) agrees -> `kbcli` (active) agrees" in row
+    assert "`r-estimator` -> `r-posterior` (differs -> agrees): posterior kde -> likelihood |" \
+        in row
+    # a difference no rung removes is said to be explained by none of the factors
+    rungs = [(n, o, bad) for n, o, _ in rungs]
+    rep = stage.build(main, ablations=_ladder(rungs))
+    assert "no rung flips it: it differs on every rung" in rep.readme
+    assert "What explains each difference" not in stage.build(main).readme

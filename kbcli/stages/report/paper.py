@@ -188,3 +188,22 @@ def _dynamics_claims(art: Artifact) -> list[Claim]:
         out.append(Claim("Sect. IV-C", DYN_NS, judged, opts, f"{s} vs {base}: {measured}",
                          verdict, beside(art, dyn)))
     return out
+
+
+def claim_rules(art: Artifact) -> dict:
+    """Each claim's rule by its paper text, ``fn(method, strategy) -> (measured, verdict)``, for
+    judging a claim on any method of ``art`` (the ablation ladder: :mod:`.ablation`)."""
+    art = upgrade(art)
+    modes = art.attrs["modes"]
+    rules: dict = {}
+    if "ideal" in modes:
+        rules[FIG6] = lambda x, s: entropy_claim(art, "ideal", x, s)
+        for cat, _, text, rule in DISPLACEMENT_CLAIMS:
+            if cat in art.attrs["categories"]:
+                rules[text] = rule_fn(art, "ideal", cat, rule)
+        if all(c in art.attrs["categories"] for c, *_ in DISPLACEMENT_CLAIMS):
+            rules[TREND[1]] = _trend_fn(art, "ideal")
+    if "dynamics" in modes:
+        rules[DYN_RESTORES] = lambda x, s: restores(art, x)
+        rules[DYN_NS] = partial(_dynamics, art)
+    return rules

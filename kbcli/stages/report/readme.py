@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from kbcli.stages.artifact import Artifact
+from kbcli.stages.report.ablation import explain
 from kbcli.stages.report.captions import figures
 from kbcli.stages.report.departures import departures_table
 from kbcli.stages.report.paper import claims
@@ -29,13 +30,16 @@ from kbcli.stages.report.tables import (
 )
 
 
-def build(art: Artifact) -> Report:
-    """The report of an evaluation artifact: README text, claims and figures."""
+def build(art: Artifact, ablations: Artifact | None = None) -> Report:
+    """The report of an evaluation artifact: README text, claims and figures; with
+    ``ablations`` (an evaluation of the ablation ladder, ``pipelines/ablations.toml``) also the
+    section "What explains each difference"."""
     art = upgrade(art)
     check(art)
     cl = claims(art)
     figs = figures(art)
-    lines = [*_header(art), *_claims_section(cl), "", _how_judged(), "",
+    why = explain(cl, ablations) if ablations is not None else []
+    lines = [*_header(art), *_claims_section(cl), "", _how_judged(), "", *why,
              *departures_table(art), *_methods_section(art), *_figures_section(figs), *_ablation_section(art)]
     for m in art.attrs["modes"]:
         lines += _mode_sections(art, m)
