@@ -390,3 +390,16 @@ def test_what_explains_each_difference_on_a_known_ladder():
     rep = stage.build(main, ablations=_ladder(rungs))
     assert "no rung flips it: it differs on every rung" in rep.readme
     assert "What explains each difference" not in stage.build(main).readme
+
+
+def test_dynamics_claims_on_the_robots_own_model_beside_the_default():
+    both = ("ideal", "dynamics")
+    main = _evaluation(PAPER_LIKE, modes=both, play=0.99)
+    own = _evaluation({c: [0.3, 0.2, 0.9] for c in PAPER_LIKE}, modes=("dynamics",), play=0.6)
+    own.inputs["model"] = {"file": "own-model.h5", "sha256": "ab" * 32}
+    cl = stage.claims(main, own)
+    rows = [c for c in cl if c.source.startswith("Sect. IV-C")]
+    assert [c.source for c in rows] == ["Sect. IV-C"] * 2 + ["Sect. IV-C, the robot's own model"] * 2
+    assert [c.verdict for c in rows] == ["agrees", "differs", "differs", "agrees"]
+    assert all("own-model.h5" in c.measured for c in rows[2:])
+    assert "Sect. IV-C, the robot's own model" in stage.build(main, own=own).readme

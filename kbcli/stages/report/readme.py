@@ -30,13 +30,14 @@ from kbcli.stages.report.tables import (
 )
 
 
-def build(art: Artifact, ablations: Artifact | None = None) -> Report:
+def build(art: Artifact, ablations: Artifact | None = None, own: Artifact | None = None) -> Report:
     """The report of an evaluation artifact: README text, claims and figures; with
     ``ablations`` (an evaluation of the ablation ladder, ``pipelines/ablations.toml``) also the
-    section "What explains each difference"."""
+    section "What explains each difference"; with ``own`` (the protocol evaluated with the robot's
+    own learned model) the Sect. IV-C claims on that model too, beside those on ``art``'s."""
     art = upgrade(art)
     check(art)
-    cl = claims(art)
+    cl = claims(art, own)
     figs = figures(art)
     why = explain(cl, ablations) if ablations is not None else []
     lines = [*_header(art), *_claims_section(cl), "", _how_judged(), "", *why,
