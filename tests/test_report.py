@@ -403,3 +403,16 @@ def test_dynamics_claims_on_the_robots_own_model_beside_the_default():
     assert [c.verdict for c in rows] == ["agrees", "differs", "differs", "agrees"]
     assert all("own-model.h5" in c.measured for c in rows[2:])
     assert "Sect. IV-C, the robot's own model" in stage.build(main, own=own).readme
+
+
+def test_methods_table_marks_options_that_do_not_apply():
+    art = _evaluation(PAPER_LIKE)
+    for x, extra in (("paper", {"robust": True, "kde_samples": 10000, "robust_eta": None}),
+                     ("kbcli", {"robust": True, "kde_samples": 10000, "robust_eta": None})):
+        for by_s in art.attrs["methods"][x]["options"].values():
+            for d in by_s.values():
+                d["robot"].update(extra)
+    text = stage.build(art).readme
+    assert "| **robust** | n/a | True |" in text
+    assert "| **kde_samples** | 10000 | n/a |" in text
+    assert "| **robust_eta** | n/a | None |" in text

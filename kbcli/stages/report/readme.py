@@ -134,8 +134,9 @@ def _methods_section(art: Artifact) -> list[str]:
     return [
         "## Methods: every resolved option",
         "",
-        "Options that differ between methods are in bold; `strategy`, `mode`, `max_steps`, "
-        "`family` and `reach_noise` are set per experiment by the protocol.",
+        "Options that differ between methods are in bold; n/a: the option does not apply to the "
+        "method (its posterior, family or strategies never read it); `strategy`, `mode`, "
+        "`max_steps`, `family` and `reach_noise` are set per experiment by the protocol.",
         "",
         *methods_table(art),
         "",
