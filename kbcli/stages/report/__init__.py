@@ -46,9 +46,10 @@ from kbcli.stages.report.source import (
     Report,
     method_names,
     ordered,
+    prior_entropy,
     upgrade,
 )
 
 __all__ = ["ENTROPY_STEPS", "KEY_OPTIONS", "NOT_SIGNIFICANT", "RESTORED_MARGIN", "RMSE_STEPS",
            "VERDICTS", "Claim", "Figure", "Report", "build", "claims", "figures", "method_names",
-           "ordered", "upgrade"]
+           "ordered", "prior_entropy", "upgrade"]
