@@ -65,7 +65,7 @@ def _bandwidth(r: dict, art: Artifact) -> str | None:
     if r.get("posterior") != "kde":
         return None
     bw = r.get("kde_bandwidth")
-    return ("a Gaussian kernel of std " + ("Scott's rule" if bw is None else f"{bw:g} px")
+    return ("a Gaussian kernel, its std " + ("by Scott's rule" if bw is None else f"{bw:g} px")
             + f"; the product is evaluated on a grid of {_opt(r, 'resolution')} px over "
             f"+-{_opt(r, 'prior_halfwidth')} px, not sampled")
 
