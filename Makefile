@@ -11,13 +11,15 @@ SEED   ?= 0
 
 JOBS   ?= 2
 
-.PHONY: help install demo test lint docs docs-serve docs-figures results data data-files reproduce reproduce-ideal model-quality reproduce-layouts bench clean
+.PHONY: help install demo test lint docs docs-serve docs-figures results data data-files reproduce reproduce-ideal reproduce-ablations reproduce-own-model model-quality reproduce-layouts bench clean
 
 help:
 	@echo "make demo        install, then run the main job on the embedded default model"
 	@echo "make test        install (with the dev extra), then run the test suite"
 	@echo "make data        rebuild data/ (keyboard, default model, golden set) from scratch"
 	@echo "make reproduce   learn, evaluate and report the paper's experiments (out/report/)"
+	@echo "make reproduce-ablations  the ablation ladder paper -> kbcli (pipelines/ablations.toml), time printed"
+	@echo "make reproduce-own-model  Sect. IV-C with the robot's own learned model, beside the default"
 	@echo "make reproduce-layouts  learn and adapt on every layout (out/layouts/report/; hours)"
 	@echo "make model-quality  test the paper's Sect. IV-C hypothesis: advantage vs model quality"
 	@echo "make bench       print the benchmark tables"
@@ -115,6 +117,30 @@ reproduce: $(STAMP)
 
 reproduce-ideal: $(STAMP)
 	MODE=ideal OUT=$(OUT)/reproduce REPORT=$(OUT)/report benchmarks/reproduce.sh
+
+# The ablation ladder from `paper` to `kbcli` one factor at a time (pipelines/ablations.toml), on
+# the model of `make reproduce` (learned first when missing); the report of $(OUT)/reproduce/eval.h5
+# then gains "What explains each difference". Prints the wall time of each stage.
+reproduce-ablations: $(STAMP)
+	CONFIG=pipelines/ablations.toml EVAL=ablations.h5 LEARN=missing OUT=$(OUT)/reproduce \
+	    REPORT=$(OUT)/report benchmarks/reproduce.sh
+
+# Sect. IV-C as the paper ran it: the dynamics claims on a model the robot learned itself
+# (dynamics mode, realistic arm, OWN_BUDGET reaches), evaluated beside the default model; the
+# report gives both verdicts. OWN_BUDGET is to be justified from `make model-quality`.
+OWN_BUDGET ?= 800
+reproduce-own-model: $(STAMP)
+	@mkdir -p $(OUT)/reproduce
+	$(KBCLI) learn --keyboard data/keyboard.h5 --mode dynamics --arm realistic \
+	    --budget $(OWN_BUDGET) --seed $(SEED) -o $(OUT)/reproduce/own-model.h5
+	$(KBCLI) evaluate --config pipelines/paper.toml --model $(OUT)/reproduce/own-model.h5 \
+	    --mode dynamics -o $(OUT)/reproduce/own-eval.h5 --resume \
+	    $(if $(SCHEDULER),--scheduler $(SCHEDULER),--jobs $(JOBS)) \
+	    $(if $(EXPERIMENTS),--experiments $(EXPERIMENTS),)
+	@test -f $(OUT)/reproduce/eval.h5 || { echo "run make reproduce first"; exit 1; }
+	$(KBCLI) report $(OUT)/reproduce/eval.h5 --own-model $(OUT)/reproduce/own-eval.h5 \
+	    $(if $(wildcard $(OUT)/reproduce/ablations.h5),--ablations $(OUT)/reproduce/ablations.h5,) \
+	    -o $(OUT)/report
 
 # Every layout (grid, hex, piano, pads, polygons): the learning and adaptation tables and one figure
 # per layout in $(OUT)/layouts/report/ (pipelines/layouts.toml; hours; interrupted runs continue).

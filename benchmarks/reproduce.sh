@@ -11,6 +11,13 @@
 #   SCHEDULER=tcp://HOST:8786 benchmarks/reproduce.sh   # ... or on a Dask cluster
 #   EXPERIMENTS=5 benchmarks/reproduce.sh    # a quick look: 5 runs per parametrization
 #   METHOD=paper benchmarks/reproduce.sh     # one method of the config only
+#   CONFIG=pipelines/ablations.toml EVAL=ablations.h5 LEARN=missing benchmarks/reproduce.sh
+#                                            # the ablation ladder (make reproduce-ablations)
+#   OWN_MODEL=own-model.h5 benchmarks/reproduce.sh  # also the dynamics claims on that model's
+#                                            # evaluation ($OUT/own-eval.h5, made first)
+#
+# The report is written for $OUT/eval.h5 (when it exists), reading beside it the ablation ladder
+# $OUT/ablations.h5 and the evaluation with the robot's own model $OUT/own-eval.h5 when they exist.
 #
 # An interrupted run continues where it stopped when started again (evaluate --resume).
 set -euo pipefail
@@ -25,6 +32,9 @@ METHOD=${METHOD:-}
 EXPERIMENTS=${EXPERIMENTS:-}
 SCHEDULER=${SCHEDULER:-}
 SEED=${SEED:-0}
+CONFIG=${CONFIG:-pipelines/paper.toml}
+EVAL=${EVAL:-eval.h5}
+LEARN=${LEARN:-always}        # always, or missing: learn only when $OUT/model.h5 does not exist
 mkdir -p "$OUT"
 
 names=()
@@ -42,16 +52,27 @@ stage() {
     times+=("$(( (t1 - t0) / 1000000 ))")
 }
 
-eval_args=(--config pipelines/paper.toml --model "$OUT/model.h5" -o "$OUT/eval.h5" --resume)
+eval_args=(--config "$CONFIG" --model "$OUT/model.h5" -o "$OUT/$EVAL" --resume)
 [[ -n $MODE ]] && eval_args+=(--mode "$MODE")
 [[ -n $METHOD ]] && eval_args+=(--method "$METHOD")
 [[ -n $EXPERIMENTS ]] && eval_args+=(--experiments "$EXPERIMENTS")
 if [[ -n $SCHEDULER ]]; then eval_args+=(--scheduler "$SCHEDULER"); else eval_args+=(--jobs "$JOBS"); fi
 
-stage keyboard "$KBCLI" keyboard --config pipelines/keyboard.toml -o "$OUT/keyboard.h5"
-stage learn "$KBCLI" learn --keyboard "$OUT/keyboard.h5" -o "$OUT/model.h5" --seed "$SEED"
+if [[ $LEARN == always || ! -f $OUT/model.h5 ]]; then
+    stage keyboard "$KBCLI" keyboard --config pipelines/keyboard.toml -o "$OUT/keyboard.h5"
+    stage learn "$KBCLI" learn --keyboard "$OUT/keyboard.h5" -o "$OUT/model.h5" --seed "$SEED"
+fi
 stage evaluate "$KBCLI" evaluate "${eval_args[@]}"
-stage report "$KBCLI" report "$OUT/eval.h5" -o "$REPORT"
+timings="$OUT/timings.txt"
+[[ $EVAL != eval.h5 ]] && timings="$OUT/timings-${EVAL%.h5}.txt"
+report_args=("$OUT/eval.h5" -o "$REPORT")
+[[ -f $OUT/ablations.h5 ]] && report_args+=(--ablations "$OUT/ablations.h5")
+[[ -f $OUT/own-eval.h5 ]] && report_args+=(--own-model "$OUT/own-eval.h5")
+if [[ -f $OUT/eval.h5 ]]; then
+    stage report "$KBCLI" report "${report_args[@]}"
+else
+    echo "== report: skipped ($OUT/eval.h5 not made yet: make reproduce writes it)" >&2
+fi
 
 {
     printf '%-10s %10s\n' stage "wall s"
@@ -62,7 +83,7 @@ stage report "$KBCLI" report "$OUT/eval.h5" -o "$REPORT"
     done
     printf '%-10s %10.1f\n' total "$(echo "$total" | awk '{print $1 / 1000}')"
     if [[ -n $SCHEDULER ]]; then where="scheduler $SCHEDULER"; else where="jobs $JOBS"; fi
-    echo "(mode: ${MODE:-ideal+dynamics}; methods: ${METHOD:-all of the config}; $where;" \
+    echo "(config: $CONFIG; mode: ${MODE:-ideal+dynamics}; methods: ${METHOD:-all of the config}; $where;" \
          "experiments per parametrization: ${EXPERIMENTS:-config})"
     echo "(load average, 1/5/15 min: $load_before before, $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo "?") after; $(nproc 2>/dev/null || echo "?") cores)"
-} | tee "$OUT/timings.txt"
+} | tee "$timings"

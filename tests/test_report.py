@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from test_evaluate import FAKE, small_config
@@ -169,7 +171,7 @@ def test_readme_has_every_table_and_claim():
                     "Large displacements: representation, estimator or strategy?"):
         assert heading in text
     assert "p < 1e-05 at 10 px (p=1.0e-07)" in text
-    assert text.count("| Sect. IV-") == 7
+    assert text.split("## Departures")[0].count("| Sect. IV-") == 7
     # the other method beside the judged one, and the options that differ in bold
     assert "kbcli active:" in text and "| **posterior** | kde | likelihood |" in text
     assert [f.name for f in rep.figures] == ["fig6_entropy.png", "fig7_error_ideal.png",
@@ -311,3 +313,106 @@ def test_an_ml_verdict_is_shown_with_the_posterior_mean_too():
     assert small.verdict == "agrees"
     assert "the posterior mean of the same runs: not at 10 px (p=5.0e-01)" in small.measured
     assert "[differs] (this verdict differs from the ML estimate's" in small.measured
+
+
+PAPER_TEXT = Path(__file__).resolve().parents[1] / ".." / "shared" / "paper" / \
+    "where-is-my-keyboard.md"
+
+
+def test_departures_quote_the_paper_and_follow_the_options():
+    from kbcli.stages.report.departures import DEPARTURES, departures
+
+    if PAPER_TEXT.exists():  # the paper sits beside the clone in the project's workspace
+        paper = PAPER_TEXT.read_text(encoding="utf-8")
+        for d in DEPARTURES:
+            assert d.quote in paper, d.quote
+    art = _evaluation(PAPER_LIKE)
+    rows = {d.quote: does for d, does in departures(art)}
+    assert any("ties go to the lowest grid index" in v for v in rows.values())
+    assert any("off: every run takes 5 observations" in v for v in rows.values())
+    # a method that sets the paper's stopping rule and a floorless KDE has neither departure
+    for by_s in art.attrs["methods"]["paper"]["options"].values():
+        for d in by_s.values():
+            d["robot"].update(stop_ml=0.9, kde_floor=0.0)
+    rows = {d.quote: does for d, does in departures(art)}
+    assert not any("off: every run" in v or "floor" in v for v in rows.values())
+    text = stage.build(_evaluation(PAPER_LIKE)).readme
+    assert "## Departures from the paper" in text
+    assert '| Sect. IV-A | "a baseline strategy, consisting in the random selection of samples" |' \
+        in text
+
+
+def _ladder(rungs) -> Artifact:
+    """A synthetic ablation ladder: rungs ``(name, robot options, small p-values)`` built on
+    :func:`_evaluation` (every other claim as PAPER_LIKE)."""
+    import copy
+
+    art = _evaluation(PAPER_LIKE)
+    base = art.attrs["methods"]["paper"]
+    methods, order = {}, []
+    for tree in ("curves", "pvalues", "entropy"):
+        paper = art.data[tree]["ideal"]["paper"]
+        art.data[tree]["ideal"] = {}
+        for name, _, small in rungs:
+            t = copy.deepcopy(paper)
+            if tree == "pvalues":
+                t["small"]["active"]["pvalue"] = np.asarray(small, float)
+            art.data[tree]["ideal"][name] = t
+    for name, opts, _ in rungs:
+        m = copy.deepcopy(base)
+        for by_s in m["options"].values():
+            for s, d in by_s.items():
+                d["robot"] = {**opts, "strategy": s}
+        methods[name] = m
+        order.append(name)
+    art.attrs.update(methods=methods, method_order=order, judged=order[0])
+    return art
+
+
+def test_what_explains_each_difference_on_a_known_ladder():
+    """The small claim differs with the KDE and agrees once the posterior is the likelihood: the
+    section names the posterior (and only it) as what flips it, computed from the options."""
+    bad, good = [1e-7, 1e-3, 1e-6], [1e-9] * 3
+    kde = {"posterior": "kde", "estimator": "ml", "model_blur": 0.0}
+    rungs = [("paper", kde, bad), ("r-estimator", {**kde, "estimator": "mean"}, bad),
+             ("r-posterior", {**kde, "estimator": "mean", "posterior": "likelihood"}, good),
+             ("kbcli", {"posterior": "likelihood", "estimator": "mean"}, good)]
+    main = _evaluation({**PAPER_LIKE, "small": bad})
+    rep = stage.build(main, ablations=_ladder(rungs))
+    section = rep.readme.split("## What explains each difference")[1].split("\n## ")[0]
+    row = next(r for r in section.splitlines() if r.startswith("| small displacements"))
+    assert "`paper` (active) differs -> `r-estimator` (active) differs -> `r-posterior` " \
+        "(active) agrees -> `kbcli` (active) agrees" in row
+    assert "`r-estimator` -> `r-posterior` (differs -> agrees): posterior kde -> likelihood |" \
+        in row
+    # a difference no rung removes is said to be explained by none of the factors
+    rungs = [(n, o, bad) for n, o, _ in rungs]
+    rep = stage.build(main, ablations=_ladder(rungs))
+    assert "no rung flips it: it differs on every rung" in rep.readme
+    assert "What explains each difference" not in stage.build(main).readme
+
+
+def test_dynamics_claims_on_the_robots_own_model_beside_the_default():
+    both = ("ideal", "dynamics")
+    main = _evaluation(PAPER_LIKE, modes=both, play=0.99)
+    own = _evaluation({c: [0.3, 0.2, 0.9] for c in PAPER_LIKE}, modes=("dynamics",), play=0.6)
+    own.inputs["model"] = {"file": "own-model.h5", "sha256": "ab" * 32}
+    cl = stage.claims(main, own)
+    rows = [c for c in cl if c.source.startswith("Sect. IV-C")]
+    assert [c.source for c in rows] == ["Sect. IV-C"] * 2 + ["Sect. IV-C, the robot's own model"] * 2
+    assert [c.verdict for c in rows] == ["agrees", "differs", "differs", "agrees"]
+    assert all("own-model.h5" in c.measured for c in rows[2:])
+    assert "Sect. IV-C, the robot's own model" in stage.build(main, own=own).readme
+
+
+def test_methods_table_marks_options_that_do_not_apply():
+    art = _evaluation(PAPER_LIKE)
+    for x, extra in (("paper", {"robust": True, "kde_samples": 10000, "robust_eta": None}),
+                     ("kbcli", {"robust": True, "kde_samples": 10000, "robust_eta": None})):
+        for by_s in art.attrs["methods"][x]["options"].values():
+            for d in by_s.values():
+                d["robot"].update(extra)
+    text = stage.build(art).readme
+    assert "| **robust** | n/a | True |" in text
+    assert "| **kde_samples** | 10000 | n/a |" in text
+    assert "| **robust_eta** | n/a | None |" in text

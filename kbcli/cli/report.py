@@ -32,6 +32,14 @@ def report_cmd(
     output: opts.output_option("Report folder to write (created if needed).") = Path("report"),
     fmt: Annotated[str, typer.Option(
         "--format", help=f"Figure format: {', '.join(FIGURE_FORMATS)}.")] = "png",
+    ablations: Annotated[Path | None, typer.Option(
+        help="Evaluation of the ablation ladder (kbcli evaluate --config "
+             "pipelines/ablations.toml): adds 'What explains each difference', the rung whose "
+             "change flips each claim that differs.")] = None,
+    own_model: Annotated[Path | None, typer.Option(
+        help="Evaluation of the same protocol with the robot's own learned model (make "
+             "reproduce-own-model): the Sect. IV-C claims are judged on it too, beside the "
+             "main evaluation's model.")] = None,
 ) -> None:
     """Write the reproduction report of an evaluation (or of a model-quality sweep).
 
@@ -43,21 +51,26 @@ def report_cmd(
     resolved option of every method, the paper's claims judged on the paper's method with ours
     beside it, the large-displacement ablation, tables of observations to each threshold,
     p-values with the smallest attainable one, RMSE and measured playing success); --format pdf or
-    svg writes the figures in that format instead. Prints each claim's verdict.
+    svg writes the figures in that format instead; --ablations ABL.h5 adds the section "What
+    explains each difference"; --own-model OWN.h5 judges the Sect. IV-C claims on that evaluation
+    too. Prints each claim's verdict.
     """
     from kbcli.viz import report as viz
 
     if fmt not in FIGURE_FORMATS:
         raise ConfigError(f"--format must be one of {', '.join(FIGURE_FORMATS)}, got {fmt!r}")
-    check_io({"EVALUATION": evaluation}, Output(output, "report folder", folder=True))
+    inputs = {"EVALUATION": evaluation, "--ablations": ablations, "--own-model": own_model}
+    check_io(inputs, Output(output, "report folder", folder=True))
     art = read_artifact(evaluation, ("evaluation", "model_quality"))
     if art.kind == "model_quality":
         _quality_report(art, evaluation, output, fmt)
         return
     art = stage.upgrade(art)
-    rep = stage.build(art)
+    ladder = read_artifact(ablations, ("evaluation",)) if ablations else None
+    own = read_artifact(own_model, ("evaluation",)) if own_model else None
+    rep = stage.build(art, ablations=ladder, own=own)
     names = {f.name: str(Path(f.name).with_suffix("." + fmt)) for f in rep.figures}
-    check_io({"EVALUATION": evaluation},
+    check_io(inputs,
              Output(output, "report folder", folder=True, files=("README.md", *names.values())))
     readme = rep.readme
     with atomic_folder(output, owned=OWNED) as tmp, busy("drawing the report's figures"):

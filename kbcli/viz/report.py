@@ -76,11 +76,38 @@ def _rows(art: Artifact, mode: str, key: str = "curves") -> list[tuple[str, str]
 LINESTYLES = ("-", "--", ":", "-.")
 
 
+#: Fig. 5's panels zoom on the posterior: cells above this share of the panel's maximum (the
+#: colour scale's floor) and the truth, padded, at least ZOOM_MIN_HALF px either side.
+ZOOM_FLOOR = 1e-3
+ZOOM_MIN_HALF = 4.0
+
+
+def zoom_window(p: np.ndarray, ext: tuple[float, float, float, float], truth: np.ndarray,
+                floor: float = ZOOM_FLOOR,
+                min_half: float = ZOOM_MIN_HALF) -> tuple[float, float, float, float]:
+    """(x0, x1, y0, y1) px a Fig. 5 panel shows: the cells of ``p`` (rows = dy) at or above
+    ``floor`` of its maximum and the true displacement, with a margin of a fifth of the span, at
+    least ``min_half`` px either side of the centre, within the grid's extent ``ext``."""
+    h, w = p.shape
+    xs = np.linspace(ext[0], ext[1], w + 1)
+    ys = np.linspace(ext[2], ext[3], h + 1)
+    rows, cols = np.nonzero(p >= floor * max(float(p.max()), 1e-300))
+    if len(rows) == 0:
+        return ext
+    lo = np.array([min(xs[cols.min()], truth[0]), min(ys[rows.min()], truth[1])])
+    hi = np.array([max(xs[cols.max() + 1], truth[0]), max(ys[rows.max() + 1], truth[1])])
+    centre, half = (lo + hi) / 2, np.maximum((hi - lo) / 2 * 1.2, min_half)
+    half = np.full(2, half.max())  # square panels
+    return (max(centre[0] - half[0], ext[0]), min(centre[0] + half[0], ext[1]),
+            max(centre[1] - half[1], ext[2]), min(centre[1] + half[1], ext[3]))
+
+
 def plot_posterior(art: Artifact, path: str | os.PathLike, mode: str | None = None,
                    max_columns: int = 6) -> None:
     """Fig. 5: one row per method and strategy, one column per snapshot step, in px coordinates
     (the displacement dx, dy), each panel scaled to its own maximum on a log colour scale (one
-    colour bar), the true displacement marked."""
+    colour bar) and zoomed on its mass and the truth (:func:`zoom_window`), the true displacement
+    an outline that never hides a posterior collapsed onto one cell."""
     from kbcli.stages.report import upgrade
 
     art = upgrade(art)
@@ -92,10 +119,10 @@ def plot_posterior(art: Artifact, path: str | os.PathLike, mode: str | None = No
         raise ValueError("no posterior snapshots in this evaluation")
     data = {r: _snapshot_arrays(examples[r[0]][r[1]]) for r in rows}
     ncol = min(max_columns, max(len(d[1]) for d in data.values()))
-    fig, axes = plt.subplots(len(rows), ncol, figsize=(1.9 * ncol + 1.2, 1.95 * len(rows) + 0.6),
-                             squeeze=False, sharex=True, sharey=True)
+    fig, axes = plt.subplots(len(rows), ncol, figsize=(1.9 * ncol + 1.2, 2.05 * len(rows) + 0.6),
+                             squeeze=False)
     params = art.array("experiments/params")
-    norm = LogNorm(vmin=1e-3, vmax=1.0)
+    norm = LogNorm(vmin=ZOOM_FLOOR, vmax=1.0)
     im = None
     for r, (x, s) in enumerate(rows):
         snaps, steps, ext = data[(x, s)]
@@ -105,24 +132,33 @@ def plot_posterior(art: Artifact, path: str | os.PathLike, mode: str | None = No
             if c >= len(snaps):
                 ax.axis("off")
                 continue
-            p = snaps[c] / max(snaps[c].max(), 1e-300)
-            im = ax.imshow(np.maximum(p, 1e-3), origin="lower", extent=ext, cmap="magma",
-                           norm=norm, interpolation="nearest")
-            ax.plot(*truth, marker="+", color="cyan", ms=10, mew=1.4)
+            im = _posterior_panel(ax, snaps[c], ext, truth, norm)
             ax.set_title(f"t = {int(steps[c])}", fontsize=8)
-            ax.tick_params(labelsize=7)
             if r == len(rows) - 1:
                 ax.set_xlabel("dx (px)", fontsize=8)
             if c == 0:
                 ax.set_ylabel(f"{x}\n{s}\ndy (px)", fontsize=8)
-    fig.suptitle(f"Posterior over the displacement, {mode} mode (cross: the truth, "
-                 f"({truth[0]:g}, {truth[1]:g}) px)", fontsize=10)
+    fig.suptitle(f"Posterior over the displacement, {mode} mode (circle: the truth, "
+                 f"({truth[0]:g}, {truth[1]:g}) px; each panel zoomed on its mass)", fontsize=10)
     fig.tight_layout(rect=(0, 0, 0.92, 0.97))
     cax = fig.add_axes((0.93, 0.15, 0.015, 0.7))
     cb = fig.colorbar(im, cax=cax)
     cb.set_label("posterior / its maximum (log)", fontsize=8)
     cb.ax.tick_params(labelsize=7)
     save(fig, path)
+
+
+def _posterior_panel(ax, snap: np.ndarray, ext: tuple, truth: np.ndarray, norm):
+    """One Fig. 5 panel: the posterior over its own maximum, zoomed, the truth as an outline."""
+    p = snap / max(snap.max(), 1e-300)
+    im = ax.imshow(np.maximum(p, ZOOM_FLOOR), origin="lower", extent=ext, cmap="magma",
+                   norm=norm, interpolation="nearest")
+    x0, x1, y0, y1 = zoom_window(p, ext, truth)
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.plot(*truth, marker="o", ms=11, mfc="none", mec="cyan", mew=1.3, ls="none")
+    ax.tick_params(labelsize=7)
+    return im
 
 
 def _style(art: Artifact, x: str, s: str, i: int) -> dict:
@@ -134,25 +170,37 @@ def _style(art: Artifact, x: str, s: str, i: int) -> dict:
 
 
 def plot_entropy(art: Artifact, path: str | os.PathLike) -> None:
-    """Fig. 6: mean posterior entropy per step, method (line style) and strategy (colour),
+    """Fig. 6: mean posterior entropy per step from t = 0 (the uniform prior's entropy), one panel
+    per mode (rows) and size category (columns), method (line style) and strategy (colour),
     interquartile range shaded."""
-    from kbcli.stages.report import upgrade
+    from kbcli.stages.report import prior_entropy, upgrade
 
     art = upgrade(art)
-    modes = art.attrs["modes"]
-    fig, axes = plt.subplots(1, len(modes), figsize=(5.2 * len(modes), 3.8), squeeze=False)
-    for ax, m in zip(axes[0], modes, strict=True):
-        for i, (x, s) in enumerate(_rows(art, m, "entropy")):
-            e = art.data["entropy"][m][x][s]
-            t = np.arange(1, len(e["mean"]) + 1)
-            st = _style(art, x, s, i)
-            ax.plot(t, e["mean"], label=f"{x} / {s}", **st)
-            ax.fill_between(t, e["q25"], e["q75"], color=st["color"], alpha=0.12, lw=0)
-        ax.set_xlabel("observations")
-        ax.set_ylabel("posterior entropy (nats)")
-        ax.set_title(f"{m} mode", fontsize=10)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
+    modes, cats = art.attrs["modes"], art.attrs["categories"]
+    fig, axes = plt.subplots(len(modes), len(cats), figsize=(4.2 * len(cats), 3.4 * len(modes)),
+                             squeeze=False, sharex=True, sharey=True)
+    for r, m in enumerate(modes):
+        for ax, c in zip(axes[r], cats, strict=True):
+            for i, (x, s) in enumerate(_rows(art, m, "entropy")):
+                cur = art.data["curves"][m].get(x, {}).get(c, {}).get(s)
+                if cur is None or "entropy_mean" not in cur:
+                    continue
+                h0 = prior_entropy(art, x)
+                mean, q25, q75 = (np.asarray(cur[f"entropy_{k}"], float)
+                                  for k in ("mean", "q25", "q75"))
+                if h0 is not None:  # every run starts from the uniform prior
+                    mean, q25, q75 = (np.r_[h0, v] for v in (mean, q25, q75))
+                t = np.arange(len(mean)) + (0 if h0 is not None else 1)
+                st = _style(art, x, s, i)
+                ax.plot(t, mean, label=f"{x} / {s}", **st)
+                ax.fill_between(t, q25, q75, color=st["color"], alpha=0.12, lw=0)
+            limit = art.config["categories"][c]["limit"]
+            ax.set_title(f"{m} mode, {c} (up to {limit:g} px)", fontsize=9)
+            ax.grid(alpha=0.3)
+            if r == len(modes) - 1:
+                ax.set_xlabel("observations")
+        axes[r, 0].set_ylabel("posterior entropy (nats)")
+    axes[0, -1].legend(fontsize=7)
     save(fig, path)
 
 

@@ -24,7 +24,10 @@ and strategies), with every other method shown beside it (stated in the README t
   at least the median measured before the displacement minus :data:`RESTORED_MARGIN`.
 
 The package: :mod:`~kbcli.stages.report.source` (reading the artifact, the value types),
-:mod:`~kbcli.stages.report.judge` (the rules), :mod:`~kbcli.stages.report.paper` (the claims),
+:mod:`~kbcli.stages.report.judge` (the rules), :mod:`~kbcli.stages.report.effects` (effect
+sizes: medium's *not so big*, the trend across categories), :mod:`~kbcli.stages.report.paper` (the
+claims), :mod:`~kbcli.stages.report.departures` (the departures from the paper's text),
+:mod:`~kbcli.stages.report.ablation` (what explains each difference, from the ablation ladder),
 :mod:`~kbcli.stages.report.tables`, :mod:`~kbcli.stages.report.captions` (the figures) and
 :mod:`~kbcli.stages.report.readme` (:func:`build`).
 """
@@ -46,9 +49,10 @@ from kbcli.stages.report.source import (
     Report,
     method_names,
     ordered,
+    prior_entropy,
     upgrade,
 )
 
 __all__ = ["ENTROPY_STEPS", "KEY_OPTIONS", "NOT_SIGNIFICANT", "RESTORED_MARGIN", "RMSE_STEPS",
            "VERDICTS", "Claim", "Figure", "Report", "build", "claims", "figures", "method_names",
-           "ordered", "upgrade"]
+           "ordered", "prior_entropy", "upgrade"]

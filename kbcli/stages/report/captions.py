@@ -19,11 +19,14 @@ def figures(art: Artifact) -> list[Figure]:
                            f"observations of one example run per method and strategy ({first} "
                            f"mode, first {art.config.get('example', '')} displacement; the same "
                            "displacement for every row), each panel scaled to its own maximum "
-                           "(colour bar); the cross is the true displacement."))
+                           "(colour bar) and zoomed on the cells above 1e-3 of it and the truth "
+                           "(axes in px differ between panels); the circle outlines the true "
+                           "displacement, so a posterior collapsed onto one cell stays visible."))
     figs.append(Figure("fig6_entropy.png", "Fig. 6: entropy reduction",
-                       "Posterior entropy (nats) against observations, mean over all experiments "
-                       "of each method and strategy, with the interquartile range shaded; one "
-                       "panel per mode. Entropies of different posteriors (KDE, likelihood) are "
+                       "Posterior entropy (nats) against observations from t = 0 (the uniform "
+                       "prior over the method's hypothesis grid), mean over the experiments of "
+                       "each method and strategy, with the interquartile range shaded; one "
+                       "panel per mode and size category. Entropies of different posteriors (KDE, likelihood) are "
                        "on the same grid but not of the same model: compare strategies within "
                        "a method."))
     for m in modes:

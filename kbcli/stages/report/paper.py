@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import partial
 
 from kbcli.stages.artifact import Artifact
@@ -50,14 +51,32 @@ DYN_NS = ("with robot dynamics the differences between the strategies were not s
           "enough")
 
 
-def claims(art: Artifact) -> list[Claim]:
-    """The paper's claims (Sect. IV-A, IV-B, IV-C) judged on the judged method, others beside."""
+def claims(art: Artifact, own: Artifact | None = None) -> list[Claim]:
+    """The paper's claims (Sect. IV-A, IV-B, IV-C) judged on the judged method, others beside;
+    with ``own`` (the same protocol evaluated with the robot's own learned model) the Sect. IV-C
+    claims once more on it, beside those on ``art``'s model."""
     art = upgrade(art)
     check(art)
     modes = art.attrs["modes"]
     ideal = "ideal" if "ideal" in modes else None
-    return [*_entropy_claims(art, ideal), *_displacement_claims(art, ideal),
-            *_dynamics_claims(art)]
+    out = [*_entropy_claims(art, ideal), *_displacement_claims(art, ideal),
+           *_dynamics_claims(art)]
+    return out + (own_model_claims(own) if own is not None else [])
+
+
+OWN_SOURCE = "Sect. IV-C, the robot's own model"
+
+
+def own_model_claims(own: Artifact) -> list[Claim]:
+    """The Sect. IV-C claims judged on an evaluation run with the robot's own learned model (the
+    paper's "model learned with the iCub robot"), each measured text naming that model."""
+    own = upgrade(own)
+    check(own)
+    model = own.inputs.get("model", {})
+    label = (f"with the robot's own model ({own.attrs.get('model_strategy')}, file "
+             f"{model.get('file')}, sha256 `{str(model.get('sha256'))[:16]}`)")
+    return [replace(c, source=OWN_SOURCE, measured=f"{label}: {c.measured}")
+            for c in _dynamics_claims(own)]
 
 
 def _entropy_claims(art: Artifact, ideal: str | None) -> list[Claim]:
@@ -188,3 +207,22 @@ def _dynamics_claims(art: Artifact) -> list[Claim]:
         out.append(Claim("Sect. IV-C", DYN_NS, judged, opts, f"{s} vs {base}: {measured}",
                          verdict, beside(art, dyn)))
     return out
+
+
+def claim_rules(art: Artifact) -> dict:
+    """Each claim's rule by its paper text, ``fn(method, strategy) -> (measured, verdict)``, for
+    judging a claim on any method of ``art`` (the ablation ladder: :mod:`.ablation`)."""
+    art = upgrade(art)
+    modes = art.attrs["modes"]
+    rules: dict = {}
+    if "ideal" in modes:
+        rules[FIG6] = lambda x, s: entropy_claim(art, "ideal", x, s)
+        for cat, _, text, rule in DISPLACEMENT_CLAIMS:
+            if cat in art.attrs["categories"]:
+                rules[text] = rule_fn(art, "ideal", cat, rule)
+        if all(c in art.attrs["categories"] for c, *_ in DISPLACEMENT_CLAIMS):
+            rules[TREND[1]] = _trend_fn(art, "ideal")
+    if "dynamics" in modes:
+        rules[DYN_RESTORES] = lambda x, s: restores(art, x)
+        rules[DYN_NS] = partial(_dynamics, art)
+    return rules

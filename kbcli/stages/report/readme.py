@@ -5,7 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from kbcli.stages.artifact import Artifact
+from kbcli.stages.report.ablation import explain
 from kbcli.stages.report.captions import figures
+from kbcli.stages.report.departures import departures_table
+from kbcli.stages.report.effects import EFFECT_LEVEL
 from kbcli.stages.report.paper import claims
 from kbcli.stages.report.source import (
     ENTROPY_STEPS,
@@ -28,14 +31,18 @@ from kbcli.stages.report.tables import (
 )
 
 
-def build(art: Artifact) -> Report:
-    """The report of an evaluation artifact: README text, claims and figures."""
+def build(art: Artifact, ablations: Artifact | None = None, own: Artifact | None = None) -> Report:
+    """The report of an evaluation artifact: README text, claims and figures; with
+    ``ablations`` (an evaluation of the ablation ladder, ``pipelines/ablations.toml``) also the
+    section "What explains each difference"; with ``own`` (the protocol evaluated with the robot's
+    own learned model) the Sect. IV-C claims on that model too, beside those on ``art``'s."""
     art = upgrade(art)
     check(art)
-    cl = claims(art)
+    cl = claims(art, own)
     figs = figures(art)
-    lines = [*_header(art), *_claims_section(cl), "", _how_judged(), "",
-             *_methods_section(art), *_figures_section(figs), *_ablation_section(art)]
+    why = explain(cl, ablations) if ablations is not None else []
+    lines = [*_header(art), *_claims_section(cl), "", _how_judged(), "", *why,
+             *departures_table(art), *_methods_section(art), *_figures_section(figs), *_ablation_section(art)]
     for m in art.attrs["modes"]:
         lines += _mode_sections(art, m)
     lines += ["## Playing success (measured; median and interquartile range over runs)", "",
@@ -121,15 +128,26 @@ def _how_judged() -> str:
         + ", ".join(str(t) for t in ENTROPY_STEPS) + ". *Restores performance* agrees when, for "
         "every strategy, the median measured playing success after adaptation is at least the "
         f"median measured before the displacement minus {100 * RESTORED_MARGIN:.0f} points. A run "
-        "that never gets below a threshold counts as max_steps + 1 observations.")
+        "that never gets below a threshold counts as max_steps + 1 observations. Claims about "
+        "the size of the advantage (medium's *not so big*, judged whole with its significance; "
+        "the trend across categories) read the probability of superiority A = P(the strategy "
+        "needs fewer observations than the baseline) + P(tie) / 2 at each threshold informative "
+        "in every category compared (the paper's p-values at 50 runs are a monotone function of "
+        "it): they agree when A falls from each category to the next at each such threshold and "
+        "the fall from the first to the last is significant at one of them at least (one-sided "
+        f"normal test with DeLong's variance, p < {EFFECT_LEVEL:g}). Where the judged method "
+        "estimates by the maximum-likelihood cell, each verdict that reads an estimate is also "
+        "given for the posterior mean of the same runs, so that none rests on the ML tie rule "
+        "unseen.")
 
 
 def _methods_section(art: Artifact) -> list[str]:
     return [
         "## Methods: every resolved option",
         "",
-        "Options that differ between methods are in bold; `strategy`, `mode`, `max_steps`, "
-        "`family` and `reach_noise` are set per experiment by the protocol.",
+        "Options that differ between methods are in bold; n/a: the option does not apply to the "
+        "method (its posterior, family or strategies never read it); `strategy`, `mode`, "
+        "`max_steps`, `family` and `reach_noise` are set per experiment by the protocol.",
         "",
         *methods_table(art),
         "",

@@ -198,3 +198,18 @@ def others(art: Artifact) -> list[str]:
 def played(art: Artifact, sel: np.ndarray, key: str) -> np.ndarray:
     v = np.asarray(art.data["experiments"][key], float)[sel]
     return v[~np.isnan(v)]
+
+
+def prior_entropy(art: Artifact, method: str) -> float | None:
+    """Entropy (nats) of a method's uniform prior over its hypothesis grid: the posterior entropy
+    at t = 0, before any observation (None when its options do not say the grid)."""
+    from kbcli.core.grid import grid_bytes
+
+    r = robot(art, method)
+    try:
+        cells, _ = grid_bytes(r.get("family", "translation"), float(r["prior_halfwidth"]),
+                              float(r["resolution"]), float(r.get("max_angle", 0.0)),
+                              float(r.get("angle_resolution", 1.0)))
+    except (KeyError, TypeError, ValueError):
+        return None
+    return float(np.log(cells))

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.transforms import FAMILIES
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.report.source import (
     KEY_OPTIONS,
@@ -31,14 +33,52 @@ def methods_table(art: Artifact) -> list[str]:
             *_loop_rows(_loop_options(info, meths), meths)]
 
 
+def _uses_samples(r: dict) -> bool:
+    return r.get("posterior") in POSTERIORS and POSTERIORS.get(r["posterior"]).uses_samples
+
+
+def _is_robust(r: dict) -> bool:
+    return (bool(r.get("robust")) and r.get("posterior") in POSTERIORS
+            and POSTERIORS.get(r["posterior"]).robust)
+
+
+def _rotates(r: dict) -> bool:
+    return r.get("family") in FAMILIES and FAMILIES.get(r["family"]).rotates
+
+
+#: Robot options that apply only to some methods: option -> ``(robot options, strategies) ->
+#: bool``; the methods table prints "n/a" for a method they do not apply to.
+APPLIES = {
+    "kde_samples": lambda r, s: _uses_samples(r),
+    "kde_bandwidth": lambda r, s: _uses_samples(r),
+    "robust": lambda r, s: r.get("posterior") not in POSTERIORS
+    or POSTERIORS.get(r["posterior"]).robust,
+    "robust_blurs": lambda r, s: _is_robust(r),
+    "robust_outliers": lambda r, s: _is_robust(r),
+    "robust_eta": lambda r, s: _is_robust(r),
+    "redundancy_radius": lambda r, s: _is_robust(r),
+    "max_angle": lambda r, s: _rotates(r),
+    "angle_resolution": lambda r, s: _rotates(r),
+    "candidates": lambda r, s: bool({"active", "infogain"} & set(s)),
+    "hypotheses": lambda r, s: "infogain" in s,
+    "active_keep": lambda r, s: "active" in s,
+    "active_hypotheses": lambda r, s: "active" in s,
+}
+NOT_APPLICABLE = "n/a"
+
+
 def _robot_rows(art: Artifact, meths: list[str]) -> list[str]:
-    """The robot's options, :data:`KEY_OPTIONS` first; those that differ in bold."""
+    """The robot's options, :data:`KEY_OPTIONS` first; those that differ in bold; "n/a" where an
+    option does not apply to a method (:data:`APPLIES`)."""
     robots = {x: robot(art, x) for x in meths}
+    strategies = {x: methods_of(art)[x]["strategies"] for x in meths}
     keys = [k for k in KEY_OPTIONS if any(k in r for r in robots.values())]
     keys += sorted({k for r in robots.values() for k in r} - set(keys))
     lines = []
     for k in keys:
-        vals = [robots[x].get(k, "(default)") for x in meths]
+        vals = [robots[x].get(k, "(default)")
+                if APPLIES.get(k, lambda r, s: True)(robots[x], strategies[x]) else NOT_APPLICABLE
+                for x in meths]
         name = f"**{k}**" if len({str(v) for v in vals}) > 1 else k
         lines.append(f"| {name} | " + " | ".join(str(v) for v in vals) + " |")
     return lines

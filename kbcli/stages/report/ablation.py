@@ -1,0 +1,106 @@
+"""What explains each difference: the claims along an ablation ladder (``pipelines/ablations.toml``).
+
+The ladder is an evaluation whose methods, in the config's order, go from the paper's method to
+ours one factor at a time (each rung changes some options of the one before). For every claim the
+main report marks *differs*, :func:`explain` judges the same claim on every rung, with the same
+rule (:func:`kbcli.stages.report.paper.claim_rules`), and names the options whose change flips the
+verdict: the differences between the two rungs' resolved options, computed from the artifact,
+never written by hand. Each rung is judged on its last non-baseline strategy (``infogain`` on a
+rung that swaps ``active`` for it).
+"""
+
+from __future__ import annotations
+
+from kbcli.stages.artifact import Artifact
+from kbcli.stages.report.paper import claim_rules
+from kbcli.stages.report.source import Claim, compared, method_names, methods_of, robot, upgrade
+from kbcli.stages.report.tables import APPLIES, NOT_APPLICABLE
+
+
+def rung_strategy(art: Artifact, method: str) -> str | None:
+    """The strategy a rung is judged on: its last non-baseline strategy."""
+    s = compared(art, method)
+    return s[-1] if s else None
+
+
+def changes(art: Artifact, before: str, after: str) -> list[str]:
+    """What changes from rung ``before`` to ``after``: each differing robot option that applies
+    to both (one that applies to only one follows from another change, e.g. ``kde_samples`` from
+    ``posterior``) and the judged strategy, as ``'key a -> b'``."""
+    a, b = _shown(art, before), _shown(art, after)
+    out = [f"{k} {a.get(k, '(default)')} -> {b.get(k, '(default)')}"
+           for k in sorted(set(a) | set(b))
+           if str(a.get(k)) != str(b.get(k)) and NOT_APPLICABLE not in (a.get(k), b.get(k))]
+    sa, sb = rung_strategy(art, before), rung_strategy(art, after)
+    if sa != sb:
+        out.append(f"strategy {sa} -> {sb}")
+    for k in ("modes", "categories"):
+        if methods_of(art)[before][k] != methods_of(art)[after][k]:
+            out.append(f"{k} {', '.join(methods_of(art)[before][k])} -> "
+                       f"{', '.join(methods_of(art)[after][k])}")
+    return out
+
+
+def _shown(art: Artifact, method: str) -> dict:
+    """A rung's robot options, "n/a" for those that do not apply to it (as the methods table)."""
+    r, strategies = robot(art, method), methods_of(art)[method]["strategies"]
+    return {k: v if APPLIES.get(k, lambda r, s: True)(r, strategies) else NOT_APPLICABLE
+            for k, v in r.items()}
+
+
+def ladder(ablations: Artifact, claim: str) -> list[tuple[str, str, str]] | None:
+    """``(rung, strategy, verdict)`` of one claim (its paper text) along the ladder, or None when
+    the ladder's artifact has no rule for it."""
+    rules = claim_rules(ablations)
+    if claim not in rules:
+        return None
+    out = []
+    for x in method_names(ablations):
+        s = rung_strategy(ablations, x)
+        if s is None:
+            continue
+        out.append((x, s, rules[claim](x, s)[1]))
+    return out
+
+
+def explain(claims: list[Claim], ablations: Artifact) -> list[str]:
+    """The section "What explains each difference" (markdown lines): for every claim marked
+    *differs*, its verdict on every rung and the changes that flip it."""
+    ablations = upgrade(ablations)
+    lines = ["## What explains each difference", "",
+             f"Every claim marked *differs*, judged with the same rule on each rung of the "
+             f"ablation ladder (`{ablations.path or 'an ablation evaluation'}`, its methods in "
+             "order, each changing some options of the one before; a rung is judged on its last "
+             "strategy other than the baseline). A flip is a rung whose verdict leaves or returns "
+             "to *differs*; what flips it is what that rung changes.", ""]
+    differs = [c for c in claims if c.verdict == "differs"]
+    if not differs:
+        return [*lines, "No claim is marked *differs*.", ""]
+    lines += ["| claim | verdict along the ladder | what flips it |", "|---|---|---|"]
+    seen = set()
+    for c in differs:
+        if c.paper in seen:
+            continue
+        seen.add(c.paper)
+        steps = ladder(ablations, c.paper)
+        if not steps:
+            lines.append(f"| {c.paper} | not measured by the ladder | - |")
+            continue
+        path = " -> ".join(f"`{x}` ({s}) {v}" for x, s, v in steps)
+        lines.append(f"| {c.paper} | {path} | {_flips(ablations, steps)} |")
+    return [*lines, ""]
+
+
+def _flips(art: Artifact, steps: list[tuple[str, str, str]]) -> str:
+    """The rungs at which a verdict leaves (or returns to) *differs*, with what they change."""
+    measured = [st for st in steps if st[2] != "not measured"]
+    flips = []
+    for (x0, _, v0), (x1, _, v1) in zip(measured, measured[1:], strict=False):
+        if (v0 == "differs") != (v1 == "differs"):
+            what = "; ".join(changes(art, x0, x1)) or "nothing in the resolved options"
+            flips.append(f"`{x0}` -> `{x1}` ({v0} -> {v1}): {what}")
+    if flips:
+        return "; ".join(flips)
+    if measured and all(v == "differs" for _, _, v in measured):
+        return "no rung flips it: it differs on every rung (none of these factors explains it)"
+    return "no rung flips it: it does not differ on any measured rung of the ladder"
