@@ -22,7 +22,8 @@ from matplotlib.colors import LogNorm  # noqa: E402
 from kbcli.stages.artifact import Artifact  # noqa: E402
 from kbcli.viz.common import save  # noqa: E402
 
-COLOURS = {"random": "tab:gray", "active": "tab:blue", "infogain": "tab:red"}
+COLOURS = {"random": "tab:gray", "active": "tab:blue", "paper-active": "tab:cyan",
+           "infogain": "tab:red"}
 
 
 def _colour(s: str, i: int) -> str:

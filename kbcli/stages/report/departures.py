@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from kbcli.stages.artifact import Artifact
-from kbcli.stages.report.source import robot
+from kbcli.stages.report.source import compared, robot
 
 
 @dataclass(frozen=True)
@@ -31,7 +31,7 @@ def _opt(r: dict, key: str, default="(default)"):
 
 
 def _candidates(r: dict, art: Artifact) -> str | None:
-    if r.get("active_candidates") == "model":  # the paper's sampling, once a method can ask for it
+    if "active" not in r.get("_strategies", ()):  # `paper-active` is Sect. III-E's own strategy
         return None
     return (f"`active` draws {_opt(r, 'candidates')} candidates uniformly over the working area "
             f"and ranks them by the entropy of the posterior predictive over "
@@ -41,13 +41,15 @@ def _candidates(r: dict, art: Artifact) -> str | None:
 
 
 def _simulation(r: dict, art: Artifact) -> str | None:
+    if "active" not in r.get("_strategies", ()):
+        return None
     return ("each kept candidate is simulated with the model's likelihood table, not a KDE term "
             "of Algorithm 2; at the first step the best hypothesis of a flat posterior is the "
             "grid's first cell")
 
 
 def _samples(r: dict, art: Artifact) -> str | None:
-    if r.get("posterior") != "kde":
+    if r.get("posterior") != "kde" or r.get("kde_draw") == "fresh":
         return None
     return (f"{_opt(r, 'kde_samples')} actions per sound are drawn once and shared by every "
             "experiment of the evaluation, so the runs of a cell share their Monte-Carlo noise")
@@ -85,6 +87,9 @@ def _stop(r: dict, art: Artifact) -> str | None:
 
 
 def _baseline(r: dict, art: Artifact) -> str | None:
+    if r.get("random_actions") == "model":
+        return (f"`{art.attrs['baseline']}` draws its touches from the model (a sound, then an "
+                "action from p(a | s)): the paper leaves \"random selection\" open")
     return (f"`{art.attrs['baseline']}`: touches drawn uniformly over the working area")
 
 
@@ -150,7 +155,8 @@ DEPARTURES: tuple[Departure, ...] = (
 
 def departures(art: Artifact, method: str | None = None) -> list[tuple[Departure, str]]:
     """The departures in force for ``method`` (default: the judged one) with what it does."""
-    r = robot(art, method or art.attrs["judged"])
+    name = method or art.attrs["judged"]
+    r = {**robot(art, name), "_strategies": tuple(compared(art, name))}
     out = []
     for d in DEPARTURES:
         does = d.does(r, art)

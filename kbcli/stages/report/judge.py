@@ -211,7 +211,7 @@ def large_why(art: Artifact, mode: str) -> str:
                          + (", same runs" if sfx else "") + f", {s})")
                 txt = f"{label}: p={fmt_p(best[0])} at {best[1]:g} px"
                 (sig if best[0] < NOT_SIGNIFICANT else calm).append(txt)
-                if x == judged and not sfx and s == "active":
+                if x == judged and not sfx and s in ("active", "paper-active"):
                     judged_sig = best[0] < NOT_SIGNIFICANT
     if not sig and not calm:
         return ""

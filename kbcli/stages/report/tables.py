@@ -59,9 +59,9 @@ APPLIES = {
     "redundancy_radius": lambda r, s: _is_robust(r),
     "max_angle": lambda r, s: _rotates(r),
     "angle_resolution": lambda r, s: _rotates(r),
-    "candidates": lambda r, s: bool({"active", "infogain"} & set(s)),
+    "candidates": lambda r, s: bool({"active", "paper-active", "infogain"} & set(s)),
     "hypotheses": lambda r, s: "infogain" in s,
-    "active_keep": lambda r, s: "active" in s,
+    "active_keep": lambda r, s: bool({"active", "paper-active"} & set(s)),
     "active_hypotheses": lambda r, s: "active" in s,
 }
 NOT_APPLICABLE = "n/a"
