@@ -105,7 +105,7 @@ def test_a_bench_command_writes_the_result_file_the_docs_render(tmp_path):
     r = CliRunner().invoke(app, ["bench", "--json", str(out), "arm", "--reaches", "20"])
     assert r.exit_code == 0, r.output
     d = json.loads(out.read_text())
-    assert d["command"].startswith("kbcli ") and d["kbcli_version"] and d["machine"]
+    assert d["command"].startswith("kbcli") and d["kbcli_version"] and d["machine"]
     (table,) = d["tables"]
     assert table["columns"][0] == "preset" and len(table["rows"]) >= 3
     page = hooks.results_markdown("arm", tmp_path)
