@@ -72,13 +72,10 @@ def test_bench_learn_peer_cli_writes_the_result_file(runner, tmp_path):
     from kbcli.cli import app
 
     path = tmp_path / "learn-peer.json"
-    r = runner.invoke(app, ["bench", "learn", "--peer", "--seeds", "1", "--budgets", "20",
-                            "--layout", "grid", "--eval-step", "5", "--json", str(path)])
+    r = runner.invoke(app, ["bench", "--json", str(path), "learn", "--peer", "--seeds", "1",
+                            "--budgets", "20", "--layout", "grid", "--eval-step", "5"])
     assert r.exit_code == 0, r.output
     assert "verdict per layout and budget" in r.output
     d = json.loads(path.read_text())
-    assert set(d) == {"command", "date", "machine", "kbcli_version", "tables"}
-    assert d["command"].startswith("kbcli bench learn --peer --seeds 1 --budgets 20")
+    assert {"command", "date", "machine", "kbcli_version", "tables"} <= set(d)
     assert [len(t["rows"]) for t in d["tables"]] == [1 + len(peer.PEERS), 1]
-    r = runner.invoke(app, ["bench", "learn", "--json", str(path)])
-    assert r.exit_code == 1 and "--json is written by --peer only" in r.output

@@ -180,9 +180,6 @@ def bench_learn_cmd(
         "uncertainty sampling around scikit-learn classifiers, same simulator, seeds and scorer, "
         "with a verdict per layout and budget [layouts default grid, hex, piano, pads, "
         "polygons].")] = False,
-    json_path: Annotated[Path | None, typer.Option(
-        "--json", help="With --peer: also write the tables to this JSON file (command, date, "
-        "machine, kbcli version, tables).")] = None,
 ) -> None:
     """Benchmark learning the model: sample efficiency and speed, per layout, model class and
     strategy.
@@ -196,7 +193,7 @@ def bench_learn_cmd(
     """
     from kbcli.bench import learn as bench
 
-    if _bench_peer(peer, seeds, budgets, layout, seed, eval_step, json_path):
+    if _bench_peer(peer, seeds, budgets, layout, seed, eval_step):
         return
     kb = None
     if keyboard is not None:
@@ -235,28 +232,18 @@ def bench_learn_cmd(
 
 
 def _bench_peer(peer: bool, seeds: int, budgets: str | None, layout: list[str] | None, seed: int,
-                eval_step: float, json_path: Path | None) -> bool:
-    """``kbcli bench learn --peer``: run, print and (with ``--json``) write the tables; False
-    (nothing done) without ``--peer``."""
+                eval_step: float) -> bool:
+    """``kbcli bench learn --peer``: run and print the tables (``kbcli bench --json FILE learn
+    --peer`` also writes them); False (nothing done) without ``--peer``."""
     if not peer:
-        if json_path is not None:
-            raise ConfigError("--json is written by --peer only")
         return False
     budgets = budgets or "150,300,800"
-    import datetime
-    import json
-    import platform
-
-    from kbcli import __version__
     from kbcli.bench import peer as bench
-    from kbcli.io.atomic import atomic_path
 
     fields = {"seeds": seeds, "budgets": _budgets(budgets), "seed": seed, "eval_step": eval_step}
     if layout:
         fields["layouts"] = tuple(layout)
     cfg = bench.PeerConfig(**fields)
-    if json_path is not None:
-        check_io({}, ("--json", json_path))
     n = len(cfg.layouts) * cfg.seeds * (1 + len(cfg.peers))
     results = list(progress(bench.runs(cfg), n, "learning runs (kbcli and peers)"))
     tables = bench.tables(cfg, bench.summarize(cfg, results))
@@ -268,19 +255,7 @@ def _bench_peer(peer: bool, seeds: int, budgets: str | None, layout: list[str] |
                          or "px" in c else "left")
         for r in tb["rows"]:
             t.add_row(*(str(r[c]) for c in tb["columns"]))
-        con.print(t)
-    if json_path is not None:
-        command_text = (f"kbcli bench learn --peer --seeds {seeds} --budgets {budgets} "
-                        + " ".join(f"--layout {name}" for name in cfg.layouts)
-                        + (f" --seed {seed}" if seed else "")
-                        + (f" --eval-step {eval_step:g}" if eval_step != 1.0 else ""))
-        doc = {"command": command_text, "date": datetime.date.today().isoformat(),
-               "machine": f"{platform.machine()}, {platform.system()}, Python "
-                          f"{platform.python_version()}",
-               "kbcli_version": __version__, "tables": tables}
-        with atomic_path(json_path, suffix=".json") as tmp:
-            Path(tmp).write_text(json.dumps(doc, indent=2) + "\n")
-        out.print(f"wrote {json_path}")
+        show_table(con, t)
     return True
 
 
