@@ -487,7 +487,7 @@ def sigint_heard():
 def test_learn_signal(tmp_path, sig, code, line, sigint_heard):
     out = tmp_path / "m.h5"
     p = subprocess.Popen([sys.executable, "-m", "kbcli", "learn", "--keyboard", KB, "--budget",
-                          "100000", "-o", str(out)], stdout=subprocess.PIPE,
+                          "20000", "-o", str(out)], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True,
                          env={**os.environ, "PYTHONPATH": str(ROOT)})
     lf = lock.lock_file(out)

@@ -224,7 +224,7 @@ def test_boundary_error_edge_cases():
 
 # -- exploration --------------------------------------------------------------------------------
 def test_unknown_strategy_lists_the_valid_ones():
-    with pytest.raises(ConfigError, match="active, random"):
+    with pytest.raises(ConfigError, match="active, balanced, random"):
         STRATEGIES.get("greedy")
     with pytest.raises(ConfigError, match="budget"):
         ExploreConfig(budget=0)

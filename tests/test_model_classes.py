@@ -272,7 +272,7 @@ def test_bench_learn_per_layout_and_class(runner):
         assert frag in text, frag
     r = runner.invoke(app, ["bench", "learn", "--layout", "staggered"])
     assert r.exit_code == 1 and "unknown layout" in r.output
-    r = runner.invoke(app, ["bench", "learn", "--model-class", "forest"])
+    r = runner.invoke(app, ["bench", "learn", "--model-class", "gp"])
     assert r.exit_code == 1 and "unknown model class" in r.output
 
 

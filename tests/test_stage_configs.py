@@ -76,7 +76,7 @@ def test_evaluate_config_known_answers():
     assert set(cfg.arm) == {"ideal", "dynamics"}
     assert [m.name for m in cfg.methods] == ["paper", "kbcli"] and cfg.judged == "paper"
     assert [c.name for c in cfg.categories] == ["small", "medium", "large"]
-    assert cfg.strategies == ("random", "active", "infogain") and cfg.n_params == 2
+    assert cfg.strategies == ("random", "paper-active", "active", "infogain") and cfg.n_params == 2
     assert EvaluateConfig.from_dict(cfg.to_dict()) == cfg
     assert pickle.loads(pickle.dumps(cfg)) == cfg
     fewer = cfg.replace(experiments=2)
