@@ -19,6 +19,7 @@ scikit-activeml is an optional dependency (``pip install -e '.[bench]'``).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -142,14 +143,16 @@ def peer_run(cfg: PeerConfig, kb: Keyboard, name: str, seed: np.random.SeedSeque
 
     label(rng.choice(cfg.pool, cfg.init, replace=False))
     out, n = {}, cfg.init
-    for budget in sorted(cfg.budgets):
-        while n < budget:
-            k = min(cfg.batch, budget - n)
+    with warnings.catch_warnings():  # scikit-learn's notes on few labelled samples per class
+        warnings.simplefilter("ignore", UserWarning)
+        for budget in sorted(cfg.budgets):
+            while n < budget:
+                k = min(cfg.batch, budget - n)
+                clf.fit(pool, y)
+                label(np.atleast_1d(qs.query(pool, y, clf, fit_clf=False, batch_size=k)))
+                n += k
             clf.fit(pool, y)
-            label(np.atleast_1d(qs.query(pool, y, clf, fit_clf=False, batch_size=k)))
-            n += k
-        clf.fit(pool, y)
-        out[budget] = _scores(clf.predict, kb, cfg.eval_step)
+            out[budget] = _scores(clf.predict, kb, cfg.eval_step)
     return out
 
 
