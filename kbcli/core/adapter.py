@@ -42,10 +42,10 @@ from kbcli.core.adapter_config import AdapterConfig, learning_rate, redundancy_r
 from kbcli.core.estimators import ESTIMATORS
 from kbcli.core.grid import HypothesisGrid
 from kbcli.core.kde import ActionSamples
-from kbcli.core.model import UNKNOWN
 from kbcli.core.posterior import Posterior
 from kbcli.core.posteriors import POSTERIORS, Observation
 from kbcli.core.robust import RobustPosterior, planning_table
+from kbcli.core.sounds import UNKNOWN
 from kbcli.core.strategies import STRATEGIES, Context
 from kbcli.core.table import LikelihoodTable
 from kbcli.errors import ConfigError, ObservationError

@@ -25,11 +25,9 @@ import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.exceptions import NotFittedError
 
-from kbcli.core.keyboard import Keyboard, match
+from kbcli.core.keyboard import Keyboard
+from kbcli.core.sounds import SILENCE, classify_features, prepare_samples
 from kbcli.errors import ConfigError
-
-SILENCE = 0
-UNKNOWN = -1
 
 
 @dataclass(frozen=True)
@@ -124,24 +122,6 @@ def grid_points(
     return np.array([xs[0], ys[0]]), np.stack([gx, gy], axis=-1)
 
 
-def classify_features(
-    perceived: np.ndarray, class_features: np.ndarray, threshold: float
-) -> np.ndarray:
-    """Class of each perceived sound: 0 for silence (NaN), -1 when no class is within ``threshold``.
-
-    Parameters
-    ----------
-    perceived : (n, D) ndarray
-    class_features : (C, D) ndarray, row 0 (silence) is ignored
-    """
-    perceived = np.atleast_2d(np.asarray(perceived, float))
-    silent = np.isnan(perceived).all(axis=1)
-    m = match(perceived, class_features[1:], threshold)
-    out = np.where(m >= 0, m + 1, UNKNOWN)
-    out[silent] = SILENCE
-    return out
-
-
 #: Query points per block of a prediction.
 _CHUNK = 16384
 #: Added to both sides of every pairwise contest: log(2 Phi(z)) instead of log Phi(z), so that a
@@ -174,6 +154,36 @@ class ModelBase(ClassifierMixin, BaseEstimator):
     n_neighbors: int
     match_threshold: float
     area: tuple[float, float, float, float]
+
+
+    def fit(self, actions: np.ndarray, perceived: np.ndarray,
+            targets: np.ndarray | None = None) -> ModelBase:
+        """Learn the sound classes and p(sound | action) from exploration samples.
+
+        Parameters
+        ----------
+        actions : (n, 2) ndarray
+            Where the finger landed (proprioception).
+        perceived : (n, D) ndarray
+            What was heard there (NaN rows: silence).
+        targets : (n, 2) ndarray, optional
+            Where the reaches aimed; gives the landing scatter ``reach_sd_`` (else 0).
+
+        Returns
+        -------
+        self
+
+        Notes
+        -----
+        A class checks its settings in ``_check_params`` and keeps what it learned from the samples
+        in ``_set_fitted(features, actions, labels, reach_sd)``; the ``lines`` class, which fits its
+        boundary pieces here too, overrides ``fit``.
+        """
+        self._check_params()
+        x, features, labels, reach_sd = prepare_samples(actions, perceived, targets,
+                                                        self.match_threshold)
+        self._set_fitted(features, x, labels, reach_sd)
+        return self
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "class_features_"):

@@ -72,7 +72,8 @@ import numpy as np
 from sklearn.base import clone
 
 from kbcli.core.accuracy import boundary_error as _boundary_error
-from kbcli.core.model import classify_features, grid_points
+from kbcli.core.model import grid_points
+from kbcli.core.sounds import classify_features
 
 #: Folds of the cross-validation.
 FOLDS = 5

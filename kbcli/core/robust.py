@@ -66,8 +66,8 @@ from scipy.ndimage import correlate1d
 
 from kbcli.core.grid import HypothesisGrid
 from kbcli.core.likelihood import cell_index, inverse_coords
-from kbcli.core.model import SILENCE
 from kbcli.core.posterior import Posterior
+from kbcli.core.sounds import SILENCE
 from kbcli.core.table import LikelihoodTable
 
 #: Default nuisance grids: boundary blur (px) and outlier rate.

@@ -43,7 +43,6 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from kbcli.core.model import ModelBase
-from kbcli.core.sounds import prepare_samples
 from kbcli.errors import ArtifactError, ConfigError
 
 SITE_GRID = 2.0  # px, grid on which boundary sites are looked for
@@ -121,29 +120,6 @@ class SklearnModel(ModelBase):
         return points
 
     # -- fitting --------------------------------------------------------------------------------
-    def fit(self, actions: np.ndarray, perceived: np.ndarray,
-            targets: np.ndarray | None = None) -> SklearnModel:
-        """Learn the sound classes and p(sound | action) from exploration samples.
-
-        Parameters
-        ----------
-        actions : (n, 2) ndarray
-            Where the finger landed (proprioception).
-        perceived : (n, D) ndarray
-            What was heard there (NaN rows: silence).
-        targets : (n, 2) ndarray, optional
-            Where the reaches aimed; gives the landing scatter ``reach_sd_`` (else 0).
-
-        Returns
-        -------
-        self
-        """
-        self._check_params()
-        x, features, labels, reach_sd = prepare_samples(actions, perceived, targets,
-                                                        self.match_threshold)
-        self._set_fitted(features, x, labels, reach_sd)
-        return self
-
     def _set_fitted(self, features: np.ndarray, actions: np.ndarray, labels: np.ndarray,
                     reach_sd: float) -> None:
         self.class_features_ = np.asarray(features, float)

@@ -14,8 +14,31 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
-from kbcli.core.model import classify_features
+from kbcli.core.keyboard import match
 from kbcli.errors import ConfigError
+
+#: Class id of silence.
+SILENCE = 0
+#: Class id of a sound that matches no class.
+UNKNOWN = -1
+
+
+def classify_features(
+    perceived: np.ndarray, class_features: np.ndarray, threshold: float
+) -> np.ndarray:
+    """Class of each perceived sound: 0 for silence (NaN), -1 when no class is within ``threshold``.
+
+    Parameters
+    ----------
+    perceived : (n, D) ndarray
+    class_features : (C, D) ndarray, row 0 (silence) is ignored
+    """
+    perceived = np.atleast_2d(np.asarray(perceived, float))
+    silent = np.isnan(perceived).all(axis=1)
+    m = match(perceived, class_features[1:], threshold)
+    out = np.where(m >= 0, m + 1, UNKNOWN)
+    out[silent] = SILENCE
+    return out
 
 
 def discover_classes(perceived: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:

@@ -65,7 +65,7 @@ from scipy.special import log_ndtr
 from sklearn.svm import SVC
 
 from kbcli.core.model import ModelBase
-from kbcli.core.sounds import prepare_samples, straddling_edges
+from kbcli.core.sounds import straddling_edges
 from kbcli.errors import ArtifactError, ConfigError
 
 _SQRT3 = float(np.sqrt(3.0))
@@ -147,29 +147,6 @@ class SVCModel(ModelBase):
             raise ConfigError(f"linear_pairs must be True or False, got {self.linear_pairs!r}")
 
     # -- fitting --------------------------------------------------------------------------------
-    def fit(self, actions: np.ndarray, perceived: np.ndarray,
-            targets: np.ndarray | None = None) -> SVCModel:
-        """Learn the sound classes and p(sound | action) from exploration samples.
-
-        Parameters
-        ----------
-        actions : (n, 2) ndarray
-            Where the finger landed (proprioception).
-        perceived : (n, D) ndarray
-            What was heard there (NaN rows: silence).
-        targets : (n, 2) ndarray, optional
-            Where the reaches aimed; gives the landing scatter ``reach_sd_`` (else 0).
-
-        Returns
-        -------
-        self
-        """
-        self._check_params()
-        x, features, labels, reach_sd = prepare_samples(actions, perceived, targets,
-                                                        self.match_threshold)
-        self._set_fitted(features, x, labels, reach_sd)
-        return self
-
     def _set_fitted(self, features: np.ndarray, actions: np.ndarray, labels: np.ndarray,
                     reach_sd: float) -> None:
         self.class_features_ = np.asarray(features, float)

@@ -19,7 +19,8 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from kbcli.core.action_sampler import RasterSampler
-from kbcli.core.model import SILENCE, ExactModel, grid_points
+from kbcli.core.model import ExactModel, grid_points
+from kbcli.core.sounds import SILENCE
 
 #: Classes kept per raster cell of a soft table for the strategies' predictive distributions (a
 #: learned model mixes two sounds at an edge; a blurred exact map up to four at a key corner).

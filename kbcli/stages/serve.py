@@ -65,7 +65,7 @@ from kbcli.core import transforms
 from kbcli.core.adapt import Adapter, AdapterConfig, step_record
 from kbcli.core.config import Config, Flag, Whole, between
 from kbcli.core.keyboard import FEATURE_NAMES, sound_name
-from kbcli.core.model import UNKNOWN
+from kbcli.core.sounds import UNKNOWN
 from kbcli.errors import ArtifactError, ConfigError, KbcliError
 from kbcli.stages.adapt import Recorder, run_attrs, run_data
 from kbcli.stages.artifact import Artifact, ref
