@@ -195,3 +195,17 @@ def _plain(v: Any) -> Any:
     if isinstance(v, np.generic):
         return v.item()
     return v
+
+
+def as_table(cls: type[Config]) -> Any:
+    """A before-validator of a field holding a nested config ``cls``: an instance passes as it is,
+    a table (mapping) is read by ``cls.from_dict``, anything else is refused."""
+    def check(v: Any) -> Config:
+        if isinstance(v, cls):
+            return v
+        if isinstance(v, Mapping):
+            return cls.from_dict(dict(v))
+        raise ConfigError(f"must be a table ([{cls.what}]), got {type(v).__name__}")
+
+    check.__name__ = f"as_{cls.__name__}"
+    return check

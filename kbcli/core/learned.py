@@ -197,21 +197,7 @@ class LearnedModel(ModelBase):
     def fit(
         self, actions: np.ndarray, perceived: np.ndarray, targets: np.ndarray | None = None
     ) -> LearnedModel:
-        """Learn the sound classes and p(sound | action) from exploration samples.
-
-        Parameters
-        ----------
-        actions : (n, 2) ndarray
-            Where the finger landed (proprioception).
-        perceived : (n, D) ndarray
-            What was heard there (NaN rows: silence).
-        targets : (n, 2) ndarray, optional
-            Where the reaches aimed; gives the landing scatter ``reach_sd_`` (else 0).
-
-        Returns
-        -------
-        self
-        """
+        """As :meth:`ModelBase.fit`, the boundary pieces fitted to the samples too."""
         self._check_params()
         x, features, labels, reach_sd = prepare_samples(actions, perceived, targets,
                                                         self.match_threshold)

@@ -14,7 +14,7 @@ it (until the robot adapted) and after adaptation.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -22,7 +22,7 @@ from pydantic import Field, field_serializer, field_validator, model_validator
 
 from kbcli.core import transforms
 from kbcli.core.adapt import build_table, learning_rate, redundancy_radius, robust_blurs
-from kbcli.core.config import Config, Name, NonNegativeInt, Whole, between
+from kbcli.core.config import Config, Name, NonNegativeInt, Whole, as_table, between
 from kbcli.core.detect import DetectorConfig
 from kbcli.core.loop import ADAPT, PLAY, LoopStep, closed_loop
 from kbcli.core.melody import DEFAULT_MELODY, parse_melody
@@ -72,14 +72,7 @@ class LoopConfig(Config):
 
     _melody = field_validator("melody")(check_melody_text)
 
-    @field_validator("adapt", mode="before")
-    @classmethod
-    def _adapt(cls, v: Any) -> AdaptConfig:
-        if isinstance(v, AdaptConfig):
-            return v
-        if isinstance(v, Mapping):
-            return AdaptConfig.from_dict(dict(v))
-        raise ConfigError(f"must be an adapt table, got {type(v).__name__}")
+    _adapt = field_validator("adapt", mode="before")(as_table(AdaptConfig))
 
     @field_serializer("adapt")
     def _adapt_table(self, v: AdaptConfig) -> dict:

@@ -63,7 +63,7 @@ from pydantic import Field, field_validator
 from kbcli import __version__
 from kbcli.core import transforms
 from kbcli.core.adapt import Adapter, AdapterConfig, step_record
-from kbcli.core.config import Config, Flag, Whole, between
+from kbcli.core.config import Config, Flag, Whole, as_table, between
 from kbcli.core.keyboard import FEATURE_NAMES, sound_name
 from kbcli.core.sounds import UNKNOWN
 from kbcli.errors import ArtifactError, ConfigError, KbcliError
@@ -109,14 +109,7 @@ class ServeConfig(Config):
     max_steps: between(Whole, 1, MAX_SERVE_STEPS) = 40
     stop: Flag = True
 
-    @field_validator("adapter", mode="before")
-    @classmethod
-    def _adapter(cls, v: Any) -> AdapterConfig:
-        if isinstance(v, AdapterConfig):
-            return v
-        if isinstance(v, Mapping):
-            return AdapterConfig.from_dict(dict(v))
-        raise ConfigError(f"must be an adapt table, got {type(v).__name__}")
+    _adapter = field_validator("adapter", mode="before")(as_table(AdapterConfig))
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> ServeConfig:
