@@ -47,13 +47,14 @@ def test_cli_reference_names_every_command_and_option():
 def test_results_page_renders_a_result_file(tmp_path):
     d = {"command": "kbcli bench detect", "date": "2026-12-03", "machine": "2 cores",
          "kbcli_version": "0.1.0",
-         "tables": [{"title": "delay", "columns": ["detector", "delay"],
-                     "rows": [{"detector": "binomial", "delay": 12.25},
-                              {"detector": "a|b", "delay": 3}]}]}
+         "tables": [{"title": "delay", "columns": ["detector", "|delay|"],
+                     "rows": [{"detector": "binomial", "|delay|": 12.25},
+                              {"detector": "a|b", "|delay|": 3}]}]}
     (tmp_path / "detect.json").write_text(json.dumps(d))
     page = hooks.results_markdown("detect", tmp_path)
     assert "Measured with `kbcli bench detect` on 2026-12-03, kbcli 0.1.0, 2 cores." in page
     assert "| binomial | 12.25 |" in page and "| a\\|b | 3 |" in page
+    assert "| detector | \\|delay\\| |" in page  # a header's bars escaped too
     assert hooks.results_markdown("detect", tmp_path) == page     # regenerates identically
     assert "not there yet" in hooks.results_markdown("missing", tmp_path)
 

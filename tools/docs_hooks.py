@@ -61,7 +61,7 @@ def cli_markdown() -> str:
 
 
 def _table(rows: list[dict], columns: list[str]) -> list[str]:
-    out = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    out = ["| " + " | ".join(_cell(c) for c in columns) + " |", "|" + "---|" * len(columns)]
     for r in rows:
         out.append("| " + " | ".join(_cell(r.get(c, "")) for c in columns) + " |")
     return out
