@@ -741,3 +741,31 @@ def test_terminated_inside_a_command_exits_143(runner, tmp_path, monkeypatch):
     r = runner.invoke(app, ["keyboard", "-o", str(tmp_path / "k.h5")])
     assert r.exit_code == 143 and r.output.strip() == "kbcli: terminated"
     assert _listing(tmp_path) == []
+
+
+def test_evaluate_final_write_failing_keeps_the_checkpoint_and_says_how_to_resume(
+        tmp_path, monkeypatch):
+    """A full disk at the evaluation's last write: one line with the cause and the --resume hint,
+    the finished experiments kept, no output; --resume then writes it without running any."""
+    from typer.testing import CliRunner
+
+    import kbcli.cli.evaluate as cli_evaluate
+
+    out = tmp_path / "e.h5"
+    argv = ["evaluate", "--config", str(ROOT / "pipelines" / "golden.toml"), "--model", MODEL,
+            "-o", str(out)]
+
+    def full(*_a, **_k):
+        raise ArtifactError(f"{out}: cannot write: No space left on device")
+
+    monkeypatch.setattr(cli_evaluate, "write_artifact", full)
+    r = CliRunner().invoke(app, argv)
+    assert r.exit_code == 1
+    line = r.output.strip()
+    assert "\n" not in line and "No space left on device" in line
+    assert "rerun with --resume" in line and not out.exists()
+    assert Checkpoint.beside(out).is_dir()
+    monkeypatch.undo()
+    r = CliRunner().invoke(app, [*argv, "--resume"])
+    assert r.exit_code == 0, r.output
+    assert out.is_file() and not Checkpoint.beside(out).exists()

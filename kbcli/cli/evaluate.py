@@ -154,7 +154,12 @@ def evaluate_cmd(
     elapsed = time.perf_counter() - started
     results = {**done, **fresh}
     art = stage.assemble(cfg, tasks, results, model_art, keyboard)
-    write_artifact(art, output)
+    try:
+        write_artifact(art, output)
+    except KbcliError as exc:  # e.g. a full disk: the experiments stay in the checkpoint
+        hint = (f"; all {len(tasks)} experiments are kept in {ckpt.folder}: rerun with --resume "
+                "to write it" if ckpt.exists() else "")
+        raise KbcliError(f"{exc}{hint}") from None
     ckpt.remove()
     out.print(f"wrote {output}: {len(tasks)} experiments ({', '.join(cfg.modes)}; methods "
               + ", ".join(f"{m.name} ({', '.join(m.strategies)})" for m in cfg.methods) + ")")
