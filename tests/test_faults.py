@@ -769,3 +769,22 @@ def test_evaluate_final_write_failing_keeps_the_checkpoint_and_says_how_to_resum
     r = CliRunner().invoke(app, [*argv, "--resume"])
     assert r.exit_code == 0, r.output
     assert out.is_file() and not Checkpoint.beside(out).exists()
+
+
+def test_quality_full_disk_at_its_first_model_leaves_no_checkpoint(tmp_path, monkeypatch):
+    """The sweep's first model cannot be written: one line, exit 1, and no empty checkpoint."""
+    from typer.testing import CliRunner
+
+    import kbcli.cli.quality as cli_quality
+
+    out = tmp_path / "q.h5"
+
+    def full(art, path, *a, **k):
+        raise ArtifactError(f"{path}: cannot write: No space left on device")
+
+    monkeypatch.setattr(cli_quality, "write_artifact", full)
+    r = CliRunner().invoke(app, ["quality", "--config", str(ROOT / "pipelines" / "golden.toml"),
+                                 "--keyboard", str(GOLDEN / "keyboard.h5"), "-o", str(out)])
+    assert r.exit_code == 1, r.output
+    assert "No space left on device" in r.output and "Traceback" not in r.output
+    assert not out.exists() and not Checkpoint.beside(out).exists()

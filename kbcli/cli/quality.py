@@ -10,7 +10,7 @@ import typer
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import check_io, command, err, out, progress, run_checkpointed
-from kbcli.errors import ConfigError
+from kbcli.errors import ConfigError, KbcliError
 from kbcli.io import signals
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_config, load_toml
@@ -129,10 +129,7 @@ def _learn_models(cfg, kb_art, ckpt: Checkpoint, resume: bool, jobs: int,
         for i, res in progress(execute(job, todo, jobs=jobs, scheduler=scheduler), len(todo),
                                "learning models"):
             art = res["artifact"]
-            ckpt.start()  # (only now: a run that fails before its first model leaves nothing)
-            model_dir.mkdir(exist_ok=True)
-            write_artifact(art, model_dir / f"{ltasks[i].name}.h5")
-            models[ltasks[i].name] = art
+            _keep_model(ckpt, model_dir, ltasks[i].name, art, models, len(ltasks))
     except KeyboardInterrupt as exc:
         msg = (f"{len(models)} of {len(ltasks)} models kept in {model_dir}: rerun with --resume "
                "to continue") if models else f"none of {len(ltasks)} models had finished; " \
@@ -140,6 +137,24 @@ def _learn_models(cfg, kb_art, ckpt: Checkpoint, resume: bool, jobs: int,
         err.print(f"kbcli: {signals.what(exc)}; {msg}", markup=False)
         raise typer.Exit(signals.exit_code(exc)) from None
     return models
+
+
+def _keep_model(ckpt: Checkpoint, model_dir: Path, name: str, art, models: dict,
+                total: int) -> None:
+    """Write one learned model into the checkpoint. A failed write (a full disk) leaves no
+    checkpoint when none was kept yet, else says how many are kept and how to resume."""
+    fresh = not ckpt.exists()
+    try:
+        ckpt.start()  # (only now: a run that fails before its first model leaves nothing)
+        model_dir.mkdir(exist_ok=True)
+        write_artifact(art, model_dir / f"{name}.h5")
+    except (KbcliError, OSError) as exc:
+        if fresh and not models:
+            ckpt.remove()
+            raise
+        raise KbcliError(f"{exc}; {len(models)} of {total} models kept in {model_dir}: rerun "
+                         "with --resume to continue") from None
+    models[name] = art
 
 
 def _adapt_all(cfg, models: dict, kb_art, ckpt: Checkpoint, done: dict, jobs: int,
