@@ -788,3 +788,24 @@ def test_quality_full_disk_at_its_first_model_leaves_no_checkpoint(tmp_path, mon
     assert r.exit_code == 1, r.output
     assert "No space left on device" in r.output and "Traceback" not in r.output
     assert not out.exists() and not Checkpoint.beside(out).exists()
+
+
+@pytest.mark.parametrize("head", [
+    "1 tasks have been successfully executed  but not used.",
+    "4 tasks which were still being processed by the workers have been cancelled.",
+    "2 tasks have been successfully executed  but not used. Additionally, 3 tasks which were "
+    "still being processed by the workers have been cancelled.",
+])
+def test_joblibs_cancel_warning_is_silenced_in_every_wording(head):
+    import warnings
+
+    from kbcli.io.runner import quiet_joblib_cancel
+
+    msg = head + " You could benefit from adjusting the input task iterator to limit unnecessary " \
+        "computation time."
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        quiet_joblib_cancel()
+        warnings.warn(msg, stacklevel=2)
+        warnings.warn("an unrelated warning", stacklevel=2)
+    assert [str(w.message) for w in seen] == ["an unrelated warning"]

@@ -195,13 +195,22 @@ def _serial(job: Job, todo: list[int]) -> Iterator[tuple[int, dict]]:
             yield i, fn(state, job.tasks[i])
 
 
+def quiet_joblib_cancel() -> None:
+    """Silence joblib's warning about cancelled tasks.
+
+    Stopped early (Ctrl-C, SIGTERM, an error), joblib cancels the running tasks and says so in a
+    warning of several lines; the one line the CLI prints already says what was kept. Its text
+    starts with whichever of "N tasks have been successfully executed but not used" and "N tasks
+    which were still being processed" applies, and always ends with the same advice.
+    """
+    warnings.filterwarnings("ignore", message=r"(?s).*adjusting the input task iterator",
+                            category=UserWarning)
+
+
 def _local(job: Job, todo: list[int], n_jobs: int) -> Iterator[tuple[int, dict]]:
     from joblib import Parallel, delayed
 
-    # Stopped early (Ctrl-C, SIGTERM, an error), joblib cancels the running tasks and says so in
-    # a warning of several lines; the one line the CLI prints already says what was kept.
-    warnings.filterwarnings("ignore", message=r"\d+ tasks which were still being processed",
-                            category=UserWarning)
+    quiet_joblib_cancel()
 
     par = Parallel(n_jobs=n_jobs, backend="loky", return_as="generator_unordered",
                    batch_size=1, pre_dispatch="2 * n_jobs")
