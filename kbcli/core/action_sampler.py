@@ -48,6 +48,8 @@ class RasterSampler:
     def __init__(self, table) -> None:
         self.table = table
         self._support: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
+        #: per class, the centres (k, 2) of its support's cells, pad px
+        self._centres: dict[int, np.ndarray] = {}
 
     def support(self, cls: int) -> tuple[np.ndarray, np.ndarray, float]:
         """(flat cell indices, acceptance probabilities, acceptance rate) of class ``cls``
@@ -74,7 +76,8 @@ class RasterSampler:
         ValueError
             If ``cls`` is not a class of the model, or has no support in the raster.
         """
-        cells, acc, rate = self.support(int(cls))
+        cls = int(cls)
+        cells, acc, rate = self.support(cls)
         n = int(n)
         picked: list[np.ndarray] = []
         have = 0
@@ -84,11 +87,24 @@ class RasterSampler:
             ok = idx[rng.random(m) < acc[idx]]
             picked.append(ok)
             have += len(ok)
-        pick = cells[np.concatenate(picked)[:n]]
-        t = self.table
-        row, col = np.divmod(pick, t.shape[1])
-        centre = np.column_stack([t.origin[0] + col * t.step, t.origin[1] + row * t.step])
-        return centre + rng.uniform(-0.5, 0.5, size=(n, 2)) * t.step
+        pick = (picked[0] if len(picked) == 1 else np.concatenate(picked))[:n]
+        # uniform within the cell: ``rng.uniform(-0.5, 0.5)`` computes ``-0.5 + 1.0 * random()``,
+        # the same draws and bits as ``random() - 0.5``, without its broadcasting overhead
+        jitter = rng.random((n, 2))
+        jitter -= 0.5
+        jitter *= self.table.step
+        jitter += self.centres(cls)[pick]
+        return jitter
+
+    def centres(self, cls: int) -> np.ndarray:
+        """(k, 2) centres of the cells of class ``cls``'s support (in :meth:`support`'s order),
+        pad px (built once)."""
+        if cls not in self._centres:
+            t = self.table
+            row, col = np.divmod(self.support(cls)[0], t.shape[1])
+            self._centres[cls] = np.column_stack([t.origin[0] + col * t.step,
+                                                  t.origin[1] + row * t.step])
+        return self._centres[cls]
 
 
 class FreshSamples:

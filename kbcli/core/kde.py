@@ -4,7 +4,8 @@ Draw ``N`` actions ``a_i ~ p(action | s_t)`` from the model, map each onto ``a_t
 ``computeTransform`` (:func:`kbcli.core.transforms.translation_mapping`; for the rigid family, once
 per grid angle), bin the hypotheses linearly onto the grid and convolve with a Gaussian kernel by
 FFT (:func:`binned_kde`, ``scipy.fft``, O(G log G), the binned-KDE trick of fast KDE libraries;
-checked against the direct sum in the tests), then mix with a floor (a uniform density
+the kernel being separable, by 1-D FFTs along the rows, then the columns; checked against the
+direct sum in the tests), then mix with a floor (a uniform density
 over the prior with weight ``eps``; ``AdapterConfig.kde_floor``, 0 for none, :func:`floored_log`)
 and take the log. The samples of ``p(action | s)`` do not depend on the posterior, so they can be
 drawn once per sound class and reused (:class:`ActionSamples`; per run, or per model in the
@@ -26,7 +27,6 @@ likelihood term knows the outside is silent).
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -141,15 +141,15 @@ class ActionSamples:
         return s[rng.integers(len(s), size=int(n))]
 
 
-@functools.lru_cache(maxsize=64)
-def _kernel_fft(sig: float, pad: int, size: int) -> np.ndarray:
-    """rFFT of the Gaussian kernel of std ``sig`` cells, truncated to ``|offset| <= pad`` taps and
-    laid out circularly on a ``size x size`` grid (offset 0 at index 0), as a density per cell
-    (the caller divides by ``res^2``)."""
-    k1 = np.zeros(size)
+def _kernel_spectra(sig: np.ndarray, pad: int, size: int) -> np.ndarray:
+    """(b, size // 2 + 1) rFFTs of 1-D Gaussian kernels of std ``sig`` (b,) cells, truncated to
+    ``|offset| <= pad`` taps and laid out circularly on ``size`` cells (offset 0 at index 0), as a
+    density per cell (the caller divides by ``res^2``)."""
     off = np.arange(-pad, pad + 1)
-    k1[off % size] = np.exp(-0.5 * (off / sig) ** 2) / (math.sqrt(2 * math.pi) * sig)
-    return sfft.rfft2(np.outer(k1, k1).astype(np.float32))
+    sig = np.asarray(sig, float)[:, None]
+    k1 = np.zeros((len(sig), size))
+    k1[:, off % size] = np.exp(-0.5 * (off / sig) ** 2) / (math.sqrt(2 * math.pi) * sig)
+    return sfft.rfft(k1, axis=1).astype(np.complex64)
 
 
 def binned_kde(points: np.ndarray, x0: float, y0: float, res: float, n: int,
@@ -159,10 +159,11 @@ def binned_kde(points: np.ndarray, x0: float, y0: float, res: float, n: int,
     ``density[..., i, j] ~= mean_k N((x0 + j res, y0 + i res); points[..., k, :], bandwidth^2 I)``,
     the direct sum of the paper's Eq. 7 (with a Gaussian ``K``). Points are linearly binned onto the
     grid widened by the kernel's reach (``4 bandwidth``, so points just outside the grid still count)
-    and convolved with the kernel by ``scipy.fft`` (O(G log G); the kernel's transform is cached per
-    bandwidth). The kernel is truncated at 4 standard deviations. Sets of points that share a
-    kernel reach are binned and transformed together (one ``bincount``, one batched FFT), each
-    with its own bandwidth: the same numbers as one call per set.
+    and convolved with the kernel by ``scipy.fft`` (O(G log G); the Gaussian is separable: real
+    1-D FFTs along the rows that hold points, then along the ``n`` inner columns). The kernel is
+    truncated at 4 standard deviations. Sets of points that share a kernel reach are binned and
+    transformed together (one ``bincount``, batched FFTs), each with its own bandwidth: the same
+    numbers as one call per set.
 
     Parameters
     ----------
@@ -222,14 +223,24 @@ def _binned_kde_reach(pts: np.ndarray, x0: float, y0: float, res: float, n: int,
     for j, (shift, wa, wb) in enumerate(((0, gu, gv), (1, fu, gv), (m, gu, fv), (m + 1, fu, fv))):
         np.add(base, shift, out=idx[j * k:(j + 1) * k])
         np.multiply(wa, wb, out=w[j * k:(j + 1) * k])
-    counts = np.bincount(idx, w, b * m * m).reshape(b, m, m).astype(np.float32)
-    # single precision: the density's rounding (~1e-7 of its peak) is far below the outlier floor
-    spec = sfft.rfft2(counts, s=(size, size), axes=(1, 2))
-    sigs, which = np.unique(sig, return_inverse=True)  # one kernel per distinct bandwidth
-    kern = [_kernel_fft(float(s), pad, size) for s in sigs]
-    spec *= kern[0][None] if len(kern) == 1 else np.stack(kern)[which]
-    full = sfft.irfft2(spec, s=(size, size), axes=(1, 2))
-    dens = np.maximum(full[:, pad:pad + n, pad:pad + n], 0.0, dtype=np.float64)
+    counts = np.bincount(idx, w, b * m * m).reshape(b * m, m).astype(np.float32)
+    # the kernel is separable: convolve the rows, then the columns, each by real 1-D FFTs (single
+    # precision: the density's rounding, ~1e-7 of its peak, is far below the outlier floor); only
+    # rows holding points are transformed, and only the n inner columns are kept
+    spec = _kernel_spectra(sig, pad, size)
+    rows = np.flatnonzero(counts.any(axis=1))
+    dens = np.zeros((b, n, n))
+    if not len(rows):
+        return dens
+    conv = sfft.rfft(counts[rows], n=size, axis=1)
+    conv *= spec[rows // m]
+    inner = np.zeros((b * m, n), np.float32)
+    inner[rows] = sfft.irfft(conv, n=size, axis=1)[:, pad:pad + n]
+    sets = np.unique(rows // m)  # sets with a point on the widened grid (the others stay 0)
+    cols = sfft.rfft(inner.reshape(b, m, n)[sets], n=size, axis=1)
+    cols *= spec[sets, :, None]
+    full = sfft.irfft(cols, n=size, axis=1)
+    dens[sets] = np.maximum(full[:, pad:pad + n, :], 0.0, dtype=np.float64)
     dens /= npts * res * res
     return dens
 
