@@ -281,7 +281,7 @@ def test_paper_config_parses_and_plans():
     v1 = stage.adapt_config(cfg, "paper-v1", "active", "ideal")
     assert (v1.robot.kde_draw, v1.robot.kde_eps, v1.robot.ml_ties) == ("shared", 1e-3, "first")
     ours = stage.adapt_config(cfg, "kbcli", "infogain", "dynamics")
-    from kbcli.core.adapt import AdapterConfig
+    from kbcli.core.adapter_config import AdapterConfig
 
     # kbcli is the adapter's defaults: what they are, it is
     assert ours.robot == AdapterConfig(strategy="infogain")

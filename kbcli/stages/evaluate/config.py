@@ -411,7 +411,7 @@ def resolved_methods(cfg: EvaluateConfig, model=None) -> dict:
     ``model``: the robust posterior's ``redundancy_radius`` (px), ``robust_blurs`` (px) and
     ``robust_eta`` (its learning rate); 0, [] and 1 with the plain or KDE posterior. Empty without a model.
     """
-    from kbcli.core.adapt import learning_rate, redundancy_radius, robust_blurs
+    from kbcli.core.adapter_config import learning_rate, redundancy_radius, robust_blurs
 
     out = {}
     for m in cfg.methods:
