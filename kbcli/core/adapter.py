@@ -220,13 +220,27 @@ class Adapter:
                           np.asarray(action, float).reshape(2), int(cls))
         return self.kind.term(obs)[0]
 
+    def simulate_many(self, actions: np.ndarray, classes: np.ndarray) -> np.ndarray:
+        """``(k, *grid.shape)``: :meth:`simulate` of ``k`` touches (``actions`` (k, 2),
+        ``classes`` (k,)), the same numbers as one call each in turn, computed together when the
+        kind of posterior can (its ``terms``)."""
+        obs = [Observation(self.grid, self.table, self.model, self.cfg, self.samples,
+                           np.asarray(a, float).reshape(2), int(c))
+               for a, c in zip(np.asarray(actions, float).reshape(-1, 2),
+                               np.asarray(classes).reshape(-1), strict=True)]
+        many = getattr(self.kind, "terms", None)
+        if many is not None:
+            return many(obs)
+        return np.stack([self.kind.term(o)[0] for o in obs])
+
     def context(self) -> Context:
         if self._edges is None:
             self._edges, self._corners = self.table.boundary_points()
         return Context(self.posterior, self.planning_table(), self.area, self._edges,
                        self._corners, self.cfg, touched=self.touched(),
                        redundancy_radius=self.redundancy_radius,
-                       sampler=self.action_source(), simulate=self.simulate)
+                       sampler=self.action_source(), simulate=self.simulate,
+                       simulate_many=self.simulate_many)
 
     def touched(self) -> np.ndarray:
         """(k, 2) where the observed touches were read (felt positions, or the aims)."""

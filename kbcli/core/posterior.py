@@ -119,6 +119,22 @@ class Posterior:
         """Multiply in one observation's term (Eq. 8: add its log)."""
         return Posterior(self.grid, self.logp + term, self.n_obs + 1, self.tie_seed)
 
+    def entropies_after(self, terms: np.ndarray) -> np.ndarray:
+        """(k,) the entropy (nats) of the posterior updated with each of ``k`` terms
+        ``(k, *grid.shape)``: ``update(terms[i]).entropy()`` bit for bit, without building the
+        posteriors (one pass over the stacked terms; row sums add pairwise like a 1-D sum)."""
+        k = len(terms)
+        logw = self.logp.reshape(1, -1) + np.asarray(terms, float).reshape(k, -1)
+        m = np.max(logw, axis=1, keepdims=True)
+        if not np.isfinite(m).all():
+            raise ValueError("a posterior needs at least one cell of finite log-probability")
+        p = np.exp(logw - m)
+        total = p.sum(axis=1, keepdims=True)
+        p /= total
+        # math.log, as log_normalise takes it (numpy's vectorised log may round differently)
+        logw -= m + np.array([[math.log(t)] for t in total[:, 0]])
+        return np.array([-np.einsum("i,i->", p[i], logw[i]) for i in range(k)])
+
     def with_tie_seed(self, tie_seed: int | None) -> Posterior:
         """The same posterior (same arrays, no renormalisation) with another tie rule."""
         out = object.__new__(Posterior)

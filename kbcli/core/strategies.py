@@ -83,8 +83,9 @@ class Context:
     sampler : object
         Draws actions from p(action | sound) (``random`` with ``random_actions = "model"``,
         ``paper-active``).
-    simulate : callable
-        The adapter's own posterior term of a simulated touch (``paper-active``).
+    simulate, simulate_many : callable
+        The adapter's own posterior term of a simulated touch, and of several at once
+        (``paper-active``).
     """
 
     posterior: Posterior
@@ -99,6 +100,8 @@ class Context:
     sampler: Any = None
     #: ``simulate(action (2,), cls) -> log term``: the term a touch would multiply the posterior by
     simulate: Callable[[np.ndarray, int], np.ndarray] | None = None
+    #: ``simulate_many(actions (k, 2), classes (k,)) -> (k, *grid.shape)``: ``simulate`` of each
+    simulate_many: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
 
     @property
     def family(self) -> str:
@@ -281,8 +284,8 @@ def paper_active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     3. each kept action's outcome simulated under the best (maximum-likelihood) hypothesis so far
        (its most probable sound);
     4. the current posterior updated with each simulated outcome by the adapter's own term
-       (``ctx.simulate``: with the KDE posterior, Algorithm 2 on the simulated sound), on the
-       whole grid;
+       (``ctx.simulate_many``: with the KDE posterior, Algorithm 2 on the simulated sound, fresh
+       samples for each), on the whole grid (the entropies after, :meth:`Posterior.entropies_after`);
     5. the action with the largest entropy reduction (lowest entropy after) chosen.
 
     Choices the paper leaves open: the number of candidates and kept ones (``candidates`` 256,
@@ -297,9 +300,27 @@ def paper_active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     ml = grid.params(np.array([post.ml_index()]))
     mx, my = inverse_points(ctx.family, ml, kept, ctx.centre)
     simulated = table.classes_at(mx, my)[0]  # (k,)
-    after = [post.update(ctx.simulate(a, int(c))).entropy()
-             for a, c in zip(kept, simulated, strict=True)]
+    after = np.concatenate([post.entropies_after(_simulated_terms(ctx, kept[sel], simulated[sel]))
+                            for sel in _chunks(len(kept), grid.size)])
     return kept[int(np.argmin(after))]
+
+
+#: Grid cells of simulated terms held at once (``paper-active``: 8 terms of a rigid grid at
+#: 0.5 px would take 80 MB).
+SIMULATED_CELLS = 2**21
+
+
+def _chunks(k: int, cells: int) -> list[slice]:
+    """Slices of ``range(k)`` holding at most ``SIMULATED_CELLS`` cells of terms (at least one)."""
+    step = max(1, SIMULATED_CELLS // max(cells, 1))
+    return [slice(i, i + step) for i in range(0, k, step)]
+
+
+def _simulated_terms(ctx: Context, actions: np.ndarray, classes: np.ndarray) -> np.ndarray:
+    """``(k, *grid.shape)`` the adapter's terms of simulated touches (together when it can)."""
+    if ctx.simulate_many is not None:
+        return ctx.simulate_many(actions, classes)
+    return np.stack([ctx.simulate(a, int(c)) for a, c in zip(actions, classes, strict=True)])
 
 
 @STRATEGIES.register("infogain")

@@ -5,11 +5,12 @@ p(action | sound) built from samples of the model (:mod:`kbcli.core.kde`,
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from kbcli.core.kde import kde_term
+from kbcli.core.kde import kde_term, kde_terms
 from kbcli.core.posteriors.base import POSTERIORS, Observation
 
 
@@ -26,6 +27,16 @@ class KdePosterior:
         that is None), and the kernel bandwidth (px) it used."""
         return kde_term(obs.grid, obs.model, obs.action, obs.cls, n_samples=obs.cfg.kde_samples,
                         eps=obs.cfg.kde_eps, samples=obs.samples)
+
+    def terms(self, observations: Sequence[Observation]) -> np.ndarray:
+        """``(k, *grid.shape)`` log terms of ``k`` observations of one adaptation (the same grid,
+        model, config and samples), the same numbers as :meth:`term` of each in turn (their
+        samples drawn in that order), the kernel densities computed together."""
+        first = observations[0]
+        draws = [first.samples.get(int(o.cls)) for o in observations]
+        actions = np.array([o.action for o in observations], float).reshape(-1, 2)
+        return kde_terms(first.grid, actions, np.stack([d for d, _ in draws]),
+                         [bw for _, bw in draws], first.cfg.kde_eps)
 
 
 POSTERIORS.register("kde", KdePosterior(),
