@@ -11,6 +11,7 @@ import numpy as np
 
 from kbcli.core.kde import kde_term
 from kbcli.core.posteriors.base import POSTERIORS, Observation
+from kbcli.core.registry import Uses
 
 
 @dataclass(frozen=True)
@@ -28,5 +29,11 @@ class KdePosterior:
                         eps=obs.cfg.kde_eps, samples=obs.samples)
 
 
+def _fresh(cfg) -> bool:
+    return cfg.kde_draw == "fresh"
+
+
 POSTERIORS.register("kde", KdePosterior(),
-                    summary="the paper's product of KDEs of p(action | sound) (Eq. 7)")
+                    summary="the paper's product of KDEs of p(action | sound) (Eq. 7)",
+                    uses=("kde_samples", "kde_draw", "kde_floor", "kde_bandwidth",
+                          Uses("kde_sampler", _fresh, 'kde_draw = "fresh"')))
