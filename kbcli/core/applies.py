@@ -44,8 +44,8 @@ PARTS: dict[str, Registry] = {"posterior": POSTERIORS, "estimator": ESTIMATORS,
 #: Options read by the adapter's own rules rather than by a part (the stopping rules): the ML cell
 #: is read by the paper's rule (so are its ties), the radius by ours.
 RULES: tuple[Uses, ...] = (
-    Uses("ml_ties", lambda cfg: cfg.stop_ml is not None, "stop_ml is set"),
-    Uses("stop_radius", lambda cfg: bool(cfg.stop_mass), "stop_mass > 0"),
+    Uses("ml_ties", lambda cfg: cfg.stop_ml is not None, "stop_ml is set", "stop_ml is not set"),
+    Uses("stop_radius", lambda cfg: bool(cfg.stop_mass), "stop_mass > 0", "stop_mass = 0"),
 )
 
 
@@ -95,7 +95,7 @@ def why(option: str, cfg: Any, strategies: Iterable[str] | None = None) -> str:
     who = [f"by {kind} {_or(names, serial=False)}" for kind, names in by_kind.items()] + rules
     here = [f"the {k} is {chosen[k][0]}" if len(chosen[k]) == 1
             else f"the {k.replace('y', 'ie')}s are {', '.join(chosen[k])}" for k in by_kind]
-    here += [f"{u.note} does not hold" for kind, name, u in found
+    here += [u.describe_unmet() for kind, name, u in found
              if (kind is None or name in chosen[kind]) and not u.holds(cfg)]
     return f"it is read only {_or(who)}; here {'; '.join(here) or 'none of them is chosen'}"
 

@@ -48,11 +48,14 @@ class Uses:
         always).
     note : str
         ``when`` in words, for messages (``"robust = true"``).
+    unmet : str
+        ``when`` failing, in words (``"robust = false"``; default: ``note`` "does not hold").
     """
 
     option: str
     when: Callable[[Any], bool] | None = None
     note: str = ""
+    unmet: str = ""
 
     def holds(self, cfg: Any) -> bool:
         """Whether the part reads the option under ``cfg``."""
@@ -60,6 +63,9 @@ class Uses:
 
     def describe(self) -> str:
         return f" when {self.note}" if self.note else ""
+
+    def describe_unmet(self) -> str:
+        return self.unmet or f"{self.note} does not hold"
 
 
 

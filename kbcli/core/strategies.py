@@ -235,7 +235,8 @@ def model_actions(ctx: Context, n: int, rng: np.random.Generator) -> np.ndarray:
 
 @STRATEGIES.register("random", uses=(
     "random_actions",
-    Uses("kde_sampler", lambda cfg: cfg.random_actions == "model", 'random_actions = "model"')))
+    Uses("kde_sampler", lambda cfg: cfg.random_actions == "model", 'random_actions = "model"',
+         'random_actions = "area"')))
 def random_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """The paper's baseline, "random selection of samples": uniform over the working area
     (``random_actions = "area"``) or an action sampled from the model (``"model"``:

@@ -84,7 +84,8 @@ FAMILIES.register("translation", Family("translation", ("dx", "dy"), rotates=Fal
 FAMILIES.register("rigid", Family("rigid", ("angle", "dx", "dy"), rotates=True),
                   summary="a rotation (deg) about the keyboard centre and a shift (dx, dy)",
                   uses=("max_angle", "angle_resolution",
-                        Uses("stop_angle", lambda cfg: bool(cfg.stop_mass), "stop_mass > 0")))
+                        Uses("stop_angle", lambda cfg: bool(cfg.stop_mass), "stop_mass > 0",
+                             "stop_mass = 0")))
 
 
 def family_for(params: dict[str, float]) -> Family:

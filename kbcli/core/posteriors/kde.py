@@ -36,4 +36,4 @@ def _fresh(cfg) -> bool:
 POSTERIORS.register("kde", KdePosterior(),
                     summary="the paper's product of KDEs of p(action | sound) (Eq. 7)",
                     uses=("kde_samples", "kde_draw", "kde_floor", "kde_bandwidth",
-                          Uses("kde_sampler", _fresh, 'kde_draw = "fresh"')))
+                          Uses("kde_sampler", _fresh, 'kde_draw = "fresh"', 'kde_draw = "shared"')))

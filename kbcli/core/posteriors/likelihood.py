@@ -48,5 +48,6 @@ def _cell_averaged(cfg) -> bool:
 
 POSTERIORS.register(
     "likelihood", LikelihoodPosterior(), summary="the model's classifier at each touch (ours)",
-    uses=("robust", Uses("cell_average", _cell_averaged, "robust = false or the family rotates"),
-          *(Uses(o, _robust, "robust = true") for o in ROBUST_OPTIONS)))
+    uses=("robust", Uses("cell_average", _cell_averaged, "robust = false or the family rotates",
+                         "robust = true and the family does not rotate"),
+          *(Uses(o, _robust, "robust = true", "robust = false") for o in ROBUST_OPTIONS)))
