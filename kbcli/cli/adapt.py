@@ -27,6 +27,7 @@ from kbcli.cli.app import (
     ticker,
 )
 from kbcli.cli.record import show_table
+from kbcli.core.applies import refuse_unused
 from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -71,8 +72,18 @@ def adapt_cmd(
     resolution: opts.Resolution = None,
     prior_halfwidth: opts.PriorHalfwidth = None,
     stop: Annotated[bool | None, typer.Option(
-        "--stop/--no-stop", help="End at the stopping rule (mass within 1 px >= 0.95) instead of "
+        "--stop/--no-stop", help="End at the stopping rules (--stop-mass, --stop-ml) instead of "
         "always taking T steps [default --no-stop].")] = None,
+    kde_samples: opts.KdeSamples = None,
+    kde_draw: opts.KdeDraw = None,
+    kde_sampler: opts.KdeSampler = None,
+    kde_floor: opts.KdeFloor = None,
+    ml_ties: opts.MlTies = None,
+    stop_ml: opts.StopMl = None,
+    stop_mass: opts.StopMass = None,
+    random_actions: opts.RandomActions = None,
+    candidates: opts.Candidates = None,
+    active_keep: opts.ActiveKeep = None,
     snapshots: Annotated[str, typer.Option(
         "--snapshots", help="Steps at which to store the posterior (0 = prior), or 'all' (every "
         "step: kbcli animate then shows each one).")
@@ -91,12 +102,13 @@ def adapt_cmd(
     flags = {"strategy": strategy, "posterior": posterior, "estimator": estimator,
              "family": family, "mode": mode, "reach_noise": reach_noise, "feedback": feedback,
              "model_blur": model_blur, "max_steps": max_steps, "resolution": resolution,
-             "prior_halfwidth": prior_halfwidth, "stop": stop}
-    values = _adapt_values(config, flags, arm)
+             "prior_halfwidth": prior_halfwidth, "stop": stop, "kde_samples": kde_samples,
+             "kde_draw": kde_draw, "kde_sampler": kde_sampler, "kde_floor": kde_floor,
+             "ml_ties": ml_ties, "stop_ml": stop_ml, "stop_mass": stop_mass,
+             "random_actions": random_actions, "candidates": candidates, "active_keep": active_keep}
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
-    values.setdefault("family", scene_art.config.get("family", "translation"))
-    cfg = stage.AdaptConfig.from_dict(values)
+    cfg = _adapt_config(config, flags, arm, scene_art.config.get("family", "translation"))
     steps = _snapshots(snapshots, cfg.max_steps)
     if beyond := sorted({s for s in steps if s > cfg.max_steps}):
         err.print(f"kbcli: note: --snapshots {', '.join(map(str, beyond))} beyond --max-steps "
@@ -111,13 +123,19 @@ def adapt_cmd(
     _report_run(art, cfg, output)
 
 
-def _adapt_values(config: Path | None, flags: dict, arm: str | None) -> dict:
-    """The [adapt] table of ``config`` (if any) with the flags given on top, and the arm."""
-    values = load_stage_table(config, "adapt") if config is not None else {}
-    values.update({k: v for k, v in flags.items() if v is not None})
+def _adapt_config(config: Path | None, flags: dict, arm: str | None,
+                  family: str) -> stage.AdaptConfig:
+    """The [adapt] table of ``config`` (if any) with the flags given on top, the arm, and
+    ``family`` (the scene's) unless set; a robot option set (in either) that the method does not
+    read is refused (:func:`kbcli.core.applies.refuse_unused`)."""
+    table = load_stage_table(config, "adapt") if config is not None else {}
+    values = {**table, **{k: v for k, v in flags.items() if v is not None}}
     if arm is not None:
         values["arm"] = load_arm(arm)
-    return values
+    values.setdefault("family", family)
+    cfg = stage.AdaptConfig.from_dict(values)
+    refuse_unused(cfg.robot, opts.robot_given(flags, table, str(config)), "adapt")
+    return cfg
 
 
 def _report_run(art, cfg, output: Path) -> None:

@@ -19,6 +19,7 @@ from kbcli.cli.app import (
     plot_app,
     progress,
 )
+from kbcli.core.applies import refuse_unused
 from kbcli.core.detect import DetectorConfig
 from kbcli.core.loop import PLAY
 from kbcli.core.melody import DEFAULT_MELODY
@@ -53,6 +54,16 @@ def run_cmd(
     n_lt: Annotated[int, typer.Option(help="Detector long-term window N_LT.")] = 100,
     n_st: Annotated[int, typer.Option(help="Detector short-term window N_ST.")] = 10,
     threshold: Annotated[float, typer.Option(help="Detector threshold, in (0, 1).")] = 0.01,
+    kde_samples: opts.KdeSamples = None,
+    kde_draw: opts.KdeDraw = None,
+    kde_sampler: opts.KdeSampler = None,
+    kde_floor: opts.KdeFloor = None,
+    ml_ties: opts.MlTies = None,
+    stop_ml: opts.StopMl = None,
+    stop_mass: opts.StopMass = None,
+    random_actions: opts.RandomActions = None,
+    candidates: opts.Candidates = None,
+    active_keep: opts.ActiveKeep = None,
     seed: opts.Seed = 0,
 ) -> None:
     """Play, notice the move, adapt, resume: the closed loop as the robot lives it.
@@ -66,13 +77,18 @@ def run_cmd(
     scene_art = read_artifact(scene, "scene")
     if family is None:  # like adapt: estimate what the scene moved (a rigid move has an angle)
         family = scene_art.config.get("family", "translation")
+    given = {"estimator": estimator, "kde_samples": kde_samples, "kde_draw": kde_draw,
+             "kde_sampler": kde_sampler, "kde_floor": kde_floor, "ml_ties": ml_ties,
+             "stop_ml": stop_ml, "stop_mass": stop_mass, "random_actions": random_actions,
+             "candidates": candidates, "active_keep": active_keep}
+    adapt = AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
+                             reach_noise=reach_noise, arm=load_arm(arm), stop=True,
+                             **{k: v for k, v in given.items() if v is not None})
+    refuse_unused(adapt.robot, opts.robot_given(given), "run")
     cfg = stage.LoopConfig(
         melody=melody, steps=steps, perturb_at=perturb_at, max_adapt_steps=max_adapt_steps,
         detector=DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold),
-        adapt=AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
-                               reach_noise=reach_noise, arm=load_arm(arm), stop=True,
-                               **({} if estimator is None else {"estimator": estimator})),
-    )
+        adapt=adapt)
     session = stage.LoopSession(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed)
     note_arm(cfg.adapt.arm, cfg.adapt.mode)
     adapting = [0]
@@ -88,7 +104,12 @@ def run_cmd(
         pass
     art = session.artifact()
     write_artifact(art, output)
-    a = art.attrs
+    _report_loop(art.attrs, output)
+
+
+def _report_loop(a: dict, output: Path) -> None:
+    """What the session measured: success before, after the move, after adaptation; the
+    detection and the adaptation."""
     out.print(f"wrote {output}")
     out.print(f"success before the move {_pct(a['success_before'])}, after it "
               f"{_pct(a['success_after_perturbation'])}, after adaptation "

@@ -12,6 +12,7 @@ import numpy as np
 from pydantic import Field, InstanceOf, field_validator, model_validator
 
 from kbcli.core import transforms
+from kbcli.core.applies import refuse_unused
 from kbcli.core.config import (
     Name,
     Names,
@@ -314,7 +315,9 @@ class EvaluateConfig(StageConfig):
         for meth in self.methods:
             for s in meth.strategies:
                 for m in self.modes:
-                    adapt_config(self, meth.name, s, m)
+                    acfg = adapt_config(self, meth.name, s, m)
+            if acfg is not None:  # options the method's parts do not read are refused
+                refuse_unused(acfg.robot, meth.given(), f"methods.{meth.name}", meth.strategies)
         return self
 
     def _check_names(self) -> None:
