@@ -14,6 +14,7 @@ from matplotlib.patches import Circle, Polygon
 from matplotlib.path import Path
 
 from kbcli.core.keyboard import Keyboard
+from kbcli.core.transforms import FAMILIES
 from kbcli.io.atomic import atomic_path
 from kbcli.io.paths import figure_format
 from kbcli.viz.palette import key_colours
@@ -22,6 +23,17 @@ from kbcli.viz.palette import key_colours
 def external(attrs: dict) -> bool:
     """Whether a run came from a robot in another process (``kbcli serve``): no ground truth."""
     return attrs.get("source") == "external"
+
+
+def angle_note(family: str | None, world_family: str | None) -> str:
+    """What a figure of the translation posterior says of the angle: "angle marginalised" when the
+    estimated ``family`` has one (the panels show its sum over the angle), "angle not estimated"
+    when only the keyboard's move (``world_family``) rotates, "" when nothing rotates."""
+    if family is not None and FAMILIES.get(family).rotates:
+        return "angle marginalised"
+    if world_family is not None and FAMILIES.get(world_family).rotates:
+        return "angle not estimated"
+    return ""
 
 
 def save(fig: Figure, path: str | os.PathLike, dpi: int = 110) -> None:
@@ -170,13 +182,15 @@ _LABEL_OFFSETS = ((4, 4), (4, -11), (None, 4), (None, -11), (4, 13), (4, -20), (
 
 
 def place_labels(ax, xy: np.ndarray, texts: list[str], fontsize: float = 6.5,
-                 avoid: np.ndarray | None = None, inside: bool = False, **kw) -> int:
+                 avoid: np.ndarray | None = None, inside: bool = False, margin: float = 0.5,
+                 **kw) -> int:
     """Label points without letting two labels overlap or cover a point.
 
     Each label takes the first offset of :data:`_LABEL_OFFSETS` whose box is clear of the labels
     placed before it and of every point (``xy`` and ``avoid``, as a marker of about 8 points);
     a label with no free place, or of a point that is not finite, is left out; with ``inside``, a
-    place must also lie inside the axes. Call once the axes' limits and position are final (after
+    place must also lie inside the axes. Each label's box counts ``margin`` points wider on every
+    side (at least the pad of a background box given in ``bbox``). Call once the axes' limits and position are final (after
     ``tight_layout``).
 
     Returns
@@ -193,7 +207,8 @@ def place_labels(ax, xy: np.ndarray, texts: list[str], fontsize: float = 6.5,
     disp = ax.transData.transform(pts)
     marks = ax.transData.transform(every)
     r = 4.0 * scale
-    frame = ax.bbox.padded(-2 * scale)  # (a label's own box pads it by about a point)
+    m = margin * scale
+    frame = ax.bbox
     taken: list[tuple[float, float, float, float]] = [
         (mx - r, my - r, mx + r, my + r) for mx, my in marks]
     skipped = 0
@@ -204,7 +219,8 @@ def place_labels(ax, xy: np.ndarray, texts: list[str], fontsize: float = 6.5,
         w, h = 0.64 * fontsize * len(text) * scale, fontsize * scale
         for ox, oy in _LABEL_OFFSETS:
             ox = -4 - w / scale if ox is None else ox
-            box = (px + ox * scale, py + oy * scale, px + ox * scale + w, py + oy * scale + h)
+            x0, y0 = px + ox * scale, py + oy * scale
+            box = (x0 - m, y0 - m, x0 + w + m, y0 + h + m)
             if inside and not (frame.x0 <= box[0] and box[2] <= frame.x1 and frame.y0 <= box[1]
                                and box[3] <= frame.y1):
                 continue
@@ -212,7 +228,7 @@ def place_labels(ax, xy: np.ndarray, texts: list[str], fontsize: float = 6.5,
                    for a, b, c, d in taken):
                 taken.append(box)
                 ax.annotate(text, (x, y), textcoords="offset points", xytext=(ox, oy),
-                            fontsize=fontsize, **kw)
+                            fontsize=fontsize, va="bottom", **kw)
                 break
         else:
             skipped += 1

@@ -239,6 +239,6 @@ def plot_loop(steps: dict, attrs: dict, kb: Keyboard, path: str | os.PathLike, w
     at, texts, touches = _keyboard_panel(ax3, kb, steps, phase, attrs)
     fig.suptitle(_title(phase, result, attrs), fontsize=11)
     fig.tight_layout()
-    place_labels(ax3, at, texts, fontsize=8.5, avoid=touches, inside=True, zorder=5,
+    place_labels(ax3, at, texts, fontsize=8.5, avoid=touches, inside=True, margin=1.6, zorder=5,
                  bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8})
     save(fig, path)
