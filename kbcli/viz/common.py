@@ -170,7 +170,7 @@ def fit_title(ax, text: str, fontsize: float = 9.5) -> None:
     out now), so that a long title never runs past the axes' edges."""
     ax.apply_aspect()
     width_pt = ax.get_position().width * ax.figure.get_figwidth() * 72.0
-    chars = max(int(width_pt / (0.58 * fontsize)), 20)
+    chars = max(int(width_pt / (0.53 * fontsize)), 20)  # (an average character: ~0.5 em)
     lines = [w for line in text.split("\n") for w in textwrap.wrap(line, chars) or [""]]
     ax.set_title("\n".join(lines), fontsize=fontsize)
 

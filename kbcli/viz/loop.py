@@ -240,5 +240,7 @@ def plot_loop(steps: dict, attrs: dict, kb: Keyboard, path: str | os.PathLike, w
     fig.suptitle(_title(phase, result, attrs), fontsize=11)
     fig.tight_layout()
     place_labels(ax3, at, texts, fontsize=8.5, avoid=touches, inside=True, margin=1.6, zorder=5,
-                 bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8})
+                 bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8},
+                 arrowprops={"arrowstyle": "-", "color": "0.3", "lw": 0.6, "shrinkA": 0,
+                             "shrinkB": 2.5})  # a leader to its touch
     save(fig, path)
