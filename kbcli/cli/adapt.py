@@ -32,6 +32,7 @@ from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm, load_stage_table
 from kbcli.stages import adapt as stage
+from kbcli.stages.config import MAX_ADAPT_STEPS
 
 
 def _snapshots(text: str, max_steps: int) -> tuple[int, ...]:
@@ -67,7 +68,7 @@ def adapt_cmd(
     ] = None,
     arm: opts.arm_option("ideal", optional=True) = None,
     model_blur: opts.ModelBlur = None,
-    max_steps: opts.max_steps_option("Observations at most [default 40].") = None,
+    max_steps: opts.max_steps_option(f"Observations at most [default 40; at most {MAX_ADAPT_STEPS}].") = None,
     resolution: opts.Resolution = None,
     prior_halfwidth: opts.PriorHalfwidth = None,
     stop: Annotated[bool | None, typer.Option(

@@ -15,7 +15,7 @@ from rich.table import Table
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, out, progress
 from kbcli.cli.record import show_table
-from kbcli.core.detect import DetectorConfig
+from kbcli.core.detect import MAX_N_LT, MAX_N_ST, DetectorConfig
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import detect as stage
@@ -26,8 +26,10 @@ def detect_cmd(
     history: Annotated[Path, typer.Argument(help="History artifact (kbcli play).")],
     output: opts.output_option("Detection artifact to write (.h5)."),
     detector: opts.detector_option() = "binomial",
-    n_lt: Annotated[int, typer.Option("--n-lt", help="Long-term window N_LT (Eq. 4).")] = 100,
-    n_st: Annotated[int, typer.Option("--n-st", help="Short-term window N_ST (Eq. 5), < N_LT.")] = 10,
+    n_lt: Annotated[int, typer.Option(
+        "--n-lt", help=f"Long-term window N_LT (Eq. 4), at most {MAX_N_LT}.")] = 100,
+    n_st: Annotated[int, typer.Option(
+        "--n-st", help=f"Short-term window N_ST (Eq. 5), < N_LT and at most {MAX_N_ST}.")] = 10,
     threshold: Annotated[float, typer.Option(
         "--threshold", help="Fire when the score (binomial: upper tail of Eq. 6) falls below it; in (0, 1).")] = 0.01,
     shift: Annotated[float, typer.Option(

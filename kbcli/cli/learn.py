@@ -32,6 +32,7 @@ from kbcli.io.schema import MIN_SOUNDS
 from kbcli.sim import SimConfig
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import learn as stage
+from kbcli.stages.config import MAX_BUDGET
 
 
 @command(name="learn")
@@ -44,19 +45,20 @@ def learn_cmd(
         "--strategy", help=f"Exploration: {opts.one_of('exploration', 'exact')} (exact: the "
         "keyboard's own geometry, no learning).")] = "active",
     budget: Annotated[int, typer.Option(
-        "--budget", help="Reaches to explore with; a run that hears fewer than two distinct sounds "
-        "is refused (nothing written).")] = 800,
+        "--budget", help=f"Reaches to explore with, at most {MAX_BUDGET}; a run that hears fewer than "
+        "two distinct sounds is refused (nothing written).")] = 800,
     seed: opts.seed_option("Seed of the exploration and arm noise.") = 0,
     reach_noise: Annotated[float, typer.Option(
         "--reach-noise", help="Landing scatter of a reach, px (motor noise in dynamics mode).")
     ] = 0.0,
     arm: opts.arm_option() = "ideal",
-    batch: Annotated[int, typer.Option("--batch", help="Reaches per model refit.")] = 10,
+    batch: Annotated[int, typer.Option(
+        "--batch", help=f"Reaches per model refit, at most {MAX_BUDGET}.")] = 10,
     explore_radius: Annotated[float, typer.Option(
         "--explore-radius", help="active: first cover the working area to this radius, px.")
     ] = 20.0,
     curve_every: Annotated[int, typer.Option(
-        "--curve-every", help="Reaches between learning-curve points.")] = 50,
+        "--curve-every", help=f"Reaches between learning-curve points, at most {MAX_BUDGET}.")] = 50,
     model_class: opts.model_class_option(
         "Model class: auto or one of {classes}. auto: explore with forest, keep the class with the "
         "best cross-validated score on the samples (on stderr); lines: straight key edges; svc, "
