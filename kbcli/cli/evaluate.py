@@ -175,9 +175,12 @@ def bench_evaluate_cmd(
     model: opts.model_option("Model artifact; default: the exact model of the config's keyboard.",
                              optional=True) = None,
     experiments: Annotated[int, typer.Option(
-        "--experiments", help="Repetitions per parametrization and strategy.")] = 2,
+        "--experiments", help=opts.at_most("Repetitions per parametrization and strategy",
+                                           MAX_EXPERIMENTS))] = 2,
     mode: opts.mode_option() = "ideal",
-    workers: Annotated[int, typer.Option("--workers", help="Workers of the parallel backends.")] = 2,
+    workers: Annotated[int, typer.Option("--workers", help="Workers of the parallel backends; at "
+                                         "most the number of cores this process may use (more "
+                                         "is capped, with a note).")] = 2,
 ) -> None:
     """Benchmark the execution backends on a slice of the protocol.
 
@@ -189,6 +192,7 @@ def bench_evaluate_cmd(
     cfg = _load_config(config, experiments, mode)
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
+    workers = opts.cap_workers(workers, "--workers")
     if model is not None:
         model_art = read_artifact(model, "model")
     else:
