@@ -52,10 +52,10 @@ def learn_cmd(
         "--reach-noise", help="Landing scatter of a reach, px (motor noise in dynamics mode).")
     ] = 0.0,
     arm: opts.arm_option() = "ideal",
-    batch: Annotated[int, typer.Option(
-        "--batch", help=f"Reaches per model refit, at most {MAX_BUDGET}.")] = 10,
+    batch: Annotated[int, typer.Option("--batch", help=f"Reaches per refit, at most {MAX_BUDGET}.")] = 10,
     explore_radius: Annotated[float, typer.Option(
-        "--explore-radius", help="active: first cover the working area to this radius, px.")
+        "--explore-radius", help="active: first cover the working area to this radius, px "
+        "(at least 1.9 px on the default pad: a cover of 1,000,000 points).")
     ] = 20.0,
     curve_every: Annotated[int, typer.Option(
         "--curve-every", help=f"Reaches between learning-curve points, at most {MAX_BUDGET}.")] = 50,
