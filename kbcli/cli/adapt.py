@@ -100,8 +100,10 @@ def adapt_cmd(
     cfg = stage.AdaptConfig.from_dict(values)
     steps = _snapshots(snapshots, cfg.max_steps)
     if beyond := sorted({s for s in steps if s > cfg.max_steps}):
-        err.print(f"kbcli: note: --snapshots {', '.join(map(str, beyond))} beyond --max-steps "
-                  f"{cfg.max_steps}: not recorded", markup=False)
+        shown = ", ".join(map(str, beyond[:8])) + (f", ... ({len(beyond)} steps)" if len(beyond) > 8
+                                                   else "")
+        err.print(f"kbcli: note: --snapshots {shown} beyond --max-steps {cfg.max_steps}: not "
+                  "recorded", markup=False)
     stage.check_inputs(model_art, scene_art)
     note_arm(cfg.arm, cfg.mode)
     what = f"adapting ({cfg.strategy}, {cfg.posterior} posterior), observations"
