@@ -100,6 +100,33 @@ def config_option(help: str, optional: bool = True) -> Any:
     return Annotated[Path | None if optional else Path, _opt("--config", help=help)]
 
 
+# -- counts -----------------------------------------------------------------------------------------
+#: Upper bounds of the benchmarks' counts that no stage config bounds (issue 29: a typo such as 1e9
+#: is refused in one line before any work, never run at full CPU until killed).
+MAX_SEEDS = 1000
+MAX_REACHES = 100_000
+MAX_STREAMS = 100_000
+MAX_TUNE_ACTIONS = 10_000_000
+MAX_HORIZON = 100_000
+MAX_REPEATS = 100
+MAX_TIMED_STEPS = 100_000
+
+
+def at_most(text: str, bound: int) -> str:
+    """A count option's help with its upper bound: ``Runs per row, at most 1000.``"""
+    return f"{text.rstrip('.')}, at most {bound}."
+
+
+def check_counts(*counts: tuple[str, int | None, int]) -> None:
+    """Refuse, in one line, a count outside ``[1, bound]``: ``(option, value, bound)`` each (a
+    None value: not given)."""
+    from kbcli.errors import ConfigError
+
+    for option, value, bound in counts:
+        if value is not None and not 1 <= value <= bound:
+            raise ConfigError(f"{option} must be a whole number in [1, {bound}], got {value}")
+
+
 # -- seeds and workers ------------------------------------------------------------------------------
 def seed_option(help: str = "Seed of the robot's and the world's randomness.") -> Any:
     """``--seed``: the seed of a command's random draws (a whole number >= 0)."""
@@ -107,14 +134,18 @@ def seed_option(help: str = "Seed of the robot's and the world's randomness.") -
 
 
 Seed = seed_option()
-def _cap_jobs(value: int) -> int:
-    """More workers than cores only run slower: cap ``--jobs`` at the core count, with a note."""
+def cap_workers(value: int, option: str = "--jobs") -> int:
+    """More workers than cores only run slower: cap ``option`` at the core count, with a note."""
     from kbcli.io.processes import cap_jobs
 
-    jobs, note = cap_jobs(value)
+    jobs, note = cap_jobs(value, option)
     if note is not None:
         sys.stderr.write(f"kbcli: {note}\n")
     return jobs
+
+
+def _cap_jobs(value: int) -> int:
+    return cap_workers(value)
 
 
 #: ``--jobs/-j``: local worker processes.

@@ -20,7 +20,7 @@ from kbcli.cli.app import (
     progress,
 )
 from kbcli.core.applies import refuse_unused
-from kbcli.core.detect import DetectorConfig
+from kbcli.core.detect import MAX_N_LT, MAX_N_ST, DetectorConfig
 from kbcli.core.loop import PLAY
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -28,6 +28,7 @@ from kbcli.io.config import arm_file, load_arm
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import run as stage
 from kbcli.stages.adapt import AdaptConfig
+from kbcli.stages.config import MAX_ADAPT_STEPS
 
 
 def _pct(v: float | None) -> str:
@@ -40,8 +41,10 @@ def run_cmd(
     scene: Annotated[Path, typer.Option("--scene", help="Scene artifact (kbcli perturb): where the keyboard moves.")],
     output: opts.output_option("Closed-loop artifact to write (.h5)."),
     melody: Annotated[str, typer.Option(help="Notes NOTE:BEATS, looped.")] = DEFAULT_MELODY,
-    steps: Annotated[int, typer.Option(help="Play touches (adaptation touches come on top).")] = 600,
-    perturb_at: Annotated[int, typer.Option(help="Touches after which the keyboard moves.")] = 200,
+    steps: Annotated[int, typer.Option(
+        help=f"Play touches (adaptation touches come on top), at most {stage.MAX_LOOP_STEPS}.")] = 600,
+    perturb_at: Annotated[int, typer.Option(
+        help="Touches after which the keyboard moves, fewer than --steps.")] = 200,
     strategy: opts.strategy_option() = "infogain",
     posterior: opts.posterior_option() = "likelihood",
     estimator: opts.estimator_option() = None,
@@ -49,10 +52,13 @@ def run_cmd(
     mode: opts.mode_option() = "ideal",
     reach_noise: opts.ReachNoise = 0.0,
     arm: opts.arm_option() = "ideal",
-    max_adapt_steps: Annotated[int, typer.Option(help="Touches at most per adaptation.")] = 40,
+    max_adapt_steps: Annotated[int, typer.Option(
+        help=f"Touches at most per adaptation (at most {MAX_ADAPT_STEPS}).")] = 40,
     detector: opts.detector_option() = "binomial",
-    n_lt: Annotated[int, typer.Option(help="Detector long-term window N_LT.")] = 100,
-    n_st: Annotated[int, typer.Option(help="Detector short-term window N_ST.")] = 10,
+    n_lt: Annotated[int, typer.Option(
+        help=f"Detector long-term window N_LT, at most {MAX_N_LT}.")] = 100,
+    n_st: Annotated[int, typer.Option(
+        help=f"Detector short-term window N_ST, at most {MAX_N_ST}.")] = 10,
     threshold: Annotated[float, typer.Option(help="Detector threshold, in (0, 1).")] = 0.01,
     kde_samples: opts.KdeSamples = None,
     kde_draw: opts.KdeDraw = None,
