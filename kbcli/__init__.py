@@ -42,7 +42,7 @@ __all__ = ["__version__", "Adapter", "AdapterConfig", "Detector", "DetectorConfi
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from kbcli.api import Adapter, load_keyboard, load_model
-    from kbcli.core.adapt import AdapterConfig
+    from kbcli.core.adapter_config import AdapterConfig
     from kbcli.core.detect import Detector, DetectorConfig
 
 

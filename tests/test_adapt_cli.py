@@ -198,3 +198,83 @@ def test_a_config_files_arm_table_is_read_beside_its_adapt_table(runner, files):
     conf.write_text('[adapt]\n[arm]\npreset = "wobbly"\n')
     _one_line_error(_adapt(runner, files, "--config", str(conf), out="bad.h5"), "wobbly")
     assert not (files / "bad.h5").exists()
+
+
+# -- the paper method's options as flags (issue 26) -----------------------------------------------
+def test_paper_method_flags_reach_the_run(runner, files):
+    """Options once reachable only through TOML are flags; their values are the run's (recorded in
+    its config); kbcli inspect shows only the options the run's method reads, --json every one."""
+    r = _adapt(runner, files, "--posterior", "kde", "--strategy", "paper-active", "--estimator",
+               "ml", "--kde-floor", "0", "--kde-draw", "fresh", "--kde-sampler", "raster",
+               "--kde-samples", "500", "--ml-ties", "random", "--stop-ml", "0.02", "--stop-mass",
+               "0", "--candidates", "16", "--active-keep", "3", "--max-steps", "3")
+    assert r.exit_code == 0, r.output
+    robot = read_artifact(files / "run.h5", "run").config["adapt"]["robot"]
+    assert {k: robot[k] for k in ("posterior", "strategy", "kde_floor", "kde_draw", "kde_sampler",
+                                  "kde_samples", "ml_ties", "stop_ml", "stop_mass", "candidates",
+                                  "active_keep")} == {
+        "posterior": "kde", "strategy": "paper-active", "kde_floor": 0.0, "kde_draw": "fresh",
+        "kde_sampler": "raster", "kde_samples": 500, "ml_ties": "random", "stop_ml": 0.02,
+        "stop_mass": 0.0, "candidates": 16, "active_keep": 3}
+    r = _adapt(runner, files, "--strategy", "random", "--random-actions", "model", "--max-steps",
+               "2", out="random.h5")
+    assert r.exit_code == 0, r.output
+    assert read_artifact(files / "random.h5", "run").config["adapt"]["robot"][
+        "random_actions"] == "model"
+    table = runner.invoke(app, ["inspect", str(files / "run.h5")]).output
+    assert "adapt.robot.kde_floor" in table and "adapt.robot.active_keep" in table
+    assert "robust_eta" not in table and "hypotheses" not in table and "not shown" in table
+    full = runner.invoke(app, ["inspect", "--json", str(files / "run.h5")]).output
+    assert '"robust_eta"' in full and '"hypotheses"' in full
+
+
+@pytest.mark.parametrize(
+    "args, fragments",
+    [
+        (("--kde-floor", "0"), ["adapt: --kde-floor does not apply", "posterior kde",
+                                "the posterior is likelihood"]),
+        (("--posterior", "kde", "--kde-sampler", "raster"),
+         ["--kde-sampler does not apply", 'kde_draw = "shared"']),
+        (("--ml-ties", "random"), ["--ml-ties does not apply", "estimator ml",
+                                   "the strategy is infogain"]),
+        (("--strategy", "random", "--candidates", "8"), ["--candidates does not apply",
+                                                         "the strategy is random"]),
+        (("--strategy", "infogain", "--active-keep", "2"), ["--active-keep does not apply"]),
+        (("--random-actions", "model"), ["--random-actions does not apply", "strategy random"]),
+        (("--kde-draw", "sometimes", "--posterior", "kde"), ["kde_draw", "shared, fresh"]),
+        (("--candidates", "0"), ["candidates"]),
+    ],
+)
+def test_adapt_refuses_flags_the_method_does_not_read(runner, files, args, fragments):
+    r = _adapt(runner, files, *args, out="bad.h5")
+    _one_line_error(r, *fragments)
+    assert not (files / "bad.h5").exists()
+
+
+def test_adapt_refuses_a_config_files_option_the_method_does_not_read(runner, files):
+    conf = files / "a.toml"
+    conf.write_text('[adapt]\nmax_steps = 2\nrobust_eta = 0.5\n')
+    r = _adapt(runner, files, "--config", str(conf), "--posterior", "kde", out="bad.h5")
+    _one_line_error(r, "adapt: robust_eta (in", "a.toml) does not apply",
+                    "read only by posterior likelihood when robust = true",
+                    "the posterior is kde")
+    conf.write_text('[adapt]\nmax_steps = 2\n[adapt.robot]\nrobust = false\nrobust_blurs = [1.0]\n')
+    _one_line_error(_adapt(runner, files, "--config", str(conf), out="bad.h5"),
+                    "robust_blurs (in", "robust = false")
+    assert not (files / "bad.h5").exists()
+
+
+def test_run_refuses_flags_the_method_does_not_read_and_records_those_it_reads(runner, files):
+    base = ["run", "--model", str(files / "model.h5"), "--scene", str(files / "scene.h5"),
+            "--steps", "30", "--perturb-at", "16", "--n-lt", "10", "--n-st", "5"]
+    r = runner.invoke(app, [*base, "-o", str(files / "bad.h5"), "--posterior", "likelihood",
+                            "--kde-floor", "0"])
+    _one_line_error(r, "run: --kde-floor does not apply", "posterior kde")
+    assert not (files / "bad.h5").exists()
+    r = runner.invoke(app, [*base, "-o", str(files / "loop.h5"), "--posterior", "kde",
+                            "--kde-floor", "0.01", "--stop-ml", "0.1", "--stop-mass", "0",
+                            "--candidates", "32"])
+    assert r.exit_code == 0, r.output
+    robot = read_artifact(files / "loop.h5").config["loop"]["adapt"]["robot"]
+    assert (robot["kde_floor"], robot["stop_ml"], robot["stop_mass"], robot["candidates"]) == (
+        0.01, 0.1, 0.0, 32)

@@ -45,7 +45,7 @@ def test_perturb_wraps_the_angle(runner, kb_path, tmp_path):
 
 
 def test_max_angle_outside_its_range_is_refused():
-    from kbcli.core.adapt import AdapterConfig
+    from kbcli.core.adapter_config import AdapterConfig
 
     with pytest.raises(ConfigError, match=r"\[0, 180\]"):
         AdapterConfig(family="rigid", max_angle=200.0)

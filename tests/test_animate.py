@@ -87,7 +87,7 @@ def test_animate_an_adaptation(files, runner):
     assert r.exit_code == 0, r.output
     assert "7 frames" in r.output
     im = Image.open(out)
-    assert im.n_frames == 7 and im.size == (800, 448)
+    assert im.n_frames == 7 and im.size == (800, 496)  # 10 x 6.2 in at 80 dpi
     durations, frames = [], []
     for i in range(im.n_frames):
         im.seek(i)

@@ -281,7 +281,7 @@ def test_paper_config_parses_and_plans():
     v1 = stage.adapt_config(cfg, "paper-v1", "active", "ideal")
     assert (v1.robot.kde_draw, v1.robot.kde_eps, v1.robot.ml_ties) == ("shared", 1e-3, "first")
     ours = stage.adapt_config(cfg, "kbcli", "infogain", "dynamics")
-    from kbcli.core.adapt import AdapterConfig
+    from kbcli.core.adapter_config import AdapterConfig
 
     # kbcli is the adapter's defaults: what they are, it is
     assert ours.robot == AdapterConfig(strategy="infogain")
@@ -605,3 +605,61 @@ def test_a_top_level_arm_table_is_refused_not_ignored(runner, tmp_path, model_pa
                             "-o", str(out)])
     _one_line_error(r, "remove it", "[evaluate.arm]")
     assert not out.exists() and not Checkpoint.beside(out).exists()
+
+
+# -- options a method's parts do not read (issue 26) ----------------------------------------------
+@pytest.mark.parametrize(
+    ("method", "fragments"),
+    [
+        ({"posterior": "kde", "robust_eta": 0.5},
+         ["methods.m: robust_eta does not apply", "posterior likelihood", "the posterior is kde"]),
+        ({"posterior": "kde", "robust": False}, ["methods.m: robust does not apply"]),
+        ({"posterior": "kde", "robot": {"robust_blurs": [1.0]}},
+         ["methods.m: robust_blurs does not apply"]),
+        ({"robust": False, "redundancy_radius": 2.0},
+         ["methods.m: redundancy_radius does not apply", "robust = false"]),
+        ({"ml_ties": "random", "strategies": ["random", "infogain"]},
+         ["methods.m: ml_ties does not apply", "estimator ml", "the estimator is mean",
+          "stop_ml is not set"]),
+        ({"hypotheses": 64}, ["hypotheses does not apply", "strategy infogain",
+                              "the strategies are random, active"]),
+        ({"posterior": "kde", "kde_sampler": "raster"},
+         ["kde_sampler does not apply", 'kde_draw = "shared"']),
+        ({"kde_floor": 0.0}, ["kde_floor does not apply", "posterior kde"]),
+    ],
+)
+def test_a_method_option_its_parts_do_not_read_is_refused(runner, tmp_path, model_path, method,
+                                                          fragments):
+    """An option no part of the method reads is refused in one line naming the method, the option
+    and why, never silently recorded as in force (in Python and from a TOML file, exit 1)."""
+    strategies = method.pop("strategies", ["random", "active"])
+    table = {"m": {"strategies": strategies, **method}}
+    with pytest.raises(ConfigError) as exc:
+        small_config(methods=table)
+    assert "\n" not in str(exc.value) and all(f in str(exc.value) for f in fragments)
+    lines = ["[evaluate]", "judged = \"m\"", "modes = [\"ideal\"]", "[evaluate.methods.m]",
+             f"strategies = {json.dumps(strategies)}"]
+    robot = method.pop("robot", None)
+    lines += [f"{k} = {json.dumps(v)}" for k, v in method.items()]
+    if robot:
+        lines += ["[evaluate.methods.m.robot]", *(f"{k} = {json.dumps(v)}" for k, v in robot.items())]
+    conf = tmp_path / "e.toml"
+    conf.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "e.h5"
+    r = runner.invoke(app, ["evaluate", "--config", str(conf), "--model", str(model_path),
+                            "-o", str(out)])
+    _one_line_error(r, *fragments)
+    assert not out.exists()
+
+
+def test_options_the_method_reads_are_accepted_and_recorded():
+    cfg = small_config(methods={"m": {"strategies": ["random", "paper-active"], "posterior": "kde",
+                                      "kde_draw": "fresh", "kde_sampler": "raster",
+                                      "kde_floor": 0.0, "estimator": "ml", "ml_ties": "random",
+                                      "random_actions": "model", "candidates": 32,
+                                      "active_keep": 4, "stop_ml": 0.02, "stop_mass": 0.0}})
+    r = stage.adapt_config(cfg, "m", "paper-active", "ideal").robot
+    assert (r.kde_floor, r.kde_sampler, r.candidates, r.active_keep) == (0.0, "raster", 32, 4)
+    # every resolved option stays recorded, those the method does not read included
+    opts = stage.resolved_methods(cfg)["m"]["options"]["ideal"]["random"]["robot"]
+    assert opts["robust_eta"] is None and opts["hypotheses"] == 512

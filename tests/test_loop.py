@@ -7,7 +7,7 @@ import pytest
 
 from kbcli.cli import app
 from kbcli.core import transforms
-from kbcli.core.adapt import AdapterConfig
+from kbcli.core.adapter_config import AdapterConfig
 from kbcli.core.detect import DetectorConfig
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.loop import ADAPT, PLAY, closed_loop

@@ -11,7 +11,9 @@ from sklearn.exceptions import NotFittedError
 
 from kbcli.cli import app
 from kbcli.core import accuracy as scoring
-from kbcli.core.adapt import Adapter, AdapterConfig, adapt
+from kbcli.core.adapt import adapt
+from kbcli.core.adapter import Adapter
+from kbcli.core.adapter_config import AdapterConfig
 from kbcli.core.explore import Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.layouts import example_config_fields

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from kbcli.core.action_sampler import FreshSamples, RasterSampler
-from kbcli.core.adapt import Adapter, AdapterConfig
+from kbcli.core.adapter import Adapter
+from kbcli.core.adapter_config import AdapterConfig
 from kbcli.core.grid import HypothesisGrid
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.model import ExactModel

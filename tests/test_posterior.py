@@ -11,7 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from kbcli.core import transforms
-from kbcli.core.adapt import AdapterConfig, build_table
+from kbcli.core.adapt_setup import build_table
+from kbcli.core.adapter_config import AdapterConfig
 from kbcli.core.grid import HypothesisGrid, grid_bytes
 from kbcli.core.kde import ActionSamples, binned_kde, kde_term, scott_bandwidth
 from kbcli.core.keyboard import Keyboard, KeyboardConfig

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from kbcli.cli import app
-from kbcli.core.adapt import Adapter, AdapterConfig
+from kbcli.core.adapter import Adapter
+from kbcli.core.adapter_config import AdapterConfig
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.model import ExactModel
 from kbcli.core.posteriors import POSTERIORS, Observation, PosteriorKind

@@ -95,6 +95,8 @@ def test_bad_quality_configs_are_refused(table):
     ({"rows": {"random": {"strategy": "psychic"}}}, ["quality", "row 'random'", "'psychic'"]),
     ({"categories": {"a": {"limit": 3}}}, ["quality.categories", "displacements"]),
     ({"budget": [10]}, ["unknown quality option 'budget'", "budgets"]),
+    ({"rows": {"random": {"strategy": "random", "candidates": 9}}},
+     ["rows.random: candidates does not apply", "strategy active, paper-active or infogain"]),
 ])
 def test_bad_quality_config_messages_name_key_and_range(table, fragments):
     """One line naming the table, the key and what is allowed (issue 25: pydantic configs)."""

@@ -9,6 +9,7 @@ import pytest
 from test_evaluate import FAKE, small_config
 
 from kbcli.cli import app
+from kbcli.core.adapter_config import AdapterConfig
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import evaluate as evaluate_stage
 from kbcli.stages import report as stage
@@ -167,7 +168,7 @@ def test_readme_has_every_table_and_claim():
     for heading in ("The paper's claims", "Observations to reach each error threshold (ideal mode)",
                     "Mann-Whitney U p-values against random (dynamics mode)",
                     "RMSE (px) after t observations", "Playing success",
-                    "Methods: every resolved option",
+                    "Methods: every option that applies",
                     "Large displacements: representation, estimator or strategy?"):
         assert heading in text
     assert "p < 1e-05 at 10 px (p=1.0e-07)" in text
@@ -416,3 +417,23 @@ def test_methods_table_marks_options_that_do_not_apply():
     assert "| **robust** | n/a | True |" in text
     assert "| **kde_samples** | 10000 | n/a |" in text
     assert "| **robust_eta** | n/a | None |" in text
+
+
+def test_methods_table_of_kde_methods_lists_no_likelihood_only_option():
+    art = _evaluation(PAPER_LIKE)
+    robot = {**AdapterConfig(posterior="kde", estimator="ml").to_dict(), "kde_floor": 0.0}
+    for x in ("paper", "kbcli"):  # both read with the KDE: no method reads the robust options
+        art.attrs["methods"][x]["from_model"] = {"redundancy_radius": 0.0, "robust_blurs": [],
+                                                 "robust_eta": 1.0}
+        for by_s in art.attrs["methods"][x]["options"].values():
+            for d in by_s.values():
+                d["robot"] = {**robot, "strategy": d["robot"]["strategy"]}
+    table = "\n".join(stage.tables.methods_table(art))
+    for k in ("robust", "robust_blurs", "robust_outliers", "robust_eta", "redundancy_radius",
+              "cell_average", "hypotheses", "stop_angle", "max_angle"):
+        assert f"| {k} " not in table and f"| {k}," not in table and f"**{k}**" not in table, k
+    for k in ("kde_samples", "kde_floor", "kde_draw", "ml_ties", "candidates", "active_keep"):
+        assert f"| {k} |" in table, k
+    assert "n/a" not in table  # every row applies to both
+    # all of them stay recorded in the artifact
+    assert "robust_eta" in art.attrs["methods"]["paper"]["options"]["ideal"]["active"]["robot"]

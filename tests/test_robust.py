@@ -9,16 +9,16 @@ from hypothesis import strategies as st
 from scipy.special import logsumexp
 
 from kbcli.core import accuracy as scoring
-from kbcli.core.adapt import (
+from kbcli.core.adapt import adapt
+from kbcli.core.adapt_setup import spot_count
+from kbcli.core.adapter import Adapter
+from kbcli.core.adapter_config import (
     MAX_BLUR,
     REDUNDANCY_FACTOR,
     WIDE_BLUR_FACTOR,
-    Adapter,
     AdapterConfig,
-    adapt,
     redundancy_radius,
     robust_blurs,
-    spot_count,
 )
 from kbcli.core.grid import HypothesisGrid
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
@@ -331,7 +331,7 @@ def test_the_blur_grid_widens_for_a_model_that_says_it_is_weak():
     """A model whose own boundary error is 4 px also has a blur of 2 x 4 = 8 px weighed; a good
     model (1.5 px), the exact one (no estimate) and the rigid family keep their grids; an explicit
     grid or model_blur wins."""
-    from kbcli.core.adapt import learning_rate
+    from kbcli.core.adapter_config import learning_rate
     from kbcli.core.robust import DEFAULT_BLURS, RIGID_BLURS
 
     class Rated(ExactModel):
@@ -358,7 +358,7 @@ def test_the_learning_rate_tempers_a_model_that_says_it_is_weak():
     """eta = min(1, (1.5 px / b)^2) for a model rating its boundaries b px off: 1 up to 1.5 px and
     for the exact model, 0.25 at 3 px; an explicit robust_eta wins; the rigid family and the plain
     posterior are untouched; bad values are rejected."""
-    from kbcli.core.adapt import learning_rate, temper
+    from kbcli.core.adapter_config import learning_rate, temper
     from kbcli.core.robust import TEMPER_PX
 
     class Rated(ExactModel):

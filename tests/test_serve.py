@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from kbcli.cli import app
-from kbcli.core.adapt import AdapterConfig
+from kbcli.core.adapter_config import AdapterConfig
 from kbcli.core.keyboard import KeyboardConfig
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.sim import IdealReacher, SimConfig, World

@@ -7,7 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from kbcli.core.adapt import Adapter, AdapterConfig, adapt, build_table
+from kbcli.core.adapt import adapt
+from kbcli.core.adapt_setup import build_table
+from kbcli.core.adapter import Adapter
+from kbcli.core.adapter_config import AdapterConfig
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.model import ExactModel
 from kbcli.core.posterior import Posterior
@@ -184,7 +187,8 @@ class _SoftWrapper:
 
 
 def test_the_plain_posterior_softens_learned_models_and_the_robust_one_learns_the_blur():
-    from kbcli.core.adapt import LEARNED_BLUR, total_blur
+    from kbcli.core.adapt_setup import total_blur
+    from kbcli.core.adapter_config import LEARNED_BLUR
     from kbcli.core.robust import DEFAULT_BLURS
 
     soft = _SoftWrapper(MODEL)

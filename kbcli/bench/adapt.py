@@ -55,7 +55,9 @@ import numpy as np
 from pydantic import AfterValidator, Field, Strict
 
 from kbcli.core import stats
-from kbcli.core.adapt import Adapter, AdapterConfig, build_samples, build_table
+from kbcli.core.adapt_setup import build_samples, build_table
+from kbcli.core.adapter import Adapter
+from kbcli.core.adapter_config import AdapterConfig
 from kbcli.core.config import Config, Count, Name, NonNegative, NonNegativeInt
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.layouts import LAYOUTS, example_config_fields

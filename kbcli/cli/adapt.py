@@ -27,11 +27,13 @@ from kbcli.cli.app import (
     ticker,
 )
 from kbcli.cli.record import show_table
+from kbcli.core.applies import refuse_unused
 from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm, load_stage_table
 from kbcli.stages import adapt as stage
+from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_EXPERIMENTS
 
 
 def _snapshots(text: str, max_steps: int) -> tuple[int, ...]:
@@ -67,12 +69,22 @@ def adapt_cmd(
     ] = None,
     arm: opts.arm_option("ideal", optional=True) = None,
     model_blur: opts.ModelBlur = None,
-    max_steps: opts.max_steps_option("Observations at most [default 40].") = None,
+    max_steps: opts.max_steps_option(f"Observations at most [default 40; at most {MAX_ADAPT_STEPS}].") = None,
     resolution: opts.Resolution = None,
     prior_halfwidth: opts.PriorHalfwidth = None,
     stop: Annotated[bool | None, typer.Option(
-        "--stop/--no-stop", help="End at the stopping rule (mass within 1 px >= 0.95) instead of "
+        "--stop/--no-stop", help="End at the stopping rules (--stop-mass, --stop-ml) instead of "
         "always taking T steps [default --no-stop].")] = None,
+    kde_samples: opts.KdeSamples = None,
+    kde_draw: opts.KdeDraw = None,
+    kde_sampler: opts.KdeSampler = None,
+    kde_floor: opts.KdeFloor = None,
+    ml_ties: opts.MlTies = None,
+    stop_ml: opts.StopMl = None,
+    stop_mass: opts.StopMass = None,
+    random_actions: opts.RandomActions = None,
+    candidates: opts.Candidates = None,
+    active_keep: opts.ActiveKeep = None,
     snapshots: Annotated[str, typer.Option(
         "--snapshots", help="Steps at which to store the posterior (0 = prior), or 'all' (every "
         "step: kbcli animate then shows each one).")
@@ -91,16 +103,19 @@ def adapt_cmd(
     flags = {"strategy": strategy, "posterior": posterior, "estimator": estimator,
              "family": family, "mode": mode, "reach_noise": reach_noise, "feedback": feedback,
              "model_blur": model_blur, "max_steps": max_steps, "resolution": resolution,
-             "prior_halfwidth": prior_halfwidth, "stop": stop}
-    values = _adapt_values(config, flags, arm)
+             "prior_halfwidth": prior_halfwidth, "stop": stop, "kde_samples": kde_samples,
+             "kde_draw": kde_draw, "kde_sampler": kde_sampler, "kde_floor": kde_floor,
+             "ml_ties": ml_ties, "stop_ml": stop_ml, "stop_mass": stop_mass,
+             "random_actions": random_actions, "candidates": candidates, "active_keep": active_keep}
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
-    values.setdefault("family", scene_art.config.get("family", "translation"))
-    cfg = stage.AdaptConfig.from_dict(values)
+    cfg = _adapt_config(config, flags, arm, scene_art.config.get("family", "translation"))
     steps = _snapshots(snapshots, cfg.max_steps)
     if beyond := sorted({s for s in steps if s > cfg.max_steps}):
-        err.print(f"kbcli: note: --snapshots {', '.join(map(str, beyond))} beyond --max-steps "
-                  f"{cfg.max_steps}: not recorded", markup=False)
+        shown = ", ".join(map(str, beyond[:8])) + (f", ... ({len(beyond)} steps)" if len(beyond) > 8
+                                                   else "")
+        err.print(f"kbcli: note: --snapshots {shown} beyond --max-steps {cfg.max_steps}: not "
+                  "recorded", markup=False)
     stage.check_inputs(model_art, scene_art)
     note_arm(cfg.arm, cfg.mode)
     what = f"adapting ({cfg.strategy}, {cfg.posterior} posterior), observations"
@@ -111,13 +126,19 @@ def adapt_cmd(
     _report_run(art, cfg, output)
 
 
-def _adapt_values(config: Path | None, flags: dict, arm: str | None) -> dict:
-    """The [adapt] table of ``config`` (if any) with the flags given on top, and the arm."""
-    values = load_stage_table(config, "adapt") if config is not None else {}
-    values.update({k: v for k, v in flags.items() if v is not None})
+def _adapt_config(config: Path | None, flags: dict, arm: str | None,
+                  family: str) -> stage.AdaptConfig:
+    """The [adapt] table of ``config`` (if any) with the flags given on top, the arm, and
+    ``family`` (the scene's) unless set; a robot option set (in either) that the method does not
+    read is refused (:func:`kbcli.core.applies.refuse_unused`)."""
+    table = load_stage_table(config, "adapt") if config is not None else {}
+    values = {**table, **{k: v for k, v in flags.items() if v is not None}}
     if arm is not None:
         values["arm"] = load_arm(arm)
-    return values
+    values.setdefault("family", family)
+    cfg = stage.AdaptConfig.from_dict(values)
+    refuse_unused(cfg.robot, opts.robot_given(flags, table, str(config)), "adapt")
+    return cfg
 
 
 def _report_run(art, cfg, output: Path) -> None:
@@ -212,7 +233,8 @@ def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: 
 @command(bench_app, name="adapt")
 def bench_adapt_cmd(
     experiments: Annotated[int, typer.Option(
-        "--experiments", help="Runs per strategy and displacement category.")] = 50,
+        "--experiments", help=opts.at_most("Runs per strategy and displacement category",
+                                           MAX_EXPERIMENTS))] = 50,
     section: Annotated[list[str] | None, typer.Option(
         "--section", help="exact, noise, rigid, kde, learned or learned-rigid (repeat for several) "
         "[default: exact, noise, rigid and kde, plus learned when --model is given].")] = None,
@@ -221,7 +243,8 @@ def bench_adapt_cmd(
     strategy: opts.strategies_option("random, active, infogain") = None,
     category: Annotated[list[str] | None, typer.Option(
         "--category", help="small, medium, large (repeat) [default all three].")] = None,
-    max_steps: Annotated[int, typer.Option("--max-steps", "-T", help="Steps per run.")] = 40,
+    max_steps: Annotated[int, typer.Option("--max-steps", "-T", help=opts.at_most(
+        "Steps per run", MAX_ADAPT_STEPS))] = 40,
     seed: opts.seed_option("Seed of displacements and runs.") = 0,
     model_blur: Annotated[float | None, typer.Option(
         "--model-blur", help="learned section: soften the model's map by this many px [default "
@@ -229,8 +252,9 @@ def bench_adapt_cmd(
     layout: opts.layout_option("Keyboard layout of every section: {layouts} (its default keyboard) "
                                "[default: the model's keyboard with --model, else grid].") = None,
     kde_steps: Annotated[int, typer.Option(
-        "--kde-steps", min=1, help="kde section: touches timed for the KDE step's speed (on --model, "
-        "default data/default-model.h5).")] = 200,
+        "--kde-steps", help=opts.at_most("kde section: touches timed for the KDE step's speed (on "
+                                         "--model, default data/default-model.h5)",
+                                         opts.MAX_TIMED_STEPS))] = 200,
 ) -> None:
     """Benchmark the adaptation strategies: sample efficiency and speed, on any layout.
 
@@ -243,6 +267,9 @@ def bench_adapt_cmd(
     """
     from kbcli.bench import adapt as bench
 
+    opts.check_counts(("--experiments", experiments, MAX_EXPERIMENTS),
+                      ("--max-steps", max_steps, MAX_ADAPT_STEPS),
+                      ("--kde-steps", kde_steps, opts.MAX_TIMED_STEPS))
     learned, model_art, kb, layout = _bench_model(model, layout)
     sections = tuple(section) if section else bench.default_sections(model is not None)
     cfg = bench.BenchConfig(
@@ -327,8 +354,10 @@ def bench_robust_cmd(
     model: opts.model_option("Model artifact [default: the embedded default model].",
                              optional=True) = None,
     experiments: Annotated[int, typer.Option(
-        "--experiments", min=1, help="Runs per category, strategy and posterior.")] = 30,
-    max_steps: Annotated[int, typer.Option("--max-steps", "-T", min=1, help="Touches per run.")] = 30,
+        "--experiments", help=opts.at_most("Runs per category, strategy and posterior",
+                                           MAX_EXPERIMENTS))] = 30,
+    max_steps: Annotated[int, typer.Option("--max-steps", "-T", help=opts.at_most(
+        "Touches per run", MAX_ADAPT_STEPS))] = 30,
     strategy: opts.strategies_option("random, active, infogain") = None,
     seed: opts.seed_option("Seed of displacements and runs.") = 0,
 ) -> None:
@@ -345,6 +374,8 @@ def bench_robust_cmd(
     from kbcli.stages import keyboard as keyboard_stage
     from kbcli.stages.models import load_model
 
+    opts.check_counts(("--experiments", experiments, MAX_EXPERIMENTS),
+                      ("--max-steps", max_steps, MAX_ADAPT_STEPS))
     model = default_model_path() if model is None else model
     art = read_artifact(model, "model")
     m, kb = load_model(art), keyboard_stage.load(art)

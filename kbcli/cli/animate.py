@@ -11,6 +11,7 @@ from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, interactive, out
 from kbcli.cli.record import show_table
 from kbcli.io.paths import DEFAULT_MODEL, default_model_path
+from kbcli.stages.config import MAX_ADAPT_STEPS
 
 
 @command(name="animate")
@@ -51,10 +52,10 @@ def animate_cmd(
 @command(bench_app, name="animate")
 def bench_animate_cmd(
     model: opts.model_option("Model artifact the runs adapt with.") = Path(DEFAULT_MODEL),
-    repeats: Annotated[int, typer.Option("--repeats", min=1, help="Renders per run (the "
-                                         "median is reported).")] = 3,
-    touches: Annotated[int, typer.Option("--touches", min=1, help="Touches of the "
-                                         "adaptation.")] = 40,
+    repeats: Annotated[int, typer.Option("--repeats", help=opts.at_most(
+        "Renders per run (the median is reported)", opts.MAX_REPEATS))] = 3,
+    touches: Annotated[int, typer.Option("--touches", help=opts.at_most(
+        "Touches of the adaptation", MAX_ADAPT_STEPS))] = 40,
     loop: Annotated[bool, typer.Option("--loop/--no-loop", help="Also render a 600-touch "
                                        "closed loop.")] = True,
 ) -> None:
@@ -70,6 +71,8 @@ def bench_animate_cmd(
     from kbcli.bench import animate as bench
     from kbcli.io.artifact import read_artifact
 
+    opts.check_counts(("--repeats", repeats, opts.MAX_REPEATS),
+                      ("--touches", touches, MAX_ADAPT_STEPS))
     cfg = bench.BenchConfig(repeats=repeats, touches=touches, loop=loop)
     if model == Path(DEFAULT_MODEL):
         model = default_model_path()

@@ -15,7 +15,7 @@ from rich.table import Table
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, out, progress
 from kbcli.cli.record import show_table
-from kbcli.core.detect import DetectorConfig
+from kbcli.core.detect import MAX_N_LT, MAX_N_ST, DetectorConfig
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import detect as stage
@@ -26,8 +26,10 @@ def detect_cmd(
     history: Annotated[Path, typer.Argument(help="History artifact (kbcli play).")],
     output: opts.output_option("Detection artifact to write (.h5)."),
     detector: opts.detector_option() = "binomial",
-    n_lt: Annotated[int, typer.Option("--n-lt", help="Long-term window N_LT (Eq. 4).")] = 100,
-    n_st: Annotated[int, typer.Option("--n-st", help="Short-term window N_ST (Eq. 5), < N_LT.")] = 10,
+    n_lt: Annotated[int, typer.Option(
+        "--n-lt", help=f"Long-term window N_LT (Eq. 4), at most {MAX_N_LT}.")] = 100,
+    n_st: Annotated[int, typer.Option(
+        "--n-st", help=f"Short-term window N_ST (Eq. 5), < N_LT and at most {MAX_N_ST}.")] = 10,
     threshold: Annotated[float, typer.Option(
         "--threshold", help="Fire when the score (binomial: upper tail of Eq. 6) falls below it; in (0, 1).")] = 0.01,
     shift: Annotated[float, typer.Option(
@@ -75,15 +77,20 @@ def bench_detect_cmd(
     model: opts.model_option("Model artifact whose melody player sets the failure rates "
                              "[default: the exact model of the default keyboard].",
                              optional=True) = None,
-    streams: Annotated[int, typer.Option("--streams", help="Evaluation streams per category.")] = 400,
+    streams: Annotated[int, typer.Option("--streams", help=opts.at_most(
+        "Evaluation streams per category", opts.MAX_STREAMS))] = 400,
     tune_actions: Annotated[int, typer.Option(
-        "--tune-actions", help="Change-free actions used to tune every detector.")] = 1_000_000,
+        "--tune-actions", help=opts.at_most("Change-free actions used to tune every detector",
+                                            opts.MAX_TUNE_ACTIONS))] = 1_000_000,
     horizon: Annotated[int, typer.Option(
-        "--horizon", help="Post-change actions after which a change counts as missed.")] = 1000,
+        "--horizon", help=opts.at_most("Post-change actions after which a change counts as missed",
+                                       opts.MAX_HORIZON))] = 1000,
     fa_target: Annotated[float, typer.Option(
         "--fa-target", help="False alarms allowed per 10,000 actions when tuning.")] = 1.0,
-    n_lt: Annotated[int, typer.Option("--n-lt", help="Long-term window of our detectors.")] = 100,
-    n_st: Annotated[int, typer.Option("--n-st", help="Short-term window of our detectors.")] = 10,
+    n_lt: Annotated[int, typer.Option("--n-lt", help=opts.at_most(
+        "Long-term window of our detectors", MAX_N_LT))] = 100,
+    n_st: Annotated[int, typer.Option("--n-st", help=opts.at_most(
+        "Short-term window of our detectors", MAX_N_ST))] = 10,
     detectors: Annotated[str, typer.Option(
         "--detectors", help="Comma-separated subset of binomial,cusum,bocpd,fhddm,ddm,adwin.")] =
         "binomial,cusum,bocpd,fhddm,ddm,adwin",
@@ -98,6 +105,10 @@ def bench_detect_cmd(
     """
     from kbcli.bench import detect as bench
 
+    opts.check_counts(("--streams", streams, opts.MAX_STREAMS),
+                      ("--tune-actions", tune_actions, opts.MAX_TUNE_ACTIONS),
+                      ("--horizon", horizon, opts.MAX_HORIZON), ("--n-lt", n_lt, MAX_N_LT),
+                      ("--n-st", n_st, MAX_N_ST))
     rng = np.random.default_rng(seed)
     m, kb, p_pre, note = _model_rate(model, p_pre, rng)
     posts = _rates(p_post)

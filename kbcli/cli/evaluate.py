@@ -20,6 +20,7 @@ from kbcli.io.config import arm_file, load_arm, load_toml
 from kbcli.io.paths import Output, checkout_file
 from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
 from kbcli.stages import evaluate as stage
+from kbcli.stages.config import MAX_EXPERIMENTS
 
 DEFAULT_CONFIG = Path("pipelines/paper.toml")
 
@@ -99,7 +100,8 @@ def evaluate_cmd(
     method: Annotated[list[str] | None, typer.Option(
         "--method", help="Only this method of the config (repeat for several) [default: all].")] = None,
     experiments: Annotated[int | None, typer.Option(
-        "--experiments", help="Repetitions per parametrization, strategy and mode (overrides the config).")] = None,
+        "--experiments", help="Repetitions per parametrization, strategy and mode, at most "
+        f"{MAX_EXPERIMENTS} (overrides the config).")] = None,
     mode: opts.mode_option("the config's modes", help="Only this mode") = None,
     arm: opts.arm_option("the config's [evaluate.arm] per mode", optional=True) = None,
     jobs: opts.Jobs = 1,
@@ -107,7 +109,8 @@ def evaluate_cmd(
     resume: Annotated[bool, typer.Option(
         "--resume", help="Continue an interrupted run from its checkpoint OUTPUT.ckpt.")] = False,
     checkpoint_every: Annotated[int, typer.Option(
-        "--checkpoint-every", help="Save finished experiments to OUTPUT.ckpt after this many.")] = 10,
+        "--checkpoint-every", help="Save finished experiments to OUTPUT.ckpt after this many (more "
+        "than the experiments: only at the end).")] = 10,
 ) -> None:
     """Run the paper's evaluation protocol: every displacement x method x strategy x mode, N times.
 
@@ -172,9 +175,12 @@ def bench_evaluate_cmd(
     model: opts.model_option("Model artifact; default: the exact model of the config's keyboard.",
                              optional=True) = None,
     experiments: Annotated[int, typer.Option(
-        "--experiments", help="Repetitions per parametrization and strategy.")] = 2,
+        "--experiments", help=opts.at_most("Repetitions per parametrization and strategy",
+                                           MAX_EXPERIMENTS))] = 2,
     mode: opts.mode_option() = "ideal",
-    workers: Annotated[int, typer.Option("--workers", help="Workers of the parallel backends.")] = 2,
+    workers: Annotated[int, typer.Option("--workers", help="Workers of the parallel backends; at "
+                                         "most the number of cores this process may use (more "
+                                         "is capped, with a note).")] = 2,
 ) -> None:
     """Benchmark the execution backends on a slice of the protocol.
 
@@ -186,6 +192,7 @@ def bench_evaluate_cmd(
     cfg = _load_config(config, experiments, mode)
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
+    workers = opts.cap_workers(workers, "--workers")
     if model is not None:
         model_art = read_artifact(model, "model")
     else:

@@ -10,6 +10,7 @@ import typer
 from rich.table import Table
 
 from kbcli.cli.app import command, out
+from kbcli.core.applies import applies, shown, view
 from kbcli.errors import ArtifactError
 from kbcli.io.artifact import describe, provenance_chain
 
@@ -35,16 +36,21 @@ def inspect_cmd(
     cfg = Table(title="config", show_header=True)
     cfg.add_column("key")
     cfg.add_column("value")
-    for k, v in _flatten(d["config"]):
+    hidden: list[str] = []
+    for k, v in _flatten(d["config"], hidden=hidden):
         cfg.add_row(k, json.dumps(v))
     out.print(cfg)
     if d["attrs"]:
         at = Table(title="summary", show_header=True)
         at.add_column("key")
         at.add_column("value")
-        for k, v in _flatten(d["attrs"]):
+        for k, v in _flatten(_unread_resolved(d["config"], d["attrs"], hidden), hidden=hidden):
             at.add_row(k, json.dumps(v) if not isinstance(v, str) else v)
         out.print(at)
+    if hidden:
+        out.print(f"{len(hidden)} robot options the method does not read (its posterior, "
+                  "estimator, family, strategy and stopping rules) are not shown; --json prints "
+                  "every recorded one")
     prov = Table(title="provenance (inputs, recursively)")
     prov.add_column("role")
     prov.add_column("kind")
@@ -67,10 +73,51 @@ def inspect_cmd(
         raise ArtifactError(f"{artifact}: {d['problem']}")
 
 
-def _flatten(d: dict, prefix: str = ""):
+def _robot_of(tree: dict) -> dict | None:
+    """The first robot config (a ``robot`` table with a posterior) in a nested dict."""
+    for k, v in tree.items():
+        if k == "robot" and isinstance(v, dict) and "posterior" in v:
+            return v
+        found = _robot_of(v) if isinstance(v, dict) else None
+        if found is not None:
+            return found
+    return None
+
+
+def _unread_resolved(config: dict, attrs: dict, hidden: list) -> dict:
+    """``attrs`` without the options a run resolved from the model (the robust posterior's radius,
+    blurs and learning rate) when its method does not read them: a run's summary (its config's
+    robot), an evaluation's ``methods.NAME.from_model`` (that method's robot); added to ``hidden``."""
+    def drop(d: dict, robot: dict | None, strategies, prefix: str) -> dict:
+        if robot is None:
+            return d
+        cfg = view(robot)
+        out = {k: v for k, v in d.items() if k not in robot or applies(k, cfg, strategies)}
+        hidden.extend(f"{prefix}{k}" for k in d if k not in out)
+        return out
+
+    attrs = drop(attrs, _robot_of(config), None, "")
+    methods = attrs.get("methods")
+    if isinstance(methods, dict):
+        attrs = {**attrs, "methods": {
+            x: {**m, "from_model": drop(m["from_model"], _robot_of(m), m.get("strategies"),
+                                        f"methods.{x}.from_model.")}
+            if isinstance(m, dict) and isinstance(m.get("from_model"), dict) else m
+            for x, m in methods.items()}}
+    return attrs
+
+
+def _flatten(d: dict, prefix: str = "", hidden: list | None = None):
+    """``(dotted key, value)`` of a nested dict; a robot config (``...robot``) gives only the options
+    its method reads (:func:`kbcli.core.applies.shown`), the others' keys added to ``hidden``."""
     for k in sorted(d):
         v = d[k]
+        if k == "robot" and isinstance(v, dict) and "posterior" in v:
+            kept = shown(v)
+            if hidden is not None:
+                hidden += [f"{prefix}{k}.{o}" for o in v if o not in kept]
+            v = kept
         if isinstance(v, dict) and v:
-            yield from _flatten(v, f"{prefix}{k}.")
+            yield from _flatten(v, f"{prefix}{k}.", hidden)
         else:
             yield f"{prefix}{k}", v

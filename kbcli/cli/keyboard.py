@@ -10,6 +10,7 @@ import typer
 from kbcli.cli import options as opts
 from kbcli.cli.app import busy, check_io, command, figure_output, out, plot_app
 from kbcli.core.keyboard import KeyboardConfig
+from kbcli.core.layouts import MAX_KEYS
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml
 from kbcli.stages import keyboard as stage
@@ -22,9 +23,11 @@ def keyboard_cmd(
         "TOML file with a [keyboard] table (e.g. pipelines/keyboard.toml; pipelines/layouts/*.toml "
         "for the other layouts, polygons' keys included).") = None,
     layout: opts.layout_option("Layout of the keys [default grid]. {described}.") = None,
-    rows: Annotated[int | None, typer.Option(help="Rows of keys: grid, hex, pads [default 4].")] = None,
+    rows: Annotated[int | None, typer.Option(
+        help=f"Rows of keys: grid, hex, pads [default 4]; rows x cols at most {MAX_KEYS} keys.")] = None,
     cols: Annotated[int | None, typer.Option(
-        help="Columns of keys: grid, hex, pads [default 8]; white keys: piano [default 12].")] = None,
+        help="Columns of keys: grid, hex, pads [default 8]; white keys: piano [default 12]; at most "
+        f"{MAX_KEYS} keys in all.")] = None,
     key_size: Annotated[float | None, typer.Option(
         help="Key size, px: a square's side (grid) [default 50], a hexagon's width across the flats "
         "(hex) [50], a white key's width (piano) [36], the distance between pad centres (pads) [50]."

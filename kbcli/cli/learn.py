@@ -32,6 +32,7 @@ from kbcli.io.schema import MIN_SOUNDS
 from kbcli.sim import SimConfig
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import learn as stage
+from kbcli.stages.config import MAX_BUDGET, MAX_EXPERIMENTS
 
 
 @command(name="learn")
@@ -44,19 +45,20 @@ def learn_cmd(
         "--strategy", help=f"Exploration: {opts.one_of('exploration', 'exact')} (exact: the "
         "keyboard's own geometry, no learning).")] = "active",
     budget: Annotated[int, typer.Option(
-        "--budget", help="Reaches to explore with; a run that hears fewer than two distinct sounds "
-        "is refused (nothing written).")] = 800,
+        "--budget", help=f"Reaches to explore with, at most {MAX_BUDGET}; a run that hears fewer than "
+        "two distinct sounds is refused (nothing written).")] = 800,
     seed: opts.seed_option("Seed of the exploration and arm noise.") = 0,
     reach_noise: Annotated[float, typer.Option(
         "--reach-noise", help="Landing scatter of a reach, px (motor noise in dynamics mode).")
     ] = 0.0,
     arm: opts.arm_option() = "ideal",
-    batch: Annotated[int, typer.Option("--batch", help="Reaches per model refit.")] = 10,
+    batch: Annotated[int, typer.Option("--batch", help=f"Reaches per refit, at most {MAX_BUDGET}.")] = 10,
     explore_radius: Annotated[float, typer.Option(
-        "--explore-radius", help="active: first cover the working area to this radius, px.")
+        "--explore-radius", help="active: first cover the working area to this radius, px "
+        "(at least 1.9 px on the default pad: a cover of 1,000,000 points).")
     ] = 20.0,
     curve_every: Annotated[int, typer.Option(
-        "--curve-every", help="Reaches between learning-curve points.")] = 50,
+        "--curve-every", help=f"Reaches between learning-curve points, at most {MAX_BUDGET}.")] = 50,
     model_class: opts.model_class_option(
         "Model class: auto or one of {classes}. auto: explore with forest, keep the class with the "
         "best cross-validated score on the samples (on stderr); lines: straight key edges; svc, "
@@ -140,23 +142,30 @@ def plot_model_cmd(
     out.print(f"wrote {output}")
 
 
+#: Budgets one benchmark's --budgets may list.
+MAX_BUDGETS = 64
+
+
 def _budgets(text: str) -> tuple[int, ...]:
     try:
         vals = tuple(int(v) for v in text.split(",") if v.strip())
     except ValueError:
         raise ConfigError(
             f"--budgets must be whole numbers separated by commas, got {text!r}") from None
-    if not vals or any(v < 1 for v in vals):
-        raise ConfigError(f"--budgets must be whole numbers >= 1, got {text!r}")
+    if not vals or any(v < 1 or v > MAX_BUDGET for v in vals):
+        raise ConfigError(f"--budgets must be whole numbers in [1, {MAX_BUDGET}], got {text!r}")
+    if len(vals) > MAX_BUDGETS:
+        raise ConfigError(f"--budgets: at most {MAX_BUDGETS} budgets, got {len(vals)}")
     return vals
 
 
 @command(bench_app, name="learn")
 def bench_learn_cmd(
-    seeds: Annotated[int, typer.Option("--seeds", min=1, help="Runs per row.")] = 5,
+    seeds: Annotated[int, typer.Option("--seeds", help=opts.at_most("Runs per row",
+                                                                    opts.MAX_SEEDS))] = 5,
     budgets: Annotated[str | None, typer.Option(
-        "--budgets", help="Budgets at which to report the accuracy, comma-separated [default "
-        "200,400,800,1600; with --peer 150,300,800].")] = None,
+        "--budgets", help="Budgets at which to report the accuracy, comma-separated, each at most "
+        f"{MAX_BUDGET} [default 200,400,800,1600; with --peer 150,300,800].")] = None,
     strategy: opts.strategies_option("active, random", kind="exploration") = None,
     layout: opts.layout_option("Layouts to learn, each its default keyboard (repeat): {layouts} "
                                "[default grid].", many=True) = None,
@@ -168,8 +177,8 @@ def bench_learn_cmd(
     reach_noise: Annotated[float, typer.Option("--reach-noise", help="Landing scatter, px.")] = 0.0,
     seed: opts.seed_option("Seed of the runs.") = 0,
     boundary_budget: Annotated[int, typer.Option(
-        "--boundary-budget", help="Reaches at which the boundary error and the learn wall time "
-        "are measured.")] = 800,
+        "--boundary-budget", help=opts.at_most("Reaches at which the boundary error and the learn "
+                                               "wall time are measured", MAX_BUDGET))] = 800,
     eval_step: Annotated[float, typer.Option(
         "--eval-step", help="Grid (px) on which the accuracy is measured.")] = 1.0,
     cache: Annotated[Path | None, typer.Option(
@@ -193,6 +202,8 @@ def bench_learn_cmd(
     """
     from kbcli.bench import learn as bench
 
+    opts.check_counts(("--seeds", seeds, opts.MAX_SEEDS),
+                      ("--boundary-budget", boundary_budget, MAX_BUDGET))
     if _bench_peer(peer, seeds, budgets, layout, seed, eval_step):
         return
     kb = None
@@ -266,11 +277,11 @@ def bench_layouts_cmd(
     output: opts.output_option("Folder to write keyboards/, models/, cache/ and report/ in.") = Path(
         "out/layouts"),
     seeds: Annotated[int | None, typer.Option(
-        "--seeds", min=1, help="Learning runs per layout, class and strategy [default: the "
-        "config's].")] = None,
-    experiments: Annotated[int | None, typer.Option(
-        "--experiments", min=2, help="Adaptation runs per strategy and category, translation "
+        "--seeds", help=f"Learning runs per layout, class and strategy, at most {opts.MAX_SEEDS} "
         "[default: the config's].")] = None,
+    experiments: Annotated[int | None, typer.Option(
+        "--experiments", min=2, help="Adaptation runs per strategy and category, translation, at "
+        f"most {MAX_EXPERIMENTS} [default: the config's].")] = None,
     layout: opts.layout_option("Only these layouts (repeat): {layouts} [default: the config's].",
                                many=True) = None,
 ) -> None:
@@ -284,6 +295,8 @@ def bench_layouts_cmd(
     """
     from kbcli.bench.layouts import LayoutsConfig, Pipeline
 
+    opts.check_counts(("--seeds", seeds, opts.MAX_SEEDS),
+                      ("--experiments", experiments, MAX_EXPERIMENTS))
     cfg = LayoutsConfig.from_toml(config)
     over = {k: v for k, v in (("seeds", seeds), ("experiments", experiments),
                               ("layouts", tuple(layout) if layout else None)) if v is not None}
@@ -315,7 +328,8 @@ def _targets(cfg, res):
 
 @command(bench_app, name="arm")
 def bench_arm_cmd(
-    reaches: Annotated[int, typer.Option("--reaches", min=1, help="Reaches per preset and mode.")] = 500,
+    reaches: Annotated[int, typer.Option("--reaches", help=opts.at_most(
+        "Reaches per preset and mode", opts.MAX_REACHES))] = 500,
     seed: opts.seed_option("Seed of the targets and the noise.") = 0,
 ) -> None:
     """How each arm preset errs: landing error and felt-minus-true error.
@@ -327,6 +341,7 @@ def bench_arm_cmd(
     """
     from kbcli.bench import arm as bench
 
+    opts.check_counts(("--reaches", reaches, opts.MAX_REACHES))
     rows = bench.run(reaches=reaches, seed=seed)
     t = Table(title=f"arm presets: {reaches} reaches each over the default working area, px "
                     "(median / 95th percentile)", title_justify="left")
@@ -343,13 +358,14 @@ def bench_arm_cmd(
 @command(bench_app, name="reliability")
 def bench_reliability_cmd(
     budgets: Annotated[str, typer.Option(
-        "--budgets", help="Reach budgets, comma-separated.")] = "150,300,800,1600",
+        "--budgets", help=f"Reach budgets, comma-separated, each at most {MAX_BUDGET}.")] = \
+        "150,300,800,1600",
     mode: opts.mode_option(help="Reaching") = "ideal",
     arm: opts.arm_option(files=False) = "ideal",
     seed: opts.seed_option("First seed of the learning runs.") = 0,
     seeds: Annotated[int, typer.Option(
-        "--seeds", min=1, help="Learning runs per cell (seeds SEED, SEED+1, ...): the table "
-                               "prints medians.")] = 3,
+        "--seeds", help=opts.at_most("Learning runs per cell (seeds SEED, SEED+1, ...): the "
+                                     "table prints medians", opts.MAX_SEEDS))] = 3,
 ) -> None:
     """How well calibrated learned models are, and how well they know it.
 
@@ -361,6 +377,7 @@ def bench_reliability_cmd(
     """
     from kbcli.bench import reliability as bench
 
+    opts.check_counts(("--seeds", seeds, opts.MAX_SEEDS))
     rows = bench.summarise(bench.run(budgets=_budgets(budgets), mode=mode, arm=arm, seed=seed,
                                      seeds=seeds))
     last = seed + seeds - 1

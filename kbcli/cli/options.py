@@ -11,12 +11,13 @@ behaviour are the commands' own: a bad name is refused by the stage's config (on
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
+from kbcli.core.adapter_config import AdapterConfig
 from kbcli.core.detect import DETECTORS
 from kbcli.core.estimators import ESTIMATORS
 from kbcli.core.explore import STRATEGIES as EXPLORATIONS
@@ -99,6 +100,33 @@ def config_option(help: str, optional: bool = True) -> Any:
     return Annotated[Path | None if optional else Path, _opt("--config", help=help)]
 
 
+# -- counts -----------------------------------------------------------------------------------------
+#: Upper bounds of the benchmarks' counts that no stage config bounds (issue 29: a typo such as 1e9
+#: is refused in one line before any work, never run at full CPU until killed).
+MAX_SEEDS = 1000
+MAX_REACHES = 100_000
+MAX_STREAMS = 100_000
+MAX_TUNE_ACTIONS = 10_000_000
+MAX_HORIZON = 100_000
+MAX_REPEATS = 100
+MAX_TIMED_STEPS = 100_000
+
+
+def at_most(text: str, bound: int) -> str:
+    """A count option's help with its upper bound: ``Runs per row, at most 1000.``"""
+    return f"{text.rstrip('.')}, at most {bound}."
+
+
+def check_counts(*counts: tuple[str, int | None, int]) -> None:
+    """Refuse, in one line, a count outside ``[1, bound]``: ``(option, value, bound)`` each (a
+    None value: not given)."""
+    from kbcli.errors import ConfigError
+
+    for option, value, bound in counts:
+        if value is not None and not 1 <= value <= bound:
+            raise ConfigError(f"{option} must be a whole number in [1, {bound}], got {value}")
+
+
 # -- seeds and workers ------------------------------------------------------------------------------
 def seed_option(help: str = "Seed of the robot's and the world's randomness.") -> Any:
     """``--seed``: the seed of a command's random draws (a whole number >= 0)."""
@@ -106,14 +134,18 @@ def seed_option(help: str = "Seed of the robot's and the world's randomness.") -
 
 
 Seed = seed_option()
-def _cap_jobs(value: int) -> int:
-    """More workers than cores only run slower: cap ``--jobs`` at the core count, with a note."""
+def cap_workers(value: int, option: str = "--jobs") -> int:
+    """More workers than cores only run slower: cap ``option`` at the core count, with a note."""
     from kbcli.io.processes import cap_jobs
 
-    jobs, note = cap_jobs(value)
+    jobs, note = cap_jobs(value, option)
     if note is not None:
         sys.stderr.write(f"kbcli: {note}\n")
     return jobs
+
+
+def _cap_jobs(value: int) -> int:
+    return cap_workers(value)
 
 
 #: ``--jobs/-j``: local worker processes.
@@ -202,6 +234,84 @@ Resolution = Annotated[float | None, _opt(
 #: ``--prior-halfwidth``: the prior box.
 PriorHalfwidth = Annotated[float | None, _opt(
     "--prior-halfwidth", help="Prior box of dx and dy, +-px [default 45].")]
+
+
+# -- the paper's method's parts (issue 26); each refused where the method does not read it --------
+def _robot_default(name: str) -> str:
+    """The adapter's default of option ``name``, for a help text."""
+    return str(AdapterConfig.model_fields[name].default)
+
+
+def _robot_option(name: str, kind: Any, help: str, default: str | None = None) -> Any:
+    """``--NAME`` (dashes for underscores) of the adapter's option ``name`` (None: the config's),
+    its help closed by the adapter's default."""
+    flag = "--" + name.replace("_", "-")
+    return Annotated[kind | None, _opt(flag, help=f"{help} [default "
+                                                  f"{default or _robot_default(name)}].")]
+
+
+#: The adapter options of the flags above (and those every adapting command has), by flag.
+PAPER_FLAGS = ("kde_samples", "kde_draw", "kde_sampler", "kde_floor", "ml_ties", "stop_ml",
+               "stop_mass", "random_actions", "candidates", "active_keep")
+
+
+def robot_given(flags: Mapping[str, Any], table: Mapping[str, Any] | None = None,
+                source: str = "") -> dict[str, str]:
+    """The robot options a user set, each with how the message names it: the flags given (not
+    None) as ``--flag``, the keys of a TOML ``[adapt]`` table (and of its ``robot`` table) as
+    ``key`` (of ``source``) (:func:`kbcli.core.applies.refuse_unused`)."""
+    robot = set(AdapterConfig.model_fields)
+    table = dict(table or {})
+    inner = table.pop("robot", None)
+    keys = [*table, *(inner if isinstance(inner, Mapping) else ())]
+    where = f" (in {source})" if source else ""
+    given = {k: f"{k}{where}" for k in keys if k in robot}
+    given.update({k: "--" + k.replace("_", "-") for k, v in flags.items()
+                  if v is not None and k in robot})
+    return given
+
+
+#: ``--kde-samples``: N of Algorithm 2.
+KdeSamples = _robot_option("kde_samples", int, "kde posterior: actions drawn from p(action | "
+                           "sound) per KDE term (N of Algorithm 2), a whole number >= 10")
+#: ``--kde-draw``: when those samples are drawn.
+KdeDraw = _robot_option("kde_draw", str, "kde posterior: shared (each sound's samples drawn once, "
+                        "reused by every touch) or fresh (Algorithm 2 as written: new samples for "
+                        "every touch, from the run's seed)")
+#: ``--kde-sampler``: what draws samples of p(action | sound).
+KdeSampler = _robot_option("kde_sampler", str, "What draws actions from p(action | sound) for "
+                           "--kde-draw fresh, --random-actions model and paper-active's candidates: "
+                           "model (the model's own rejection sampler: exact, ~250 ms per 10,000 "
+                           "draws) or raster (the model's raster: a cell by p(sound | cell), then a "
+                           "point in it; ~1 ms)")
+#: ``--kde-floor``: the uniform floor of each KDE term.
+KdeFloor = _robot_option("kde_floor", float, "kde posterior: weight in [0, 1) of the uniform floor "
+                         "mixed into each KDE term; 0: none (Eq. 7 as written: a displacement no "
+                         "sample supports is ruled out)", default="0.001, the outlier rate")
+#: ``--ml-ties``: ties of the maximum-likelihood cell.
+MlTies = _robot_option("ml_ties", str, "Which of several equally probable cells is the maximum-"
+                       "likelihood one (read by --estimator ml, active, paper-active and --stop-ml): "
+                       "first (the lowest grid index: the prior box's corner on a flat posterior) "
+                       "or random (uniformly among the tied cells, seeded: no positional bias)")
+#: ``--stop-ml``: the paper's stopping rule.
+StopMl = _robot_option("stop_ml", float, "The paper's stopping rule: stop when the most probable "
+                       "cell of the posterior holds at least this probability, > 0", default="off")
+#: ``--stop-mass``: ours.
+StopMass = _robot_option("stop_mass", float, "Our stopping rule: stop when this fraction (0-1) of "
+                         "the posterior lies within 1 px of the estimate; 0: off (the paper's rule "
+                         "alone)")
+#: ``--random-actions``: where the random strategy touches.
+RandomActions = _robot_option("random_actions", str, "Where strategy random touches: area "
+                              "(uniform over the working area) or model (a sound uniform over the "
+                              "model's sounds, then an action from p(action | sound): the paper's "
+                              "random selection of samples)")
+#: ``--candidates``: candidate actions per decision.
+Candidates = _robot_option("candidates", int, "Candidate actions per decision of active, "
+                           "paper-active (sampled from the model) and infogain, a whole number "
+                           ">= 1")
+#: ``--active-keep``: the most confusing candidates simulated.
+ActiveKeep = _robot_option("active_keep", int, "Most confusing candidates active and "
+                           "paper-active keep and simulate, a whole number >= 1")
 
 
 def max_steps_option(help: str, optional: bool = True, **kw: Any) -> Any:

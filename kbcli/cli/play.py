@@ -64,9 +64,11 @@ def play_cmd(
     melody: Annotated[str, typer.Option(
         "--melody", help=f"Notes NOTE:BEATS, looped (the paper's Fig. 3 example by default); at "
         f"most {MAX_NOTES} notes of at most {MAX_BEATS:g} beats each.")] = DEFAULT_MELODY,
-    steps: Annotated[int, typer.Option("--steps", help="Number of actions.")] = 300,
+    steps: Annotated[int, typer.Option(
+        "--steps", help=f"Number of actions, at most {stage.MAX_PLAY_STEPS}.")] = 300,
     perturb_at: Annotated[int | None, typer.Option(
-        "--perturb-at", help="Step at which the keyboard moves [default steps/2 with a scene].")] = None,
+        "--perturb-at", help="Step at which the keyboard moves, before --steps [default steps/2 with "
+        "a scene].")] = None,
     mode: opts.mode_option() = "ideal",
     reach_noise: opts.ReachNoise = 0.0,
     arm: opts.arm_option() = "ideal",

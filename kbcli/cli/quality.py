@@ -17,6 +17,7 @@ from kbcli.io.config import load_config, load_toml
 from kbcli.io.paths import Output, checkout_file
 from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
 from kbcli.stages import quality as stage
+from kbcli.stages.config import MAX_BUDGET, MAX_EXPERIMENTS
 
 DEFAULT_CONFIG = Path("pipelines/model-quality.toml")
 DEFAULT_KEYBOARD = Path("data/keyboard.h5")
@@ -38,9 +39,11 @@ def quality_cmd(
     config: opts.config_option("TOML with a [quality] table.", optional=False) = DEFAULT_CONFIG,
     keyboard: opts.keyboard_option("Keyboard artifact the models are learned on.") = DEFAULT_KEYBOARD,
     experiments: Annotated[int | None, typer.Option(
-        "--experiments", help="Repetitions per displacement, model and row (overrides the config).")] = None,
+        "--experiments", help=f"Repetitions per displacement, model and row, at most {MAX_EXPERIMENTS} "
+        "(overrides the config).")] = None,
     budgets: Annotated[str | None, typer.Option(
-        "--budgets", help="Reach budgets of the models, comma-separated (overrides the config).")] = None,
+        "--budgets", help=f"Reach budgets of the models, comma-separated, each at most {MAX_BUDGET} "
+        "(overrides the config).")] = None,
     jobs: opts.Jobs = 1,
     scheduler: opts.Scheduler = None,
     resume: Annotated[bool, typer.Option(

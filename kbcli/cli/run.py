@@ -19,7 +19,8 @@ from kbcli.cli.app import (
     plot_app,
     progress,
 )
-from kbcli.core.detect import DetectorConfig
+from kbcli.core.applies import refuse_unused
+from kbcli.core.detect import MAX_N_LT, MAX_N_ST, DetectorConfig
 from kbcli.core.loop import PLAY
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -27,6 +28,7 @@ from kbcli.io.config import arm_file, load_arm
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import run as stage
 from kbcli.stages.adapt import AdaptConfig
+from kbcli.stages.config import MAX_ADAPT_STEPS
 
 
 def _pct(v: float | None) -> str:
@@ -39,8 +41,10 @@ def run_cmd(
     scene: Annotated[Path, typer.Option("--scene", help="Scene artifact (kbcli perturb): where the keyboard moves.")],
     output: opts.output_option("Closed-loop artifact to write (.h5)."),
     melody: Annotated[str, typer.Option(help="Notes NOTE:BEATS, looped.")] = DEFAULT_MELODY,
-    steps: Annotated[int, typer.Option(help="Play touches (adaptation touches come on top).")] = 600,
-    perturb_at: Annotated[int, typer.Option(help="Touches after which the keyboard moves.")] = 200,
+    steps: Annotated[int, typer.Option(
+        help=f"Play touches (adaptation touches come on top), at most {stage.MAX_LOOP_STEPS}.")] = 600,
+    perturb_at: Annotated[int, typer.Option(
+        help="Touches after which the keyboard moves, fewer than --steps.")] = 200,
     strategy: opts.strategy_option() = "infogain",
     posterior: opts.posterior_option() = "likelihood",
     estimator: opts.estimator_option() = None,
@@ -48,11 +52,24 @@ def run_cmd(
     mode: opts.mode_option() = "ideal",
     reach_noise: opts.ReachNoise = 0.0,
     arm: opts.arm_option() = "ideal",
-    max_adapt_steps: Annotated[int, typer.Option(help="Touches at most per adaptation.")] = 40,
+    max_adapt_steps: Annotated[int, typer.Option(
+        help=f"Touches at most per adaptation (at most {MAX_ADAPT_STEPS}).")] = 40,
     detector: opts.detector_option() = "binomial",
-    n_lt: Annotated[int, typer.Option(help="Detector long-term window N_LT.")] = 100,
-    n_st: Annotated[int, typer.Option(help="Detector short-term window N_ST.")] = 10,
+    n_lt: Annotated[int, typer.Option(
+        help=f"Detector long-term window N_LT, at most {MAX_N_LT}.")] = 100,
+    n_st: Annotated[int, typer.Option(
+        help=f"Detector short-term window N_ST, at most {MAX_N_ST}.")] = 10,
     threshold: Annotated[float, typer.Option(help="Detector threshold, in (0, 1).")] = 0.01,
+    kde_samples: opts.KdeSamples = None,
+    kde_draw: opts.KdeDraw = None,
+    kde_sampler: opts.KdeSampler = None,
+    kde_floor: opts.KdeFloor = None,
+    ml_ties: opts.MlTies = None,
+    stop_ml: opts.StopMl = None,
+    stop_mass: opts.StopMass = None,
+    random_actions: opts.RandomActions = None,
+    candidates: opts.Candidates = None,
+    active_keep: opts.ActiveKeep = None,
     seed: opts.Seed = 0,
 ) -> None:
     """Play, notice the move, adapt, resume: the closed loop as the robot lives it.
@@ -66,13 +83,18 @@ def run_cmd(
     scene_art = read_artifact(scene, "scene")
     if family is None:  # like adapt: estimate what the scene moved (a rigid move has an angle)
         family = scene_art.config.get("family", "translation")
+    given = {"estimator": estimator, "kde_samples": kde_samples, "kde_draw": kde_draw,
+             "kde_sampler": kde_sampler, "kde_floor": kde_floor, "ml_ties": ml_ties,
+             "stop_ml": stop_ml, "stop_mass": stop_mass, "random_actions": random_actions,
+             "candidates": candidates, "active_keep": active_keep}
+    adapt = AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
+                             reach_noise=reach_noise, arm=load_arm(arm), stop=True,
+                             **{k: v for k, v in given.items() if v is not None})
+    refuse_unused(adapt.robot, opts.robot_given(given), "run")
     cfg = stage.LoopConfig(
         melody=melody, steps=steps, perturb_at=perturb_at, max_adapt_steps=max_adapt_steps,
         detector=DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold),
-        adapt=AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
-                               reach_noise=reach_noise, arm=load_arm(arm), stop=True,
-                               **({} if estimator is None else {"estimator": estimator})),
-    )
+        adapt=adapt)
     session = stage.LoopSession(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed)
     note_arm(cfg.adapt.arm, cfg.adapt.mode)
     adapting = [0]
@@ -88,7 +110,12 @@ def run_cmd(
         pass
     art = session.artifact()
     write_artifact(art, output)
-    a = art.attrs
+    _report_loop(art.attrs, output)
+
+
+def _report_loop(a: dict, output: Path) -> None:
+    """What the session measured: success before, after the move, after adaptation; the
+    detection and the adaptation."""
     out.print(f"wrote {output}")
     out.print(f"success before the move {_pct(a['success_before'])}, after it "
               f"{_pct(a['success_after_perturbation'])}, after adaptation "

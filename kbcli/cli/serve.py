@@ -22,6 +22,7 @@ import typer
 from kbcli.cli import options as opts
 from kbcli.cli.app import check_io, command, err
 from kbcli.io.signals import Terminated
+from kbcli.stages.serve import MAX_SERVE_STEPS
 
 _HELP = """Adapt with a robot in another process: JSON lines on stdin/stdout (or a local socket).
 
@@ -136,7 +137,7 @@ def serve_cmd(
     posterior: opts.posterior_option("likelihood") = None,
     estimator: opts.estimator_option() = None,
     family: opts.family_option("translation") = None,
-    max_steps: opts.max_steps_option("Touches at most [default 40].") = None,
+    max_steps: opts.max_steps_option(f"Touches at most [default 40; at most {MAX_SERVE_STEPS}].") = None,
     stop: Annotated[bool | None, typer.Option(
         "--stop/--no-stop", help="Say done at the stopping rule (mass within 1 px >= 0.95), or "
         "only after --max-steps [default --stop].")] = None,

@@ -26,24 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kbcli.core.adapt_setup import build_samples, build_table, spot_count, table_key, total_blur
-from kbcli.core.adapter import Adapter, Estimate
-from kbcli.core.adapter_config import (
-    LEARNED_BLUR,
-    MAX_BLUR,
-    REDUNDANCY_FACTOR,
-    WIDE_BLUR_FACTOR,
-    AdapterConfig,
-    blur_grid,
-    learning_rate,
-    own_boundary_error,
-    redundancy_radius,
-    robust_blurs,
-    temper,
-)
+from kbcli.core.adapter import Adapter
 from kbcli.core.estimators import ESTIMATORS
-from kbcli.core.posteriors import POSTERIORS
-from kbcli.core.strategies import STRATEGIES
 
 
 @dataclass(frozen=True)
@@ -120,11 +104,4 @@ def step_record(adapter: Adapter, t: int, action: np.ndarray, landed: np.ndarray
                 mass=adapter.mass_near_estimate(), stop=adapter.should_stop(), ms=ms)
 
 
-#: The names other modules import from here: the loop's own, and (re-exported) the config, the
-#: set-up and the :class:`Adapter`, so ``from kbcli.core.adapt import Adapter, build_table`` keeps
-#: working for the stages and the benchmarks.
-__all__ = ["AdapterConfig", "Adapter", "Estimate", "Step", "Touch", "adapt", "step_record",
-           "build_table", "build_samples", "table_key", "total_blur", "spot_count",
-           "blur_grid", "learning_rate", "own_boundary_error", "redundancy_radius", "robust_blurs",
-           "temper", "LEARNED_BLUR", "MAX_BLUR", "REDUNDANCY_FACTOR", "WIDE_BLUR_FACTOR",
-           "STRATEGIES", "POSTERIORS"]
+__all__ = ["Step", "Touch", "adapt", "step_record"]

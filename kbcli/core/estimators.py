@@ -43,4 +43,4 @@ ESTIMATORS: Registry[Estimator] = Registry("estimator")
 ESTIMATORS.register("mean", Estimator("mean", "means", lambda post: post.mean()),
                     summary="the posterior mean (RMSE-optimal; ours)")
 ESTIMATORS.register("ml", Estimator("ml", "estimates", lambda post: post.ml()),
-                    summary="the maximum-likelihood cell (the paper's)")
+                    summary="the maximum-likelihood cell (the paper's)", uses=("ml_ties",))

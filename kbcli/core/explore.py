@@ -60,6 +60,25 @@ from kbcli.core.config import Config, Count, Name, Positive
 from kbcli.core.model_classes import DEFAULT_MODEL_CLASS, check_choice, fit_model
 from kbcli.core.registry import Registry
 from kbcli.core.select import explore_class
+from kbcli.errors import ConfigError
+
+#: Most candidate points the cover of the working area may take (``active`` and ``balanced`` grid
+#: it every ``explore_radius / 5`` px): a radius so small that it needs more is refused before any
+#: reach (issue 29: ``--explore-radius 1e-6`` would allocate without bound).
+MAX_COVER_POINTS = 1_000_000
+
+
+def check_cover(area: tuple, explore_radius: float) -> None:
+    """ConfigError when covering ``area`` to ``explore_radius`` takes more than
+    :data:`MAX_COVER_POINTS` candidate points, naming the smallest radius that fits."""
+    x0, y0, x1, y1 = area
+    cells = (x1 - x0) * (y1 - y0)
+    points = cells / (explore_radius / 5) ** 2
+    if points > MAX_COVER_POINTS:
+        least = 5 * float(np.sqrt(cells / MAX_COVER_POINTS))
+        raise ConfigError(f"explore_radius {explore_radius:g} px: covering the working area would "
+                          f"take {points:,.0f} candidate points, more than {MAX_COVER_POINTS:,}; "
+                          f"use at least {least:.2g} px")
 
 #: A strategy: ``(exploration, n, rng) -> (k, 2)`` targets inside ``exploration.area``, usually
 #: k = n; more is a plan the exploration carries out over the next batches. It may read
@@ -317,9 +336,11 @@ class Exploration:
         match_threshold: float,
         rng: np.random.Generator,
     ) -> None:
+        self.area = tuple(float(v) for v in area)
+        if cfg.strategy in ("active", "balanced"):
+            check_cover(self.area, cfg.explore_radius)
         self.cfg = cfg
         self.touch = touch
-        self.area = tuple(float(v) for v in area)
         self.match_threshold = match_threshold
         self.rng = rng
         self.strategy = STRATEGIES.get(cfg.strategy)

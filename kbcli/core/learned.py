@@ -319,24 +319,6 @@ class LearnedModel(ModelBase):
         )
         return {"points": xy[ok], "width": w[ok], "piece": pc[ok], "t": t[ok]}
 
-    # -- prediction -----------------------------------------------------------------------------
-    def predict_proba(self, points: np.ndarray) -> np.ndarray:
-        """p(sound class | action) at each point, floored at ``floor``.
-
-        Parameters
-        ----------
-        points : (n, 2) ndarray
-
-        Returns
-        -------
-        (n, C) ndarray
-            Rows sum to 1.
-        """
-        p = self._predict(points, proba=True)
-        if self.floor > 0:
-            p = (1 - self.floor) * p + self.floor / p.shape[1]
-        return p
-
     # -- storage --------------------------------------------------------------------------------
     def to_arrays(self) -> dict[str, np.ndarray]:
         """The fitted model as named arrays (for an HDF5 artifact group)."""

@@ -21,7 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from kbcli.core import transforms
-from kbcli.core.adapt import Adapter, AdapterConfig, adapt
+from kbcli.core.adapt import adapt
+from kbcli.core.adapter import Adapter
+from kbcli.core.adapter_config import AdapterConfig
 from kbcli.core.detect import Detector, DetectorConfig
 from kbcli.core.melody import Melody
 from kbcli.core.play import play

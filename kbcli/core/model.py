@@ -284,7 +284,8 @@ class ModelBase(ClassifierMixin, BaseEstimator):
         return out
 
     def predict_proba(self, points: np.ndarray) -> np.ndarray:
-        """p(sound class | action) at each point.
+        """p(sound class | action) at each point, mixed with a uniform ``floor`` where the class
+        has one (``p = (1 - floor) p + floor / C``).
 
         Parameters
         ----------
@@ -295,7 +296,11 @@ class ModelBase(ClassifierMixin, BaseEstimator):
         (n, C) ndarray
             Rows sum to 1.
         """
-        return self._predict(points, proba=True)
+        p = self._predict(points, proba=True)
+        floor = getattr(self, "floor", 0.0)
+        if floor > 0:
+            p = (1.0 - floor) * p + floor / p.shape[1]
+        return p
 
     def predict_class(self, points: np.ndarray) -> np.ndarray:
         """(n,) most probable sound class at each point."""

@@ -20,8 +20,6 @@ import math
 import numpy as np
 
 from kbcli.core.grid import HypothesisGrid
-from kbcli.core.kde import ActionSamples  # noqa: F401  re-export: stages/adapt.py, stages/evaluate.py
-from kbcli.core.table import LikelihoodTable  # noqa: F401  re-export: stages/adapt.py
 
 
 def log_normalise(logw: np.ndarray, axis: int | None = None) -> tuple[np.ndarray, np.ndarray]:

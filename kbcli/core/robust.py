@@ -70,6 +70,8 @@ from kbcli.core.posterior import Posterior
 from kbcli.core.sounds import SILENCE
 from kbcli.core.table import LikelihoodTable
 
+#: The adapter's options only the robust posterior reads (``AdapterConfig``).
+ROBUST_OPTIONS = ("robust_blurs", "robust_outliers", "robust_eta", "redundancy_radius")
 #: Default nuisance grids: boundary blur (px) and outlier rate.
 DEFAULT_BLURS = (0.0, 1.0, 2.5, 5.0)
 DEFAULT_OUTLIERS = (0.001, 0.02, 0.1)

@@ -143,11 +143,7 @@ class SklearnModel(ModelBase):
         for start in range(0, len(q), _CHUNK):
             blk = slice(start, start + _CHUNK)
             p[blk, cols] = self.classifier_.predict_proba(self._features(q[blk]))
-        if not proba:
-            return np.argmax(p, axis=1)
-        if self.floor > 0:
-            p = (1.0 - self.floor) * p + self.floor / nc
-        return p
+        return p if proba else np.argmax(p, axis=1)
 
     # -- exploration ----------------------------------------------------------------------------
     def boundary_sites(self, step: float = 1.0, extend: float = 25.0,

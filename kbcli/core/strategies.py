@@ -49,7 +49,7 @@ import numpy as np
 
 from kbcli.core import transforms
 from kbcli.core.posterior import Posterior, log_normalise
-from kbcli.core.registry import Registry
+from kbcli.core.registry import Registry, Uses
 from kbcli.core.table import LikelihoodTable
 
 StrategyFn = Callable[["Context", np.random.Generator], np.ndarray]
@@ -236,7 +236,10 @@ def model_actions(ctx: Context, n: int, rng: np.random.Generator) -> np.ndarray:
     return _clip(ctx.area, out)
 
 
-@STRATEGIES.register("random")
+@STRATEGIES.register("random", uses=(
+    "random_actions",
+    Uses("kde_sampler", lambda cfg: cfg.random_actions == "model", 'random_actions = "model"',
+         'random_actions = "area"')))
 def random_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """The paper's baseline, "random selection of samples": uniform over the working area
     (``random_actions = "area"``) or an action sampled from the model (``"model"``:
@@ -246,7 +249,7 @@ def random_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     return uniform_actions(ctx.area, 1, rng)[0]
 
 
-@STRATEGIES.register("active")
+@STRATEGIES.register("active", uses=("candidates", "active_keep", "active_hypotheses", "ml_ties"))
 def active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """The paper's: most confusing candidates, then the largest simulated entropy reduction under
     the best hypothesis."""
@@ -271,7 +274,7 @@ def active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     return kept[int(np.argmin(after))]
 
 
-@STRATEGIES.register("paper-active")
+@STRATEGIES.register("paper-active", uses=("candidates", "active_keep", "kde_sampler", "ml_ties"))
 def paper_active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """Sect. III-E as the paper writes it.
 
@@ -323,7 +326,7 @@ def _simulated_terms(ctx: Context, actions: np.ndarray, classes: np.ndarray) -> 
     return np.stack([ctx.simulate(a, int(c)) for a, c in zip(actions, classes, strict=True)])
 
 
-@STRATEGIES.register("infogain")
+@STRATEGIES.register("infogain", uses=("candidates", "hypotheses"))
 def infogain_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """Largest expected information gain over the whole posterior predictive."""
     cfg, post = ctx.cfg, ctx.posterior

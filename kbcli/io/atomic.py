@@ -1,9 +1,10 @@
 """Atomic writes: a temporary file (or folder) beside the destination, then ``os.replace``.
 
 A crash, Ctrl-C or SIGTERM never leaves a half-written file under the final name; the final file is
-mode 0644. Temporary files are named recognisably, ``.NAME.kbcli-tmp-PID-XXXXXXXX.SUFFIX``, so the
-next write of ``NAME`` removes those an earlier run left behind when it was killed (only those whose
-process is gone: a concurrent writer's are never touched).
+mode 0644 (a folder 0755). Temporary files are named recognisably,
+``.NAME.kbcli-tmp-PID-XXXXXXXX.SUFFIX``, so the next write of ``NAME`` removes those an earlier run
+left behind when it was killed (only those whose process is gone: a concurrent writer's are never
+touched).
 
 An operating-system error (a full disk, a read-only file system, an I/O error, a quota) becomes an
 :class:`~kbcli.errors.ArtifactError` naming the destination and the cause, on one line, and the
@@ -206,6 +207,7 @@ def atomic_folder(path: str | os.PathLike, *, owned: Sequence[str] = ()) -> Iter
         for name in names:
             _fsync(str(tmp / name))
         if not path.exists():
+            os.chmod(tmp, 0o755)  # (mkdtemp makes it 0700)
             os.rename(tmp, path)
         else:
             for name in names:

@@ -22,13 +22,13 @@ def usable_cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def cap_jobs(jobs: int) -> tuple[int, str | None]:
+def cap_jobs(jobs: int, option: str = "--jobs") -> tuple[int, str | None]:
     """``jobs`` capped at :func:`usable_cores` (more processes than cores only run slower, and
     each one holds a model in memory), and a note saying so (None when not capped). Values below
-    1 pass through, for :func:`kbcli.io.runner.execute` to refuse."""
+    1 pass through, for :func:`kbcli.io.runner.execute` to refuse (``option``: the flag the note names)."""
     cores = usable_cores()
     if isinstance(jobs, int) and jobs > cores:
-        return cores, (f"--jobs {jobs} is more than the {cores} cores this machine lets kbcli "
+        return cores, (f"{option} {jobs} is more than the {cores} cores this machine lets kbcli "
                        f"use: running {cores} worker processes")
     return jobs, None
 

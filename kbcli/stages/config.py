@@ -30,6 +30,16 @@ MAX_ADAPT_STEPS = 10_000
 MAX_EXPERIMENTS = 10_000
 #: Notes replayed after an adaptation.
 MAX_REPLAY_NOTES = 100_000
+#: Experiments of one evaluation or sweep in all (the paper's protocol at 50 per cell: 8,800).
+MAX_TOTAL_EXPERIMENTS = 1_000_000
+
+
+def check_total(total: int, what: str) -> None:
+    """ConfigError when a run would take more than :data:`MAX_TOTAL_EXPERIMENTS` experiments
+    (checked before any work: a cost estimate, issue 29)."""
+    if total > MAX_TOTAL_EXPERIMENTS:
+        raise ConfigError(f"{what}: {total:,} experiments in all, more than "
+                          f"{MAX_TOTAL_EXPERIMENTS:,}: lower --experiments or the config's cells")
 
 
 def message(exc: ValidationError, what: str, fields: tuple[str, ...] = ()) -> str:

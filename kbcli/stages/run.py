@@ -21,7 +21,8 @@ import numpy as np
 from pydantic import Field, field_serializer, field_validator, model_validator
 
 from kbcli.core import transforms
-from kbcli.core.adapt import build_table, learning_rate, redundancy_radius, robust_blurs
+from kbcli.core.adapt_setup import build_table
+from kbcli.core.adapter_config import learning_rate, redundancy_radius, robust_blurs
 from kbcli.core.config import Config, Name, NonNegativeInt, Whole, as_table, between
 from kbcli.core.detect import DetectorConfig
 from kbcli.core.loop import ADAPT, PLAY, LoopStep, closed_loop

@@ -62,7 +62,9 @@ from pydantic import Field, field_validator
 
 from kbcli import __version__
 from kbcli.core import transforms
-from kbcli.core.adapt import Adapter, AdapterConfig, step_record
+from kbcli.core.adapt import step_record
+from kbcli.core.adapter import Adapter
+from kbcli.core.adapter_config import AdapterConfig
 from kbcli.core.config import Config, Flag, Whole, as_table, between
 from kbcli.core.keyboard import FEATURE_NAMES, sound_name
 from kbcli.core.sounds import UNKNOWN

@@ -2,8 +2,9 @@
 entropy curves (Figs. 6, 7 for a single experiment).
 
 Top row: the translation posterior (log scale over 30 nats below its maximum, with a colour bar;
-the angle summed out for the rigid family) at the stored snapshot steps, the true displacement
-marked with a cross and the estimate (posterior mean) with a circle; the last panel zooms in on the
+for the rigid family the angle summed out, each panel titled "angle marginalised"; a rigid move
+estimated as a translation: "angle not estimated") at the stored snapshot steps, the true
+displacement marked with a cross and the estimate (posterior mean) with a circle; the last panel zooms in on the
 estimate, wide enough to keep the truth and the posterior within 10 nats of its maximum in view
 (no zoom when that is nearly the whole panel: a wide posterior). Bottom: the translation error (px, log scale)
 with the 1 px level, the angle error (degrees, rigid runs, on its own axis) and the entropy (nats)
@@ -24,7 +25,7 @@ from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator
 
 from kbcli.core.transforms import FAMILIES
 from kbcli.stages.artifact import Artifact
-from kbcli.viz.common import external, save
+from kbcli.viz.common import angle_note, external, save
 
 MAX_PANELS = 6
 DYNAMIC_RANGE = 30.0  # nats of log-posterior shown
@@ -64,6 +65,11 @@ class _Run:
     stop: object
     dx: np.ndarray
     dy: np.ndarray
+
+    @property
+    def angle_note(self) -> str:
+        """What the posterior panels show of the angle (:func:`kbcli.viz.common.angle_note`)."""
+        return angle_note(self.a.get("family"), self.a.get("world_family"))
 
     @property
     def three(self) -> bool:
@@ -121,10 +127,9 @@ def _snapshot(fig, gs, r: _Run, i: int, j: int, last: bool):
         if zoom:
             ax.set_xlim(centre[0] - half, centre[0] + half)
             ax.set_ylim(centre[1] - half, centre[1] + half)
-    after = f"after {t} observation{'s' if t != 1 else ''}"
-    ax.set_title(after if t else "prior (t = 0)", fontsize=9)
-    if zoom:
-        ax.set_title(f"{after}\n(zoom: +-{half:.3g} px)", fontsize=9)
+    after = f"after {t} observation{'s' if t != 1 else ''}" if t else "prior (t = 0)"
+    notes = ([r.angle_note] if r.angle_note else []) + ([f"zoom +-{half:.3g} px"] if zoom else [])
+    ax.set_title(after + (f"\n({'; '.join(notes)})" if notes else ""), fontsize=9)
     ax.set_xlabel("dx (px)", fontsize=8)
     if i == 0:
         ax.set_ylabel("dy (px)", fontsize=8)

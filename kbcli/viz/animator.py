@@ -4,7 +4,6 @@ once and updated in place for each frame (blitting: only what moves is redrawn).
 from __future__ import annotations
 
 import numpy as np
-from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.figure import Figure
@@ -13,7 +12,8 @@ from matplotlib.patches import Patch, Rectangle
 
 from kbcli.core import transforms
 from kbcli.core.keyboard import Keyboard
-from kbcli.viz.common import external
+from kbcli.viz.common import angle_note, external
+from kbcli.viz.palette import BELIEF, TRUTH, key_colours
 from kbcli.viz.replay import Replay
 
 DYNAMIC_RANGE = 30.0  # nats of log-posterior shown
@@ -58,23 +58,24 @@ class Animator:
         self.rep = rep
         self.blit = blit
         closed = rep.kind == "closed_loop"
-        self.fig = fig = Figure(figsize=(10.0, 5.6), dpi=dpi)
+        self.fig = fig = Figure(figsize=(10.0, 6.2), dpi=dpi)
         self.canvas = _Canvas(fig)
-        gs = fig.add_gridspec(2, 2, width_ratios=(1.2, 1.0), height_ratios=(1.45, 1.0),
-                              left=0.065, right=0.925, top=0.835, bottom=0.085, wspace=0.2,
-                              hspace=0.38)
-        self.ax_pad = fig.add_subplot(gs[:, 0])
-        self.ax_post = fig.add_subplot(gs[0, 1])
+        # the pad on the left, its legend below it (outside: inside, it covered touches)
+        self.ax_pad = fig.add_subplot(fig.add_gridspec(1, 1, left=0.065, right=0.53, top=0.85,
+                                                       bottom=0.22)[0])
+        gs = fig.add_gridspec(2, 1, height_ratios=(1.45, 1.0), left=0.6, right=0.925, top=0.82,
+                              bottom=0.075, hspace=0.38)
+        self.ax_post = fig.add_subplot(gs[0])
         if closed:
-            sub = gs[1, 1].subgridspec(2, 1, hspace=0.15)
+            sub = gs[1].subgridspec(2, 1, hspace=0.15)
             self.ax_c1 = fig.add_subplot(sub[0])
             self.ax_c2 = fig.add_subplot(sub[1], sharex=self.ax_c1)
         else:
-            self.ax_c1 = fig.add_subplot(gs[1, 1])
+            self.ax_c1 = fig.add_subplot(gs[1])
             self.ax_c2 = None
-        self.title = fig.text(0.5, 0.975, "", ha="center", va="top", fontsize=11,
+        self.title = fig.text(0.5, 0.978, "", ha="center", va="top", fontsize=11,
                               fontweight="bold")
-        self.subtitle = fig.text(0.5, 0.93, "", ha="center", va="top", fontsize=9.5)
+        self.subtitle = fig.text(0.5, 0.938, "", ha="center", va="top", fontsize=9.5)
         self._setup_pad()
         self._setup_posterior()
         self._setup_curves()
@@ -100,20 +101,19 @@ class Animator:
         kb = rep.keyboard
         self.polys = _key_polys(kb)
         self.centre = kb.centre
-        cmap = colormaps["tab20"]
-        colors = [cmap(k % 20) for k in range(kb.n_keys)]
+        colors = key_colours(kb.n_keys)  # as in every plot
         known = rep.truth is not None
         self.keys = PolyCollection(self.polys, facecolors=colors if known else "0.85",
-                                   edgecolors="0.25" if known else "0.6", linewidths=0.6,
-                                   alpha=0.75 if known else 0.6, zorder=1)
+                                   edgecolors=TRUTH["color"] if known else "0.6",
+                                   linewidths=0.8, alpha=0.8 if known else 0.6, zorder=1)
         ax.add_collection(self.keys)
         # note names on the keys (they move with the keyboard in a closed loop)
-        self.key_labels = [ax.text(x, y, name, ha="center", va="center", fontsize=6.5,
+        self.key_labels = [ax.text(x, y, name, ha="center", va="center", fontsize=7,
                                    color="0.15", zorder=2, clip_on=True)
                            for (x, y), name in zip(kb.key_centres(), kb.names, strict=True)]
         outline = [np.vstack([p, p[:1]]) for p in self.polys]
-        self.belief = LineCollection(outline, colors="black", linewidths=1.3, linestyles="--",
-                                     zorder=3)
+        self.belief = LineCollection(outline, colors=BELIEF["color"], linewidths=BELIEF["lw"],
+                                     linestyles=[BELIEF["ls"]], zorder=3)
         ax.add_collection(self.belief)
         self.trail = ax.scatter([], [], s=22, zorder=4, edgecolors="white", linewidths=0.6)
         self.current = ax.scatter([], [], s=150, marker="*", color="yellow", edgecolors="black",
@@ -124,10 +124,10 @@ class Animator:
                                            alpha=0.9))
         handles = [
             Patch(
-                fc="tab:blue" if known else "0.85", ec="0.25", alpha=0.75,
-                label="keyboard, true pose" if known else "keyboard, reference pose "
+                fc=key_colours(1)[0] if known else "0.85", ec=TRUTH["color"] if known else "0.6",
+                alpha=0.8, label="keyboard, true pose" if known else "keyboard, reference pose "
                 "(true pose unknown)"),
-            Line2D([], [], color="black", ls="--", label="robot's belief"),
+            Line2D([], [], **BELIEF, label="robot's belief"),
         ]
         dot = {"marker": "o", "ls": "none", "ms": 5, "mec": "white"}
         if rep.kind == "closed_loop":
@@ -144,8 +144,9 @@ class Animator:
                                      mec="0.3", solid_capstyle="round", alpha=0.85, zorder=5,
                                      label=rep.arm_note)
             handles.append(self.arm_line)
-        ax.legend(handles=handles, loc="upper left", fontsize=7, framealpha=0.85, ncol=2,
-                  columnspacing=1.0, handlelength=1.8)
+        ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.1), fontsize=7,
+                  frameon=False, ncol=2, columnspacing=1.0,
+                  handlelength=2.4)
         x0, y0, x1, y1 = kb.area
         lo = np.array([x0, y0], float)
         hi = np.array([x1, y1], float)
@@ -155,7 +156,7 @@ class Animator:
             hi = np.maximum(hi, pts.max(axis=0))
         pad = 0.04 * (hi - lo).max()
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
-        ax.set_ylim(lo[1] - pad, hi[1] + 4.5 * pad)  # room for the legend
+        ax.set_ylim(lo[1] - pad, hi[1] + pad)
         ax.set_aspect("equal")
         ax.set_xlabel("pad x (px)")
         ax.set_ylabel("pad y (px)")
@@ -274,7 +275,7 @@ class Animator:
             self.image.set_visible(False)
             self.est.set_data([], [])
             self.cross.set_data([], [])
-            self.post_title.set_text("posterior of the displacement")
+            self.post_title.set_text(f"{self._post_head()}\nbefore any adaptation")
             self.post_note.set_text("no adaptation yet:\nthe robot plays its melody\nand "
                                     "its detector watches\nfor failures")
             ax.set_xlim(rep.dx[0], rep.dx[-1])
@@ -314,8 +315,13 @@ class Animator:
             what = f"after touch {j}" + ("" if j == k else " (last adaptation)")
         else:
             what = f"after {j} touch{'es' if j > 1 else ''}" + \
-                ("" if j == k else f" (stored snapshot; touch {k} not stored)")
-        self.post_title.set_text(f"posterior, {what}")
+                ("" if j == k else f" (touch {k} not stored)")
+        self.post_title.set_text(f"{self._post_head()}\n{what}")
+
+    def _post_head(self) -> str:
+        """The posterior panel's first title line: what it shows, and of the angle."""
+        note = angle_note(self.rep.family, self.rep.world_family)
+        return "posterior of (dx, dy)" + (f", {note}" if note else "")
 
     # -- the curves ---------------------------------------------------------------------------------
     def _setup_curves(self) -> None:

@@ -14,7 +14,8 @@ from matplotlib.ticker import FixedLocator, NullFormatter, ScalarFormatter
 from kbcli.core import accuracy as scoring
 from kbcli.core.model import grid_points
 from kbcli.stages.artifact import Artifact
-from kbcli.viz.common import draw_keyboard, key_colours, save
+from kbcli.viz.common import draw_keyboard, save
+from kbcli.viz.palette import key_colours
 
 MAP_STEP = 2.0  # px
 _STRATEGY_COLOURS = {"random": "tab:grey", "active": "tab:orange", "infogain": "tab:blue"}
@@ -32,11 +33,11 @@ def _layout_panel(ax, res) -> None:
     """Top left: the layout and its working area."""
     kb = res.keyboard
     x0, y0, x1, y1 = kb.area
-    draw_keyboard(ax, kb)
-    ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ls="--", ec="grey", lw=1))
-    ax.set_xlim(x0 - 5, x1 + 5)
+    ax.set_xlim(x0 - 5, x1 + 5)  # limits and aspect first: the labels are sized to the keys
     ax.set_ylim(y0 - 5, y1 + 5)
     ax.set_aspect("equal")
+    draw_keyboard(ax, kb)
+    ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ls="--", ec="grey", lw=1))
     ax.set_title(f"{res.layout}: {kb.describe()}\nlabels: note, tempo (bpm); dashed: working area",
                  fontsize=9)
 

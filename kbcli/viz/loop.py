@@ -4,9 +4,11 @@ its threshold, and the adaptation touches on the keyboard.
 Top left: success (running mean over ``window`` play touches), each NO_MATCH, the move, the
 detection and the adaptation (shaded); lines break across the adaptation, where nothing is played.
 Bottom left: the detector's score (log) with its threshold. Right: the keyboard at its reference
-pose (faded), where it really is (red, rotated for a rigid move) and where the robot believes it is
-after adapting (green, dashed), with the adaptation touches numbered in order. The title gives the
-success rates exactly, with their counts.
+pose (faded), where it really is (solid, dark; rotated for a rigid move) and where the robot
+believes it is after adapting (dashed, magenta, on top: where the two coincide the dark line shows
+between the dashes; styles of :mod:`kbcli.viz.palette`), with the adaptation touches numbered in
+order (labels that would overlap a touch or another label move aside, or are left out). The title
+gives the success rates exactly, with their counts.
 """
 
 from __future__ import annotations
@@ -20,7 +22,8 @@ from matplotlib.patches import Patch, Polygon
 
 from kbcli.core import transforms
 from kbcli.core.keyboard import Keyboard
-from kbcli.viz.common import draw_keyboard, save
+from kbcli.viz.common import draw_keyboard, place_labels, save
+from kbcli.viz.palette import BELIEF, TRUTH
 
 PLAY, ADAPT = 0, 1
 
@@ -140,48 +143,46 @@ def _named(d: dict) -> str:
     return ", ".join(f"{k} {v:+.2f}" for k, v in d.items())
 
 
-def _touches(ax3, pts: np.ndarray) -> Line2D:
-    """The adaptation touches on the keyboard, numbered in order (within 3 px: one label)."""
-    ax3.plot(pts[:, 0], pts[:, 1], "-", color="0.2", lw=0.6, alpha=0.6)
-    ax3.plot(pts[:, 0], pts[:, 1], "o", color="black", ms=4)
-    groups: dict[tuple[int, int], list[int]] = {}  # touches within 3 px share one label
+def _touches(ax3, pts: np.ndarray) -> tuple[Line2D, np.ndarray, list[str]]:
+    """The adaptation touches on the keyboard in order; their labels' points and texts (touches
+    within 3 px share one label), to place once the figure is laid out (:func:`place_labels`)."""
+    ax3.plot(pts[:, 0], pts[:, 1], "-", color="0.2", lw=0.6, alpha=0.6, zorder=4)
+    ax3.plot(pts[:, 0], pts[:, 1], "o", color="black", ms=4, zorder=4)
+    groups: dict[tuple[int, int], list[int]] = {}
     for k, (x, y) in enumerate(pts, 1):
         if np.isfinite(x) and np.isfinite(y):
             groups.setdefault((int(round(x / 3)), int(round(y / 3))), []).append(k)
-    for ks in groups.values():
-        x, y = pts[ks[0] - 1]
-        ax3.annotate(",".join(map(str, ks)), (x, y), fontsize=9, xytext=(4, 4),
-                     textcoords="offset points",
-                     bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none",
-                           "alpha": 0.8})
-    return Line2D([], [], color="black", marker="o", ms=4, lw=0.6,
-                  label=f"adaptation touches, in order (1-{len(pts)})")
+    at = np.array([pts[ks[0] - 1] for ks in groups.values()]).reshape(-1, 2)
+    handle = Line2D([], [], color="black", marker="o", ms=4, lw=0.6,
+                    label=f"adaptation touches, in order (1-{len(pts)})")
+    return handle, at, [",".join(map(str, ks)) for ks in groups.values()]
 
 
-def _keyboard_panel(ax3, kb: Keyboard, steps: dict, phase: np.ndarray, attrs: dict) -> None:
+def _keyboard_panel(ax3, kb: Keyboard, steps: dict, phase: np.ndarray, attrs: dict
+                    ) -> tuple[np.ndarray, list[str], np.ndarray]:
     """Right: the keyboard where the robot learned it, where it is, where the robot believes it
-    is, and the adaptation touches; the keys (both poses) and the touches fill the panel."""
-    draw_keyboard(ax3, kb, labels=False, alpha=0.3)
+    is, and the adaptation touches; the keys (both poses) and the touches fill the panel. Returns
+    the touch labels' points and texts, and every touch (for :func:`place_labels`)."""
     fam, params = _pose(attrs.get("truth") or {})
     moved_keys = _key_polygons(kb, fam, params)
     for poly in moved_keys:
-        ax3.add_patch(Polygon(poly, closed=True, fill=False, ec="crimson", lw=1.1))
+        ax3.add_patch(Polygon(poly, closed=True, fill=False, zorder=2, **TRUTH))
     shown = [np.vstack(moved_keys), np.vstack(_key_polygons(kb, "translation", np.zeros(2)))]
     handles = [Patch(facecolor="0.85", edgecolor="0.4", label="where the robot learned it"),
-               Patch(facecolor="none", edgecolor="crimson",
-                     label="where it is: " + _named(attrs.get("truth") or {}))]
+               Line2D([], [], **TRUTH, label="where it is: " + _named(attrs.get("truth") or {}))]
     corr = attrs.get("correction") or {}
     if attrs.get("detected_at") is not None and corr:
         cf, cp = _pose(corr)
         for poly in _key_polygons(kb, cf, cp):
-            ax3.add_patch(Polygon(poly, closed=True, fill=False, ec="forestgreen", lw=1.0,
-                                  ls="--"))
-        handles.append(Line2D([], [], color="forestgreen", ls="--",
+            ax3.add_patch(Polygon(poly, closed=True, fill=False, zorder=3, **BELIEF))
+        handles.append(Line2D([], [], **BELIEF,
                               label="where the robot believes it is: " + _named(corr)))
+    at, texts, pts = np.empty((0, 2)), [], np.empty((0, 2))
     if (phase == ADAPT).any():
         pts = np.asarray(steps["landed"], float)[phase == ADAPT]
         shown.append(pts[np.isfinite(pts).all(axis=1)])
-        handles.append(_touches(ax3, pts))
+        handle, at, texts = _touches(ax3, pts)
+        handles.append(handle)
     x0, y0, x1, y1 = kb.area
     box = np.vstack(shown)
     lo = np.maximum(box.min(axis=0) - 12, (x0, y0))
@@ -189,11 +190,13 @@ def _keyboard_panel(ax3, kb: Keyboard, steps: dict, phase: np.ndarray, attrs: di
     ax3.set_xlim(lo[0], hi[0])
     ax3.set_ylim(lo[1], hi[1])
     ax3.set_aspect("equal")
+    draw_keyboard(ax3, kb, labels=False, alpha=0.3)
     ax3.set_xlabel("pad x (px)")
     ax3.set_ylabel("pad y (px)")
     ax3.legend(handles=handles, fontsize=8.5, loc="lower center", bbox_to_anchor=(0.5, 1.01),
                frameon=False, title="the keyboard and the adaptation touches",
-               title_fontsize=10)
+               title_fontsize=10, handlelength=3.0)
+    return at, texts, pts
 
 
 def _title(phase: np.ndarray, result: np.ndarray, attrs: dict) -> str:
@@ -232,7 +235,12 @@ def plot_loop(steps: dict, attrs: dict, kb: Keyboard, path: str | os.PathLike, w
     ax = fig.add_subplot(gs[0, 0])
     _success_panel(ax, t, phase, result, attrs, window)
     _score_panel(fig.add_subplot(gs[1, 0], sharex=ax), t, phase, score, attrs, config)
-    _keyboard_panel(fig.add_subplot(gs[:, 1]), kb, steps, phase, attrs)
+    ax3 = fig.add_subplot(gs[:, 1])
+    at, texts, touches = _keyboard_panel(ax3, kb, steps, phase, attrs)
     fig.suptitle(_title(phase, result, attrs), fontsize=11)
     fig.tight_layout()
+    place_labels(ax3, at, texts, fontsize=8.5, avoid=touches, inside=True, margin=1.6, zorder=5,
+                 bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8},
+                 arrowprops={"arrowstyle": "-", "color": "0.3", "lw": 0.6, "shrinkA": 0,
+                             "shrinkB": 2.5})  # a leader to its touch
     save(fig, path)

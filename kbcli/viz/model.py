@@ -25,14 +25,15 @@ from kbcli.core.keyboard import Keyboard
 from kbcli.core.model import grid_points
 from kbcli.io.schema.rules import learned, model_class_of
 from kbcli.stages.artifact import Artifact
-from kbcli.viz.common import draw_keyboard, key_colours, save
+from kbcli.viz.common import draw_keyboard, save
+from kbcli.viz.palette import key_colours
 
 MAP_STEP = 2.0  # px
 
 
 def _key_colours(kb: Keyboard) -> np.ndarray:
     """RGBA per key index + 2: -2 (a sound that is no key) grey, -1 (silence) white, then the keys'
-    colours (:func:`kbcli.viz.common.key_colours`, as in the true layout)."""
+    colours (:func:`kbcli.viz.palette.key_colours`, as in the true layout)."""
     return np.vstack([(0.6, 0.6, 0.6, 1.0), (1, 1, 1, 1), *key_colours(kb.n_keys)])
 
 
@@ -117,10 +118,10 @@ def _map_panel(fig, ax, art: Artifact, model, kb: Keyboard) -> None:
 def _layout_panel(ax, kb: Keyboard) -> None:
     """Middle: the true layout."""
     x0, y0, x1, y1 = kb.area
-    draw_keyboard(ax, kb, fontsize=6 if kb.n_keys > 32 else 6.5)
-    ax.set_xlim(x0, x1)
+    ax.set_xlim(x0, x1)  # limits and aspect first: the labels are sized to the keys
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
+    draw_keyboard(ax, kb)
     ax.set_title(f"true layout ({kb.layout}): {kb.n_keys} keys (note, tempo)", fontsize=9)
     ax.set_xlabel("pad x (px)")
 
@@ -149,8 +150,10 @@ def _curve_panel(ax, art: Artifact) -> None:
     acc = np.asarray(art.data["curve"]["accuracy"], float)
     ax.plot(n, 100 * acc, "o-", ms=3, color="tab:blue", label="accuracy")
     ax.axhline(99.0, ls="--", color="grey", lw=1, label="99 % (the target)")
-    ax.text(0.02, 99.0, " 99 %", transform=ax.get_yaxis_transform(), ha="left", va="bottom",
-            fontsize=8, color="0.35")
+    # below the line, inside the axes (above it, the label sat on the frame at 100.5 %)
+    ax.text(0.02, 99.0, "99 %", transform=ax.get_yaxis_transform(), ha="left", va="top",
+            fontsize=8, color="0.35", gid="target-label",
+            bbox={"boxstyle": "square,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8})
     ax.set_xlabel("reaches")
     ax.set_ylabel("accuracy (%, 2 px grid)")
     lo = 100 * float(np.nanmin(acc)) if len(acc) and np.isfinite(acc).any() else 0.0

@@ -12,6 +12,7 @@ import numpy as np
 
 from kbcli.core.kde import kde_term, kde_terms
 from kbcli.core.posteriors.base import POSTERIORS, Observation
+from kbcli.core.registry import Uses
 
 
 @dataclass(frozen=True)
@@ -39,5 +40,11 @@ class KdePosterior:
                          [bw for _, bw in draws], first.cfg.kde_eps)
 
 
+def _fresh(cfg) -> bool:
+    return cfg.kde_draw == "fresh"
+
+
 POSTERIORS.register("kde", KdePosterior(),
-                    summary="the paper's product of KDEs of p(action | sound) (Eq. 7)")
+                    summary="the paper's product of KDEs of p(action | sound) (Eq. 7)",
+                    uses=("kde_samples", "kde_draw", "kde_floor", "kde_bandwidth",
+                          Uses("kde_sampler", _fresh, 'kde_draw = "fresh"', 'kde_draw = "shared"')))

@@ -11,7 +11,9 @@ import numpy as np
 
 from kbcli.core.likelihood import cell_sigma, likelihood_term
 from kbcli.core.posteriors.base import POSTERIORS, Observation
-from kbcli.core.robust import Nuisance, robust_terms
+from kbcli.core.registry import Uses
+from kbcli.core.robust import ROBUST_OPTIONS, Nuisance, robust_terms
+from kbcli.core.transforms import FAMILIES
 
 
 @dataclass(frozen=True)
@@ -35,5 +37,17 @@ class LikelihoodPosterior:
         return robust_terms(grid, obs.table, obs.action, obs.cls, nuisance, sigma)
 
 
-POSTERIORS.register("likelihood", LikelihoodPosterior(),
-                    summary="the model's classifier at each touch (ours)")
+def _robust(cfg) -> bool:
+    return bool(cfg.robust)
+
+
+def _cell_averaged(cfg) -> bool:
+    """The plain posterior always cell-averages; the robust one on a rotating grid only."""
+    return not cfg.robust or (cfg.family in FAMILIES and FAMILIES.get(cfg.family).rotates)
+
+
+POSTERIORS.register(
+    "likelihood", LikelihoodPosterior(), summary="the model's classifier at each touch (ours)",
+    uses=("robust", Uses("cell_average", _cell_averaged, "robust = false or the family rotates",
+                         "robust = true and the family does not rotate"),
+          *(Uses(o, _robust, "robust = true", "robust = false") for o in ROBUST_OPTIONS)))

@@ -30,7 +30,7 @@ adaptation, and after it with the final estimate as the correction (``experiment
 
 from __future__ import annotations
 
-from kbcli.core.adapt import POSTERIORS
+from kbcli.core.posteriors import POSTERIORS
 from kbcli.stages.adapt.config import (
     DEFAULT_SNAPSHOTS,
     FEEDBACKS,

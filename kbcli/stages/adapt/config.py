@@ -8,7 +8,7 @@ from typing import Any, ClassVar
 
 from pydantic import Field, InstanceOf, field_validator, model_validator
 
-from kbcli.core.adapt import AdapterConfig
+from kbcli.core.adapter_config import AdapterConfig
 from kbcli.core.config import Flag, Name, Number, Whole, between
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError

@@ -9,12 +9,16 @@ from collections.abc import Callable
 import numpy as np
 
 from kbcli.core import transforms
-from kbcli.core.adapt import POSTERIORS, Adapter, adapt, build_samples, build_table
+from kbcli.core.adapt import adapt
+from kbcli.core.adapt_setup import build_samples, build_table
+from kbcli.core.adapter import Adapter
 from kbcli.core.estimators import ESTIMATORS
+from kbcli.core.kde import ActionSamples
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.melody import parse_melody
 from kbcli.core.play import MATCH, replay
-from kbcli.core.posterior import ActionSamples, LikelihoodTable
+from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.table import LikelihoodTable
 from kbcli.sim import SimConfig, World, make_reacher
 from kbcli.stages.adapt.config import AdaptConfig, PlayCheck
 from kbcli.stages.adapt.record import Recorder, end_angles

@@ -6,8 +6,11 @@ from __future__ import annotations
 import numpy as np
 
 from kbcli.core import transforms
-from kbcli.core.adapt import POSTERIORS, Adapter, AdapterConfig, Step
+from kbcli.core.adapt import Step
+from kbcli.core.adapter import Adapter
+from kbcli.core.adapter_config import AdapterConfig
 from kbcli.core.estimators import ESTIMATORS
+from kbcli.core.posteriors import POSTERIORS
 
 #: Per-step records of a ``run`` artifact, in the order :meth:`Recorder.add` takes them.
 RECORDS = ("actions", "landed", "perceived", "classes", "estimates", "means", "errors", "ml_errors",

@@ -12,6 +12,7 @@ import numpy as np
 from pydantic import Field, InstanceOf, field_validator, model_validator
 
 from kbcli.core import transforms
+from kbcli.core.applies import refuse_unused
 from kbcli.core.config import (
     Name,
     Names,
@@ -314,7 +315,9 @@ class EvaluateConfig(StageConfig):
         for meth in self.methods:
             for s in meth.strategies:
                 for m in self.modes:
-                    adapt_config(self, meth.name, s, m)
+                    acfg = adapt_config(self, meth.name, s, m)
+            if acfg is not None:  # options the method's parts do not read are refused
+                refuse_unused(acfg.robot, meth.given(), f"methods.{meth.name}", meth.strategies)
         return self
 
     def _check_names(self) -> None:
@@ -411,7 +414,7 @@ def resolved_methods(cfg: EvaluateConfig, model=None) -> dict:
     ``model``: the robust posterior's ``redundancy_radius`` (px), ``robust_blurs`` (px) and
     ``robust_eta`` (its learning rate); 0, [] and 1 with the plain or KDE posterior. Empty without a model.
     """
-    from kbcli.core.adapt import learning_rate, redundancy_radius, robust_blurs
+    from kbcli.core.adapter_config import learning_rate, redundancy_radius, robust_blurs
 
     out = {}
     for m in cfg.methods:

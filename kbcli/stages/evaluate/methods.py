@@ -142,6 +142,12 @@ class Method(StageConfig):
                 "strategies, modes, max_steps, family, reach_noise and arm of [evaluate] instead")
         return self
 
+    def given(self) -> list[str]:
+        """The adapt options the method's table sets (a ``robot`` table's too)."""
+        robot = self.options.get("robot")
+        inner = list(robot) if isinstance(robot, Mapping) else []
+        return [k for k in self.options if k != "robot"] + inner
+
     def runs_in(self, mode: str, category: str) -> bool:
         return ((self.modes is None or mode in self.modes)
                 and (self.categories is None or category in self.categories))

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kbcli.stages.artifact import Artifact
+from kbcli.stages.config import check_total
 from kbcli.stages.evaluate.config import EvaluateConfig
 
 #: The experiment function, ``experiment(cfg, model, keyboard, true_params, *, rng, ...) -> dict``.
@@ -70,6 +71,9 @@ def plan(cfg: EvaluateConfig) -> list[Task]:
     strategy, repetition))`` (names as CRC-32 numbers; the method's ``seed_name``), so an experiment gets the same seed whatever
     else is selected. ``seed_index`` numbers the experiments in that order.
     """
+    check_total(sum(len(meth.strategies) * cfg.experiments for mode in cfg.modes
+                    for cat in cfg.categories for _ in cat.displacements for meth in cfg.methods
+                    if meth.runs_in(mode, cat.name)), "evaluate")
     tasks: list[Task] = []
     seen: set = set()
     for mode in cfg.modes:

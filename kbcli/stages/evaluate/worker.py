@@ -77,7 +77,7 @@ def run_experiment(state: dict, task: Task) -> dict[str, np.ndarray]:
         if task.play_reference:  # a seed of their own: the same whichever task runs them
             kw["reference_rng"] = np.random.default_rng(task.reference_seed)
         if "play_pool" not in state:  # Algorithm 1's actions: a pool per class, resampled
-            from kbcli.core.posterior import ActionSamples
+            from kbcli.core.kde import ActionSamples
 
             state["play_pool"] = ActionSamples(state["model"], PLAY_POOL, [cfg.seed, _key("play")])
         kw["play_pool"] = state["play_pool"]

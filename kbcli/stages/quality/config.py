@@ -8,6 +8,7 @@ from typing import Any
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
+from kbcli.core.applies import refuse_unused
 from kbcli.core.config import (
     Config,
     Flag,
@@ -148,12 +149,15 @@ class QualityConfig(Config):
 
     @model_validator(mode="after")
     def _rows_adapt(self) -> QualityConfig:
-        """Let the adapt stage check every row's options (the shared ones and the row's)."""
+        """Let the adapt stage check every row's options (the shared ones and the row's); a row's
+        own option its method does not read is refused (:func:`kbcli.core.applies.refuse_unused`)."""
         for name in self.rows:
             try:
-                adapt_config(self, name)
+                acfg = adapt_config(self, name)
             except ConfigError as exc:
                 raise ValueError(f"the adapt options of row {name!r}: {exc}") from None
+            refuse_unused(acfg.robot, [k for k in self.rows[name] if k != "strategy"],
+                          f"rows.{name}")
         return self
 
     def to_dict(self) -> dict:

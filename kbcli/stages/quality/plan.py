@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from kbcli.stages.config import check_total
 from kbcli.stages.quality.config import EXACT, IDEAL_ROW, QualityConfig, model_names
 
 #: Spawn keys of the learning and the adapting seeds.
@@ -47,8 +48,10 @@ def plan(cfg: QualityConfig) -> list[Task]:
     """Every adaptation of the sweep, in artifact order (model, category, displacement, row,
     repetition; then, with ``ideal``, the exact model's). The seed depends on (category,
     displacement, repetition) only: the same for every model and row (paired)."""
-    tasks: list[Task] = []
     names = [n for n, _, _ in model_names(cfg)]
+    cells = sum(len(cat.displacements) for cat in cfg.categories) * cfg.experiments
+    check_total((len(names) * len(cfg.rows) + bool(cfg.ideal)) * cells, "quality")
+    tasks: list[Task] = []
     for name, rows in [*((n, list(cfg.rows)) for n in names),
                        *([(EXACT, [IDEAL_ROW])] if cfg.ideal else [])]:
         for ci, cat in enumerate(cfg.categories):

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.report.paper import claim_rules
-from kbcli.stages.report.source import Claim, compared, method_names, methods_of, robot, upgrade
-from kbcli.stages.report.tables import APPLIES, NOT_APPLICABLE
+from kbcli.stages.report.source import Claim, compared, method_names, methods_of, upgrade
+from kbcli.stages.report.tables import NOT_APPLICABLE, applicable
 
 
 def rung_strategy(art: Artifact, method: str) -> str | None:
@@ -27,7 +27,7 @@ def changes(art: Artifact, before: str, after: str) -> list[str]:
     """What changes from rung ``before`` to ``after``: each differing robot option that applies
     to both (one that applies to only one follows from another change, e.g. ``kde_samples`` from
     ``posterior``) and the judged strategy, as ``'key a -> b'``."""
-    a, b = _shown(art, before), _shown(art, after)
+    a, b = applicable(art, before), applicable(art, after)
     out = [f"{k} {a.get(k, '(default)')} -> {b.get(k, '(default)')}"
            for k in sorted(set(a) | set(b))
            if str(a.get(k)) != str(b.get(k)) and NOT_APPLICABLE not in (a.get(k), b.get(k))]
@@ -39,13 +39,6 @@ def changes(art: Artifact, before: str, after: str) -> list[str]:
             out.append(f"{k} {', '.join(methods_of(art)[before][k])} -> "
                        f"{', '.join(methods_of(art)[after][k])}")
     return out
-
-
-def _shown(art: Artifact, method: str) -> dict:
-    """A rung's robot options, "n/a" for those that do not apply to it (as the methods table)."""
-    r, strategies = robot(art, method), methods_of(art)[method]["strategies"]
-    return {k: v if APPLIES.get(k, lambda r, s: True)(r, strategies) else NOT_APPLICABLE
-            for k, v in r.items()}
 
 
 def ladder(ablations: Artifact, claim: str) -> list[tuple[str, str, str]] | None:

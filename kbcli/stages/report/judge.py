@@ -27,15 +27,23 @@ from kbcli.stages.report.source import (
 )
 
 
+def _tested(art: Artifact, mode: str, method: str, category: str, strategy: str,
+            sfx: str = "") -> tuple | None:
+    """(thresholds, baseline name, the cell's curves, the strategy's tests) of one cell, or None
+    when the strategy was not tested there."""
+    cur, pvs = cell(art, mode, method, category)
+    if cur is None or strategy not in pvs or f"pvalue{sfx}" not in pvs[strategy]:
+        return None
+    return art.array("thresholds"), art.attrs["baseline"], cur, pvs[strategy]
+
+
 def significance(art: Artifact, mode: str, method: str, category: str, strategy: str,
                   upto: float, bound: float, sfx: str = "") -> tuple[str, str]:
     """(measured text, verdict) of 'p < bound up to `upto` px' for one strategy."""
-    thr = art.array("thresholds")
-    base = art.attrs["baseline"]
-    cur, pvs = cell(art, mode, method, category)
-    if cur is None or strategy not in pvs or f"pvalue{sfx}" not in pvs[strategy]:
+    tested = _tested(art, mode, method, category, strategy, sfx)
+    if tested is None:
         return "not evaluated", "not measured"
-    pv = pvs[strategy]
+    thr, base, cur, pv = tested
     min_p = float(pv.get("min_pvalue", 0.0))
     ok, bad, weak, skipped = [], [], [], []
     for j, t in enumerate(thr):
@@ -71,12 +79,10 @@ def significance(art: Artifact, mode: str, method: str, category: str, strategy:
 def not_significant(art: Artifact, mode: str, method: str, category: str,
                     strategy: str, sfx: str = "") -> tuple[str, str]:
     """(measured text, verdict) of 'no threshold has p < 0.01 in the strategy's favour'."""
-    thr = art.array("thresholds")
-    base = art.attrs["baseline"]
-    cur, pvs = cell(art, mode, method, category)
-    if cur is None or strategy not in pvs or f"pvalue{sfx}" not in pvs[strategy]:
+    tested = _tested(art, mode, method, category, strategy, sfx)
+    if tested is None:
         return "not evaluated", "not measured"
-    pv = pvs[strategy]
+    thr, base, cur, pv = tested
     sig = []
     informative = 0
     for j, t in enumerate(thr):
@@ -169,17 +175,16 @@ def _best_p(art: Artifact, mode: str, method: str, category: str, strategy: str,
             sfx: str = "") -> tuple[float, float] | None:
     """(smallest p in the strategy's favour over the informative thresholds, its threshold px),
     or None when no threshold is informative (reached by either in half the runs)."""
-    thr = art.array("thresholds")
-    base = art.attrs["baseline"]
-    cur, pvs = cell(art, mode, method, category)
-    if cur is None or strategy not in pvs or f"pvalue{sfx}" not in pvs[strategy]:
+    tested = _tested(art, mode, method, category, strategy, sfx)
+    if tested is None:
         return None
+    thr, base, cur, pv = tested
     best = None
     for j, t in enumerate(thr):
         if max(cur[strategy][f"reached{sfx}"][j], cur[base][f"reached{sfx}"][j]) < 0.5:
             continue
-        p = float(pvs[strategy][f"pvalue{sfx}"][j])
-        if pvs[strategy][f"statistic{sfx}"][j] >= 0:
+        p = float(pv[f"pvalue{sfx}"][j])
+        if pv[f"statistic{sfx}"][j] >= 0:
             p = 1.0  # not in the strategy's favour
         if best is None or p < best[0]:
             best = (p, float(t))

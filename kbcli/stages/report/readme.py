@@ -143,11 +143,13 @@ def _how_judged() -> str:
 
 def _methods_section(art: Artifact) -> list[str]:
     return [
-        "## Methods: every resolved option",
+        "## Methods: every option that applies",
         "",
         "Options that differ between methods are in bold; n/a: the option does not apply to the "
-        "method (its posterior, family or strategies never read it); `strategy`, `mode`, "
-        "`max_steps`, `family` and `reach_noise` are set per experiment by the protocol.",
+        "method (its posterior, estimator, family, strategies and stopping rules never read it), "
+        "and an option no method reads has no row; every resolved option is recorded in the "
+        "evaluation artifact (`kbcli inspect --json`). `strategy`, `mode`, `max_steps`, `family` "
+        "and `reach_noise` are set per experiment by the protocol.",
         "",
         *methods_table(art),
         "",

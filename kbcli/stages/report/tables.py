@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core.posteriors import POSTERIORS
-from kbcli.core.transforms import FAMILIES
+from kbcli.core.applies import applies, view
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.report.source import (
     KEY_OPTIONS,
@@ -22,63 +21,41 @@ from kbcli.stages.report.source import (
 
 
 def methods_table(art: Artifact) -> list[str]:
-    """Every resolved option of every method (rows), methods as columns; differing rows marked."""
+    """The resolved options of every method (rows), methods as columns; differing rows marked; an
+    option a method does not read is "n/a" (every one stays recorded in the artifact)."""
     meths = list(methods_of(art))
     info = methods_of(art)
     lines = ["| option | " + " | ".join(f"`{x}`" for x in meths) + " |",
              "|" + "---|" * (len(meths) + 1)]
     for k in ("strategies", "modes", "categories"):
         lines.append(f"| {k} | " + " | ".join(", ".join(info[x][k]) for x in meths) + " |")
-    return [*lines, *_robot_rows(art, meths), *_model_rows(info, meths),
+    return [*lines, *_robot_rows(art, meths), *_model_rows(art, info, meths),
             *_loop_rows(_loop_options(info, meths), meths)]
 
 
-def _uses_samples(r: dict) -> bool:
-    return r.get("posterior") in POSTERIORS and POSTERIORS.get(r["posterior"]).uses_samples
-
-
-def _is_robust(r: dict) -> bool:
-    return (bool(r.get("robust")) and r.get("posterior") in POSTERIORS
-            and POSTERIORS.get(r["posterior"]).robust)
-
-
-def _rotates(r: dict) -> bool:
-    return r.get("family") in FAMILIES and FAMILIES.get(r["family"]).rotates
-
-
-#: Robot options that apply only to some methods: option -> ``(robot options, strategies) ->
-#: bool``; the methods table prints "n/a" for a method they do not apply to.
-APPLIES = {
-    "kde_samples": lambda r, s: _uses_samples(r),
-    "kde_bandwidth": lambda r, s: _uses_samples(r),
-    "robust": lambda r, s: r.get("posterior") not in POSTERIORS
-    or POSTERIORS.get(r["posterior"]).robust,
-    "robust_blurs": lambda r, s: _is_robust(r),
-    "robust_outliers": lambda r, s: _is_robust(r),
-    "robust_eta": lambda r, s: _is_robust(r),
-    "redundancy_radius": lambda r, s: _is_robust(r),
-    "max_angle": lambda r, s: _rotates(r),
-    "angle_resolution": lambda r, s: _rotates(r),
-    "candidates": lambda r, s: bool({"active", "paper-active", "infogain"} & set(s)),
-    "hypotheses": lambda r, s: "infogain" in s,
-    "active_keep": lambda r, s: bool({"active", "paper-active"} & set(s)),
-    "active_hypotheses": lambda r, s: "active" in s,
-}
+#: What the methods table prints for an option a method does not read (:mod:`kbcli.core.applies`).
 NOT_APPLICABLE = "n/a"
+
+
+def applicable(art: Artifact, method: str) -> dict:
+    """A method's robot options, :data:`NOT_APPLICABLE` for those it does not read (its parts
+    name what they read: :func:`kbcli.core.applies.applies`)."""
+    r, strategies = robot(art, method), methods_of(art)[method]["strategies"]
+    cfg = view(r)
+    return {k: v if applies(k, cfg, strategies) else NOT_APPLICABLE for k, v in r.items()}
 
 
 def _robot_rows(art: Artifact, meths: list[str]) -> list[str]:
     """The robot's options, :data:`KEY_OPTIONS` first; those that differ in bold; "n/a" where an
-    option does not apply to a method (:data:`APPLIES`)."""
-    robots = {x: robot(art, x) for x in meths}
-    strategies = {x: methods_of(art)[x]["strategies"] for x in meths}
+    option does not apply to a method, and no row for an option no method reads."""
+    robots = {x: applicable(art, x) for x in meths}
     keys = [k for k in KEY_OPTIONS if any(k in r for r in robots.values())]
     keys += sorted({k for r in robots.values() for k in r} - set(keys))
     lines = []
     for k in keys:
-        vals = [robots[x].get(k, "(default)")
-                if APPLIES.get(k, lambda r, s: True)(robots[x], strategies[x]) else NOT_APPLICABLE
-                for x in meths]
+        vals = [robots[x].get(k, "(default)") for x in meths]
+        if all(v == NOT_APPLICABLE for v in vals):
+            continue
         name = f"**{k}**" if len({str(v) for v in vals}) > 1 else k
         lines.append(f"| {name} | " + " | ".join(str(v) for v in vals) + " |")
     return lines
@@ -104,15 +81,20 @@ def _loop_options(info: dict, meths: list[str]) -> dict:
     return loop
 
 
-def _model_rows(info: dict, meths: list[str]) -> list[str]:
-    """The options resolved from the model (robust posterior's radius, blurs and eta)."""
+def _model_rows(art: Artifact, info: dict, meths: list[str]) -> list[str]:
+    """The options resolved from the model (robust posterior's radius, blurs and eta), for the
+    methods that read them ("n/a" for the others; no row when none does)."""
     lines = []
+    robots = {x: applicable(art, x) for x in meths}
     for k in ("redundancy_radius", "robust_blurs", "robust_eta"):  # as the model resolved them
-        if any(k in info[x].get("from_model", {}) for x in meths):
+        reads = [robots[x].get(k) != NOT_APPLICABLE for x in meths]
+        if any(k in info[x].get("from_model", {}) for x in meths) and any(reads):
             vals = [info[x].get("from_model", {}).get(k, "") for x in meths]
-            vals = [(", ".join(f"{v:g}" for v in val) or "none (not robust)")
+            vals = [NOT_APPLICABLE if not ok else
+                    (", ".join(f"{v:g}" for v in val) or "none (not robust)")
                     if isinstance(val, list) else
-                    (f"{val:.2f}" if isinstance(val, float) else str(val)) for val in vals]
+                    (f"{val:.2f}" if isinstance(val, float) else str(val))
+                    for val, ok in zip(vals, reads, strict=True)]
             unit = "" if k == "robust_eta" else " (px)"
             lines.append(f"| {k}, resolved from the model{unit} | " + " | ".join(vals) + " |")
     return lines
