@@ -234,3 +234,19 @@ def test_the_animation_shares_the_plots_palette_and_its_legend_covers_no_touch(r
     _check_animator(anim, run.keyboard)
     anim.draw(run.n)
     assert "angle marginalised" in anim.ax_post.get_title()
+
+
+def test_the_reports_posterior_figure_says_when_the_angle_is_marginalised(monkeypatch, tmp_path):
+    from kbcli.viz import report
+
+    figs = []
+    monkeypatch.setattr(report, "save", lambda fig, path: figs.append(fig))
+    art = read_artifact(GOLDEN / "evaluation.h5", "evaluation")
+    report.plot_posterior(art, tmp_path / "p.png")
+    assert "angle" not in figs[-1]._suptitle.get_text()  # a translation evaluation
+    for opts in art.attrs["methods"]["kbcli"]["options"]["ideal"].values():
+        opts["robot"]["family"] = "rigid"
+    report.plot_posterior(art, tmp_path / "p.png")
+    assert "angle marginalised" in figs[-1]._suptitle.get_text()
+    for fig in figs:
+        plt.close(fig)
