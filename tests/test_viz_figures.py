@@ -6,6 +6,7 @@ legend that covers no touch."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from pathlib import Path
 
@@ -208,8 +209,9 @@ def test_posterior_panels_say_what_they_do_with_the_angle(capture, tmp_path, rig
 # -- the animation ---------------------------------------------------------------------------------------
 def _check_animator(anim: Animator, kb) -> None:
     # the keys in the plots' colours
-    faces = anim.keys.get_facecolors()[:, :3]
-    np.testing.assert_allclose(faces, key_colours(kb.n_keys)[:, :3], atol=1e-6)
+    if kb is not None:
+        faces = anim.keys.get_facecolors()[:, :3]
+        np.testing.assert_allclose(faces, key_colours(kb.n_keys)[:, :3], atol=1e-6)
     # the pad's legend outside every axes (it covers no touch) and inside the figure
     anim.canvas.draw()
     renderer = anim.canvas.get_renderer()
@@ -234,3 +236,21 @@ def test_the_animation_shares_the_plots_palette_and_its_legend_covers_no_touch(r
     _check_animator(anim, run.keyboard)
     anim.draw(run.n)
     assert "angle marginalised" in anim.ax_post.get_title()
+    unknown = dataclasses.replace(load_replay(read_artifact(GOLDEN / "run.h5")), truth=None)
+    _check_animator(Animator(unknown, dpi=60, blit=True), None)  # a real robot's longer legend
+
+
+def test_the_reports_posterior_figure_says_when_the_angle_is_marginalised(monkeypatch, tmp_path):
+    from kbcli.viz import report
+
+    figs = []
+    monkeypatch.setattr(report, "save", lambda fig, path: figs.append(fig))
+    art = read_artifact(GOLDEN / "evaluation.h5", "evaluation")
+    report.plot_posterior(art, tmp_path / "p.png")
+    assert "angle" not in figs[-1]._suptitle.get_text()  # a translation evaluation
+    for opts in art.attrs["methods"]["kbcli"]["options"]["ideal"].values():
+        opts["robot"]["family"] = "rigid"
+    report.plot_posterior(art, tmp_path / "p.png")
+    assert "angle marginalised" in figs[-1]._suptitle.get_text()
+    for fig in figs:
+        plt.close(fig)

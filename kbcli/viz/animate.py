@@ -1,15 +1,17 @@
 """Animated replay of an adaptation (``run``) or a closed-loop session (``closed_loop``).
 
 One frame per touch (a closed loop of hundreds of touches keeps every adaptation touch and a
-subsample of the play touches). Left, the pad: the keyboard where it really is (filled keys; at its
-reference pose before the move of a closed loop; unknown for a session with a real robot, then the
-reference pose is shown in grey), the robot's current belief of where it is (dashed outline: the
-posterior estimate while adapting, the correction in force while playing), the arm (from the joint
-angles recorded per touch in dynamics mode; from inverse kinematics of the landing point in ideal
-mode), the touches so far and the sound heard at the current one. Top right: the posterior over the
-displacement (log scale over 30 nats, zooming in as it concentrates; the true displacement is the
-cyan cross). Bottom right: the entropy and the error (or, without ground truth, the posterior mass
-near the estimate) of an adaptation; the success rate and the detector score of a closed loop.
+subsample of the play touches). Left, the pad: the keyboard where it really is (filled keys in the
+plots' colours, :mod:`kbcli.viz.palette`; at its reference pose before the move of a closed loop;
+unknown for a session with a real robot, then the reference pose is shown in grey), the robot's
+current belief of where it is (dashed magenta outline, as in ``kbcli plot run``: the posterior
+estimate while adapting, the correction in force while playing), the arm (from the joint angles
+recorded per touch in dynamics mode; from inverse kinematics of the landing point in ideal mode),
+the touches so far and the sound heard at the current one; its legend below it, covering nothing.
+Top right: the posterior over the displacement (log scale over 30 nats, zooming in as it
+concentrates; the true displacement is the cyan cross; for a rigid move, the angle marginalised).
+Bottom right: the entropy and the error (or, without ground truth, the posterior mass near the
+estimate) of an adaptation; the success rate and the detector score of a closed loop.
 
 Frames are made by :class:`matplotlib.animation.FuncAnimation` on one figure whose artists are
 updated in place, and written by :class:`~matplotlib.animation.PillowWriter` (GIF) or

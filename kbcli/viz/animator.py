@@ -3,6 +3,8 @@ once and updated in place for each frame (blitting: only what moves is redrawn).
 
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection, PolyCollection
@@ -144,6 +146,8 @@ class Animator:
                                      mec="0.3", solid_capstyle="round", alpha=0.85, zorder=5,
                                      label=rep.arm_note)
             handles.append(self.arm_line)
+        for h in handles:  # two columns within the pad's width
+            h.set_label(textwrap.fill(h.get_label(), 34))
         ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.1), fontsize=7,
                   frameon=False, ncol=2, columnspacing=1.0,
                   handlelength=2.4)

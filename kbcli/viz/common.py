@@ -29,11 +29,12 @@ def angle_note(family: str | None, world_family: str | None) -> str:
     """What a figure of the translation posterior says of the angle: "angle marginalised" when the
     estimated ``family`` has one (the panels show its sum over the angle), "angle not estimated"
     when only the keyboard's move (``world_family``) rotates, "" when nothing rotates."""
-    if family is not None and FAMILIES.get(family).rotates:
+    def rotates(name: str | None) -> bool:
+        return name in FAMILIES and FAMILIES.get(name).rotates
+
+    if rotates(family):
         return "angle marginalised"
-    if world_family is not None and FAMILIES.get(world_family).rotates:
-        return "angle not estimated"
-    return ""
+    return "angle not estimated" if rotates(world_family) else ""
 
 
 def save(fig: Figure, path: str | os.PathLike, dpi: int = 110) -> None:

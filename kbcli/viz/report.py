@@ -20,7 +20,7 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import LogNorm  # noqa: E402
 
 from kbcli.stages.artifact import Artifact  # noqa: E402
-from kbcli.viz.common import save  # noqa: E402
+from kbcli.viz.common import angle_note, save  # noqa: E402
 
 COLOURS = {"random": "tab:gray", "active": "tab:blue", "paper-active": "tab:cyan",
            "infogain": "tab:red"}
@@ -139,14 +139,23 @@ def plot_posterior(art: Artifact, path: str | os.PathLike, mode: str | None = No
                 ax.set_xlabel("dx (px)", fontsize=8)
             if c == 0:
                 ax.set_ylabel(f"{x}\n{s}\ndy (px)", fontsize=8)
+    notes = sorted({_angle_note(art, mode, x, s) for x, s in rows} - {""})
     fig.suptitle(f"Posterior over the displacement, {mode} mode (circle: the truth, "
-                 f"({truth[0]:g}, {truth[1]:g}) px; each panel zoomed on its mass)", fontsize=10)
+                 f"({truth[0]:g}, {truth[1]:g}) px; each panel zoomed on its mass"
+                 + "".join(f"; {n}" for n in notes) + ")", fontsize=10)
     fig.tight_layout(rect=(0, 0, 0.92, 0.97))
     cax = fig.add_axes((0.93, 0.15, 0.015, 0.7))
     cb = fig.colorbar(im, cax=cax)
     cb.set_label("posterior / its maximum (log)", fontsize=8)
     cb.ax.tick_params(labelsize=7)
     save(fig, path)
+
+
+def _angle_note(art: Artifact, mode: str, method: str, strategy: str) -> str:
+    """What a Fig. 5 row shows of the angle (:func:`kbcli.viz.common.angle_note`)."""
+    opts = ((art.attrs["methods"][method].get("options") or {}).get(mode) or {}).get(strategy)
+    robot = (opts or {}).get("robot") or {}
+    return angle_note(robot.get("family"), art.config.get("family"))
 
 
 def _posterior_panel(ax, snap: np.ndarray, ext: tuple, truth: np.ndarray, norm):
