@@ -145,3 +145,19 @@ def test_every_example_of_a_page_runs(page, tmp_path):
     _workdir(tmp_path)
     for line in _runnable(page):
         _run(line, tmp_path)
+
+
+def test_the_protocol_examples_name_a_sound_of_the_default_model():
+    """The serve protocol's example reply ("class": 13, "sound": "A4 106 bpm") is what the default
+    model answers, in `kbcli serve --help` and in the stage's docstring."""
+    import kbcli.stages.serve as serve_stage
+    from kbcli.core.notes import sound_name
+    from kbcli.io.artifact import read_artifact
+
+    features = read_artifact(ROOT / "data" / "default-model.h5", "model").data["model"]["class_features"]
+    help_text = CliRunner().invoke(app, ["serve", "--help"], env={"COLUMNS": "200"}).output
+    for text in (help_text, serve_stage.__doc__):
+        pairs = re.findall(r'"class": (\d+), "sound": "([^"]+)"', text)
+        assert pairs
+        for cls, sound in pairs:
+            assert sound_name(features[int(cls)]) == sound, (cls, sound)
