@@ -45,7 +45,7 @@ The robot, per touch ("op" may be left out):
   px (optional: without it the aim is used, set --blur); action: where it aimed (optional: the
   suggested action; must be in the working area); id: echoed back.
 kbcli answers:
-  {"type": "step", "step": 1, "class": 12, "sound": "A4 96 bpm", "estimate": {"dx": 11.9,
+  {"type": "step", "step": 1, "class": 13, "sound": "A4 106 bpm", "estimate": {"dx": 11.9,
    "dy": -7.1}, "entropy": 2.3, "mass": 0.81, "done": false, "action": [x, y] | null}
   done: stop touching (stopping rule with --stop, or --max-steps touches); action: the next touch
   (null after --max-steps touches).

@@ -60,7 +60,7 @@ def name_to_midi(name: str) -> int:
 
 
 def sound_name(features) -> str:
-    """A heard sound in words: ``"A4 96 bpm"`` (the pitch's nearest note), ``"silence"`` (NaN)."""
+    """A heard sound in words: ``"A4 106 bpm"`` (the pitch's nearest note), ``"silence"`` (NaN)."""
     f = np.asarray(features, float).reshape(-1)
     if f.size == 0 or np.isnan(f).all():
         return "silence"

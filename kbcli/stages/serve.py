@@ -31,7 +31,7 @@ no sound of the model are refused (an error reply, nothing recorded, the touch b
 unless the message says ``"insist": true``: then the touch is recorded with class -1 and does not
 move the posterior. kbcli answers::
 
-    {"type": "step", "step": 1, "class": 12, "sound": "A4 96 bpm",
+    {"type": "step", "step": 1, "class": 13, "sound": "A4 106 bpm",
      "estimate": {"dx": 11.9, "dy": -7.1}, "entropy": 2.3, "mass": 0.81, "done": false,
      "action": [x, y]}
 
