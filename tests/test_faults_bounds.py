@@ -109,3 +109,20 @@ def test_every_count_names_its_bound_in_help(runner, command):
             continue
         text = " ".join(opt.split())
         assert re.search(r"at most (\d|the number of cores)", text), text
+
+
+@pytest.mark.parametrize("line", ['{"op": ' + "[" * 30_000 + "]" * 30_000 + "}",
+                                  "[" * 60_000 + "]" * 60_000])
+def test_serve_deeply_nested_json_is_an_error_reply(line):
+    """A hostile robot's deeply nested JSON (within the line limit) is refused like any bad
+    message, never a RecursionError traceback that ends the session (found by the battery)."""
+    import numpy as np
+
+    from kbcli.io.artifact import read_artifact
+    from kbcli.stages.serve import ServeConfig, Session
+
+    session = Session(ServeConfig.from_dict({"resolution": 2.0, "prior_halfwidth": 15.0}),
+                      read_artifact(MODEL), rng=np.random.default_rng(0), seed=0)
+    reply = session.handle(line.encode())
+    assert reply["type"] == "error" and "nested too deeply" in reply["error"]
+    assert session.handle(b'{"op": "state"}')["type"] != "error"  # the session goes on

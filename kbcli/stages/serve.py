@@ -245,6 +245,8 @@ class Session:
                 msg = json.loads(text, parse_constant=_reject_constant)
             except json.JSONDecodeError as exc:
                 raise MessageError(f"not JSON ({exc.msg} at column {exc.colno})") from None
+            except RecursionError:  # "[[[[..." within MAX_LINE: json recurses per level
+                raise MessageError("not JSON this side reads: nested too deeply") from None
             if not isinstance(msg, dict):
                 raise MessageError(f"a message is a JSON object, got {type(msg).__name__}")
             msg_id = msg.get("id")
