@@ -55,6 +55,7 @@ results: $(STAMP)
 	$(KBCLI) bench --json $(RESULTS)/detect.json detect
 	$(KBCLI) bench --json $(RESULTS)/adapt.json adapt --section exact --section learned --model data/default-model.h5 --experiments 20
 	$(KBCLI) bench --json $(RESULTS)/robust.json robust --experiments 20
+	$(KBCLI) bench --json $(RESULTS)/speed.json speed --repeats 5
 	$(KBCLI) bench --json $(RESULTS)/learn.json learn --seeds 3
 	$(KBCLI) bench --json $(RESULTS)/reliability.json reliability --seeds 3
 

@@ -119,11 +119,12 @@ def adapt_cmd(
     stage.check_inputs(model_art, scene_art)
     note_arm(cfg.arm, cfg.mode)
     what = f"adapting ({cfg.strategy}, {cfg.posterior} posterior), observations"
+    timings: dict[str, float] = {}
     with ticker(cfg.max_steps, what) as tick:
         art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
-                        snapshot_steps=steps, on_step=tick)
+                        snapshot_steps=steps, on_step=tick, timings=timings)
     write_artifact(art, output)
-    _report_run(art, cfg, output)
+    _report_run(art, cfg, output, timings.get("setup_ms"))
 
 
 def _adapt_config(config: Path | None, flags: dict, arm: str | None,
@@ -141,8 +142,9 @@ def _adapt_config(config: Path | None, flags: dict, arm: str | None,
     return cfg
 
 
-def _report_run(art, cfg, output: Path) -> None:
-    """One line on the run written; a note when the truth lay outside the prior."""
+def _report_run(art, cfg, output: Path, setup_ms: float | None = None) -> None:
+    """One line on the run written (its set-up time apart from the median touch's); a note when
+    the truth lay outside the prior."""
     a = art.attrs
     est = ", ".join(f"{k}={v:.2f}" for k, v in a["estimate"].items())
     truth = ", ".join(f"{k}={v:.2f}" for k, v in a["truth"].items())
@@ -154,7 +156,8 @@ def _report_run(art, cfg, output: Path) -> None:
     out.print(f"wrote {output}: {cfg.strategy}/{cfg.posterior}, {a['steps']} steps; estimate "
               f"{est} (truth {truth}); final error {a['final_error_px']:.2f} px{angle}; "
               f"below 1 px {'from step ' + str(reach) if reach else 'never'}{stop_txt}; "
-              f"{a['median_step_ms']:.1f} ms per step")
+              + (f"set-up {setup_ms:.0f} ms, " if setup_ms is not None else "")
+              + f"{a['median_step_ms']:.1f} ms per touch (median)")
     if not a["truth_inside_prior"]:
         err.print("kbcli: note: the scene's displacement lies outside the robot's prior "
                   "(--prior-halfwidth, max_angle, --family): it cannot be recovered exactly", markup=False)

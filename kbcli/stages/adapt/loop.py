@@ -4,6 +4,7 @@ around it by replaying the melody with Algorithm 1 (:func:`play_success`)."""
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -75,7 +76,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
                play: PlayCheck | None = None,
                play_pool: ActionSamples | None = None,
                reference_rng: np.random.Generator | None = None,
-               on_step: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
+               on_step: Callable[[int], None] | None = None,
+               timings: dict[str, float] | None = None) -> dict[str, np.ndarray]:
     """One adaptation against a world whose keyboard sits at ``true_params``.
 
     Parameters
@@ -107,6 +109,9 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         and strategy, so they measure the same whichever experiment runs them).
     on_step : callable, optional
         Called with the step number after each observation (a progress bar).
+    timings : dict, optional
+        Receives ``setup_ms``: the wall-clock time of the adapter's set-up before the first touch
+        (the model raster, :meth:`Adapter.prepare`), which ``step_ms`` leaves out.
 
     Returns
     -------
@@ -124,7 +129,7 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     world_family = cfg.robot.family if world_family is None else world_family
     truth = np.asarray(true_params, float)
     robot_rng, world_rng = rng.spawn(2)
-    adapter = Adapter(model, cfg.adapter_config(), rng=robot_rng, table=table, samples=samples)
+    adapter = _prepared(cfg, model, robot_rng, table, samples, timings)
     touch = _Touches(World(keyboard, make_reacher(cfg.sim_config()), truth, world_family),
                      world_rng)
     rec = Recorder(adapter, [s for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps])
@@ -142,6 +147,16 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
                           rng=rng.spawn(1)[0], pool=play_pool, reference_rng=reference_rng)
         out.update({f"play_{k}": np.float64(v) for k, v in res.items()})
     return out
+
+
+def _prepared(cfg: AdaptConfig, model, rng: np.random.Generator, table, samples,
+              timings: dict[str, float] | None) -> Adapter:
+    """The robot's adapter, prepared for its first touch; its set-up time in ``timings``."""
+    t0 = time.perf_counter()
+    adapter = Adapter(model, cfg.adapter_config(), rng=rng, table=table, samples=samples).prepare()
+    if timings is not None:
+        timings["setup_ms"] = 1e3 * (time.perf_counter() - t0)
+    return adapter
 
 
 class _Touches:

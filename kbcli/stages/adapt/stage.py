@@ -3,6 +3,7 @@ a ``run`` artifact (:func:`check_inputs` refuses mismatched inputs)."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -55,7 +56,8 @@ def check_inputs(model_artifact: Artifact, scene_artifact: Artifact) -> None:
 def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
         rng: np.random.Generator, seed: int | None = None,
         snapshot_steps: tuple[int, ...] = DEFAULT_SNAPSHOTS, model=None,
-        on_step: Callable[[int], None] | None = None) -> Artifact:
+        on_step: Callable[[int], None] | None = None,
+        timings: dict[str, float] | None = None) -> Artifact:
     """Adapt to a scene with a model: the ``run`` artifact.
 
     Parameters
@@ -66,6 +68,9 @@ def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
         The already loaded model of ``model_artifact`` (saves loading it again).
     on_step : callable, optional
         Called with the step number after each observation (a progress bar).
+    timings : dict, optional
+        Receives ``setup_ms``: the wall-clock time from the model artifact to the adapter ready
+        for its first touch (loading the model, its raster, :meth:`Adapter.prepare`).
 
     Raises
     ------
@@ -73,12 +78,16 @@ def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
         Wrong kinds, mismatching keyboards.
     """
     check_inputs(model_artifact, scene_artifact)
+    t0 = time.perf_counter()
     model = load_model(model_artifact) if model is None else model
+    load_ms = 1e3 * (time.perf_counter() - t0)
     kb = keyboard_stage.load(scene_artifact)
     world_family = scene_artifact.config["family"]
     truth = np.asarray(scene_artifact.config["params"], float)
     res = experiment(cfg, model, kb, truth, rng=rng, world_family=world_family,
-                     snapshot_steps=snapshot_steps, on_step=on_step)
+                     snapshot_steps=snapshot_steps, on_step=on_step, timings=timings)
+    if timings is not None:
+        timings["setup_ms"] = timings.get("setup_ms", 0.0) + load_ms
     attrs = run_attrs(res, cfg.adapter_config(), truth=truth, world_family=world_family)
     attrs["truth_inside_prior"] = _inside_prior(cfg, truth, world_family)
     sim = cfg.sim_config()

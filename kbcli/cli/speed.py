@@ -1,0 +1,87 @@
+"""``kbcli bench speed``: the adaptation's time per touch (issue 26's speed targets)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from kbcli.cli import options as opts
+from kbcli.cli.app import bench_app, busy, command, interactive, out
+from kbcli.cli.record import show_table
+from kbcli.io.artifact import read_artifact
+from kbcli.stages.config import MAX_ADAPT_STEPS
+
+#: Repeats of each measure at most.
+MAX_REPEATS = 1000
+
+
+def _loadavg() -> str:
+    try:
+        with open("/proc/loadavg") as f:
+            return f"load average {' '.join(f.read().split()[:3])}"
+    except OSError:
+        return "load average unknown"
+
+
+@command(bench_app, name="speed")
+def bench_speed_cmd(
+    model: opts.model_option("Model artifact [default: the embedded default model].",
+                             optional=True) = None,
+    repeats: Annotated[int, typer.Option("--repeats", help=opts.at_most(
+        "Adaptations per row (each its own seed); the table gives medians", MAX_REPEATS))] = 5,
+    touches: Annotated[int, typer.Option("--touches", "-T", help=opts.at_most(
+        "Touches per adaptation", MAX_ADAPT_STEPS))] = 20,
+    seed: opts.seed_option("Seed of the adaptations.") = 0,
+) -> None:
+    """Time the adaptation per touch: the paper's method and kbcli's, and kbcli adapt's posteriors.
+
+    Reads MODEL (default: the embedded default model). Writes nothing. Prints two tables, medians
+    over the repeats, on one thread: the robot's time per touch (decide, update, estimate; set-up
+    excluded) of the paper's active strategy with the KDE posterior (the paper method's options)
+    and of infogain with the likelihood posterior (kbcli's default); and the adapt stage as
+    kbcli adapt runs it with each posterior (infogain, defaults): set-up, median touch, and the
+    whole run over its touches (set-up included), with the ratio kde / likelihood.
+    """
+    from kbcli.bench import speed as bench
+    from kbcli.core.adapter_config import AdapterConfig
+    from kbcli.io.paths import default_model_path
+    from kbcli.stages import keyboard as keyboard_stage
+    from kbcli.stages.models import load_model
+
+    opts.check_counts(("--repeats", repeats, MAX_REPEATS), ("--touches", touches, MAX_ADAPT_STEPS))
+    path = default_model_path() if model is None else Path(model)
+    art = read_artifact(path, "model")
+    learned, kb = load_model(art), keyboard_stage.load(art)
+    con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
+    with busy("timing per touch"):
+        rows = [bench.touch_times(learned, kb, bench.paper_config(), "paper-active + kde (the "
+                                  "paper method)", runs=repeats, touches=touches, seed=seed),
+                bench.touch_times(learned, kb, AdapterConfig(), "infogain + likelihood "
+                                  "(kbcli's default)", runs=repeats, touches=touches, seed=seed)]
+    t = Table(title=f"time per touch on {path}: {repeats} adaptations x {touches} touches per "
+                    f"row, set-up excluded, one thread", title_justify="left")
+    for col in ("strategy + posterior", "median CPU ms / touch", "p90 CPU ms", "median wall ms"):
+        t.add_column(col, justify="left" if col.startswith("strategy") else "right")
+    for r in rows:
+        t.add_row(r.name, f"{r.cpu_ms:.1f}", f"{r.cpu_p90:.1f}", f"{r.wall_ms:.1f}")
+    show_table(con, t)
+    with busy("timing kbcli adapt"):
+        arows = [bench.adapt_times(art, kb, p, runs=repeats, touches=touches, seed=seed)
+                 for p in ("likelihood", "kde")]
+    t = Table(title=f"kbcli adapt --posterior P on {path} (infogain, defaults): {repeats} runs of "
+                    f"{touches} touches per row, one thread", title_justify="left")
+    for col in ("posterior", "set-up ms", "median touch ms", "ms / touch, set-up included",
+                "CPU ms / touch, set-up included", "vs likelihood"):
+        t.add_column(col, justify="left" if col == "posterior" else "right")
+    base = arows[0].per_touch_ms
+    for r in arows:
+        t.add_row(r.posterior, f"{r.setup_ms:.0f}", f"{r.touch_ms:.1f}", f"{r.per_touch_ms:.1f}",
+                  f"{r.per_touch_cpu_ms:.1f}", f"{r.per_touch_ms / base:.2f}x")
+    show_table(con, t)
+    con.print(f"wall time on a shared machine ({_loadavg()}); CPU time: this process only. "
+              f"Targets (issue 26): paper-active + kde <= 20 ms per touch; kde within 3x of "
+              f"likelihood, set-up included")
