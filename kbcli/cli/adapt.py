@@ -61,18 +61,21 @@ def adapt_cmd(
     family: opts.family_option("the scene's family") = None,
     mode: opts.mode_option("ideal") = None,
     reach_noise: Annotated[float | None, typer.Option(
-        "--reach-noise", help="Landing scatter of the arm, px [default 0].")] = None,
+        "--reach-noise", help="Landing scatter of the arm (standard deviation), px.",
+        show_default="0")] = None,
     feedback: Annotated[str | None, typer.Option(
-        "--feedback", help="landed (the robot feels where it landed) or aim [default landed].")
-    ] = None,
+        "--feedback", help="Where the robot updates its posterior: landed (where it feels its "
+        "finger landed) or aim (where it aimed).", show_default="landed")] = None,
     arm: opts.arm_option("ideal", optional=True) = None,
     model_blur: opts.ModelBlur = None,
-    max_steps: opts.max_steps_option("Observations at most [default 40].") = None,
+    max_steps: opts.max_steps_option("Touches (observations) at most.", show_default="40") = None,
     resolution: opts.Resolution = None,
     prior_halfwidth: opts.PriorHalfwidth = None,
     stop: Annotated[bool | None, typer.Option(
-        "--stop/--no-stop", help="End at the stopping rule (mass within 1 px >= 0.95) instead of "
-        "always taking T steps [default --no-stop].")] = None,
+        "--stop/--no-stop", help="End at the stopping rule (posterior mass within 1 px of the "
+        "estimate >= 0.95). adapt measures, so by default it takes all --max-steps touches, "
+        "records the error after each and says when the rule fired (as evaluate does); serve and "
+        "run, which drive a robot, stop at the rule.", show_default="--no-stop")] = None,
     snapshots: Annotated[str, typer.Option(
         "--snapshots", help="Steps at which to store the posterior (0 = prior), or 'all' (every "
         "step: kbcli animate then shows each one).")
@@ -214,23 +217,26 @@ def bench_adapt_cmd(
     experiments: Annotated[int, typer.Option(
         "--experiments", help="Runs per strategy and displacement category.")] = 50,
     section: Annotated[list[str] | None, typer.Option(
-        "--section", help="exact, noise, rigid, kde, learned or learned-rigid (repeat for several) "
-        "[default: exact, noise, rigid and kde, plus learned when --model is given].")] = None,
+        "--section", help="Sections to run (repeat): exact, noise, rigid, kde, learned or "
+        "learned-rigid.", show_default="exact, noise, rigid and kde, plus learned with --model")
+    ] = None,
     model: opts.model_option("A learned model artifact for the learned section.",
                              optional=True) = None,
     strategy: opts.strategies_option("random, active, infogain") = None,
     category: Annotated[list[str] | None, typer.Option(
-        "--category", help="small, medium, large (repeat) [default all three].")] = None,
-    max_steps: Annotated[int, typer.Option("--max-steps", "-T", help="Steps per run.")] = 40,
+        "--category", help="Displacement categories (repeat): small, medium, large.",
+        show_default="all three")] = None,
+    max_steps: Annotated[int, typer.Option("--max-steps", "-T", help="Touches per run.")] = 40,
     seed: opts.seed_option("Seed of displacements and runs.") = 0,
     model_blur: Annotated[float | None, typer.Option(
-        "--model-blur", help="learned section: soften the model's map by this many px [default "
-        "1].")] = None,
-    layout: opts.layout_option("Keyboard layout of every section: {layouts} (its default keyboard) "
-                               "[default: the model's keyboard with --model, else grid].") = None,
+        "--model-blur", help="learned section: soften the model's map by this many px.",
+        show_default="1")] = None,
+    layout: opts.layout_option("Keyboard layout of every section: {layouts} (its default "
+                               "keyboard).", show_default="the model's keyboard with --model, "
+                               "else grid") = None,
     kde_steps: Annotated[int, typer.Option(
         "--kde-steps", min=1, help="kde section: touches timed for the KDE step's speed (on --model, "
-        "default data/default-model.h5).")] = 200,
+        "else the embedded default model).")] = 200,
 ) -> None:
     """Benchmark the adaptation strategies: sample efficiency and speed, on any layout.
 
@@ -324,8 +330,8 @@ def _section_table(bench, cfg, sec: str, sec_rows: list[dict], title: str, bnd) 
 
 @command(bench_app, name="robust")
 def bench_robust_cmd(
-    model: opts.model_option("Model artifact [default: the embedded default model].",
-                             optional=True) = None,
+    model: opts.model_option("Model artifact (.h5, kind 'model').", optional=True,
+                             show_default="the embedded default model") = None,
     experiments: Annotated[int, typer.Option(
         "--experiments", min=1, help="Runs per category, strategy and posterior.")] = 30,
     max_steps: Annotated[int, typer.Option("--max-steps", "-T", min=1, help="Touches per run.")] = 30,

@@ -67,14 +67,14 @@ def _fmt(v: float, horizon: int) -> str:
 @command(bench_app, name="detect")
 def bench_detect_cmd(
     p_pre: Annotated[float | None, typer.Option(
-        "--p-pre", help="Failure rate before the change [default: the --model's on its reference "
-        "pose, else 0.01].")] = None,
+        "--p-pre", help="Failure rate before the change (a probability per played note).",
+        show_default="the --model's on its reference pose, else 0.01")] = None,
     p_post: Annotated[str | None, typer.Option(
         "--p-post", help="Comma-separated post-change failure rates instead of the displacement "
         "categories (e.g. 0.05,0.2).")] = None,
-    model: opts.model_option("Model artifact whose melody player sets the failure rates "
-                             "[default: the exact model of the default keyboard].",
-                             optional=True) = None,
+    model: opts.model_option("Model artifact whose melody player sets the failure rates.",
+                             optional=True,
+                             show_default="the exact model of the default keyboard") = None,
     streams: Annotated[int, typer.Option("--streams", help="Evaluation streams per category.")] = 400,
     tune_actions: Annotated[int, typer.Option(
         "--tune-actions", help="Change-free actions used to tune every detector.")] = 1_000_000,

@@ -155,13 +155,13 @@ def _budgets(text: str) -> tuple[int, ...]:
 def bench_learn_cmd(
     seeds: Annotated[int, typer.Option("--seeds", min=1, help="Runs per row.")] = 5,
     budgets: Annotated[str | None, typer.Option(
-        "--budgets", help="Budgets at which to report the accuracy, comma-separated [default "
-        "200,400,800,1600; with --peer 150,300,800].")] = None,
+        "--budgets", help="Budgets (reaches) at which to report the accuracy, comma-separated.",
+        show_default="200,400,800,1600; with --peer 150,300,800")] = None,
     strategy: opts.strategies_option("active, random", kind="exploration") = None,
-    layout: opts.layout_option("Layouts to learn, each its default keyboard (repeat): {layouts} "
-                               "[default grid].", many=True) = None,
-    model_class: opts.model_class_option("Model classes to fit (repeat): {classes} [default "
-                                         "lines].", many=True) = None,
+    layout: opts.layout_option("Layouts to learn, each its default keyboard (repeat): {layouts}.",
+                               many=True, show_default="grid; with --peer all five") = None,
+    model_class: opts.model_class_option("Model classes to fit (repeat): {classes}.", many=True,
+                                         show_default="lines") = None,
     keyboard: opts.keyboard_option("A keyboard artifact to learn instead of the layouts' "
                                    "defaults.", optional=True) = None,
     mode: opts.mode_option(help="Reaching") = "ideal",
@@ -178,8 +178,8 @@ def bench_learn_cmd(
     peer: Annotated[bool, typer.Option(
         "--peer", help="Instead: kbcli's default learner (auto, active) beside scikit-activeml's "
         "uncertainty sampling around scikit-learn classifiers, same simulator, seeds and scorer, "
-        "with a verdict per layout and budget [layouts default grid, hex, piano, pads, "
-        "polygons].")] = False,
+        "with a verdict per layout and budget; on grid, hex, piano, pads and polygons unless "
+        "--layout is given.")] = False,
 ) -> None:
     """Benchmark learning the model: sample efficiency and speed, per layout, model class and
     strategy.
@@ -266,13 +266,13 @@ def bench_layouts_cmd(
     output: opts.output_option("Folder to write keyboards/, models/, cache/ and report/ in.") = Path(
         "out/layouts"),
     seeds: Annotated[int | None, typer.Option(
-        "--seeds", min=1, help="Learning runs per layout, class and strategy [default: the "
-        "config's].")] = None,
+        "--seeds", min=1, help="Learning runs per layout, class and strategy.",
+        show_default="the config's")] = None,
     experiments: Annotated[int | None, typer.Option(
-        "--experiments", min=2, help="Adaptation runs per strategy and category, translation "
-        "[default: the config's].")] = None,
-    layout: opts.layout_option("Only these layouts (repeat): {layouts} [default: the config's].",
-                               many=True) = None,
+        "--experiments", min=2, help="Adaptation runs per strategy and category, translation.",
+        show_default="the config's")] = None,
+    layout: opts.layout_option("Only these layouts (repeat): {layouts}.", many=True,
+                               show_default="the config's") = None,
 ) -> None:
     """Learning and adaptation on every layout: tables and one figure per layout.
 

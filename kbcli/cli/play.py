@@ -66,7 +66,8 @@ def play_cmd(
         f"most {MAX_NOTES} notes of at most {MAX_BEATS:g} beats each.")] = DEFAULT_MELODY,
     steps: Annotated[int, typer.Option("--steps", help="Number of actions.")] = 300,
     perturb_at: Annotated[int | None, typer.Option(
-        "--perturb-at", help="Step at which the keyboard moves [default steps/2 with a scene].")] = None,
+        "--perturb-at", help="Touches after which the keyboard moves (with --scene).",
+        show_default="half of --steps")] = None,
     mode: opts.mode_option() = "ideal",
     reach_noise: opts.ReachNoise = 0.0,
     arm: opts.arm_option() = "ideal",
