@@ -292,6 +292,19 @@ def busy(description: str) -> Iterator[None]:
         yield
 
 
+@contextlib.contextmanager
+def phases(description: str) -> Iterator[Callable[[str], None]]:
+    """A spinner with the elapsed time on a terminal for work done in named phases: yields
+    ``phase(text)``, which shows the phase now running (nothing when not a terminal)."""
+    if not interactive():
+        yield lambda text: None
+        return
+    cols = (SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn())
+    with Progress(*cols, console=err, transient=True) as bar:
+        task = bar.add_task(description, total=None)
+        yield lambda text: bar.update(task, description=text)
+
+
 def output_path(path: Path, force: bool = True) -> Path:
     """Check an output path's folder exists before any work is done."""
     folder = path.parent if str(path.parent) else Path(".")

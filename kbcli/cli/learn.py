@@ -21,6 +21,7 @@ from kbcli.cli.app import (
     interactive,
     note_arm,
     out,
+    phases,
     plot_app,
     progress,
 )
@@ -94,7 +95,8 @@ def learn_cmd(
     for _ in progress(learning, cfg.budget, f"{strategy} exploration ({mode}, {model_class}), "
                       "reaches", advance=reaches):
         pass
-    art = learning.artifact()
+    with phases("finishing the model") as phase:  # (model selection and calibration take a while)
+        art = learning.artifact(on_phase=phase)
     a = art.attrs
     sounds = a["n_classes"] - 1
     if sounds < MIN_SOUNDS:
