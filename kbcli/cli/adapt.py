@@ -21,6 +21,7 @@ from kbcli.cli.app import (
     figure_output,
     interactive,
     note_arm,
+    note_default,
     out,
     plot_app,
     progress,
@@ -98,7 +99,9 @@ def adapt_cmd(
     values = _adapt_values(config, flags, arm)
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
-    values.setdefault("family", scene_art.config.get("family", "translation"))
+    scene_family = "family" not in values  # estimate what the scene moved (rigid: an angle too)
+    if scene_family:
+        values["family"] = scene_art.config.get("family", "translation")
     cfg = stage.AdaptConfig.from_dict(values)
     steps = _snapshots(snapshots, cfg.max_steps)
     if beyond := sorted({s for s in steps if s > cfg.max_steps}):
@@ -111,6 +114,8 @@ def adapt_cmd(
         art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
                         snapshot_steps=steps, on_step=tick)
     write_artifact(art, output)
+    if scene_family:  # (said once the inputs passed every check: a refusal stays one line)
+        note_default("family", cfg.family, "the scene's (--family to choose)")
     _report_run(art, cfg, output)
 
 

@@ -197,6 +197,11 @@ def progress(items: Iterable[T], total: int | None, description: str, *,
                 bar.update(task, description=text)
 
 
+def note_default(name: str, value: Any, why: str) -> None:
+    """Say on stderr, once, a default that depends on the input: ``family: rigid, the scene's``."""
+    err.print(f"{name}: {value}, {why}", markup=False)
+
+
 def note_arm(arm: Any, mode: str) -> None:
     """Say on stderr when ``mode`` ignores part of the arm (:func:`kbcli.sim.modes.ideal_mode_note`)."""
     from kbcli.sim.modes import ideal_mode_note
