@@ -30,7 +30,7 @@ __version__ = "0.1.0"
 #: public name -> module that defines it (imported lazily by :func:`__getattr__`)
 _EXPORTS = {
     "Adapter": "kbcli.api",
-    "AdapterConfig": "kbcli.core.adapt",
+    "AdapterConfig": "kbcli.core.adapter_config",
     "Detector": "kbcli.core.detect",
     "DetectorConfig": "kbcli.core.detect",
     "load_model": "kbcli.api",

@@ -77,6 +77,10 @@ def test_adapt_rigid_scene_and_kde_posterior(runner, files):
     assert r.exit_code == 0, r.output
     art = read_artifact(files / "run.h5", "run")
     assert art.config["adapt"]["robot"]["family"] == "rigid"  # the scene's family by default
+    assert r.stderr.count("family: rigid, the scene's") == 1  # said once, on stderr
+    r = _adapt(runner, files, "--max-steps", "2", "--family", "translation", scene="rigid.h5")
+    assert r.exit_code == 0, r.output
+    assert "family:" not in r.stderr  # chosen, not defaulted
     assert art.data["estimates"].shape == (5, 3) and "angle error" in r.output
     assert art.data["snapshot_angles"].shape[0] == 2
 

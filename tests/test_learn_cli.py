@@ -194,3 +194,18 @@ def test_bench_reliability_summary_is_the_median_over_seeds():
 def test_bench_reliability_refuses_zero_seeds(runner):
     r = runner.invoke(app, ["bench", "reliability", "--seeds", "0"])
     _one_line_error(r, "--seeds must be a whole number in [1, 1000], got 0")
+
+
+def test_learning_reports_each_phase_after_the_last_reach():
+    """The progress covers model selection and calibration, not only the reaches (issue 28)."""
+    kb = keyboard_stage.run(KeyboardConfig(rows=2, cols=3))
+    seen = []
+    for model_class, first in (("auto", "choosing the model class"), ("forest", "cross-validating")):
+        cfg = stage.LearnConfig(budget=40, model_class=model_class)
+        learning = stage.learn(cfg, kb, rng=np.random.default_rng(0), seed=0)
+        for _ in learning:
+            pass
+        seen.clear()
+        art = learning.artifact(on_phase=seen.append)
+        assert seen[0].startswith(first) and seen[-1].startswith("scoring"), seen
+        assert f"the {art.attrs['model_class']} model" in " ".join(seen)

@@ -92,6 +92,7 @@ def test_cli_run_and_plot(runner, tmp_path):
                             "--steps", "300", "-o", str(tmp_path / "loop.h5")])
     assert r.exit_code == 0, r.output
     assert "after adaptation" in r.output
+    assert r.stderr.count("family: translation, the scene's") == 1  # a default from the input
     art = read_artifact(tmp_path / "loop.h5", "closed_loop")
     assert art.inputs["model"]["sha256"] and art.inputs["scene"]["sha256"]
     r = runner.invoke(app, ["plot", "run", str(tmp_path / "loop.h5"), "-o", str(tmp_path / "loop.png")])

@@ -21,6 +21,7 @@ from kbcli.cli.app import (
     figure_output,
     interactive,
     note_arm,
+    note_default,
     out,
     plot_app,
     progress,
@@ -63,18 +64,22 @@ def adapt_cmd(
     family: opts.family_option("the scene's family") = None,
     mode: opts.mode_option("ideal") = None,
     reach_noise: Annotated[float | None, typer.Option(
-        "--reach-noise", help="Landing scatter of the arm, px [default 0].")] = None,
+        "--reach-noise", help="Landing scatter of the arm (standard deviation), px.",
+        show_default="0")] = None,
     feedback: Annotated[str | None, typer.Option(
-        "--feedback", help="landed (the robot feels where it landed) or aim [default landed].")
-    ] = None,
+        "--feedback", help="Where the robot updates its posterior: landed (where it feels its "
+        "finger landed) or aim (where it aimed).", show_default="landed")] = None,
     arm: opts.arm_option("ideal", optional=True) = None,
     model_blur: opts.ModelBlur = None,
-    max_steps: opts.max_steps_option(f"Observations at most [default 40; at most {MAX_ADAPT_STEPS}].") = None,
+    max_steps: opts.max_steps_option(f"Touches (observations) at most, at most {MAX_ADAPT_STEPS}.",
+                                     show_default="40") = None,
     resolution: opts.Resolution = None,
     prior_halfwidth: opts.PriorHalfwidth = None,
     stop: Annotated[bool | None, typer.Option(
-        "--stop/--no-stop", help="End at the stopping rules (--stop-mass, --stop-ml) instead of "
-        "always taking T steps [default --no-stop].")] = None,
+        "--stop/--no-stop", help="End at the stopping rules (--stop-mass, --stop-ml). adapt "
+        "measures, so by default it takes all --max-steps touches, records the error after each "
+        "and says when a rule fired (as evaluate does); serve and run, which drive a robot, stop "
+        "at the rules.", show_default="--no-stop")] = None,
     kde_samples: opts.KdeSamples = None,
     kde_draw: opts.KdeDraw = None,
     kde_sampler: opts.KdeSampler = None,
@@ -109,13 +114,10 @@ def adapt_cmd(
              "random_actions": random_actions, "candidates": candidates, "active_keep": active_keep}
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
-    cfg = _adapt_config(config, flags, arm, scene_art.config.get("family", "translation"))
+    cfg, scene_family = _adapt_config(config, flags, arm,
+                                      scene_art.config.get("family", "translation"))
     steps = _snapshots(snapshots, cfg.max_steps)
-    if beyond := sorted({s for s in steps if s > cfg.max_steps}):
-        shown = ", ".join(map(str, beyond[:8])) + (f", ... ({len(beyond)} steps)" if len(beyond) > 8
-                                                   else "")
-        err.print(f"kbcli: note: --snapshots {shown} beyond --max-steps {cfg.max_steps}: not "
-                  "recorded", markup=False)
+    _note_beyond(steps, cfg.max_steps)
     stage.check_inputs(model_art, scene_art)
     note_arm(cfg.arm, cfg.mode)
     what = f"adapting ({cfg.strategy}, {cfg.posterior} posterior), observations"
@@ -124,22 +126,34 @@ def adapt_cmd(
         art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
                         snapshot_steps=steps, on_step=tick, timings=timings)
     write_artifact(art, output)
+    if scene_family:  # (said once the inputs passed every check: a refusal stays one line)
+        note_default("family", cfg.family, "the scene's (--family to choose)")
     _report_run(art, cfg, output, timings.get("setup_ms"))
 
 
+def _note_beyond(steps: list[int], max_steps: int) -> None:
+    """A note on the ``--snapshots`` steps past ``--max-steps`` (they are not recorded)."""
+    if beyond := sorted({s for s in steps if s > max_steps}):
+        shown = ", ".join(map(str, beyond[:8])) + (f", ... ({len(beyond)} steps)" if len(beyond) > 8
+                                                   else "")
+        err.print(f"kbcli: note: --snapshots {shown} beyond --max-steps {max_steps}: not "
+                  "recorded", markup=False)
+
+
 def _adapt_config(config: Path | None, flags: dict, arm: str | None,
-                  family: str) -> stage.AdaptConfig:
+                  family: str) -> tuple[stage.AdaptConfig, bool]:
     """The [adapt] table of ``config`` (if any) with the flags given on top, the arm, and
-    ``family`` (the scene's) unless set; a robot option set (in either) that the method does not
-    read is refused (:func:`kbcli.core.applies.refuse_unused`)."""
+    ``family`` (the scene's) unless set, and whether it was the scene's; a robot option set (in
+    either) that the method does not read is refused (:func:`kbcli.core.applies.refuse_unused`)."""
     table = load_stage_table(config, "adapt") if config is not None else {}
     values = {**table, **{k: v for k, v in flags.items() if v is not None}}
     if arm is not None:
         values["arm"] = load_arm(arm)
+    scene_family = "family" not in values  # estimate what the scene moved (rigid: an angle too)
     values.setdefault("family", family)
     cfg = stage.AdaptConfig.from_dict(values)
     refuse_unused(cfg.robot, opts.robot_given(flags, table, str(config)), "adapt")
-    return cfg
+    return cfg, scene_family
 
 
 def _report_run(art, cfg, output: Path, setup_ms: float | None = None) -> None:
@@ -239,25 +253,28 @@ def bench_adapt_cmd(
         "--experiments", help=opts.at_most("Runs per strategy and displacement category",
                                            MAX_EXPERIMENTS))] = 50,
     section: Annotated[list[str] | None, typer.Option(
-        "--section", help="exact, noise, rigid, kde, learned or learned-rigid (repeat for several) "
-        "[default: exact, noise, rigid and kde, plus learned when --model is given].")] = None,
+        "--section", help="Sections to run (repeat): exact, noise, rigid, kde, learned or "
+        "learned-rigid.", show_default="exact, noise, rigid and kde, plus learned with --model")
+    ] = None,
     model: opts.model_option("A learned model artifact for the learned section.",
                              optional=True) = None,
     strategy: opts.strategies_option("random, active, infogain") = None,
     category: Annotated[list[str] | None, typer.Option(
-        "--category", help="small, medium, large (repeat) [default all three].")] = None,
+        "--category", help="Displacement categories (repeat): small, medium, large.",
+        show_default="all three")] = None,
     max_steps: Annotated[int, typer.Option("--max-steps", "-T", help=opts.at_most(
-        "Steps per run", MAX_ADAPT_STEPS))] = 40,
+        "Touches per run", MAX_ADAPT_STEPS))] = 40,
     seed: opts.seed_option("Seed of displacements and runs.") = 0,
     model_blur: Annotated[float | None, typer.Option(
-        "--model-blur", help="learned section: soften the model's map by this many px [default "
-        "1].")] = None,
-    layout: opts.layout_option("Keyboard layout of every section: {layouts} (its default keyboard) "
-                               "[default: the model's keyboard with --model, else grid].") = None,
+        "--model-blur", help="learned section: soften the model's map by this many px.",
+        show_default="1")] = None,
+    layout: opts.layout_option("Keyboard layout of every section: {layouts} (its default "
+                               "keyboard).", show_default="the model's keyboard with --model, "
+                               "else grid") = None,
     kde_steps: Annotated[int, typer.Option(
-        "--kde-steps", help=opts.at_most("kde section: touches timed for the KDE step's speed (on "
-                                         "--model, default data/default-model.h5)",
-                                         opts.MAX_TIMED_STEPS))] = 200,
+        "--kde-steps", min=1, help=opts.at_most(
+            "kde section: touches timed for the KDE step's speed (on --model, else the embedded "
+            "default model)", opts.MAX_TIMED_STEPS))] = 200,
 ) -> None:
     """Benchmark the adaptation strategies: sample efficiency and speed, on any layout.
 
@@ -354,8 +371,8 @@ def _section_table(bench, cfg, sec: str, sec_rows: list[dict], title: str, bnd) 
 
 @command(bench_app, name="robust")
 def bench_robust_cmd(
-    model: opts.model_option("Model artifact [default: the embedded default model].",
-                             optional=True) = None,
+    model: opts.model_option("Model artifact (.h5, kind 'model').", optional=True,
+                             show_default="the embedded default model") = None,
     experiments: Annotated[int, typer.Option(
         "--experiments", help=opts.at_most("Runs per category, strategy and posterior",
                                            MAX_EXPERIMENTS))] = 30,

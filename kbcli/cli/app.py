@@ -197,6 +197,11 @@ def progress(items: Iterable[T], total: int | None, description: str, *,
                 bar.update(task, description=text)
 
 
+def note_default(name: str, value: Any, why: str) -> None:
+    """Say on stderr, once, a default that depends on the input: ``family: rigid, the scene's``."""
+    err.print(f"{name}: {value}, {why}", markup=False)
+
+
 def note_arm(arm: Any, mode: str) -> None:
     """Say on stderr when ``mode`` ignores part of the arm (:func:`kbcli.sim.modes.ideal_mode_note`)."""
     from kbcli.sim.modes import ideal_mode_note
@@ -290,6 +295,19 @@ def busy(description: str) -> Iterator[None]:
     with Progress(*cols, console=err, transient=True) as bar:
         bar.add_task(description, total=None)
         yield
+
+
+@contextlib.contextmanager
+def phases(description: str) -> Iterator[Callable[[str], None]]:
+    """A spinner with the elapsed time on a terminal for work done in named phases: yields
+    ``phase(text)``, which shows the phase now running (nothing when not a terminal)."""
+    if not interactive():
+        yield lambda text: None
+        return
+    cols = (SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn())
+    with Progress(*cols, console=err, transient=True) as bar:
+        task = bar.add_task(description, total=None)
+        yield lambda text: bar.update(task, description=text)
 
 
 def output_path(path: Path, force: bool = True) -> Path:

@@ -69,14 +69,14 @@ def _fmt(v: float, horizon: int) -> str:
 @command(bench_app, name="detect")
 def bench_detect_cmd(
     p_pre: Annotated[float | None, typer.Option(
-        "--p-pre", help="Failure rate before the change [default: the --model's on its reference "
-        "pose, else 0.01].")] = None,
+        "--p-pre", help="Failure rate before the change (a probability per played note).",
+        show_default="the --model's on its reference pose, else 0.01")] = None,
     p_post: Annotated[str | None, typer.Option(
         "--p-post", help="Comma-separated post-change failure rates instead of the displacement "
         "categories (e.g. 0.05,0.2).")] = None,
-    model: opts.model_option("Model artifact whose melody player sets the failure rates "
-                             "[default: the exact model of the default keyboard].",
-                             optional=True) = None,
+    model: opts.model_option("Model artifact whose melody player sets the failure rates.",
+                             optional=True,
+                             show_default="the exact model of the default keyboard") = None,
     streams: Annotated[int, typer.Option("--streams", help=opts.at_most(
         "Evaluation streams per category", opts.MAX_STREAMS))] = 400,
     tune_actions: Annotated[int, typer.Option(

@@ -94,14 +94,16 @@ def _summary(art, elapsed: float, n_run: int, step_ms: np.ndarray) -> None:
 @command(name="evaluate")
 def evaluate_cmd(
     output: opts.output_option("Evaluation artifact to write (.h5)."),
-    model: opts.model_option("Model artifact (.h5, kind 'model') to adapt with [default: the "
-                             "embedded default model, data/default-model.h5].", optional=True) = None,
+    model: opts.model_option("Model artifact (.h5, kind 'model') to adapt with.", optional=True,
+                             show_default="the embedded default model, data/default-model.h5"
+                             ) = None,
     config: opts.config_option("TOML with an [evaluate] table.", optional=False) = DEFAULT_CONFIG,
     method: Annotated[list[str] | None, typer.Option(
-        "--method", help="Only this method of the config (repeat for several) [default: all].")] = None,
+        "--method", help="Only this method of the config (repeat for several).",
+        show_default="all")] = None,
     experiments: Annotated[int | None, typer.Option(
         "--experiments", help="Repetitions per parametrization, strategy and mode, at most "
-        f"{MAX_EXPERIMENTS} (overrides the config).")] = None,
+        f"{MAX_EXPERIMENTS}.", show_default="the config's")] = None,
     mode: opts.mode_option("the config's modes", help="Only this mode") = None,
     arm: opts.arm_option("the config's [evaluate.arm] per mode", optional=True) = None,
     jobs: opts.Jobs = 1,
@@ -172,8 +174,8 @@ def evaluate_cmd(
 @command(bench_app, name="evaluate")
 def bench_evaluate_cmd(
     config: opts.config_option("TOML with an [evaluate] table.", optional=False) = DEFAULT_CONFIG,
-    model: opts.model_option("Model artifact; default: the exact model of the config's keyboard.",
-                             optional=True) = None,
+    model: opts.model_option("Model artifact (.h5, kind 'model').", optional=True,
+                             show_default="the exact model of the config's keyboard") = None,
     experiments: Annotated[int, typer.Option(
         "--experiments", help=opts.at_most("Repetitions per parametrization and strategy",
                                            MAX_EXPERIMENTS))] = 2,

@@ -22,36 +22,44 @@ def keyboard_cmd(
     config: opts.config_option(
         "TOML file with a [keyboard] table (e.g. pipelines/keyboard.toml; pipelines/layouts/*.toml "
         "for the other layouts, polygons' keys included).") = None,
-    layout: opts.layout_option("Layout of the keys [default grid]. {described}.") = None,
+    layout: opts.layout_option("Layout of the keys. {described}.", show_default="grid") = None,
     rows: Annotated[int | None, typer.Option(
-        help=f"Rows of keys: grid, hex, pads [default 4]; rows x cols at most {MAX_KEYS} keys.")] = None,
+        help=f"Rows of keys (grid, hex, pads); rows x cols at most {MAX_KEYS} keys.",
+        show_default="4")] = None,
     cols: Annotated[int | None, typer.Option(
-        help="Columns of keys: grid, hex, pads [default 8]; white keys: piano [default 12]; at most "
-        f"{MAX_KEYS} keys in all.")] = None,
+        help=f"Columns of keys (grid, hex, pads); white keys (piano); at most {MAX_KEYS} keys in "
+        "all.", show_default="8; piano 12")] = None,
     key_size: Annotated[float | None, typer.Option(
-        help="Key size, px: a square's side (grid) [default 50], a hexagon's width across the flats "
-        "(hex) [50], a white key's width (piano) [36], the distance between pad centres (pads) [50]."
-    )] = None,
+        help="Key size, px: a square's side (grid), a hexagon's width across the flats (hex), a "
+        "white key's width (piano), the distance between pad centres (pads).",
+        show_default="50; piano 36")] = None,
     key_height: Annotated[float | None, typer.Option(
-        help="piano: height of the white keys, px [default 160].")] = None,
+        help="piano: height of the white keys, px.", show_default="160")] = None,
     black_width: Annotated[float | None, typer.Option(
-        help="piano: width of the black keys, px [default 20].")] = None,
+        help="piano: width of the black keys, px.", show_default="20")] = None,
     black_height: Annotated[float | None, typer.Option(
-        help="piano: height of the black keys, px [default 100].")] = None,
+        help="piano: height of the black keys, px.", show_default="100")] = None,
     pad_radius: Annotated[float | None, typer.Option(
-        help="pads: radius of a pad, px [default 20].")] = None,
+        help="pads: radius of a pad, px.", show_default="20")] = None,
     origin_x: Annotated[float | None, typer.Option(
-        help="Pad x of the lower-left corner, px [default: the keyboard centred on x = 400; "
-        "grid 200; polygons 0].")] = None,
+        help="Pad x of the keyboard's lower-left corner, px.",
+        show_default="the keyboard centred on x = 400; grid 200; polygons 0")] = None,
     origin_y: Annotated[float | None, typer.Option(
-        help="Pad y of the lower-left corner, px [default: centred on y = 350; grid 250; "
-        "polygons 0].")] = None,
-    margin: Annotated[float | None, typer.Option(help="Working band around the keyboard, px [default 50].")] = None,
-    base_note: Annotated[str | None, typer.Option(help="Note of the first key [default C3].")] = None,
+        help="Pad y of the keyboard's lower-left corner, px.",
+        show_default="centred on y = 350; grid 250; polygons 0")] = None,
+    margin: Annotated[float | None, typer.Option(
+        help="Width of the working band around the keyboard, px.", show_default="50")] = None,
+    base_note: Annotated[str | None, typer.Option(
+        help="Note of the first key (a name like C3, F#4 or Bb2).", show_default="C3")] = None,
     scale: Annotated[str | None, typer.Option(
-        help="diatonic, chromatic or pentatonic: grid, pads, polygons [default diatonic].")] = None,
-    noise: Annotated[float | None, typer.Option("--noise", help="Std of perception noise on pitch and tempo [default 0].")] = None,
-    threshold: Annotated[float | None, typer.Option("--threshold", help="Manhattan match threshold, Eq. 2 [default 1.5].")] = None,
+        help="Scale the keys climb: diatonic, chromatic or pentatonic (grid, pads, polygons).",
+        show_default="diatonic")] = None,
+    noise: Annotated[float | None, typer.Option(
+        "--noise", help="Standard deviation of the perception noise on pitch (semitones) and tempo "
+        "(bpm).", show_default="0")] = None,
+    threshold: Annotated[float | None, typer.Option(
+        "--threshold", help="Match threshold (Eq. 2): the largest Manhattan distance, in semitones "
+        "plus bpm, between a heard sound and a key's.", show_default="1.5")] = None,
 ) -> None:
     """Build a virtual keyboard of any layout and write its artifact.
 

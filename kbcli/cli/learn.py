@@ -21,6 +21,7 @@ from kbcli.cli.app import (
     interactive,
     note_arm,
     out,
+    phases,
     plot_app,
     progress,
 )
@@ -96,7 +97,8 @@ def learn_cmd(
     for _ in progress(learning, cfg.budget, f"{strategy} exploration ({mode}, {model_class}), "
                       "reaches", advance=reaches):
         pass
-    art = learning.artifact()
+    with phases("finishing the model") as phase:  # (model selection and calibration take a while)
+        art = learning.artifact(on_phase=phase)
     a = art.attrs
     sounds = a["n_classes"] - 1
     if sounds < MIN_SOUNDS:
@@ -164,13 +166,13 @@ def bench_learn_cmd(
     seeds: Annotated[int, typer.Option("--seeds", help=opts.at_most("Runs per row",
                                                                     opts.MAX_SEEDS))] = 5,
     budgets: Annotated[str | None, typer.Option(
-        "--budgets", help="Budgets at which to report the accuracy, comma-separated, each at most "
-        f"{MAX_BUDGET} [default 200,400,800,1600; with --peer 150,300,800].")] = None,
+        "--budgets", help="Budgets (reaches) at which to report the accuracy, comma-separated, "
+        f"each at most {MAX_BUDGET}.", show_default="200,400,800,1600; with --peer 150,300,800")] = None,
     strategy: opts.strategies_option("active, random", kind="exploration") = None,
-    layout: opts.layout_option("Layouts to learn, each its default keyboard (repeat): {layouts} "
-                               "[default grid].", many=True) = None,
-    model_class: opts.model_class_option("Model classes to fit (repeat): {classes} [default "
-                                         "lines].", many=True) = None,
+    layout: opts.layout_option("Layouts to learn, each its default keyboard (repeat): {layouts}.",
+                               many=True, show_default="grid; with --peer all five") = None,
+    model_class: opts.model_class_option("Model classes to fit (repeat): {classes}.", many=True,
+                                         show_default="lines") = None,
     keyboard: opts.keyboard_option("A keyboard artifact to learn instead of the layouts' "
                                    "defaults.", optional=True) = None,
     mode: opts.mode_option(help="Reaching") = "ideal",
@@ -187,8 +189,8 @@ def bench_learn_cmd(
     peer: Annotated[bool, typer.Option(
         "--peer", help="Instead: kbcli's default learner (auto, active) beside scikit-activeml's "
         "uncertainty sampling around scikit-learn classifiers, same simulator, seeds and scorer, "
-        "with a verdict per layout and budget [layouts default grid, hex, piano, pads, "
-        "polygons].")] = False,
+        "with a verdict per layout and budget; on grid, hex, piano, pads and polygons unless "
+        "--layout is given.")] = False,
 ) -> None:
     """Benchmark learning the model: sample efficiency and speed, per layout, model class and
     strategy.
@@ -277,13 +279,13 @@ def bench_layouts_cmd(
     output: opts.output_option("Folder to write keyboards/, models/, cache/ and report/ in.") = Path(
         "out/layouts"),
     seeds: Annotated[int | None, typer.Option(
-        "--seeds", help=f"Learning runs per layout, class and strategy, at most {opts.MAX_SEEDS} "
-        "[default: the config's].")] = None,
+        "--seeds", min=1, help=f"Learning runs per layout, class and strategy, at most "
+        f"{opts.MAX_SEEDS}.", show_default="the config's")] = None,
     experiments: Annotated[int | None, typer.Option(
         "--experiments", min=2, help="Adaptation runs per strategy and category, translation, at "
-        f"most {MAX_EXPERIMENTS} [default: the config's].")] = None,
-    layout: opts.layout_option("Only these layouts (repeat): {layouts} [default: the config's].",
-                               many=True) = None,
+        f"most {MAX_EXPERIMENTS}.", show_default="the config's")] = None,
+    layout: opts.layout_option("Only these layouts (repeat): {layouts}.", many=True,
+                               show_default="the config's") = None,
 ) -> None:
     """Learning and adaptation on every layout: tables and one figure per layout.
 

@@ -17,7 +17,7 @@ from typing import Annotated, Any
 
 import typer
 
-from kbcli.core.adapter_config import AdapterConfig
+from kbcli.core.adapter_config import MAX_CANDIDATES, MAX_KDE_SAMPLES, AdapterConfig
 from kbcli.core.detect import DETECTORS
 from kbcli.core.estimators import ESTIMATORS
 from kbcli.core.explore import STRATEGIES as EXPLORATIONS
@@ -85,9 +85,10 @@ def output_option(help: str) -> Any:
     return Annotated[Path, _opt("-o", "--output", help=help)]
 
 
-def model_option(help: str = "Model artifact (.h5, kind 'model').", optional: bool = False) -> Any:
+def model_option(help: str = "Model artifact (.h5, kind 'model').", optional: bool = False,
+                 **kw: Any) -> Any:
     """``--model``: a model artifact read."""
-    return Annotated[Path | None if optional else Path, _opt("--model", help=help)]
+    return Annotated[Path | None if optional else Path, _opt("--model", help=help, **kw)]
 
 
 def keyboard_option(help: str = "Keyboard artifact (.h5) to learn.", optional: bool = False) -> Any:
@@ -158,47 +159,50 @@ Scheduler = Annotated[str | None, _opt(
 
 
 # -- the robot's adaptation -------------------------------------------------------------------------
-def _default(text: str | None) -> str:
-    return f" [default {text}]" if text else ""
+def _shown(default: str | None) -> str | bool:
+    """What the help shows as ``[default: ...]``: ``default`` (an option whose value a config may
+    fill, so the parameter's own default is None), else the parameter's default."""
+    return default if default else True
 
 
 def strategy_option(default: str | None = None) -> Any:
     """``--strategy``: one adaptation strategy (None: the config's, named in ``default``)."""
     return Annotated[str | None, _opt(
-        "--strategy", help=f"Adaptation strategy: {one_of('strategy')}{_default(default)}.")]
+        "--strategy", help=f"Adaptation strategy: {one_of('strategy')}.",
+        show_default=_shown(default))]
 
 
 def strategies_option(default: str, kind: str = "strategy") -> Any:
     """``--strategy`` repeated: the strategies (``kind``: or the explorations) a benchmark runs."""
     return Annotated[list[str] | None, _opt(
-        "--strategy", help=f"Strategies to run (repeat): {one_of(kind)} [default {default}].")]
+        "--strategy", help=f"Strategies to run (repeat): {one_of(kind)}.", show_default=default)]
 
 
 def posterior_option(default: str | None = None) -> Any:
     """``--posterior``: the posterior kind."""
     return Annotated[str | None, _opt(
-        "--posterior", help=f"Posterior{_default(default)}. {describe_of('posterior')}.")]
+        "--posterior", help=f"Posterior. {describe_of('posterior')}.", show_default=_shown(default))]
 
 
 def estimator_option(default: str = "mean") -> Any:
     """``--estimator``: which point of the posterior the robot acts on (None: the config's)."""
     return Annotated[str | None, _opt(
-        "--estimator", help=f"Estimate of the displacement the robot acts on{_default(default)}. "
-        f"{describe_of('estimator')}.")]
+        "--estimator", help=f"Estimate of the displacement the robot acts on. "
+        f"{describe_of('estimator')}.", show_default=_shown(default))]
 
 
 def family_option(default: str | None = None, help: str = "Transform family the robot estimates"
                   ) -> Any:
     """``--family``: the transform family."""
     return Annotated[str | None, _opt(
-        "--family", help=f"{help}{_default(default)}. {describe_of('family')}.")]
+        "--family", help=f"{help}. {describe_of('family')}.", show_default=_shown(default))]
 
 
 def mode_option(default: str | None = None, help: str = "Reaching", note: str = "") -> Any:
     """``--mode``: the simulator's mode (``note``: what the modes mean to the command)."""
     return Annotated[str | None, _opt(
-        "--mode", help=f"{help}: {one_of('mode')}{f' ({note})' if note else ''}"
-        f"{_default(default)}.")]
+        "--mode", help=f"{help}: {one_of('mode')}{f' ({note})' if note else ''}.",
+        show_default=_shown(default))]
 
 
 ARM_HELP = ("Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains and "
@@ -215,25 +219,27 @@ def arm_option(default: str | None = None, optional: bool = False, files: bool =
         text = f"Arm preset: {one_of('arm')}; or a TOML file with an [arm] table (preset = NAME plus fields)"
     else:
         text = f"Arm preset ({', '.join(names)})"
-    return Annotated[str | None if optional else str, _opt("--arm", help=text + _default(default)
-                                                           + ".")]
+    return Annotated[str | None if optional else str, _opt("--arm", help=text + ".",
+                                                           show_default=_shown(default))]
 
 
 ReachNoise = Annotated[float, _opt("--reach-noise", help="Landing scatter of the arm, px.")]
 
 MODEL_BLUR_HELP = (
-    "Override: fix the blur (px, 0-50) of the model's key edges. Default: the robust posterior "
+    "Override: fix the blur (px, 0-50) of the model's key edges. Not given, the robust posterior "
     "learns it from the touches (translation: it weighs 0, 1, 2.5 and 5 px and twice a weak "
     "model's own boundary error; rigid: 0 px; recorded in the run as robust_blurs); the plain "
     "(robust = false) and kde posteriors soften a learned model's map by 1 px, the exact one's by 0.")
 #: ``--model-blur``: fix the blur of the model's key edges (None: the posterior's own).
-ModelBlur = Annotated[float | None, _opt("--model-blur", help=MODEL_BLUR_HELP)]
+ModelBlur = Annotated[float | None, _opt("--model-blur", help=MODEL_BLUR_HELP,
+                                         show_default="learned from the touches")]
 #: ``--resolution``: the hypothesis grid step.
 Resolution = Annotated[float | None, _opt(
-    "--resolution", help="Hypothesis grid step, px [default 0.5].")]
+    "--resolution", help="Hypothesis grid step, px.", show_default="0.5")]
 #: ``--prior-halfwidth``: the prior box.
 PriorHalfwidth = Annotated[float | None, _opt(
-    "--prior-halfwidth", help="Prior box of dx and dy, +-px [default 45].")]
+    "--prior-halfwidth", help="Half-width of the prior box of dx and dy, px (the robot expects a "
+    "move within +-this).", show_default="45")]
 
 
 # -- the paper's method's parts (issue 26); each refused where the method does not read it --------
@@ -246,8 +252,8 @@ def _robot_option(name: str, kind: Any, help: str, default: str | None = None) -
     """``--NAME`` (dashes for underscores) of the adapter's option ``name`` (None: the config's),
     its help closed by the adapter's default."""
     flag = "--" + name.replace("_", "-")
-    return Annotated[kind | None, _opt(flag, help=f"{help} [default "
-                                                  f"{default or _robot_default(name)}].")]
+    return Annotated[kind | None, _opt(flag, help=f"{help}.",
+                                       show_default=str(default or _robot_default(name)))]
 
 
 #: The adapter options of the flags above (and those every adapting command has), by flag.
@@ -273,7 +279,8 @@ def robot_given(flags: Mapping[str, Any], table: Mapping[str, Any] | None = None
 
 #: ``--kde-samples``: N of Algorithm 2.
 KdeSamples = _robot_option("kde_samples", int, "kde posterior: actions drawn from p(action | "
-                           "sound) per KDE term (N of Algorithm 2), a whole number >= 10")
+                           "sound) per KDE term (N of Algorithm 2), a whole number >= 10, at most "
+                           f"{MAX_KDE_SAMPLES}")
 #: ``--kde-draw``: when those samples are drawn.
 KdeDraw = _robot_option("kde_draw", str, "kde posterior: shared (each sound's samples drawn once, "
                         "reused by every touch) or fresh (Algorithm 2 as written: new samples for "
@@ -308,10 +315,11 @@ RandomActions = _robot_option("random_actions", str, "Where strategy random touc
 #: ``--candidates``: candidate actions per decision.
 Candidates = _robot_option("candidates", int, "Candidate actions per decision of active, "
                            "paper-active (sampled from the model) and infogain, a whole number "
-                           ">= 1")
+                           f">= 1, at most {MAX_CANDIDATES}")
 #: ``--active-keep``: the most confusing candidates simulated.
 ActiveKeep = _robot_option("active_keep", int, "Most confusing candidates active and "
-                           "paper-active keep and simulate, a whole number >= 1")
+                           "paper-active keep and simulate, a whole number >= 1, at most "
+                           f"{MAX_CANDIDATES}")
 
 
 def max_steps_option(help: str, optional: bool = True, **kw: Any) -> Any:
@@ -320,19 +328,20 @@ def max_steps_option(help: str, optional: bool = True, **kw: Any) -> Any:
 
 
 # -- parts named in benchmarks and stages -----------------------------------------------------------
-def layout_option(help: str, many: bool = False) -> Any:
+def layout_option(help: str, many: bool = False, **kw: Any) -> Any:
     """``--layout``: a layout (or, with ``many``, several); the help lists the registered ones."""
     kind = list[str] | None if many else str | None
     return Annotated[kind, _opt("--layout", help=help.format(layouts=", ".join(names_of("layout")),
-                                                             described=describe_of("layout")))]
+                                                             described=describe_of("layout")), **kw)]
 
 
-def model_class_option(help: str, many: bool = False) -> Any:
+def model_class_option(help: str, many: bool = False, **kw: Any) -> Any:
     """``--model-class`` (or, with ``many``, repeated): ``{classes}`` in ``help`` lists the
     registered model classes."""
     kind = list[str] | None if many else str
     return Annotated[kind, _opt("--model-class",
-                                help=help.format(classes=", ".join(names_of("model class"))))]
+                                help=help.format(classes=", ".join(names_of("model class"))),
+                                **kw)]
 
 
 def detector_option(default_note: str = "binomial is the paper's") -> Any:

@@ -67,8 +67,8 @@ def play_cmd(
     steps: Annotated[int, typer.Option(
         "--steps", help=f"Number of actions, at most {stage.MAX_PLAY_STEPS}.")] = 300,
     perturb_at: Annotated[int | None, typer.Option(
-        "--perturb-at", help="Step at which the keyboard moves, before --steps [default steps/2 with "
-        "a scene].")] = None,
+        "--perturb-at", help="Touches after which the keyboard moves (with --scene), fewer than "
+        "--steps.", show_default="half of --steps")] = None,
     mode: opts.mode_option() = "ideal",
     reach_noise: opts.ReachNoise = 0.0,
     arm: opts.arm_option() = "ideal",

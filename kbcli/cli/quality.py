@@ -39,11 +39,11 @@ def quality_cmd(
     config: opts.config_option("TOML with a [quality] table.", optional=False) = DEFAULT_CONFIG,
     keyboard: opts.keyboard_option("Keyboard artifact the models are learned on.") = DEFAULT_KEYBOARD,
     experiments: Annotated[int | None, typer.Option(
-        "--experiments", help=f"Repetitions per displacement, model and row, at most {MAX_EXPERIMENTS} "
-        "(overrides the config).")] = None,
+        "--experiments", help="Repetitions per displacement, model and row, at most "
+        f"{MAX_EXPERIMENTS}.", show_default="the config's")] = None,
     budgets: Annotated[str | None, typer.Option(
-        "--budgets", help=f"Reach budgets of the models, comma-separated, each at most {MAX_BUDGET} "
-        "(overrides the config).")] = None,
+        "--budgets", help=f"Reach budgets of the models, comma-separated, each at most {MAX_BUDGET}.",
+        show_default="the config's")] = None,
     jobs: opts.Jobs = 1,
     scheduler: opts.Scheduler = None,
     resume: Annotated[bool, typer.Option(

@@ -15,6 +15,7 @@ from kbcli.cli.app import (
     command,
     figure_output,
     note_arm,
+    note_default,
     out,
     plot_app,
     progress,
@@ -81,7 +82,8 @@ def run_cmd(
     check_io({"--model": model, "--scene": scene, "--arm": arm_file(arm)}, ("--output", output))
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
-    if family is None:  # like adapt: estimate what the scene moved (a rigid move has an angle)
+    scene_family = family is None  # like adapt: estimate what the scene moved (rigid: an angle)
+    if scene_family:
         family = scene_art.config.get("family", "translation")
     given = {"estimator": estimator, "kde_samples": kde_samples, "kde_draw": kde_draw,
              "kde_sampler": kde_sampler, "kde_floor": kde_floor, "ml_ties": ml_ties,
@@ -110,6 +112,8 @@ def run_cmd(
         pass
     art = session.artifact()
     write_artifact(art, output)
+    if scene_family:  # (said once the inputs passed every check: a refusal stays one line)
+        note_default("family", family, "the scene's (--family to choose)")
     _report_loop(art.attrs, output)
 
 

@@ -137,13 +137,16 @@ def serve_cmd(
     posterior: opts.posterior_option("likelihood") = None,
     estimator: opts.estimator_option() = None,
     family: opts.family_option("translation") = None,
-    max_steps: opts.max_steps_option(f"Touches at most [default 40; at most {MAX_SERVE_STEPS}].") = None,
+    max_steps: opts.max_steps_option(f"Touches at most, at most {MAX_SERVE_STEPS}.",
+                                     show_default="40") = None,
     stop: Annotated[bool | None, typer.Option(
-        "--stop/--no-stop", help="Say done at the stopping rule (mass within 1 px >= 0.95), or "
-        "only after --max-steps [default --stop].")] = None,
+        "--stop/--no-stop", help="Say done at the stopping rule (posterior mass within 1 px of "
+        "the estimate >= 0.95), or only after --max-steps. On unless --no-stop: a robot should touch "
+        "no more than it needs (adapt, which measures, takes every touch by default).",
+        show_default="--stop")] = None,
     blur: Annotated[float | None, typer.Option(
-        "--blur", help="The robot's reach noise, px, used when it does not send where it felt "
-        "it landed [default 0].")] = None,
+        "--blur", help="The robot's reach noise (standard deviation), px, used when it does not "
+        "send where it felt it landed.", show_default="0")] = None,
     model_blur: opts.ModelBlur = None,
     resolution: opts.Resolution = None,
     prior_halfwidth: opts.PriorHalfwidth = None,

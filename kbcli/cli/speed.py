@@ -29,8 +29,8 @@ def _loadavg() -> str:
 
 @command(bench_app, name="speed")
 def bench_speed_cmd(
-    model: opts.model_option("Model artifact [default: the embedded default model].",
-                             optional=True) = None,
+    model: opts.model_option("Model artifact.", optional=True,
+                             show_default="the embedded default model") = None,
     repeats: Annotated[int, typer.Option("--repeats", help=opts.at_most(
         "Adaptations per row (each its own seed); the table gives medians", MAX_REPEATS))] = 5,
     touches: Annotated[int, typer.Option("--touches", "-T", help=opts.at_most(

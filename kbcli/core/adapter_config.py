@@ -13,12 +13,13 @@ from pydantic import AfterValidator, Field, Strict, model_validator
 
 from kbcli.core.config import (
     Config,
-    Count,
     Flag,
     Name,
     NonNegative,
     Positive,
     Rate,
+    Whole,
+    between,
 )
 from kbcli.core.estimators import ESTIMATORS
 from kbcli.core.grid import grid_bytes
@@ -33,6 +34,11 @@ from kbcli.core.robust import (
 )
 from kbcli.core.strategies import STRATEGIES
 from kbcli.core.transforms import FAMILIES
+
+#: Upper bounds of the counts a user can type (a cost the run would pay at every touch).
+MAX_CANDIDATES = 100_000
+MAX_HYPOTHESES = 1_000_000
+MAX_KDE_SAMPLES = 1_000_000
 
 #: Default softening (px) of a learned model's map (``AdapterConfig.model_blur``).
 LEARNED_BLUR = 1.0
@@ -227,12 +233,12 @@ class AdapterConfig(Config):
     model_blur: Blur | None = None
     cell_average: Flag = True
     raster_step: Positive | None = None
-    candidates: Count = 256
-    hypotheses: Count = 512
-    active_keep: Count = 8
-    active_hypotheses: Count = 2048
+    candidates: between(Whole, 1, MAX_CANDIDATES) = 256
+    hypotheses: between(Whole, 1, MAX_HYPOTHESES) = 512
+    active_keep: between(Whole, 1, MAX_CANDIDATES) = 8
+    active_hypotheses: between(Whole, 1, MAX_HYPOTHESES) = 2048
     random_actions: Annotated[Name, _choice(*RANDOM_ACTIONS)] = "area"
-    kde_samples: Annotated[int, Strict(), Field(ge=10)] = 10000
+    kde_samples: between(Whole, 10, MAX_KDE_SAMPLES) = 10000
     kde_draw: Annotated[Name, _choice(*KDE_DRAWS)] = "shared"
     kde_sampler: Annotated[Name, _choice(*KDE_SAMPLERS)] = "model"
     kde_floor: Floor | None = None

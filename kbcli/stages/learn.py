@@ -34,7 +34,7 @@ Schema 3 (schema 2: ``lines`` only, calibrated; schema 1: ``lines``, uncalibrate
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Annotated, Any, ClassVar
 
 import numpy as np
@@ -210,15 +210,21 @@ class Learning:
                                                            spawn_key=(RELIABILITY_KEY,)))
         return reliability.assess(model, ex.landed, ex.perceived, rng=rng)
 
-    def artifact(self) -> Artifact:
-        """The ``model`` artifact (after the last batch)."""
+    def artifact(self, on_phase: Callable[[str], None] | None = None) -> Artifact:
+        """The ``model`` artifact (after the last batch); ``on_phase(text)`` is told each phase
+        (model selection, calibration, scoring) as it starts."""
         ex = self.exploration
         if len(ex.targets) < self.cfg.budget:
             raise RuntimeError("learning is not finished: iterate to the end first")
         kb = self.keyboard
+        phase = on_phase or (lambda text: None)
+        if self.cfg.model_class == AUTO:
+            phase("choosing the model class (5-fold cross-validation of each)")
         sel = self.selection()
         model_class = self.cfg.model_class if sel is None else sel.chosen
+        phase(f"cross-validating and calibrating the {model_class} model (5 folds)")
         model, rel = self.reliability(model_class)
+        phase("scoring the model against the keyboard")
         pred, true = scoring.key_maps(model, kb, EVAL_STEP)
         acc = scoring.accuracy_from_maps(pred, true)
         berr = scoring.boundary_error(pred, true, EVAL_STEP)
