@@ -126,3 +126,17 @@ def test_serve_deeply_nested_json_is_an_error_reply(line):
     reply = session.handle(line.encode())
     assert reply["type"] == "error" and "nested too deeply" in reply["error"]
     assert session.handle(b'{"op": "state"}')["type"] != "error"  # the session goes on
+
+
+@pytest.mark.parametrize("args", [["inspect", "{f}"],
+                                  ["adapt", "--model", "{f}", "--scene", MODEL, "-o", "{o}"],
+                                  ["report", "{f}", "-o", "{o}"]])
+def test_an_input_artifact_that_is_a_fifo_is_refused_not_waited_on(runner, tmp_path, args):
+    """A FIFO given as an artifact blocked the read forever (found by the battery)."""
+    import os
+
+    fifo = tmp_path / "f"
+    os.mkfifo(fifo)
+    r = runner.invoke(app, [a.format(f=fifo, o=tmp_path / "out") for a in args])
+    one_line_error(r, f"{fifo}: is a FIFO, expected a kbcli artifact")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f"]

@@ -406,7 +406,8 @@ def config_cases() -> list[Case]:
           setup=_bytes("x.h5", b"\x89HDF\r\n\x1a\n" + b"\0" * 5000)),
         c("inspect-fifo", ["inspect", "{d}/f"], setup=_fifo("f")),
         c("report-of-fifo", ["report", "{d}/f", "-o", "{d}/rep"], setup=_fifo("f")),
-        c("output-is-a-fifo", ["keyboard", "-o", "{d}/f"], setup=_fifo("f")),
+        Case("config-output-is-a-fifo-replaced", "config", ["keyboard", "-o", "{d}/f"],
+             setup=_fifo("f"), expect=(0,), lines=0, keep=("f",)),
     ]
 
 

@@ -222,6 +222,10 @@ def _check_file(path: Path) -> None:
         raise ArtifactError(f"{path}: no such file")
     if path.is_dir():
         raise ArtifactError(f"{path}: is a folder, expected a kbcli artifact (.h5 file)")
+    if not path.is_file():  # a FIFO would block the read forever, a device never end
+        kind = "a FIFO" if path.is_fifo() else "a device" if path.is_char_device() or \
+            path.is_block_device() else "not a regular file"
+        raise ArtifactError(f"{path}: is {kind}, expected a kbcli artifact (.h5 file)")
     with open(path, "rb") as fh:
         head = fh.read(8)
     if head != b"\x89HDF\r\n\x1a\n":
