@@ -102,8 +102,10 @@ class LearnConfig(Config):
     model_class : str
         The class of model fitted (a learned class of
         :data:`~kbcli.core.model_classes.MODEL_CLASSES`), or ``auto`` (the default): explore with
-        :data:`kbcli.core.select.EXPLORE_CLASS`, then fit the class with the best cross-validated
-        score on the samples (:func:`kbcli.core.select.choose`; never the simulator's truth).
+        :data:`kbcli.core.select.EXPLORE_CLASS`, re-chosen every
+        :data:`kbcli.core.select.RESELECT` reaches (:func:`kbcli.core.select.explore_choice`),
+        then fit the class with the best cross-validated score on the samples
+        (:func:`kbcli.core.select.choose`; never the simulator's truth).
     """
 
     what: ClassVar[str] = "learn"
@@ -190,7 +192,7 @@ class Learning:
         rng = np.random.default_rng(np.random.SeedSequence(self._seed, spawn_key=(SELECT_KEY,)))
         return select.choose(ex.landed, ex.perceived, match_threshold=kb.config.match_threshold,
                              area=kb.area, rng=rng,
-                             explored_with=select.explore_class(self.cfg.model_class))
+                             explored_with=ex.explored_with)
 
     @property
     def _seed(self) -> int:
@@ -202,7 +204,7 @@ class Learning:
         (:func:`kbcli.core.reliability.assess`: 5-fold cross-validation)."""
         ex, kb = self.exploration, self.keyboard
         model = ex.model
-        if chosen is not None and chosen != select.explore_class(self.cfg.model_class):
+        if chosen is not None and chosen != ex.explorer:
             model = fit_model(chosen, ex.landed, ex.perceived,
                               match_threshold=kb.config.match_threshold, area=kb.area,
                               targets=ex.targets)
