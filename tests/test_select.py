@@ -10,9 +10,11 @@ from kbcli.core.model_classes import check_choice
 from kbcli.core.select import (
     CANDIDATES,
     EXPLORE_CLASS,
+    RESELECT,
     SWITCH_Z,
     Selection,
     choose,
+    explore_choice,
     explore_class,
     paired_z,
     prefer,
@@ -92,6 +94,44 @@ def test_auto_explores_with_the_explore_class():
     for _ in ex:
         pass
     assert isinstance(ex.model, ForestModel)
+
+
+def test_explore_choice_keeps_the_forest_unless_another_class_is_clearly_better():
+    heard = np.where((G[:, 0] + 0.5 * G[:, 1] < 560)[:, None], [[10.0, 10.0]], [[20.0, 20.0]])
+    assert explore_choice(G, heard, match_threshold=1.5, area=AREA) == "svc"
+    assert explore_choice(G, _two_discs(), match_threshold=1.5, area=AREA) == "forest"
+
+
+def _grid_exploration(model_class: str, budget: int) -> Exploration:
+    from kbcli.bench.learn import bench_keyboard
+    from kbcli.sim import SimConfig, World, make_reacher
+
+    kb = bench_keyboard("grid")
+    return Exploration(ExploreConfig(budget=budget, model_class=model_class),
+                       World(kb, make_reacher(SimConfig(mode="ideal"))).touch, kb.area,
+                       kb.config.match_threshold, np.random.default_rng(0))
+
+
+def test_auto_rechooses_its_explorer_every_reselect_reaches(monkeypatch):
+    """Under auto the class refitted is re-chosen after the batch reaching each multiple of
+    RESELECT (here the choice is made to say svc), recorded with the reach count; the choice draws
+    nothing from the exploration's generator (the cover of the grid lasts past it, and its reaches
+    are the same as a forest run's), and a named class is never re-chosen."""
+    from kbcli.core import explore
+    from kbcli.core.svc_model import SVCModel
+
+    asked = []
+    monkeypatch.setattr(explore, "explore_choice", lambda x, *a, **k: asked.append(len(x)) or "svc")
+    auto = _grid_exploration("auto", RESELECT + 20)
+    steps = list(auto)
+    assert asked == [RESELECT] and auto.explorer == "svc"
+    assert auto.explorers == [(0, "forest"), (RESELECT, "svc")]
+    assert auto.explored_with == f"forest, svc from {RESELECT} reaches"
+    assert isinstance(steps[-1].model, SVCModel)
+    forest = _grid_exploration("forest", RESELECT + 20)
+    list(forest)
+    assert asked == [RESELECT] and forest.explored_with == "forest"
+    np.testing.assert_array_equal(auto.targets[:RESELECT + 10], forest.targets[:RESELECT + 10])
 
 
 def test_balanced_exploration_covers_early_and_then_seeks_boundaries():
