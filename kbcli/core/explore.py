@@ -59,7 +59,7 @@ from scipy.spatial import cKDTree
 from kbcli.core.config import Config, Count, Name, Positive
 from kbcli.core.model_classes import AUTO, DEFAULT_MODEL_CLASS, check_choice, fit_model
 from kbcli.core.registry import Registry
-from kbcli.core.select import RESELECT, explore_choice, explore_class
+from kbcli.core.select import RESELECT, explore_choice, explore_class, explore_params
 from kbcli.errors import ConfigError
 
 #: Most candidate points the cover of the working area may take (``active`` and ``balanced`` grid
@@ -361,14 +361,14 @@ class Exploration:
 
     @property
     def model(self):
-        """The model (of class :attr:`explorer`) fitted to every sample so far (None before the
-        first reach)."""
+        """The model (of class :attr:`explorer`, with :func:`kbcli.core.select.explore_params`)
+        fitted to every sample so far (None before the first reach)."""
         if len(self.landed) == 0:
             return None
         if self._model is None:
             self._model = fit_model(self.explorer, self.landed, self.perceived,
                                     match_threshold=self.match_threshold, area=self.area,
-                                    targets=self.targets)
+                                    targets=self.targets, **explore_params(self.explorer))
         return self._model
 
     @property

@@ -52,6 +52,10 @@ SWITCH_Z = 2.0
 EXPLORE_CANDIDATES = ("forest", "svc")
 #: Reaches between two choices of the class ``auto`` explores with.
 RESELECT = 100
+#: Parameters of the model refitted after every batch of an exploration (and by
+#: :func:`explore_choice`) where they differ from the final model's: a lighter forest (60 trees,
+#: 0.15 s a fit at 800 samples against 0.39 s for the final model's 200).
+EXPLORE_PARAMS: dict[str, dict] = {"forest": {"n_estimators": 60}}
 
 
 @dataclass(frozen=True)
@@ -85,8 +89,13 @@ class Selection:
 
 
 def explore_class(name: str) -> str:
-    """The class an exploration with model class ``name`` refits while it explores."""
+    """The class an exploration with model class ``name`` refits while it explores (first)."""
     return EXPLORE_CLASS if name == AUTO else name
+
+
+def explore_params(name: str) -> dict:
+    """Keyword parameters of class ``name`` while it is refitted during an exploration."""
+    return dict(EXPLORE_PARAMS.get(name, {}))
 
 
 def explore_choice(actions: np.ndarray, perceived: np.ndarray, *, match_threshold: float,
@@ -101,7 +110,8 @@ def explore_choice(actions: np.ndarray, perceived: np.ndarray, *, match_threshol
     """
     wrong, w = held_out_wrong(tuple(candidates), actions, perceived,
                               match_threshold=match_threshold, area=area,
-                              rng=np.random.default_rng(len(actions)), folds=folds)
+                              rng=np.random.default_rng(len(actions)), folds=folds,
+                              params=EXPLORE_PARAMS)
     return prefer(tuple(candidates), wrong, w)
 
 
@@ -142,7 +152,7 @@ def prefer(names: tuple[str, ...], wrong: dict[str, np.ndarray], w: np.ndarray,
 
 def held_out_wrong(names: tuple[str, ...], actions: np.ndarray, perceived: np.ndarray, *,
                    match_threshold: float, area: tuple[float, float, float, float],
-                   rng: np.random.Generator, folds: int = FOLDS
+                   rng: np.random.Generator, folds: int = FOLDS, params: dict | None = None
                    ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Which samples each class mislabels when they are held out (the same folds for all).
 
@@ -154,6 +164,8 @@ def held_out_wrong(names: tuple[str, ...], actions: np.ndarray, perceived: np.nd
         The samples.
     rng : numpy.random.Generator
         Assigns samples to folds.
+    params : dict, optional
+        name -> keyword parameters of that class (default: its defaults).
 
     Returns
     -------
@@ -168,7 +180,8 @@ def held_out_wrong(names: tuple[str, ...], actions: np.ndarray, perceived: np.nd
     fold = _fold_ids(len(x), k, rng)
     out, weights = {}, np.zeros(len(x))
     for name in names:
-        full = fit_model(name, x, s, match_threshold=match_threshold, area=area)
+        own = (params or {}).get(name, {})
+        full = fit_model(name, x, s, match_threshold=match_threshold, area=area, **own)
         labels = full.classify(s)
         weights = _area_weights(x) * (labels >= 0)
         wrong = np.zeros(len(x))
@@ -176,7 +189,8 @@ def held_out_wrong(names: tuple[str, ...], actions: np.ndarray, perceived: np.nd
             test = fold == f
             if test.all() or not test.any():
                 continue
-            m = fit_model(name, x[~test], s[~test], match_threshold=match_threshold, area=area)
+            m = fit_model(name, x[~test], s[~test], match_threshold=match_threshold, area=area,
+                          **own)
             cmap = _class_map(m.class_features_, full.class_features_, match_threshold)
             p = _held_out_probs(m, x[test], cmap, full.n_classes)
             wrong[test] = p.argmax(axis=1) != labels[test]
@@ -224,6 +238,7 @@ def choose(actions: np.ndarray, perceived: np.ndarray, *, match_threshold: float
                      folds=int(min(folds, len(np.asarray(actions).reshape(-1, 2)))))
 
 
-__all__ = ["CANDIDATES", "EXPLORE_CANDIDATES", "EXPLORE_CLASS", "RESELECT", "SWITCH_Z",
-           "Selection", "choose", "cv_errors", "explore_choice", "explore_class", "held_out_wrong",
+__all__ = ["CANDIDATES", "EXPLORE_CANDIDATES", "EXPLORE_CLASS", "EXPLORE_PARAMS", "RESELECT",
+           "SWITCH_Z", "Selection", "choose", "cv_errors", "explore_choice", "explore_class",
+           "explore_params", "held_out_wrong",
            "paired_z", "prefer"]

@@ -203,9 +203,10 @@ class Learning:
         its own estimate of how good it is, from its samples alone
         (:func:`kbcli.core.reliability.assess`: 5-fold cross-validation)."""
         ex, kb = self.exploration, self.keyboard
+        name = ex.explorer if chosen is None else chosen
         model = ex.model
-        if chosen is not None and chosen != ex.explorer:
-            model = fit_model(chosen, ex.landed, ex.perceived,
+        if name != ex.explorer or select.explore_params(name):  # the final model's parameters
+            model = fit_model(name, ex.landed, ex.perceived,
                               match_threshold=kb.config.match_threshold, area=kb.area,
                               targets=ex.targets)
         rng = np.random.default_rng(np.random.SeedSequence(self._seed,
