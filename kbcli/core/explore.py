@@ -378,10 +378,11 @@ class Exploration:
 
     def _reselect(self, before: int) -> None:
         """Under ``auto``: re-choose :attr:`explorer` when the last batch (from ``before``
-        reaches) reached a multiple of :data:`~kbcli.core.select.RESELECT` and two classes or more
-        (silence among them) were heard (eagerly, whoever asks for the model when)."""
+        reaches) reached a multiple of :data:`~kbcli.core.select.RESELECT` before the budget and two
+        classes or more (silence among them) were heard (eagerly, whoever asks for the model when)."""
         n = len(self.landed)
-        if self.cfg.model_class != AUTO or n // RESELECT == before // RESELECT:
+        if (self.cfg.model_class != AUTO or n // RESELECT == before // RESELECT
+                or n >= self.cfg.budget):
             return
         silent = np.isnan(self.perceived).all(axis=1)
         if len(np.unique(self.perceived[~silent], axis=0)) + bool(silent.any()) < 2:

@@ -22,7 +22,7 @@ SVMs replace the forest), and ``lines`` never beats the SVMs there by more than 
 
 Exploration needs a model while it explores, before the choice can be made: under ``auto`` it
 starts with :data:`EXPLORE_CLASS` (``forest``: fast to refit, any key shape), and every
-:data:`RESELECT` reaches it re-chooses the class it explores with among
+:data:`RESELECT` reaches (but at the end) it re-chooses the class it explores with among
 :data:`EXPLORE_CANDIDATES` by the same cross-validation on the samples so far
 (:func:`explore_choice`): the class that predicts the samples best also places the boundary bands
 best, so its bisections are worth more (seed 0 of ``kbcli bench learn --peer``'s, 800 reaches:
@@ -50,8 +50,9 @@ EXPLORE_CLASS = "forest"
 SWITCH_Z = 2.0
 #: The classes ``auto`` may explore with (re-chosen every :data:`RESELECT` reaches).
 EXPLORE_CANDIDATES = ("forest", "svc")
-#: Reaches between two choices of the class ``auto`` explores with.
-RESELECT = 100
+#: Reaches between two choices of the class ``auto`` explores with (a choice takes 2-3 s on 2
+#: cores at 200-800 samples: every 100 reaches doubled the time of a learn run of 800).
+RESELECT = 200
 #: Parameters of the model refitted after every batch of an exploration (and by
 #: :func:`explore_choice`) where they differ from the final model's: a lighter forest (60 trees,
 #: 0.15 s a fit at 800 samples against 0.39 s for the final model's 200).
