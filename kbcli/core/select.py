@@ -53,9 +53,10 @@ EXPLORE_CANDIDATES = ("forest", "svc")
 #: Reaches between two choices of the class ``auto`` explores with (a choice takes 2-3 s on 2
 #: cores at 200-800 samples: every 100 reaches doubled the time of a learn run of 800).
 RESELECT = 200
-#: Parameters of the model refitted after every batch of an exploration (and by
-#: :func:`explore_choice`) where they differ from the final model's: a lighter forest (60 trees,
-#: 0.15 s a fit at 800 samples against 0.39 s for the final model's 200).
+#: Parameters of the model refitted after every batch of an exploration and by the
+#: cross-validation of :func:`explore_choice` and :func:`choose` where they differ from the final
+#: model's: a lighter forest (60 trees, 0.15 s a fit at 800 samples, twice as fast as the final
+#: model's 120).
 EXPLORE_PARAMS: dict[str, dict] = {"forest": {"n_estimators": 60}}
 
 
@@ -219,7 +220,8 @@ def choose(actions: np.ndarray, perceived: np.ndarray, *, match_threshold: float
            area: tuple[float, float, float, float], rng: np.random.Generator,
            explored_with: str = EXPLORE_CLASS, candidates: tuple[str, ...] = CANDIDATES,
            folds: int = FOLDS) -> Selection:
-    """The candidate class :func:`prefer` keeps on the samples' held-out mislabels.
+    """The candidate class :func:`prefer` keeps on the samples' held-out mislabels (each class
+    cross-validated with :data:`EXPLORE_PARAMS`: a forest of 60 trees stands for the final 120).
 
     Raises
     ------
@@ -232,7 +234,8 @@ def choose(actions: np.ndarray, perceived: np.ndarray, *, match_threshold: float
             raise ConfigError(f"model class {name!r} is not learned from samples; valid: "
                               f"{', '.join(valid)}")
     wrong, w = held_out_wrong(tuple(candidates), actions, perceived,
-                              match_threshold=match_threshold, area=area, rng=rng, folds=folds)
+                              match_threshold=match_threshold, area=area, rng=rng, folds=folds,
+                              params=EXPLORE_PARAMS)
     total = max(float(w.sum()), 1e-300)
     err = {name: float((v * w).sum() / total) for name, v in wrong.items()}
     return Selection(chosen=prefer(tuple(candidates), wrong, w), explored_with=explored_with, cv_error=err,
