@@ -43,7 +43,7 @@ from kbcli.errors import ConfigError
 
 #: The classes ``auto`` chooses between, in the order :func:`prefer` tests them.
 CANDIDATES = ("forest", "svc", "lines", "knn")
-#: The class ``auto`` explores with (the choice is made once the samples are in).
+#: The class ``auto`` starts exploring with (re-chosen every :data:`RESELECT` reaches).
 EXPLORE_CLASS = "forest"
 #: A class replaces the one kept so far when its held-out mislabel rate is lower by more than
 #: this many standard errors of the paired difference.
@@ -103,8 +103,8 @@ def explore_params(name: str) -> dict:
 def explore_choice(actions: np.ndarray, perceived: np.ndarray, *, match_threshold: float,
                    area: tuple[float, float, float, float],
                    candidates: tuple[str, ...] = EXPLORE_CANDIDATES, folds: int = FOLDS) -> str:
-    """The class ``auto`` explores with next: the candidate with the lowest held-out mislabel rate
-    on the samples so far (ties to the earlier one).
+    """The class ``auto`` explores with next: the candidate :func:`prefer` keeps on the held-out
+    mislabels of the samples so far (each class with :data:`EXPLORE_PARAMS`).
 
     The folds come from a generator seeded with the number of samples, not from the
     exploration's: choosing draws nothing from it, so the reaches of every other class are

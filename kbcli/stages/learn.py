@@ -5,9 +5,9 @@ an exploration strategy (:mod:`kbcli.core.explore`) on the pad where the keyboar
 reference pose; the robot hears what its finger played and fits a model of p(sound | action) of the
 chosen class (:mod:`kbcli.core.model_classes`: ``lines``, :class:`~kbcli.core.learned.LearnedModel`;
 ``svc``, :class:`~kbcli.core.svc_model.SVCModel`; ``forest`` and ``knn``,
-:mod:`kbcli.core.sk_models`) or, by default (``auto``), explores with the ``forest`` class and then
-fits the class whose cross-validated mislabel rate on the samples is lowest
-(:mod:`kbcli.core.select`; the artifact's config then names the class chosen, its
+:mod:`kbcli.core.sk_models`) or, by default (``auto``), explores with the ``forest`` class (the
+class it refits re-chosen every 200 reaches among ``forest`` and ``svc``) and then fits the class
+that cross-validation on the samples prefers (:mod:`kbcli.core.select`; the artifact's config then names the class chosen, its
 ``model_class_requested`` is ``auto``, and its attrs' ``model_selection`` hold every candidate's
 score). The ground truth (the keyboard) is
 used only to score the model: the learning curve (accuracy on a 2 px grid over the working area
