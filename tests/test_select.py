@@ -7,7 +7,18 @@ import pytest
 
 from kbcli.core.explore import Exploration, ExploreConfig
 from kbcli.core.model_classes import check_choice
-from kbcli.core.select import CANDIDATES, EXPLORE_CLASS, Selection, choose, explore_class
+from kbcli.core.select import (
+    CANDIDATES,
+    EXPLORE_CLASS,
+    RESELECT,
+    SWITCH_Z,
+    Selection,
+    choose,
+    explore_choice,
+    explore_class,
+    paired_z,
+    prefer,
+)
 from kbcli.core.sk_models import ForestModel
 from kbcli.errors import ConfigError
 
@@ -24,24 +35,42 @@ def _two_discs() -> np.ndarray:
 
 
 def test_round_keys_choose_a_class_that_bends():
-    """Two round pads in silence: straight lines cannot follow the circles, the SVMs can."""
+    """Two round pads in silence: straight lines cannot follow the circles, the trees and the
+    SVMs can (on this uniform grid within a touch or two of each other: the forest stays)."""
     sel = choose(G, _two_discs(), match_threshold=1.5, area=AREA, rng=np.random.default_rng(0))
-    assert sel.chosen == "svc" and sel.explored_with == EXPLORE_CLASS and sel.folds == 5
+    assert sel.chosen == "forest" and sel.explored_with == EXPLORE_CLASS and sel.folds == 5
     assert set(sel.cv_error) == set(CANDIDATES)
     assert sel.cv_error["lines"] > 3 * sel.cv_error["svc"]
-    assert sel.summary().startswith("model class: svc, chosen by 5-fold cross-validation")
+    assert sel.summary().startswith("model class: forest, chosen by 5-fold cross-validation")
 
 
-def test_a_slanted_straight_edge_chooses_lines():
-    """A straight slanted edge: lines is exact (a tie with svc goes to the earlier candidate),
-    the trees' and the neighbours' boundaries are ragged."""
+def test_a_slanted_straight_edge_chooses_an_exact_class():
+    """A straight slanted edge: the SVMs (a linear machine) and lines are exact, the trees' and the
+    neighbours' boundaries are ragged: the SVMs replace the forest, lines only ties them."""
     heard = np.where((G[:, 0] + 0.5 * G[:, 1] < 560)[:, None], [[10.0, 10.0]], [[20.0, 20.0]])
     sel = choose(G, heard, match_threshold=1.5, area=AREA, rng=np.random.default_rng(0))
-    assert sel.chosen == "lines" and sel.cv_error["lines"] == 0.0
+    assert sel.chosen == "svc" and sel.cv_error["svc"] == sel.cv_error["lines"] == 0.0
     assert sel.cv_error["forest"] > 0 and sel.cv_error["knn"] > 0
     same = choose(G, heard, match_threshold=1.5, area=AREA, rng=np.random.default_rng(0))
     assert same == sel  # same folds, same scores
     assert Selection(**sel.to_dict()) == sel
+
+
+def test_a_class_replaces_the_kept_one_only_on_significant_evidence():
+    """Paired test: 20 of 100 touches the forest gets wrong and the SVMs right is a mean
+    difference of 0.2 with a standard error of 0.04, z = 5 (switch); 2 of 100 is z = 0.02 / 0.014
+    = 1.43 (stay)."""
+    w = np.ones(100)
+    forest = np.zeros(100)
+    forest[:20] = 1
+    svc = np.zeros(100)
+    assert paired_z(forest, svc, w) == pytest.approx(5.0)
+    assert prefer(("forest", "svc"), {"forest": forest, "svc": svc}, w) == "svc"
+    few = np.zeros(100)
+    few[:2] = 1
+    assert paired_z(few, svc, w) == pytest.approx(1 / 0.7) and 1 / 0.7 < SWITCH_Z
+    assert prefer(("forest", "svc"), {"forest": few, "svc": svc}, w) == "forest"
+    assert paired_z(svc, svc, w) == 0.0 and paired_z(forest, svc, np.zeros(100)) == 0.0
 
 
 def test_candidates_must_be_learned_classes_and_auto_is_a_valid_choice():
@@ -65,6 +94,45 @@ def test_auto_explores_with_the_explore_class():
     for _ in ex:
         pass
     assert isinstance(ex.model, ForestModel)
+
+
+def test_explore_choice_keeps_the_forest_unless_another_class_is_clearly_better():
+    heard = np.where((G[:, 0] + 0.5 * G[:, 1] < 560)[:, None], [[10.0, 10.0]], [[20.0, 20.0]])
+    assert explore_choice(G, heard, match_threshold=1.5, area=AREA) == "svc"
+    assert explore_choice(G, _two_discs(), match_threshold=1.5, area=AREA) == "forest"
+
+
+def _grid_exploration(model_class: str, budget: int) -> Exploration:
+    from kbcli.bench.learn import bench_keyboard
+    from kbcli.sim import SimConfig, World, make_reacher
+
+    kb = bench_keyboard("grid")
+    return Exploration(ExploreConfig(budget=budget, model_class=model_class),
+                       World(kb, make_reacher(SimConfig(mode="ideal"))).touch, kb.area,
+                       kb.config.match_threshold, np.random.default_rng(0))
+
+
+def test_auto_rechooses_its_explorer_every_reselect_reaches(monkeypatch):
+    """Under auto the class refitted is re-chosen after the batch reaching each multiple of
+    RESELECT (here the choice is made to say svc), recorded with the reach count; the choice draws
+    nothing from the exploration's generator (the reaches before it are a forest run's), and a
+    named class is never re-chosen."""
+    from kbcli.core import explore
+    from kbcli.core.svc_model import SVCModel
+
+    asked = []
+    monkeypatch.setattr(explore, "explore_choice", lambda x, *a, **k: asked.append(len(x)) or "svc")
+    auto = _grid_exploration("auto", RESELECT + 20)
+    steps = list(auto)
+    assert asked == [RESELECT] and auto.explorer == "svc"
+    assert auto.explorers == [(0, "forest"), (RESELECT, "svc")]
+    assert auto.explored_with == f"forest, svc from {RESELECT} reaches"
+    assert isinstance(steps[-1].model, SVCModel)
+    forest = _grid_exploration("forest", RESELECT + 20)
+    list(forest)
+    assert asked == [RESELECT] and forest.explored_with == "forest"
+    np.testing.assert_array_equal(auto.targets[:RESELECT], forest.targets[:RESELECT])
+    assert not np.array_equal(auto.targets[RESELECT:], forest.targets[RESELECT:])
 
 
 def test_balanced_exploration_covers_early_and_then_seeks_boundaries():

@@ -33,7 +33,7 @@ from kbcli.core.keyboard import Keyboard, match
 from kbcli.core.model import grid_points
 from kbcli.core.model_classes import AUTO, fit_model
 from kbcli.core.registry import Registry
-from kbcli.core.select import choose, explore_class
+from kbcli.core.select import choose
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig, World, make_reacher
 
@@ -159,7 +159,8 @@ def peer_run(cfg: PeerConfig, kb: Keyboard, name: str, seed: np.random.SeedSeque
 def kbcli_run(cfg: PeerConfig, kb: Keyboard, seed: np.random.SeedSequence
               ) -> dict[int, tuple[float, float]]:
     """kbcli's default learner (``kbcli learn``: active exploration, ``--model-class auto``),
-    scored at each budget: the exploration refits the class ``auto`` explores with, and at each
+    scored at each budget: the exploration refits the class ``auto`` explores with (re-chosen
+    every :data:`kbcli.core.select.RESELECT` reaches), and at each
     budget the class is chosen by cross-validation on the samples so far
     (:func:`kbcli.core.select.choose`, folds from a generator spawned off ``seed``) and fitted
     to them (without the learn stage's calibration, which leaves the most probable sound alone
@@ -174,7 +175,7 @@ def kbcli_run(cfg: PeerConfig, kb: Keyboard, seed: np.random.SeedSequence
     for step in ex:
         for b in [b for b in cfg.budgets if b not in out and step.n_reaches >= b]:
             sel = choose(ex.landed, ex.perceived, match_threshold=kb.config.match_threshold,
-                         area=kb.area, rng=pick, explored_with=explore_class(AUTO))
+                         area=kb.area, rng=pick, explored_with=ex.explored_with)
             model = fit_model(sel.chosen, ex.landed, ex.perceived,
                               match_threshold=kb.config.match_threshold, area=kb.area,
                               targets=ex.targets)

@@ -57,9 +57,9 @@ from pydantic import AfterValidator
 from scipy.spatial import cKDTree
 
 from kbcli.core.config import Config, Count, Name, Positive
-from kbcli.core.model_classes import DEFAULT_MODEL_CLASS, check_choice, fit_model
+from kbcli.core.model_classes import AUTO, DEFAULT_MODEL_CLASS, check_choice, fit_model
 from kbcli.core.registry import Registry
-from kbcli.core.select import explore_class
+from kbcli.core.select import RESELECT, explore_choice, explore_class, explore_params
 from kbcli.errors import ConfigError
 
 #: Most candidate points the cover of the working area may take (``active`` and ``balanced`` grid
@@ -109,8 +109,10 @@ class ExploreConfig(Config):
     model_class : str
         The model fitted to the samples (:data:`kbcli.core.model_classes.MODEL_CLASSES`): the
         ``active`` strategy bisects its boundary bands, whatever the class. ``auto``: the
-        exploration refits :data:`kbcli.core.select.EXPLORE_CLASS` (the final class is chosen by
-        cross-validation once the samples are in, :func:`kbcli.core.select.choose`).
+        exploration starts with :data:`kbcli.core.select.EXPLORE_CLASS` and re-chooses the class
+        it refits every :data:`kbcli.core.select.RESELECT` reaches
+        (:func:`kbcli.core.select.explore_choice`); the final class is chosen by cross-validation
+        once the samples are in (:func:`kbcli.core.select.choose`).
     """
 
     what: ClassVar[str] = "explore"
@@ -326,6 +328,11 @@ class Exploration:
         Every reach so far.
     perceived : (n, D) ndarray
         Every sound heard so far.
+    explorer : str
+        The model class refitted now (``cfg.model_class``; under ``auto`` re-chosen every
+        :data:`~kbcli.core.select.RESELECT` reaches, after the batch that reaches each multiple).
+    explorers : list of (int, str)
+        Each class explored with and the number of reaches from which it was.
     """
 
     def __init__(
@@ -349,18 +356,42 @@ class Exploration:
         self.perceived = np.empty((0, 0))
         self._model = None
         self._plan = np.empty((0, 2))
+        self.explorer = explore_class(cfg.model_class)
+        self.explorers = [(0, self.explorer)]
 
     @property
     def model(self):
-        """The model (of ``cfg.model_class``; ``auto``: of the class it explores with) fitted to every sample so far (None before the
-        first reach)."""
+        """The model (of class :attr:`explorer`, with :func:`kbcli.core.select.explore_params`)
+        fitted to every sample so far (None before the first reach)."""
         if len(self.landed) == 0:
             return None
         if self._model is None:
-            self._model = fit_model(explore_class(self.cfg.model_class), self.landed,
-                                    self.perceived, match_threshold=self.match_threshold,
-                                    area=self.area, targets=self.targets)
+            self._model = fit_model(self.explorer, self.landed, self.perceived,
+                                    match_threshold=self.match_threshold, area=self.area,
+                                    targets=self.targets, **explore_params(self.explorer))
         return self._model
+
+    @property
+    def explored_with(self) -> str:
+        """The classes explored with, in words (e.g. ``forest, svc from 200 reaches``)."""
+        return ", ".join(c if n == 0 else f"{c} from {n} reaches" for n, c in self.explorers)
+
+    def _reselect(self, before: int) -> None:
+        """Under ``auto``: re-choose :attr:`explorer` when the last batch (from ``before``
+        reaches) reached a multiple of :data:`~kbcli.core.select.RESELECT` before the budget and two
+        classes or more (silence among them) were heard (eagerly, whoever asks for the model when)."""
+        n = len(self.landed)
+        if (self.cfg.model_class != AUTO or n // RESELECT == before // RESELECT
+                or n >= self.cfg.budget):
+            return
+        silent = np.isnan(self.perceived).all(axis=1)
+        if len(np.unique(self.perceived[~silent], axis=0)) + bool(silent.any()) < 2:
+            return
+        name = explore_choice(self.landed, self.perceived, match_threshold=self.match_threshold,
+                              area=self.area)
+        if name != self.explorer:
+            self.explorer = name
+            self.explorers.append((n, name))
 
     def __iter__(self) -> Iterator[ExploreStep]:
         return self
@@ -381,4 +412,5 @@ class Exploration:
         self.landed = np.vstack([self.landed, landed])
         self.perceived = heard if done == 0 else np.vstack([self.perceived, heard])
         self._model = None
+        self._reselect(done)
         return ExploreStep(len(self.targets), t, landed, heard, self)

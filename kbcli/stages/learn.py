@@ -5,9 +5,9 @@ an exploration strategy (:mod:`kbcli.core.explore`) on the pad where the keyboar
 reference pose; the robot hears what its finger played and fits a model of p(sound | action) of the
 chosen class (:mod:`kbcli.core.model_classes`: ``lines``, :class:`~kbcli.core.learned.LearnedModel`;
 ``svc``, :class:`~kbcli.core.svc_model.SVCModel`; ``forest`` and ``knn``,
-:mod:`kbcli.core.sk_models`) or, by default (``auto``), explores with the ``forest`` class and then
-fits the class whose cross-validated mislabel rate on the samples is lowest
-(:mod:`kbcli.core.select`; the artifact's config then names the class chosen, its
+:mod:`kbcli.core.sk_models`) or, by default (``auto``), explores with the ``forest`` class (the
+class it refits re-chosen every 200 reaches among ``forest`` and ``svc``) and then fits the class
+that cross-validation on the samples prefers (:mod:`kbcli.core.select`; the artifact's config then names the class chosen, its
 ``model_class_requested`` is ``auto``, and its attrs' ``model_selection`` hold every candidate's
 score). The ground truth (the keyboard) is
 used only to score the model: the learning curve (accuracy on a 2 px grid over the working area
@@ -102,8 +102,10 @@ class LearnConfig(Config):
     model_class : str
         The class of model fitted (a learned class of
         :data:`~kbcli.core.model_classes.MODEL_CLASSES`), or ``auto`` (the default): explore with
-        :data:`kbcli.core.select.EXPLORE_CLASS`, then fit the class with the best cross-validated
-        score on the samples (:func:`kbcli.core.select.choose`; never the simulator's truth).
+        :data:`kbcli.core.select.EXPLORE_CLASS`, re-chosen every
+        :data:`kbcli.core.select.RESELECT` reaches (:func:`kbcli.core.select.explore_choice`),
+        then fit the class with the best cross-validated score on the samples
+        (:func:`kbcli.core.select.choose`; never the simulator's truth).
     """
 
     what: ClassVar[str] = "learn"
@@ -190,7 +192,7 @@ class Learning:
         rng = np.random.default_rng(np.random.SeedSequence(self._seed, spawn_key=(SELECT_KEY,)))
         return select.choose(ex.landed, ex.perceived, match_threshold=kb.config.match_threshold,
                              area=kb.area, rng=rng,
-                             explored_with=select.explore_class(self.cfg.model_class))
+                             explored_with=ex.explored_with)
 
     @property
     def _seed(self) -> int:
@@ -201,9 +203,10 @@ class Learning:
         its own estimate of how good it is, from its samples alone
         (:func:`kbcli.core.reliability.assess`: 5-fold cross-validation)."""
         ex, kb = self.exploration, self.keyboard
+        name = ex.explorer if chosen is None else chosen
         model = ex.model
-        if chosen is not None and chosen != select.explore_class(self.cfg.model_class):
-            model = fit_model(chosen, ex.landed, ex.perceived,
+        if name != ex.explorer or select.explore_params(name):  # the final model's parameters
+            model = fit_model(name, ex.landed, ex.perceived,
                               match_threshold=kb.config.match_threshold, area=kb.area,
                               targets=ex.targets)
         rng = np.random.default_rng(np.random.SeedSequence(self._seed,
