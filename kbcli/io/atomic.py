@@ -19,6 +19,7 @@ import glob
 import os
 import re
 import shutil
+import signal
 import tempfile
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -90,6 +91,20 @@ def _remove(tmp: str | os.PathLike) -> None:
             os.unlink(tmp)
 
 
+@contextlib.contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM until the block is done (their handlers then run, and raise, just
+    after it): a temporary file is never created without being known to the cleanup."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def write_error(path: str | os.PathLike, exc: OSError) -> ArtifactError:
     """The one-line error for an OS error while writing ``path``."""
     return ArtifactError(f"{path}: cannot write ({describe_os_error(exc)})")
@@ -121,9 +136,10 @@ def atomic_paths(paths: Sequence[str | os.PathLike], suffixes: Sequence[str] | N
         for path, suffix in zip(paths, suffixes, strict=True):
             current = path
             clean_stale(path)
-            fd, tmp = tempfile.mkstemp(prefix=_prefix(path), suffix=suffix, dir=_folder(path))
-            os.close(fd)
-            tmps.append(tmp)
+            with _signals_deferred():  # a SIGTERM between mkstemp and append would orphan tmp
+                fd, tmp = tempfile.mkstemp(prefix=_prefix(path), suffix=suffix, dir=_folder(path))
+                tmps.append(tmp)
+                os.close(fd)
         started = True
         yield list(tmps)
         for path, tmp in zip(paths, tmps, strict=True):
