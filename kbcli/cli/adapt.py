@@ -51,6 +51,7 @@ def _snapshots(text: str, max_steps: int) -> tuple[int, ...]:
 
 
 @command(name="adapt")
+@opts.with_paper_flags
 def adapt_cmd(
     model: opts.model_option(),
     scene: Annotated[Path, typer.Option("--scene", help="Scene artifact (.h5, kind 'scene'): the "
@@ -80,16 +81,7 @@ def adapt_cmd(
         "measures, so by default it takes all --max-steps touches, records the error after each "
         "and says when a rule fired (as evaluate does); serve and run, which drive a robot, stop "
         "at the rules.", show_default="--no-stop")] = None,
-    kde_samples: opts.KdeSamples = None,
-    kde_draw: opts.KdeDraw = None,
-    kde_sampler: opts.KdeSampler = None,
-    kde_floor: opts.KdeFloor = None,
-    ml_ties: opts.MlTies = None,
-    stop_ml: opts.StopMl = None,
-    stop_mass: opts.StopMass = None,
-    random_actions: opts.RandomActions = None,
-    candidates: opts.Candidates = None,
-    active_keep: opts.ActiveKeep = None,
+    paper_flags: dict | None = None,
     snapshots: Annotated[str, typer.Option(
         "--snapshots", help="Steps at which to store the posterior (0 = prior), or 'all' (every "
         "step: kbcli animate then shows each one).")
@@ -108,10 +100,7 @@ def adapt_cmd(
     flags = {"strategy": strategy, "posterior": posterior, "estimator": estimator,
              "family": family, "mode": mode, "reach_noise": reach_noise, "feedback": feedback,
              "model_blur": model_blur, "max_steps": max_steps, "resolution": resolution,
-             "prior_halfwidth": prior_halfwidth, "stop": stop, "kde_samples": kde_samples,
-             "kde_draw": kde_draw, "kde_sampler": kde_sampler, "kde_floor": kde_floor,
-             "ml_ties": ml_ties, "stop_ml": stop_ml, "stop_mass": stop_mass,
-             "random_actions": random_actions, "candidates": candidates, "active_keep": active_keep}
+             "prior_halfwidth": prior_halfwidth, "stop": stop, **(paper_flags or {})}
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
     cfg, scene_family = _adapt_config(config, flags, arm,

@@ -10,6 +10,8 @@ behaviour are the commands' own: a bad name is refused by the stage's config (on
 
 from __future__ import annotations
 
+import functools
+import inspect
 import sys
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
@@ -320,6 +322,37 @@ Candidates = _robot_option("candidates", int, "Candidate actions per decision of
 ActiveKeep = _robot_option("active_keep", int, "Most confusing candidates active and "
                            "paper-active keep and simulate, a whole number >= 1, at most "
                            f"{MAX_CANDIDATES}")
+
+
+#: The Typer type of each flag of :data:`PAPER_FLAGS`.
+_PAPER_TYPES = {"kde_samples": KdeSamples, "kde_draw": KdeDraw, "kde_sampler": KdeSampler,
+                "kde_floor": KdeFloor, "ml_ties": MlTies, "stop_ml": StopMl,
+                "stop_mass": StopMass, "random_actions": RandomActions,
+                "candidates": Candidates, "active_keep": ActiveKeep}
+
+
+def with_paper_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Give a command the flags of :data:`PAPER_FLAGS`, declared here once.
+
+    ``fn`` declares a parameter ``paper_flags`` where the flags go in its ``--help``; it receives
+    them there as one dict (flag name to value, None where not given).
+    """
+    sig = inspect.signature(fn, eval_str=True)
+    params = []
+    for p in sig.parameters.values():
+        if p.name != "paper_flags":
+            params.append(p)
+            continue
+        params += [inspect.Parameter(name, p.kind, default=None,
+                                     annotation=kind) for name, kind in _PAPER_TYPES.items()]
+
+    @functools.wraps(fn)
+    def wrapper(**kwargs: Any) -> Any:
+        flags = {name: kwargs.pop(name, None) for name in PAPER_FLAGS}
+        return fn(**kwargs, paper_flags=flags)
+
+    wrapper.__signature__ = sig.replace(parameters=params)  # type: ignore[attr-defined]
+    return wrapper
 
 
 def max_steps_option(help: str, optional: bool = True, **kw: Any) -> Any:

@@ -37,6 +37,7 @@ def _pct(v: float | None) -> str:
 
 
 @command(name="run")
+@opts.with_paper_flags
 def run_cmd(
     model: opts.model_option("Model artifact (kind 'model'), e.g. data/default-model.h5."),
     scene: Annotated[Path, typer.Option("--scene", help="Scene artifact (kbcli perturb): where the keyboard moves.")],
@@ -61,16 +62,7 @@ def run_cmd(
     n_st: Annotated[int, typer.Option(
         help=f"Detector short-term window N_ST, at most {MAX_N_ST}.")] = 10,
     threshold: Annotated[float, typer.Option(help="Detector threshold, in (0, 1).")] = 0.01,
-    kde_samples: opts.KdeSamples = None,
-    kde_draw: opts.KdeDraw = None,
-    kde_sampler: opts.KdeSampler = None,
-    kde_floor: opts.KdeFloor = None,
-    ml_ties: opts.MlTies = None,
-    stop_ml: opts.StopMl = None,
-    stop_mass: opts.StopMass = None,
-    random_actions: opts.RandomActions = None,
-    candidates: opts.Candidates = None,
-    active_keep: opts.ActiveKeep = None,
+    paper_flags: dict | None = None,
     seed: opts.Seed = 0,
 ) -> None:
     """Play, notice the move, adapt, resume: the closed loop as the robot lives it.
@@ -85,10 +77,7 @@ def run_cmd(
     scene_family = family is None  # like adapt: estimate what the scene moved (rigid: an angle)
     if scene_family:
         family = scene_art.config.get("family", "translation")
-    given = {"estimator": estimator, "kde_samples": kde_samples, "kde_draw": kde_draw,
-             "kde_sampler": kde_sampler, "kde_floor": kde_floor, "ml_ties": ml_ties,
-             "stop_ml": stop_ml, "stop_mass": stop_mass, "random_actions": random_actions,
-             "candidates": candidates, "active_keep": active_keep}
+    given = {"estimator": estimator, **(paper_flags or {})}
     adapt = AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
                              reach_noise=reach_noise, arm=load_arm(arm), stop=True,
                              **{k: v for k, v in given.items() if v is not None})
