@@ -97,6 +97,8 @@ def test_bad_quality_configs_are_refused(table):
     ({"budget": [10]}, ["unknown quality option 'budget'", "budgets"]),
     ({"rows": {"random": {"strategy": "random", "candidates": 9}}},
      ["rows.random: candidates does not apply", "strategy active, paper-active or infogain"]),
+    ({"adapt": {"kde_floor": 0.01}}, ["quality: adapt.kde_floor does not apply to any row",
+                                      "posterior kde"]),
 ])
 def test_bad_quality_config_messages_name_key_and_range(table, fragments):
     """One line naming the table, the key and what is allowed (issue 25: pydantic configs)."""
@@ -106,6 +108,14 @@ def test_bad_quality_config_messages_name_key_and_range(table, fragments):
     assert "\n" not in msg
     for f in fragments:
         assert f in msg, (f, msg)
+
+
+def test_a_shared_option_read_by_some_row_is_accepted():
+    """[quality.adapt] options go to every row: one row reading it is enough (issue 26)."""
+    cfg = stage.QualityConfig.from_dict({
+        "rows": {"random": {"strategy": "random"}, "infogain": {"strategy": "infogain"}},
+        "baseline": "random", "adapt": {"candidates": 9}})
+    assert cfg.adapt["candidates"] == 9
 
 
 def test_quality_config_normalises_round_trips_and_copies():

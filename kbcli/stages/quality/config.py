@@ -8,7 +8,7 @@ from typing import Any
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from kbcli.core.applies import refuse_unused
+from kbcli.core.applies import refuse_unused, unused, why
 from kbcli.core.config import (
     Config,
     Flag,
@@ -151,13 +151,19 @@ class QualityConfig(Config):
     def _rows_adapt(self) -> QualityConfig:
         """Let the adapt stage check every row's options (the shared ones and the row's); a row's
         own option its method does not read is refused (:func:`kbcli.core.applies.refuse_unused`)."""
+        configs = {}
         for name in self.rows:
             try:
-                acfg = adapt_config(self, name)
+                configs[name] = acfg = adapt_config(self, name)
             except ConfigError as exc:
                 raise ValueError(f"the adapt options of row {name!r}: {exc}") from None
             refuse_unused(acfg.robot, [k for k in self.rows[name] if k != "strategy"],
                           f"rows.{name}")
+        for option in self.adapt:  # a shared option some row reads is fine; one none reads is not
+            if configs and all(unused(c.robot, [option]) for c in configs.values()):
+                first = next(iter(configs))
+                raise ValueError(f"adapt.{option} does not apply to any row: "
+                                 f"{why(option, configs[first].robot)} (row {first!r})")
         return self
 
     def to_dict(self) -> dict:
