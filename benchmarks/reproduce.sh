@@ -10,7 +10,11 @@
 #   JOBS=1 benchmarks/reproduce.sh           # experiments in one process (default: 2 local processes)
 #   SCHEDULER=tcp://HOST:8786 benchmarks/reproduce.sh   # ... or on a Dask cluster
 #   EXPERIMENTS=5 benchmarks/reproduce.sh    # a quick look: 5 runs per parametrization
-#   METHOD=paper benchmarks/reproduce.sh     # one method of the config only
+#   METHODS="paper kbcli" benchmarks/reproduce.sh   # only these methods of the config (make
+#                                            # reproduce: the paper's and ours; default: all)
+#   EVAL=earlier.h5 METHODS="paper-v1 paper-likelihood" LEARN=missing benchmarks/reproduce.sh
+#                                            # the earlier readings kept in paper.toml
+#                                            # (make reproduce-earlier)
 #   CONFIG=pipelines/ablations.toml EVAL=ablations.h5 LEARN=missing benchmarks/reproduce.sh
 #                                            # the ablation ladder (make reproduce-ablations)
 #   OWN_MODEL=own-model.h5 benchmarks/reproduce.sh  # also the dynamics claims on that model's
@@ -28,7 +32,7 @@ OUT=${OUT:-build}
 REPORT=${REPORT:-report}
 JOBS=${JOBS:-2}
 MODE=${MODE:-}
-METHOD=${METHOD:-}
+METHODS=${METHODS:-${METHOD:-}}
 EXPERIMENTS=${EXPERIMENTS:-}
 SCHEDULER=${SCHEDULER:-}
 SEED=${SEED:-0}
@@ -54,7 +58,7 @@ stage() {
 
 eval_args=(--config "$CONFIG" --model "$OUT/model.h5" -o "$OUT/$EVAL" --resume)
 [[ -n $MODE ]] && eval_args+=(--mode "$MODE")
-[[ -n $METHOD ]] && eval_args+=(--method "$METHOD")
+for m in $METHODS; do eval_args+=(--method "$m"); done
 [[ -n $EXPERIMENTS ]] && eval_args+=(--experiments "$EXPERIMENTS")
 if [[ -n $SCHEDULER ]]; then eval_args+=(--scheduler "$SCHEDULER"); else eval_args+=(--jobs "$JOBS"); fi
 
@@ -83,7 +87,7 @@ fi
     done
     printf '%-10s %10.1f\n' total "$(echo "$total" | awk '{print $1 / 1000}')"
     if [[ -n $SCHEDULER ]]; then where="scheduler $SCHEDULER"; else where="jobs $JOBS"; fi
-    echo "(config: $CONFIG; mode: ${MODE:-ideal+dynamics}; methods: ${METHOD:-all of the config}; $where;" \
+    echo "(config: $CONFIG; mode: ${MODE:-ideal+dynamics}; methods: ${METHODS:-all of the config}; $where;" \
          "experiments per parametrization: ${EXPERIMENTS:-config})"
     echo "(load average, 1/5/15 min: $load_before before, $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo "?") after; $(nproc 2>/dev/null || echo "?") cores)"
 } | tee "$timings"

@@ -437,3 +437,18 @@ def test_methods_table_of_kde_methods_lists_no_likelihood_only_option():
     assert "n/a" not in table  # every row applies to both
     # all of them stay recorded in the artifact
     assert "robust_eta" in art.attrs["methods"]["paper"]["options"]["ideal"]["active"]["robot"]
+
+
+@pytest.mark.parametrize("robot,expected", [
+    ({"posterior": "kde", "kde_floor": None, "outlier": 0.002}, "eps = 0.002"),  # None: the outlier
+    ({"posterior": "kde", "kde_floor": None}, "eps = 0.001"),
+    ({"posterior": "kde", "kde_floor": 0.05}, "eps = 0.05"),
+    ({"posterior": "kde", "kde_floor": 0.0}, None),
+    ({"posterior": "likelihood", "kde_floor": None}, None),
+])
+def test_the_floor_departure_reads_a_recorded_none_as_the_outlier_rate(robot, expected):
+    """A method recorded with kde_floor = None (the paper-v1 reading) names the floor it used."""
+    from kbcli.stages.report.departures import _floor
+
+    said = _floor(robot, None)
+    assert said is None if expected is None else expected in said

@@ -56,9 +56,11 @@ def _samples(r: dict, art: Artifact) -> str | None:
 
 
 def _floor(r: dict, art: Artifact) -> str | None:
-    if r.get("posterior") != "kde" or r.get("kde_floor", r.get("outlier", 1e-3)) == 0:
+    eps = r.get("kde_floor")
+    if eps is None:  # None: the outlier rate (AdapterConfig.kde_eps)
+        eps = r.get("outlier", 1e-3)
+    if r.get("posterior") != "kde" or eps == 0:
         return None
-    eps = r.get("kde_floor", r.get("outlier", 1e-3))
     return (f"every KDE factor is mixed with eps = {eps:g} of the uniform prior (a floor); the "
             "samples of silence are restricted to the working area")
 
