@@ -143,7 +143,7 @@ reproduce-own-model: $(STAMP)
 	$(KBCLI) learn --keyboard data/keyboard.h5 --mode dynamics --arm realistic \
 	    --budget $(OWN_BUDGET) --seed $(SEED) -o $(OUT)/reproduce/own-model.h5
 	$(KBCLI) evaluate --config pipelines/paper.toml --model $(OUT)/reproduce/own-model.h5 \
-	    --mode dynamics -o $(OUT)/reproduce/own-eval.h5 --resume \
+	    --mode dynamics --method paper --method kbcli -o $(OUT)/reproduce/own-eval.h5 --resume \
 	    $(if $(SCHEDULER),--scheduler $(SCHEDULER),--jobs $(JOBS)) \
 	    $(if $(EXPERIMENTS),--experiments $(EXPERIMENTS),)
 	@test -f $(OUT)/reproduce/eval.h5 || { echo "run make reproduce first"; exit 1; }
