@@ -3,15 +3,20 @@ and the cause, the right exit code, nothing left half-written."""
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import importlib
 import os
+import resource
+import signal
 
+import numpy as np
+import pytest
 from helpers import one_line_error
 
 import kbcli.cli.record as record
 from kbcli.cli import app
-from kbcli.errors import KbcliError
+from kbcli.errors import ArtifactError, KbcliError
 
 cli_app = importlib.import_module("kbcli.cli.app")  # (kbcli.cli.app is also the Typer app)
 
@@ -41,3 +46,36 @@ def test_bench_json_on_a_full_disk_is_one_line(runner, tmp_path, monkeypatch):
     assert r.exit_code == 1, r.output
     assert r.output.strip().splitlines()[-1] == f"kbcli: error: {out}: No space left on device"
     assert "Traceback" not in r.output and list(tmp_path.iterdir()) == []
+
+
+@contextlib.contextmanager
+def _file_size_limit(nbytes: int):
+    """Every write past ``nbytes`` of a file fails with EFBIG, as on a full disk (a real OS error
+    at matplotlib's own writes, no root or tmpfs needed)."""
+    old_sig = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (nbytes, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+        signal.signal(signal.SIGXFSZ, old_sig)
+
+
+@pytest.mark.parametrize(("suffix", "limit"), [(".pdf", 0), (".pdf", 1000), (".pdf", 2000),
+                                              (".png", 1000), (".svg", 1000)])
+def test_figure_write_failure_is_one_error_naming_the_file(tmp_path, suffix, limit):
+    """A full disk under matplotlib's PDF writer ended in a zlib.error (or AttributeError)
+    traceback raised by its own cleanup (the battery's disk-*-plot-model); the figure is now
+    drawn in memory and written like any file."""
+    import matplotlib.pyplot as plt
+
+    from kbcli.viz.common import save
+
+    fig, ax = plt.subplots()
+    ax.plot(np.arange(1000), np.arange(1000) ** 2 % 97)
+    out = tmp_path / f"m{suffix}"
+    with _file_size_limit(limit), pytest.raises(ArtifactError) as info:
+        save(fig, out)
+    assert str(info.value) == f"{out}: cannot write (File too large)"
+    assert list(tmp_path.iterdir()) == []
