@@ -140,3 +140,27 @@ def test_an_input_artifact_that_is_a_fifo_is_refused_not_waited_on(runner, tmp_p
     r = runner.invoke(app, [a.format(f=fifo, o=tmp_path / "out") for a in args])
     one_line_error(r, f"{fifo}: is a FIFO, expected a kbcli artifact")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f"]
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["--layout", "pads", "--pad-radius", "1e-9"], "pad_radius (1e-09) must be at least 0.57 px"),
+    (["--key-size", "1e-9"], "key 0 (C3) has an area of 1e-18 px^2, at least 1 needed"),
+    (["--layout", "hex", "--key-size", "0.5"], "at least 1 needed"),
+])
+def test_keys_too_small_to_touch_refused(runner, tmp_path, args, words):
+    """A pad of radius 1e-9 px made a keyboard no touch could find (found by the battery)."""
+    r = runner.invoke(app, ["keyboard", *args, "-o", str(tmp_path / "k.h5")])
+    one_line_error(r, words)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(("melody", "words"), [
+    (" ".join(["A:1"] * 5000), "play.melody must be at most 256 notes, got 5000"),
+    ("A:" + "1" * 17000, "at most 256 notes of at most 64 characters each (16384 in all)"),
+])
+def test_long_melody_refused_in_notes(runner, tmp_path, melody, words):
+    """The melody's bound is counted in notes, the unit its --help uses (it said characters)."""
+    r = runner.invoke(app, ["play", "--model", MODEL, "--melody", melody, "-o",
+                            str(tmp_path / "h.h5")])
+    one_line_error(r, words)
+    assert list(tmp_path.iterdir()) == []

@@ -65,9 +65,35 @@ app.add_typer(plot_app, name="plot")
 app.add_typer(bench_app, name="bench")
 
 
+def _refuse(exc: BaseException) -> None:
+    """One ``kbcli: error:`` line and exit 1, for the bench group's own checks (outside
+    :func:`handle_errors`)."""
+    text = str(exc) if isinstance(exc, KbcliError) else (
+        f"{getattr(exc, 'filename', None) or ''}: {describe_os_error(exc)}")
+    err.print(f"kbcli: error: {text}", markup=False)
+    raise typer.Exit(1) from None
+
+
 def _bench_done(*_: Any, **__: Any) -> None:
     """After a bench command returned: write the tables it showed where ``--json`` asked."""
-    record.finish()
+    try:
+        record.finish()
+    except (KbcliError, OSError) as exc:  # a full disk at the end: one line, not a traceback
+        _refuse(exc)
+
+
+def _check_json(path: Path) -> None:
+    """Refuse, before the benchmark runs, a ``--json`` path whose folder (or nearest existing
+    ancestor: the folders are made) cannot be written (read-only, missing permission)."""
+    folder = path.parent if str(path.parent) else Path(".")
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        if not folder.is_dir():
+            raise KbcliError(f"{path}: {folder} is not a folder")
+        probe_writable(folder, path)
+    except KbcliError as exc:
+        _refuse(exc)
 
 
 @bench_app.callback(result_callback=_bench_done)
@@ -82,6 +108,7 @@ def _bench(json_path: Path | None = typer.Option(
         if json_path.suffix != ".json":  # so it can never be one of the command's inputs
             err.print(f"kbcli bench: --json {json_path}: a result file must end in .json")
             raise typer.Exit(1)
+        _check_json(json_path)
         record.start(json_path)
 
 #: Width of the consoles when the stream is not a terminal (a pipe, a file, a CI log): wide enough

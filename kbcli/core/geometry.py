@@ -348,6 +348,19 @@ def overlapping_pairs(shapes: KeyShapes) -> tuple[np.ndarray, np.ndarray]:
     return ii[bad][order].astype(np.int64), jj[bad][order].astype(np.int64)
 
 
+def check_key_areas(shapes: KeyShapes, names: Sequence[str]) -> None:
+    """ConfigError naming the smallest key when its area is under :data:`MIN_AREA` px^2 (a key
+    size or pad radius of 1e-9 px: a keyboard no touch could find)."""
+    if shapes.discs is not None:
+        areas = np.pi * shapes.discs[:, 2] ** 2
+    else:
+        areas = np.array([abs(polygon_area(p - p.mean(axis=0))) for p in shapes.polygons])
+    k = int(np.argmin(areas))
+    if not areas[k] >= MIN_AREA:
+        raise ConfigError(f"key {k} ({names[k]}) has an area of {areas[k]:.3g} px^2, at least "
+                          f"{MIN_AREA:g} needed: the layout's key sizes are too small")
+
+
 def check_in_pad(shapes: KeyShapes) -> None:
     """ConfigError unless every key lies inside the pad's coordinate box (|x|, |y| <=
     :data:`MAX_COORD` px): a far origin is refused before anything is sampled over the keys."""

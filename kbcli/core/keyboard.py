@@ -30,7 +30,7 @@ from pydantic import PrivateAttr, field_validator
 
 from kbcli.core import transforms
 from kbcli.core.config import Config, Count, Name, NonNegative, Positive
-from kbcli.core.geometry import Coordinate, check_in_pad, check_overlaps
+from kbcli.core.geometry import Coordinate, check_in_pad, check_key_areas, check_overlaps
 from kbcli.core.layouts import (
     DEFAULT_CENTRE,
     LAYOUT_FIELDS,
@@ -202,6 +202,7 @@ def _placed(local: LayoutGeometry, origin: tuple[float, float],
     if top > 127:
         raise ConfigError(f"the highest key would be MIDI {top}, above 127: lower base_note")
     check_in_pad(geom.shapes)
+    check_key_areas(geom.shapes, names)
     check_overlaps(geom.shapes, names)
     feats = np.column_stack([geom.pitches.astype(float), geom.tempos.astype(float)])
     _check_distinct(feats, names, threshold)

@@ -36,9 +36,15 @@ MAX_MELODY_CHARS = 64 * MAX_NOTES
 
 
 def check_melody_text(v: str) -> str:
-    """``v`` unless it is longer than :data:`MAX_MELODY_CHARS` (a field validator)."""
+    """``v`` unless it has more than :data:`~kbcli.core.melody.MAX_NOTES` notes or is longer than
+    :data:`MAX_MELODY_CHARS` (a field validator; the message counts notes, the user's unit)."""
     if len(v) > MAX_MELODY_CHARS:
-        raise ValueError(f"must be at most {MAX_MELODY_CHARS} characters, got {len(v)}")
+        n = len(v.split())
+        if n > MAX_NOTES:
+            raise ValueError(f"must be at most {MAX_NOTES} notes, got {n}")
+        each = MAX_MELODY_CHARS // MAX_NOTES
+        raise ValueError(f"must be at most {MAX_NOTES} notes of at most {each} characters each "
+                         f"({MAX_MELODY_CHARS} in all), got {len(v)} characters")
     return v
 
 

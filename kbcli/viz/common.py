@@ -3,6 +3,7 @@ the keyboard with legible key labels, labels of points that do not overlap."""
 
 from __future__ import annotations
 
+import io
 import os
 import textwrap
 
@@ -15,7 +16,7 @@ from matplotlib.path import Path
 
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.transforms import FAMILIES
-from kbcli.io.atomic import atomic_path
+from kbcli.io.atomic import write_bytes
 from kbcli.io.paths import figure_format
 from kbcli.viz.palette import key_colours
 
@@ -48,12 +49,15 @@ def save(fig: Figure, path: str | os.PathLike, dpi: int = 110) -> None:
     meta = {"png": {"Software": None}, "pdf": {"Creator": None, "Producer": None,
                                                 "CreationDate": None},
             "svg": {"Date": None, "Creator": None}}[fmt]
+    buf = io.BytesIO()
     try:  # a fixed salt: the SVG's clip-path and glyph ids are the same from run to run
-        with atomic_path(path, suffix="." + fmt) as tmp, \
-                matplotlib.rc_context({"svg.hashsalt": "kbcli"}):
-            fig.savefig(tmp, format=fmt, dpi=dpi, bbox_inches="tight", metadata=meta)
+        with matplotlib.rc_context({"svg.hashsalt": "kbcli"}):
+            fig.savefig(buf, format=fmt, dpi=dpi, bbox_inches="tight", metadata=meta)
     finally:
         plt.close(fig)
+    # Drawn in memory, then written: a full disk under matplotlib's PDF writer ended in a zlib
+    # traceback (its cleanup flushed the compressor again), not the one line a write error is.
+    write_bytes(path, buf.getvalue(), suffix="." + fmt)
 
 
 #: Font sizes (points) tried for the key labels, largest first: none smaller is ever used.

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core.geometry import KeyShapes
+from kbcli.core.geometry import MIN_AREA, KeyShapes
 from kbcli.core.layouts.base import (
     KeyboardConfig,
     LayoutGeometry,
@@ -32,6 +32,9 @@ def build(cfg: KeyboardConfig) -> LayoutGeometry:
     rows, cols = cfg.rows, cfg.cols
     check_count(rows, cols)
     s, r = cfg.key_size, cfg.pad_radius
+    if np.pi * r * r < MIN_AREA:
+        raise ConfigError(f"pad_radius ({r:g}) must be at least {np.ceil(100 * np.sqrt(MIN_AREA / np.pi)) / 100:g} px: "
+                          f"a pad needs an area of at least {MIN_AREA:g} px^2")
     if 2 * r > s:
         raise ConfigError(f"pad_radius ({r:g}) must be at most half of key_size ({s:g}), the "
                           "distance between pad centres: pads would overlap")

@@ -1,0 +1,81 @@
+"""Faults found by tools/fault_battery.py (issue 29), each at its cause: one line naming the path
+and the cause, the right exit code, nothing left half-written."""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import importlib
+import os
+import resource
+import signal
+
+import numpy as np
+import pytest
+from helpers import one_line_error
+
+import kbcli.cli.record as record
+from kbcli.cli import app
+from kbcli.errors import ArtifactError, KbcliError
+
+cli_app = importlib.import_module("kbcli.cli.app")  # (kbcli.cli.app is also the Typer app)
+
+
+def test_bench_json_in_an_unwritable_folder_refused_before_the_benchmark(runner, tmp_path,
+                                                                          monkeypatch):
+    """``bench --json`` into a read-only folder ran the benchmark, then ended in a traceback."""
+    ran = []
+    monkeypatch.setattr(cli_app, "probe_writable", lambda folder, target: (_ for _ in ()).throw(
+        KbcliError(f"{target}: cannot write in {folder} (Read-only file system)")))
+    monkeypatch.setattr(record, "machine", lambda: ran.append(1) or "m")
+    r = runner.invoke(app, ["bench", "--json", str(tmp_path / "x" / "b.json"), "arm",
+                            "--reaches", "2"])
+    one_line_error(r, "b.json: cannot write in", "(Read-only file system)")
+    assert ran == [] and list(tmp_path.iterdir()) == []
+
+
+def test_bench_json_on_a_full_disk_is_one_line(runner, tmp_path, monkeypatch):
+    """The result file is written after the benchmark, outside the commands' error boundary: a
+    full disk there was a traceback with exit 0."""
+    def full(path, argv=None):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    monkeypatch.setattr(record, "write", full)
+    out = tmp_path / "b.json"
+    r = runner.invoke(app, ["bench", "--json", str(out), "arm", "--reaches", "2"])
+    assert r.exit_code == 1, r.output
+    assert r.output.strip().splitlines()[-1] == f"kbcli: error: {out}: No space left on device"
+    assert "Traceback" not in r.output and list(tmp_path.iterdir()) == []
+
+
+@contextlib.contextmanager
+def _file_size_limit(nbytes: int):
+    """Every write past ``nbytes`` of a file fails with EFBIG, as on a full disk (a real OS error
+    at matplotlib's own writes, no root or tmpfs needed)."""
+    old_sig = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (nbytes, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+        signal.signal(signal.SIGXFSZ, old_sig)
+
+
+@pytest.mark.parametrize(("suffix", "limit"), [(".pdf", 0), (".pdf", 1000), (".pdf", 2000),
+                                              (".png", 1000), (".svg", 1000)])
+def test_figure_write_failure_is_one_error_naming_the_file(tmp_path, suffix, limit):
+    """A full disk under matplotlib's PDF writer ended in a zlib.error (or AttributeError)
+    traceback raised by its own cleanup (the battery's disk-*-plot-model); the figure is now
+    drawn in memory and written like any file."""
+    import matplotlib.pyplot as plt
+
+    from kbcli.viz.common import save
+
+    fig, ax = plt.subplots()
+    ax.plot(np.arange(1000), np.arange(1000) ** 2 % 97)
+    out = tmp_path / f"m{suffix}"
+    with _file_size_limit(limit), pytest.raises(ArtifactError) as info:
+        save(fig, out)
+    assert str(info.value) == f"{out}: cannot write (File too large)"
+    assert list(tmp_path.iterdir()) == []
