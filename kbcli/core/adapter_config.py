@@ -191,7 +191,8 @@ class AdapterConfig(Config):
         bandwidth) drawn once per adaptation, from the adapter's own generator by
         ``kde_sampler``, and reused by every simulated touch, while the real touches still draw as
         ``kde_draw`` says: the same planner without its sampling, about a third of a touch's time
-        (``kbcli bench speed``). ``fresh``: new samples for every simulated touch.
+        (``kbcli bench speed``). ``fresh``: new samples for every simulated touch. Recorded in
+        an artifact's config only when set.
     kde_sampler : str
         What draws fresh samples of p(action | sound), and the ``model`` actions of ``random``
         and ``paper-active``: ``model`` (``model.sample_actions``, the model's own rejection
@@ -248,7 +249,10 @@ class AdapterConfig(Config):
     random_actions: Annotated[Name, _choice(*RANDOM_ACTIONS)] = "area"
     kde_samples: between(Whole, 10, MAX_KDE_SAMPLES) = 10000
     kde_draw: Annotated[Name, _choice(*KDE_DRAWS)] = "shared"
-    simulate_draw: Annotated[Name, _choice(*KDE_DRAWS)] | None = None
+    # written to artifacts only when set (None is the behaviour of every artifact stored before
+    # the option existed: their configs read back to the same dict)
+    simulate_draw: Annotated[Annotated[Name, _choice(*KDE_DRAWS)] | None,
+                             Field(exclude_if=lambda v: v is None)] = None
     kde_sampler: Annotated[Name, _choice(*KDE_SAMPLERS)] = "model"
     kde_floor: Floor | None = None
     kde_bandwidth: Positive | None = None
