@@ -10,6 +10,7 @@ import pytest
 from kbcli.core.action_sampler import FreshSamples, RasterSampler
 from kbcli.core.adapter import Adapter
 from kbcli.core.adapter_config import AdapterConfig
+from kbcli.core.applies import applies
 from kbcli.core.grid import HypothesisGrid
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.model import ExactModel
@@ -91,6 +92,29 @@ def test_algorithm_2_samples_fresh_per_observation_and_per_seed():
     assert not np.array_equal(t1, c.simulate(point, 5))  # another experiment, other samples
     shared = adapter(1, kde_draw="shared")
     np.testing.assert_array_equal(shared.simulate(point, 5), shared.simulate(point, 5))
+
+
+def test_simulate_draw_shared_reuses_one_draw_per_sound_in_the_simulations_only():
+    point = np.array([400.0, 300.0])
+    a, b = adapter(1, simulate_draw="shared"), adapter(1, simulate_draw="shared")
+    t1 = a.simulate(point, 5)
+    np.testing.assert_array_equal(t1, a.simulate(point, 5))  # one draw per sound, reused
+    np.testing.assert_array_equal(t1, b.simulate(point, 5))  # same seed, same samples
+    assert not np.array_equal(t1, adapter(2, simulate_draw="shared").simulate(point, 5))
+    assert isinstance(a.samples, FreshSamples) and a.samples.draws == 0  # simulations drew none
+    a.observe_class(point, 5)
+    assert a.samples.draws == 1  # a real touch still draws fresh (kde_draw)
+    # unset, or the same as kde_draw: the simulations draw as the real touches (the paper's text)
+    for ad in (adapter(1), adapter(1, simulate_draw="fresh")):
+        assert ad.simulation_samples is ad.samples
+    paper = [adapter(4, strategy="paper-active", **kw) for kw in ({}, {"simulate_draw": "fresh"})]
+    np.testing.assert_array_equal(paper[0].suggest(), paper[1].suggest())
+    cfg = AdapterConfig.from_dict({**PAPER, "strategy": "paper-active", "simulate_draw": "shared"})
+    assert applies("simulate_draw", cfg)
+    assert not applies("simulate_draw", cfg.replace(posterior="likelihood"))
+    assert not applies("simulate_draw", cfg.replace(strategy="infogain"))
+    with pytest.raises(ConfigError, match="shared, fresh"):
+        AdapterConfig(simulate_draw="sometimes")
 
 
 def test_no_floor_rules_out_and_floor_keeps():

@@ -138,6 +138,25 @@ def test_scott_bandwidth_of_a_key():
     assert scott_bandwidth(s) == pytest.approx(50 / math.sqrt(12) * 10000 ** (-1 / 6), rel=0.05)
 
 
+def _scott_by_numpy(s):
+    """The bandwidth rule with numpy's own std and percentile (the reference of the fast one)."""
+    std = s.std(axis=0)
+    q75, q25 = np.percentile(s, [75, 25], axis=0)
+    sig = np.minimum(std, (q75 - q25) / 1.349)
+    return float(np.mean(np.where(sig > 0, sig, std)) * len(s) ** (-1 / 6))
+
+
+@pytest.mark.parametrize("n", [10000, 9999, 1000, 101, 12, 11])
+def test_scott_bandwidth_is_numpys_bit_for_bit(n):
+    # keys (uniform: the IQR is not the smaller spread, the quartiles are skipped), normal,
+    # heavy-tailed and two-cluster samples (the IQR decides), rounded (ties)
+    rng = np.random.default_rng(n)
+    for s in (rng.uniform(0, 50, (n, 2)), rng.normal(3, 7, (n, 2)), rng.standard_t(1, (n, 2)),
+              np.where(rng.random((n, 1)) < 0.5, 0.0, 100.0) + rng.uniform(0, 9, (n, 2)),
+              np.round(rng.uniform(0, 4, (n, 2)))):
+        assert scott_bandwidth(s) == _scott_by_numpy(s)
+
+
 def test_kde_term_peaks_where_the_likelihood_does():
     g = grid(half=30)
     a = np.array([262.0, 281.0])

@@ -259,8 +259,8 @@ def _robot_option(name: str, kind: Any, help: str, default: str | None = None) -
 
 
 #: The adapter options of the flags above (and those every adapting command has), by flag.
-PAPER_FLAGS = ("kde_samples", "kde_draw", "kde_sampler", "kde_floor", "ml_ties", "stop_ml",
-               "stop_mass", "random_actions", "candidates", "active_keep")
+PAPER_FLAGS = ("kde_samples", "kde_draw", "simulate_draw", "kde_sampler", "kde_floor", "ml_ties",
+               "stop_ml", "stop_mass", "random_actions", "candidates", "active_keep")
 
 
 def robot_given(flags: Mapping[str, Any], table: Mapping[str, Any] | None = None,
@@ -287,6 +287,12 @@ KdeSamples = _robot_option("kde_samples", int, "kde posterior: actions drawn fro
 KdeDraw = _robot_option("kde_draw", str, "kde posterior: shared (each sound's samples drawn once, "
                         "reused by every touch) or fresh (Algorithm 2 as written: new samples for "
                         "every touch, from the run's seed)")
+#: ``--simulate-draw``: the samples of paper-active's simulated touches (not yet wired into
+#: ``kbcli adapt`` / ``kbcli run``).
+SimulateDraw = _robot_option("simulate_draw", str, "kde posterior with paper-active: the samples "
+                             "of the simulated touches; shared (each sound's samples drawn once "
+                             "per run, reused by every simulated touch: faster, not the paper's "
+                             "text) or fresh (new samples for each)", default="as --kde-draw")
 #: ``--kde-sampler``: what draws samples of p(action | sound).
 KdeSampler = _robot_option("kde_sampler", str, "What draws actions from p(action | sound) for "
                            "--kde-draw fresh, --random-actions model and paper-active's candidates: "

@@ -148,6 +148,9 @@ class Adapter:
         elif self.kind.uses_samples and samples is None:
             samples = build_samples(model, cfg, [int(v) for v in rng.integers(2**32, size=2)])
         self.samples = samples
+        #: the samples of the simulated touches (``paper-active``): ``samples`` unless
+        #: ``simulate_draw`` says otherwise (:meth:`_simulation_samples`)
+        self.simulation_samples = self._simulation_samples(rng)
 
     @classmethod
     def from_model(cls, model, *, strategy: str = "infogain", family: str = "translation",
@@ -198,6 +201,22 @@ class Adapter:
                               f"model file with kbcli.Adapter.from_model (kbcli.api)")
         return model
 
+    def _simulation_samples(self, rng: np.random.Generator):
+        """The KDE samples of the simulated touches: ``self.samples``, or with ``simulate_draw``
+        set apart from ``kde_draw``, a source of their own drawn by ``kde_sampler`` from a further
+        child of ``rng`` (spawned only then: the other options draw exactly as without it)."""
+        cfg = self.cfg
+        draw = cfg.simulate_draw
+        if not self.kind.uses_samples or draw is None or draw == cfg.kde_draw:
+            return self.samples
+        own = rng.spawn(1)[0]
+        if draw == "fresh":
+            return FreshSamples(self.action_source(), cfg.kde_samples, own,
+                                bandwidth=cfg.kde_bandwidth, resolution=cfg.resolution)
+        return ActionSamples(self.action_source(), cfg.kde_samples,
+                             [int(v) for v in own.integers(2**32, size=2)],
+                             bandwidth=cfg.kde_bandwidth, resolution=cfg.resolution)
+
     # -- deciding ----------------------------------------------------------------------------------
     def planning_table(self) -> LikelihoodTable:
         """The map the strategies plan with: the model's, or with the robust posterior, blurred by
@@ -215,8 +234,9 @@ class Adapter:
 
     def simulate(self, action: np.ndarray, cls: int) -> np.ndarray:
         """The log term a touch read at ``action`` that gave ``cls`` would multiply the posterior
-        by (this adapter's kind of posterior, plain: a KDE term drawn as ``kde_draw`` says)."""
-        obs = Observation(self.grid, self.table, self.model, self.cfg, self.samples,
+        by (this adapter's kind of posterior, plain: a KDE term drawn as ``simulate_draw``, by
+        default ``kde_draw``, says)."""
+        obs = Observation(self.grid, self.table, self.model, self.cfg, self.simulation_samples,
                           np.asarray(action, float).reshape(2), int(cls))
         return self.kind.term(obs)[0]
 
@@ -224,7 +244,7 @@ class Adapter:
         """``(k, *grid.shape)``: :meth:`simulate` of ``k`` touches (``actions`` (k, 2),
         ``classes`` (k,)), the same numbers as one call each in turn, computed together when the
         kind of posterior can (its ``terms``)."""
-        obs = [Observation(self.grid, self.table, self.model, self.cfg, self.samples,
+        obs = [Observation(self.grid, self.table, self.model, self.cfg, self.simulation_samples,
                            np.asarray(a, float).reshape(2), int(c))
                for a, c in zip(np.asarray(actions, float).reshape(-1, 2),
                                np.asarray(classes).reshape(-1), strict=True)]

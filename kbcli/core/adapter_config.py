@@ -184,6 +184,15 @@ class AdapterConfig(Config):
         ``fresh``: Algorithm 2 as written, N new actions for every observation, from the
         adapter's own generator (so from the experiment's seed;
         :class:`kbcli.core.action_sampler.FreshSamples`).
+    simulate_draw : str or None
+        How ``paper-active``'s simulated touches get their KDE samples (kde posterior). None: as
+        ``kde_draw`` says (the paper's text: with ``fresh``, Algorithm 2 on every simulated sound,
+        N new samples and a bandwidth for each). ``shared``: each sound's N samples (and
+        bandwidth) drawn once per adaptation, from the adapter's own generator by
+        ``kde_sampler``, and reused by every simulated touch, while the real touches still draw as
+        ``kde_draw`` says: the same planner without its sampling, about a third of a touch's time
+        (``kbcli bench speed``). ``fresh``: new samples for every simulated touch. Recorded in
+        an artifact's config only when set.
     kde_sampler : str
         What draws fresh samples of p(action | sound), and the ``model`` actions of ``random``
         and ``paper-active``: ``model`` (``model.sample_actions``, the model's own rejection
@@ -240,6 +249,10 @@ class AdapterConfig(Config):
     random_actions: Annotated[Name, _choice(*RANDOM_ACTIONS)] = "area"
     kde_samples: between(Whole, 10, MAX_KDE_SAMPLES) = 10000
     kde_draw: Annotated[Name, _choice(*KDE_DRAWS)] = "shared"
+    # written to artifacts only when set (None is the behaviour of every artifact stored before
+    # the option existed: their configs read back to the same dict)
+    simulate_draw: Annotated[Annotated[Name, _choice(*KDE_DRAWS)] | None,
+                             Field(exclude_if=lambda v: v is None)] = None
     kde_sampler: Annotated[Name, _choice(*KDE_SAMPLERS)] = "model"
     kde_floor: Floor | None = None
     kde_bandwidth: Positive | None = None

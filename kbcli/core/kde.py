@@ -42,15 +42,49 @@ def scott_bandwidth(samples: np.ndarray) -> float:
     The spread is ``samples.std(axis=0)`` and ``numpy.percentile(samples, [75, 25], axis=0)``
     bit for bit, computed on a contiguous copy of each axis (:func:`_std_rows`,
     :func:`_percentile_rows`: 2-3x faster; the KDE posterior's fresh draws need one per term).
+    When counting shows that the IQR cannot be the smaller spread (:func:`_iqr_exceeds`: a key's
+    samples, nearly uniform over a rectangle), the quartiles are not computed: the same number.
     """
     s = np.asarray(samples, float)
     n = len(s)
     rows = np.ascontiguousarray(s.T)
     std = _std_rows(rows)
-    q75, q25 = _percentile_rows(rows, (0.75, 0.25))
-    sig = np.minimum(std, (q75 - q25) / 1.349)
+    if _iqr_exceeds(rows, std):
+        sig = std  # np.minimum(std, iqr / 1.349) is std
+    else:
+        q75, q25 = _percentile_rows(rows, (0.75, 0.25))
+        sig = np.minimum(std, (q75 - q25) / 1.349)
     sig = np.where(sig > 0, sig, std)
     return float(np.mean(sig) * n ** (-1 / 6))
+
+
+def _iqr_exceeds(rows: np.ndarray, std: np.ndarray) -> bool:
+    """Whether ``(q75 - q25) / 1.349 >= std`` holds for every row of ``rows`` (k, n), as
+    :func:`_percentile_rows` computes the quartiles, proven by counting without them.
+
+    Bounds ``L < U`` around each row's mean, 5 % further apart than ``1.349 std``: at least
+    ``hi25 + 1`` values at or below ``L`` put the order statistic ``x(hi25) <= L``, at least
+    ``n - lo75`` at or above ``U`` put ``x(lo75) >= U``. Where numpy's interpolation is monotone in
+    floating point (``q75 = a + d g`` with ``g < 0.5``, so ``q75 >= x(lo75)``; ``q25 = b - d (1 - g)``
+    with ``g >= 0.5``, or ``g = 0``, so ``q25 <= x(hi25)``), ``q75 - q25 >= U - L`` in floating point
+    too (subtraction and division are monotone). False when it cannot tell (the caller computes
+    the quartiles): other sample sizes, or a spread whose IQR may be the smaller.
+    """
+    n = rows.shape[1]
+    v75, v25 = (n - 1) * 0.75, (n - 1) * 0.25
+    lo75, lo25 = int(math.floor(v75)), int(math.floor(v25))
+    g75, g25 = v75 - lo75, v25 - lo25
+    if n < 4 or g75 >= 0.5 or 0 < g25 < 0.5:
+        return False
+    hi25 = min(lo25 + 1, n - 1)
+    centre = rows.mean(axis=1)
+    half = 0.525 * 1.349 * std
+    low, high = centre - half, centre + half
+    if not ((high - low) / 1.349 >= std).all():
+        return False
+    below = np.count_nonzero(rows <= low[:, None], axis=1)
+    above = np.count_nonzero(rows >= high[:, None], axis=1)
+    return bool(((below >= hi25 + 1) & (above >= n - lo75)).all())
 
 
 def _std_rows(rows: np.ndarray) -> np.ndarray:
@@ -66,17 +100,25 @@ def _std_rows(rows: np.ndarray) -> np.ndarray:
 def _percentile_rows(rows: np.ndarray, qs: tuple[float, ...]) -> list[np.ndarray]:
     """Quantiles ``qs`` (fractions) of each row of a (k, n) array, as ``numpy.percentile``'s
     ``linear`` method computes them: the two order statistics around ``(n - 1) q`` (one
-    ``partition``), then numpy's own interpolation."""
+    ``partition`` at the lower ones, a ``min`` for the upper ones), then numpy's own
+    interpolation."""
     n = rows.shape[1]
     where = []
     for q in qs:
         v = (n - 1) * q
         lo = int(math.floor(v))
         where.append((lo, min(lo + 1, n - 1), v - lo))
-    part = np.partition(rows, sorted({k for lo, hi, _ in where for k in (lo, hi)}), axis=1)
+    # partition at the lower order statistics only; the one above each is the least of the block
+    # that follows it (up to the next partition point): the same value, half the selections
+    kth = sorted({lo for lo, _, _ in where})
+    part = np.partition(rows, kth, axis=1)
     out = []
     for lo, hi, g in where:
-        a, b = part[:, lo], part[:, hi]
+        a = part[:, lo]
+        if hi == lo or hi in kth:
+            b = part[:, hi]
+        else:
+            b = part[:, hi:next((k for k in kth if k > lo), n)].min(axis=1)
         d = b - a
         out.append(b - d * (1 - g) if g >= 0.5 else a + d * g)  # numpy's ``_lerp``
     return out
@@ -189,8 +231,11 @@ def binned_kde(points: np.ndarray, x0: float, y0: float, res: float, n: int,
     sig = np.broadcast_to(np.asarray(bandwidth, float).reshape(-1) if np.ndim(bandwidth) else
                           float(bandwidth), (pts.shape[0],)) / res
     pads = np.ceil(4 * sig).astype(np.int64)
+    reaches = np.unique(pads)
+    if len(reaches) == 1:  # one kernel reach: no gathering of the sets
+        return _binned_kde_reach(pts, x0, y0, res, n, int(reaches[0]), sig).reshape(lead + (n, n))
     out = np.empty((pts.shape[0], n, n))
-    for pad in np.unique(pads):  # one pass per kernel reach (fresh draws: one or two)
+    for pad in reaches:  # one pass per kernel reach (fresh draws: one or two)
         sel = np.flatnonzero(pads == pad)
         out[sel] = _binned_kde_reach(pts[sel], x0, y0, res, n, int(pad), sig[sel])
     return out.reshape(lead + (n, n))
@@ -204,14 +249,22 @@ def _binned_kde_reach(pts: np.ndarray, x0: float, y0: float, res: float, n: int,
     m = n + 2 * pad  # widened grid
     # a circular convolution of period >= m gives the inner n x n cells without wrap-around
     size = sfft.next_fast_len(m, real=True)
-    u = (pts[..., 0] - x0) / res + pad
-    v = (pts[..., 1] - y0) / res + pad
-    iu = np.floor(u).astype(np.int64)
-    iv = np.floor(v).astype(np.int64)
-    fu = u - iu
-    fv = v - iv
-    ok = (iu >= 0) & (iu < m - 1) & (iv >= 0) & (iv < m - 1)
-    base = (np.arange(b)[:, None] * m + iv) * m + iu
+    # the bin of each point and its offsets in it, in place (the numbers of
+    # ``u = (x - x0) / res + pad; iu = floor(u); fu = u - iu``, fewer buffers)
+    u = pts[..., 0] - x0
+    u /= res
+    u += pad
+    v = pts[..., 1] - y0
+    v /= res
+    v += pad
+    fu, fv = np.floor(u), np.floor(v)
+    ok = (fu >= 0) & (fu < m - 1) & (fv >= 0) & (fv < m - 1)
+    iu, base = fu.astype(np.int64), fv.astype(np.int64)
+    np.subtract(u, fu, out=fu)
+    np.subtract(v, fv, out=fv)
+    base += (np.arange(b) * m)[:, None]  # (set * m + iv) * m + iu
+    base *= m
+    base += iu
     if not ok.all():
         base, fu, fv = base[ok], fu[ok], fv[ok]
     else:
@@ -232,15 +285,20 @@ def _binned_kde_reach(pts: np.ndarray, x0: float, y0: float, res: float, n: int,
     dens = np.zeros((b, n, n))
     if not len(rows):
         return dens
-    conv = sfft.rfft(counts[rows], n=size, axis=1)
-    conv *= spec[rows // m]
+    # (``np.take``: the rows of ``a[rows]``, gathered faster)
+    conv = sfft.rfft(np.take(counts, rows, axis=0), n=size, axis=1)
+    conv *= np.take(spec, rows // m, axis=0)
     inner = np.zeros((b * m, n), np.float32)
     inner[rows] = sfft.irfft(conv, n=size, axis=1)[:, pad:pad + n]
     sets = np.unique(rows // m)  # sets with a point on the widened grid (the others stay 0)
-    cols = sfft.rfft(inner.reshape(b, m, n)[sets], n=size, axis=1)
-    cols *= spec[sets, :, None]
+    inner = inner.reshape(b, m, n)
+    cols = sfft.rfft(inner if len(sets) == b else np.take(inner, sets, axis=0), n=size, axis=1)
+    cols *= np.take(spec, sets, axis=0)[:, :, None]
     full = sfft.irfft(cols, n=size, axis=1)
-    dens[sets] = np.maximum(full[:, pad:pad + n, :], 0.0, dtype=np.float64)
+    if len(sets) == b:
+        np.maximum(full[:, pad:pad + n, :], 0.0, out=dens, dtype=np.float64)
+    else:
+        dens[sets] = np.maximum(full[:, pad:pad + n, :], 0.0, dtype=np.float64)
     dens /= npts * res * res
     return dens
 
@@ -323,7 +381,7 @@ def kde_terms(grid: HypothesisGrid, actions: np.ndarray, drawn: np.ndarray,
     bws = np.repeat(np.asarray(bandwidths, float), lead).reshape(k, lead)
     dens = binned_kde(hyp, float(grid.dx[0]), float(grid.dy[0]), grid.resolution, len(grid.dx),
                       bws)
-    return floored_log(dens, grid, eps, batch=True).reshape((k,) + grid.shape)
+    return floored_log(dens, grid, eps, batch=True, overwrite=True).reshape((k,) + grid.shape)
 
 
 #: Without a floor, densities below this fraction of a term's peak are read as zero: the
@@ -336,10 +394,11 @@ ZERO_DENSITY = 1e-300
 
 
 def floored_log(dens: np.ndarray, grid: HypothesisGrid, eps: float, *,
-                batch: bool = False) -> np.ndarray:
+                batch: bool = False, overwrite: bool = False) -> np.ndarray:
     """``log((1 - eps) KDE + eps / |prior box|)``; with ``eps`` 0, ``log KDE`` with densities
     below ``ZERO_RTOL`` of the peak read as ``ZERO_DENSITY`` (Eq. 7 without a floor).
-    ``batch``: the first axis of ``dens`` holds several terms, each read against its own peak."""
+    ``batch``: the first axis of ``dens`` holds several terms, each read against its own peak.
+    ``overwrite``: compute in ``dens`` (a float64 array of the caller's own; the same numbers)."""
     if eps > 0:
         prior_density = 1.0 / (float(grid.dx[-1] - grid.dx[0]) + grid.resolution) ** 2
         return np.log((1 - eps) * dens + eps * prior_density)
@@ -347,4 +406,7 @@ def floored_log(dens: np.ndarray, grid: HypothesisGrid, eps: float, *,
         return np.log(dens)
     axes = tuple(range(1, dens.ndim)) if batch else None
     peak = np.max(dens, axis=axes, keepdims=True)
-    return np.log(np.where(dens > ZERO_RTOL * peak, dens, ZERO_DENSITY))
+    if not overwrite:
+        return np.log(np.where(dens > ZERO_RTOL * peak, dens, ZERO_DENSITY))
+    np.copyto(dens, ZERO_DENSITY, where=dens <= ZERO_RTOL * peak)  # densities are never NaN
+    return np.log(dens, out=dens)

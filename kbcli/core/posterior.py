@@ -128,7 +128,8 @@ class Posterior:
         m = np.max(logw, axis=1, keepdims=True)
         if not np.isfinite(m).all():
             raise ValueError("a posterior needs at least one cell of finite log-probability")
-        p = np.exp(logw - m)
+        p = np.subtract(logw, m)  # exp(logw - m), in place: the same numbers, one buffer fewer
+        np.exp(p, out=p)
         total = p.sum(axis=1, keepdims=True)
         p /= total
         # math.log, as log_normalise takes it (numpy's vectorised log may round differently)

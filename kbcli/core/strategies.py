@@ -274,7 +274,13 @@ def active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     return kept[int(np.argmin(after))]
 
 
-@STRATEGIES.register("paper-active", uses=("candidates", "active_keep", "kde_sampler", "ml_ties"))
+def _kde(cfg) -> bool:
+    return getattr(cfg, "posterior", None) == "kde"
+
+
+@STRATEGIES.register("paper-active", uses=(
+    "candidates", "active_keep", "kde_sampler", "ml_ties",
+    Uses("simulate_draw", _kde, 'posterior = "kde"', 'posterior is not "kde"')))
 def paper_active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """Sect. III-E as the paper writes it.
 
@@ -293,7 +299,10 @@ def paper_active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
 
     Choices the paper leaves open: the number of candidates and kept ones (``candidates`` 256,
     ``active_keep`` 8), the distribution of the sampled sounds (uniform over the model's sounds),
-    the frame of the confusion factor (the model's).
+    the frame of the confusion factor (the model's). Not the paper's, an option: with the KDE
+    posterior, ``simulate_draw = "shared"`` gives the simulated touches one set of samples per
+    sound for the whole adaptation instead of new ones per simulated touch (faster; the real
+    touches keep ``kde_draw``).
     """
     cfg, post, table = ctx.cfg, ctx.posterior, ctx.table
     cands = model_actions(ctx, cfg.candidates, rng)
