@@ -11,7 +11,7 @@ SEED   ?= 0
 
 JOBS   ?= 2
 
-.PHONY: help install demo test lint docs docs-serve docs-figures results data data-files reproduce reproduce-ideal reproduce-earlier reproduce-ablations reproduce-own-model model-quality reproduce-layouts bench clean
+.PHONY: help install demo test lint docs docs-serve docs-figures results results-reproduce results-quality data data-files reproduce reproduce-ideal reproduce-earlier reproduce-ablations reproduce-own-model model-quality reproduce-layouts bench clean
 
 help:
 	@echo "make demo        install, then run the main job on the embedded default model"
@@ -23,6 +23,7 @@ help:
 	@echo "make reproduce-own-model  Sect. IV-C with the robot's own learned model, beside the default"
 	@echo "make reproduce-layouts  learn and adapt on every layout (out/layouts/report/; hours)"
 	@echo "make model-quality  test the paper's Sect. IV-C hypothesis: advantage vs model quality"
+	@echo "make results-reproduce, results-quality  keep their verdicts as benchmarks/results/*.json"
 	@echo "make bench       print the benchmark tables"
 	@echo "make docs        build the documentation site (site/index.html); make docs-serve serves it"
 
@@ -59,6 +60,17 @@ results: $(STAMP)
 	$(KBCLI) bench --json $(RESULTS)/speed.json speed --repeats 5
 	$(KBCLI) bench --json $(RESULTS)/learn.json learn --seeds 3
 	$(KBCLI) bench --json $(RESULTS)/reliability.json reliability --seeds 3
+
+# The verdicts of the long runs, with their stage timings, as result files: those of the last
+# `make reproduce` (out/reproduce/) and `make model-quality` (out/quality.h5); seconds each.
+results-reproduce: $(STAMP)
+	$(KBCLI) bench --json $(RESULTS)/reproduce.json verdicts $(OUT)/reproduce/eval.h5 \
+	    --timings $(OUT)/reproduce/timings.txt \
+	    $(if $(wildcard $(OUT)/reproduce/own-eval.h5),--own-model $(OUT)/reproduce/own-eval.h5,)
+
+results-quality: $(STAMP)
+	$(KBCLI) bench --json $(RESULTS)/model-quality.json verdicts $(OUT)/quality.h5 \
+	    --timings $(OUT)/quality-timings.txt
 
 # The pictures the README and the docs show, from the stored default model.
 docs-figures: $(STAMP)
@@ -160,12 +172,18 @@ reproduce-layouts: $(STAMP)
 # realistic arm, each adapting with every strategy; the report draws the advantage over random
 # against the model's boundary error (JOBS=, SCHEDULER=tcp://HOST:PORT, EXPERIMENTS= honoured;
 # an interrupted run continues where it stopped).
+# Each stage's wall time goes to $(OUT)/quality-timings.txt (make results-quality shows it).
 model-quality: $(STAMP)
 	@mkdir -p $(OUT)
-	$(KBCLI) quality --config pipelines/model-quality.toml --keyboard data/keyboard.h5 \
+	@rm -f $(OUT)/quality-timings.txt
+	benchmarks/timed.sh $(OUT)/quality-timings.txt quality \
+	    $(KBCLI) quality --config pipelines/model-quality.toml --keyboard data/keyboard.h5 \
 	    -o $(OUT)/quality.h5 --resume $(if $(SCHEDULER),--scheduler $(SCHEDULER),--jobs $(JOBS)) \
 	    $(if $(EXPERIMENTS),--experiments $(EXPERIMENTS),)
-	$(KBCLI) report $(OUT)/quality.h5 -o $(OUT)/report-quality
+	benchmarks/timed.sh $(OUT)/quality-timings.txt report \
+	    $(KBCLI) report $(OUT)/quality.h5 -o $(OUT)/report-quality
+	@echo "(config: pipelines/model-quality.toml; $(if $(SCHEDULER),scheduler $(SCHEDULER),jobs $(JOBS)); experiments per displacement: $(or $(EXPERIMENTS),config); $$(nproc) cores; load average after: $$(cut -d' ' -f1-3 /proc/loadavg))" >> $(OUT)/quality-timings.txt
+	@cat $(OUT)/quality-timings.txt
 
 # Benchmark tables (long: minutes each; not part of the tests).
 bench: $(STAMP)

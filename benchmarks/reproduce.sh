@@ -22,6 +22,9 @@
 #
 # The report is written for $OUT/eval.h5 (when it exists), reading beside it the ablation ladder
 # $OUT/ablations.h5 and the evaluation with the robot's own model $OUT/own-eval.h5 when they exist.
+# Then the verdicts and the timings are kept as a result file, $OUT/reproduce.json (`kbcli bench
+# --json ... verdicts`, the format of benchmarks/results/*.json: `make results-reproduce` stores it
+# for the documentation's results page).
 #
 # An interrupted run continues where it stopped when started again (evaluate --resume).
 set -euo pipefail
@@ -91,3 +94,9 @@ fi
          "experiments per parametrization: ${EXPERIMENTS:-config})"
     echo "(load average, 1/5/15 min: $load_before before, $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo "?") after; $(nproc 2>/dev/null || echo "?") cores)"
 } | tee "$timings"
+
+if [[ $EVAL == eval.h5 && -f $OUT/eval.h5 ]]; then
+    verdict_args=("$OUT/eval.h5" --timings "$timings")
+    [[ -f $OUT/own-eval.h5 ]] && verdict_args+=(--own-model "$OUT/own-eval.h5")
+    "$KBCLI" bench --json "$OUT/reproduce.json" verdicts "${verdict_args[@]}" > /dev/null
+fi

@@ -65,7 +65,7 @@ NOT_RUN = {
 STDIN = {"kbcli serve": '{"op": "end"}\n'}
 
 #: Options naming a file the command writes.
-OUTPUTS = ("-o", "--output", "--wav", "--transcript")
+OUTPUTS = ("-o", "--output", "--wav", "--transcript", "--json")
 
 
 def examples(page: Path) -> list[str]:

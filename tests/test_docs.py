@@ -59,9 +59,51 @@ def test_results_page_renders_a_result_file(tmp_path):
 
 def test_markers_are_replaced(monkeypatch):
     monkeypatch.setattr(hooks, "cli_markdown", lambda: "CLI")
-    monkeypatch.setattr(hooks, "results_markdown", lambda name: f"R[{name}]")
-    out = hooks.on_page_markdown("a <!-- cli-reference --> b <!-- results: learn --> c")
-    assert out == "a CLI b R[learn] c"
+    monkeypatch.setattr(hooks, "results_markdown",
+                        lambda name, only=(): f"R[{name}{''.join('/' + t for t in only)}]")
+    out = hooks.on_page_markdown("a <!-- cli-reference --> b <!-- results: learn --> c "
+                                 "<!-- results: reproduce | Verdicts | Wall time of each stage -->")
+    assert out == "a CLI b R[learn] c R[reproduce/Verdicts/Wall time of each stage]"
+
+
+def _markers():
+    """Every ``<!-- results: NAME | TITLE ... -->`` of the documentation: (page, name, titles)."""
+    for page in sorted((ROOT / "docs").rglob("*.md")):
+        for m in hooks._RESULTS.finditer(page.read_text()):
+            yield page.relative_to(ROOT), m.group(1), tuple(
+                t.strip() for t in m.group(2).split("|") if t.strip())
+
+
+def test_every_results_marker_regenerates_identically_from_its_stored_file():
+    """The results pages from the stored result files: each file has the keys the page shows, the
+    tables a marker names exist, and rendering it again changes nothing."""
+    markers = list(_markers())
+    names = {name for _, name, _ in markers}
+    assert {"reproduce", "model-quality", "learn", "learn-peer", "speed"} <= names
+    for page, name, only in markers:
+        path = hooks.RESULTS / f"{name}.json"
+        if not path.exists():
+            assert "not there yet" in hooks.results_markdown(name, only=only), (page, name)
+            continue
+        d = json.loads(path.read_text())
+        assert {"command", "date", "machine", "kbcli_version", "tables"} <= set(d), path
+        for t in d["tables"]:
+            assert {"title", "columns", "rows"} <= set(t), path
+            assert all(set(r) <= set(t["columns"]) for r in t["rows"]), (path, t["title"])
+        md = hooks.results_markdown(name, only=only)
+        assert md.startswith(f"Measured with `{d['command']}`"), (page, name)
+        assert md == hooks.results_markdown(name, only=only), (page, name)
+        for title in only:
+            assert f"**{title}" in md, (page, name, title)
+
+
+def test_a_marker_naming_a_missing_table_fails_the_build(tmp_path):
+    d = {"command": "kbcli bench x", "date": "d", "machine": "m", "kbcli_version": "v",
+         "tables": [{"title": "Verdicts", "columns": ["a"], "rows": [{"a": 1}]}]}
+    (tmp_path / "x.json").write_text(json.dumps(d))
+    assert "**Verdicts**" in hooks.results_markdown("x", tmp_path, only=("Verd",))
+    with pytest.raises(ValueError, match="no table titled Timings"):
+        hooks.results_markdown("x", tmp_path, only=("Timings",))
 
 
 @pytest.mark.skipif(shutil.which("mkdocs") is None and not (Path(sys.executable).parent / "mkdocs").exists(),

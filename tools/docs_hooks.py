@@ -4,6 +4,7 @@
   the Typer application itself (its command tree; Typer vendors Click, so the walk is by duck typing);
 - ``<!-- results: NAME -->`` becomes the tables of ``benchmarks/results/NAME.json`` (see
   :func:`results_markdown`), with the command, date, machine and kbcli version that produced them;
+  ``<!-- results: NAME | TITLE | TITLE -->`` only the tables whose title starts with a TITLE;
 - ``<!-- serve-transcript -->`` becomes a real ``kbcli serve`` session with the default model.
 """
 
@@ -73,22 +74,31 @@ def _cell(v) -> str:
     return str(v).replace("|", "\\|")
 
 
-def results_markdown(name: str, root: Path = RESULTS) -> str:
+def results_markdown(name: str, root: Path = RESULTS, only: tuple[str, ...] = ()) -> str:
     """The tables of one result file (``{"command", "date", "machine", "kbcli_version", "tables":
-    [{"title", "columns", "rows"}]}``) with where they came from."""
+    [{"title", "columns", "rows"}]}``) with where they came from; with ``only``, the tables whose
+    title starts with one of those (in the file's order)."""
     path = root / f"{name}.json"
     if not path.exists():
         return (f"!!! note \"No stored result\"\n    `benchmarks/results/{name}.json` is not there yet: "
                 "run the command on this page to make it.\n")
     d = json.loads(path.read_text())
+    tables = [t for t in d["tables"] if not only or t["title"].startswith(only)]
+    if not tables:
+        raise ValueError(f"benchmarks/results/{name}.json has no table titled {' or '.join(only)}")
     out = [f"Measured with `{d['command']}` on {d['date']}, kbcli {d['kbcli_version']}, "
            f"{d['machine']}.", ""]
-    for t in d["tables"]:
+    for t in tables:
         out += [f"**{t['title']}**", ""] + _table(t["rows"], t["columns"]) + [""]
     return "\n".join(out)
 
 
-_RESULTS = re.compile(r"<!--\s*results:\s*([\w.-]+)\s*-->")
+_RESULTS = re.compile(r"<!--\s*results:\s*([\w.-]+)((?:\s*\|[^|>]+)*)\s*-->")
+
+
+def _results_marker(m: re.Match) -> str:
+    only = tuple(t.strip() for t in m.group(2).split("|") if t.strip())
+    return results_markdown(m.group(1), only=only)
 
 
 def on_page_markdown(markdown: str, **_) -> str:
@@ -96,7 +106,7 @@ def on_page_markdown(markdown: str, **_) -> str:
         markdown = markdown.replace("<!-- cli-reference -->", cli_markdown())
     if "<!-- serve-transcript -->" in markdown:
         markdown = markdown.replace("<!-- serve-transcript -->", serve_transcript())
-    return _RESULTS.sub(lambda m: results_markdown(m.group(1)), markdown)
+    return _RESULTS.sub(_results_marker, markdown)
 
 
 def _rounded(v):

@@ -20,11 +20,13 @@ from kbcli.stages import perturb as stage
 def perturb_cmd(
     keyboard: opts.keyboard_option("Keyboard artifact (.h5) to move."),
     output: opts.output_option("Scene artifact to write (.h5)."),
-    dx: Annotated[float | None, typer.Option("--dx", help="Displacement along x, px.")] = None,
-    dy: Annotated[float | None, typer.Option("--dy", help="Displacement along y, px.")] = None,
+    dx: Annotated[float | None, typer.Option("--dx", help="Displacement along x, px.",
+                                             show_default="0 when --dy or --angle is given")] = None,
+    dy: Annotated[float | None, typer.Option("--dy", help="Displacement along y, px.",
+                                             show_default="0 when --dx or --angle is given")] = None,
     angle: Annotated[float | None, typer.Option(
         "--angle", help="Rotation about the keyboard centre, degrees counter-clockwise (makes the "
-        "move rigid); wrapped to (-180, 180].")] = None,
+        "move rigid); wrapped to (-180, 180].", show_default="0 when --dx or --dy is given")] = None,
     category: Annotated[str | None, typer.Option(
         "--category", help="Draw a random move instead: small, medium or large (translation size, "
         "the Euclidean norm, in (0,10], (10,20] or (20,40] px).")] = None,

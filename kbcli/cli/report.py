@@ -6,9 +6,12 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.console import Console
+from rich.table import Table
 
 from kbcli.cli import options as opts
-from kbcli.cli.app import busy, check_io, command, out
+from kbcli.cli.app import bench_app, busy, check_io, command, interactive, out
+from kbcli.cli.record import show_table
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact
 from kbcli.io.atomic import atomic_folder
@@ -107,3 +110,56 @@ def _quality_report(art, source: Path, output: Path, fmt: str) -> None:
         if r != art.attrs["baseline"]:
             out.print(f"  {r}: the paper's explanation "
                       f"{quality.verdict(quality.hypothesis(art, r))}", soft_wrap=True)
+
+
+@command(bench_app, name="verdicts")
+def bench_verdicts_cmd(
+    evaluation: Annotated[Path, typer.Argument(
+        help="Evaluation artifact (.h5) from kbcli evaluate, or a model-quality sweep from kbcli "
+             "quality.")],
+    timings: Annotated[Path | None, typer.Option(
+        help="Stage timings to show beside the verdicts, as benchmarks/reproduce.sh writes them "
+             "(OUT/timings.txt: one 'stage  wall s' line per stage).")] = None,
+    own_model: Annotated[Path | None, typer.Option(
+        help="Evaluation with the robot's own learned model: its Sect. IV-C claims too, as "
+             "kbcli report --own-model judges them.")] = None,
+) -> None:
+    """Print the verdicts of an evaluation or a model-quality sweep as tables, with stage timings.
+
+    Reads EVALUATION (kind 'evaluation': the paper's claims judged as kbcli report judges them,
+    with the smallest p-value each one measured; kind 'model_quality': the paper's explanation
+    tested and every model's advantage) and, with --timings, the wall time of each stage. Writes
+    nothing (kbcli bench --json FILE verdicts ... keeps the tables: the documentation's results
+    pages are generated from benchmarks/results/reproduce.json and model-quality.json).
+    """
+    from kbcli.bench import verdicts as bench
+
+    inputs = {"EVALUATION": evaluation, "--timings": timings, "--own-model": own_model}
+    check_io(inputs)
+    art = read_artifact(evaluation, ("evaluation", "model_quality"))
+    if art.kind == "model_quality":
+        if own_model is not None:
+            raise ConfigError("--own-model reads an evaluation's claims; EVALUATION is a "
+                              "model-quality sweep")
+        tables = [bench.sweep_table(art), bench.hypothesis_table(art), bench.models_table(art)]
+    else:
+        own = read_artifact(own_model, ("evaluation",)) if own_model else None
+        with busy("judging the paper's claims"):
+            claims = stage.claims(stage.upgrade(art), own)
+        tables = [bench.evaluation_table(art), bench.verdict_counts(claims),
+                  bench.claim_table(claims)]
+    if timings is not None:
+        tables += [t for t in bench.timings_table(timings.read_text(encoding="utf-8")) if t.rows]
+    con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
+    for t in tables:
+        _show(con, t)
+
+
+def _show(con: Console, t) -> None:
+    """One result table (:class:`kbcli.bench.verdicts.ResultTable`) printed, and kept for --json."""
+    table = Table(title=t.title, title_justify="left")
+    for c in t.columns:
+        table.add_column(c, overflow="fold")
+    for r in t.rows:
+        table.add_row(*(r.get(c, "") for c in t.columns))
+    show_table(con, table)

@@ -1,0 +1,169 @@
+"""The tables behind ``kbcli bench verdicts``: a report's verdicts as a result file's tables.
+
+``kbcli report`` writes a README for people; the documentation's results pages read result files
+(``benchmarks/results/NAME.json``, one ``{"title", "columns", "rows"}`` per table). These functions
+turn an evaluation (the paper's claims and their verdicts, :func:`claim_table`) or a model-quality
+sweep (the paper's explanation tested, :func:`hypothesis_table`, and its models,
+:func:`models_table`) into such tables, each cell a string; :func:`timings_table` reads the stage
+timings ``benchmarks/reproduce.sh`` writes (``timings.txt``). Pure: no I/O.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from kbcli.stages import quality
+from kbcli.stages.artifact import Artifact
+from kbcli.stages.report.source import methods_of, short
+
+#: A p-value measured (``p=0.0012``, ``p = 3.1e-07``), not a bound quoted from the paper (``p <``).
+_P = re.compile(r"\bp ?= ?(\d+(?:\.\d+)?(?:e[-+]?\d+)?)\b")
+
+
+@dataclass(frozen=True)
+class ResultTable:
+    """One table of a result file: ``rows`` are ``{column: cell}`` of strings."""
+
+    title: str
+    columns: tuple[str, ...]
+    rows: tuple[dict[str, str], ...]
+
+
+def smallest_p(text: str) -> str:
+    """The smallest p-value measured in a claim's text (``-`` when it quotes none)."""
+    ps = [float(m.group(1)) for m in _P.finditer(text)]
+    return _p(min(ps)) if ps else "-"
+
+
+def _p(p: float) -> str:
+    """A p-value as the report writes it (``1`` for 1, else two digits), ``-`` when undefined."""
+    if p != p:  # NaN: not computed
+        return "-"
+    return "1" if p >= 0.9995 else f"{p:.1e}"
+
+
+CLAIM_COLUMNS = ("claim", "the paper says", "judged on", "kbcli measured", "verdict", "smallest p",
+                 "other methods")
+
+
+def claim_table(claims) -> ResultTable:
+    """The paper's claims (:class:`kbcli.stages.report.Claim`) with their verdicts: where the paper
+    says it, what it says, the method judged (its options: :func:`evaluation_table`), what was
+    measured, the verdict, the smallest p-value measured for it, and the other methods beside it."""
+    rows = tuple({"claim": c.source, "the paper says": c.paper,
+                  "judged on": c.method, "kbcli measured": c.measured,
+                  "verdict": c.verdict, "smallest p": smallest_p(c.measured),
+                  "other methods": c.beside or "-"} for c in claims)
+    return ResultTable("The paper's claims, judged", CLAIM_COLUMNS, rows)
+
+
+def verdict_counts(claims) -> ResultTable:
+    """How many claims got each verdict, per method judged."""
+    counts: dict[tuple[str, str], int] = {}
+    for c in claims:
+        counts[c.method, c.verdict] = counts.get((c.method, c.verdict), 0) + 1
+    rows = tuple({"judged on": m, "verdict": v, "claims": str(n)}
+                 for (m, v), n in sorted(counts.items()))
+    return ResultTable("Verdicts", ("judged on", "verdict", "claims"), rows)
+
+
+def evaluation_table(art: Artifact) -> ResultTable:
+    """What the evaluation ran: its file, experiments, modes, methods (each with its posterior,
+    estimator and strategies), model and seed."""
+    a, cfg = art.attrs, art.config
+    model = art.inputs.get("model", {})
+    rows = (("evaluation", f"{art.path} (sha256 {(art.sha256 or '?')[:16]}, kbcli "
+                           f"{art.kbcli_version})"),
+            ("experiments", f"{len(art.data['experiments']['mode'])}: {int(cfg['experiments'])} per "
+                            "displacement, method, strategy and mode"),
+            ("observations per experiment", str(a["max_steps"])),
+            ("modes", ", ".join(a["modes"])),
+            *((f"method {x}", f"{short(art, x)}" + (f" ({v['description']})"
+                                                     if v.get("description") else ""))
+              for x, v in methods_of(art).items()),
+            ("judged method", str(a["judged"])),
+            ("model", f"{a.get('model_strategy')} (file {model.get('file')}, sha256 "
+                      f"{str(model.get('sha256'))[:16]})"),
+            ("seed", str(art.seed)))
+    return ResultTable("The evaluation", ("what", "value"),
+                       tuple({"what": k, "value": v} for k, v in rows))
+
+
+def timings_table(text: str) -> tuple[ResultTable, ResultTable]:
+    """The stage timings ``benchmarks/reproduce.sh`` writes (``stage  wall s`` lines, then notes
+    in parentheses): the stages' wall times, and how the run was made (config, workers, load)."""
+    stages, notes = [], []
+    for line in text.splitlines():
+        line = line.strip()
+        if line.startswith("(") and line.endswith(")"):
+            notes += [p.strip() for p in line[1:-1].split(";") if p.strip()]
+            continue
+        parts = line.split()
+        if len(parts) == 2 and _number(parts[1]):
+            stages.append({"stage": parts[0], "wall s": parts[1]})
+    return (ResultTable("Wall time of each stage", ("stage", "wall s"), tuple(stages)),
+            ResultTable("How it ran", ("note",), tuple({"note": n} for n in notes)))
+
+
+def _number(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def hypothesis_table(art: Artifact) -> ResultTable:
+    """The paper's Sect. IV-C explanation tested on every row of a model-quality sweep but the
+    baseline (:func:`kbcli.stages.quality.hypothesis`)."""
+    a = art.attrs
+    rows = []
+    for r in a["rows"]:
+        if r == a["baseline"]:
+            continue
+        h = quality.hypothesis(art, r)
+        rows.append({"row": r, "Spearman rho": "-" if h["rho"] != h["rho"] else f"{h['rho']:.2f}",
+                     "p": _p(h["p"]),
+                     "significant advantage, better half": f"{h['significant_good']} of {h['good']}",
+                     "worse half": f"{h['significant_bad']} of {h['bad']}",
+                     "verdict": quality.verdict(h)})
+    cols = ("row", "Spearman rho", "p", "significant advantage, better half", "worse half",
+            "verdict")
+    return ResultTable("The paper's explanation (advantage over random against the model's "
+                       "boundary error), tested", cols, tuple(rows))
+
+
+def models_table(art: Artifact) -> ResultTable:
+    """Each model of a model-quality sweep: accuracy, boundary error, threshold, and each row's
+    advantage over the baseline (median touches saved to tau, all categories, with its p)."""
+    a = art.attrs
+    others = [r for r in a["rows"] if r != a["baseline"]]
+    models = sorted(a["models"].items(), key=lambda kv: (str(kv[1].get("exploration", "")),
+                                                         float(kv[1].get("budget", 0)), kv[0]))
+    rows = []
+    for m, mi in models:
+        row = {"model": m, "accuracy": f"{100 * mi['accuracy']:.1f} %",
+               "boundary error px": f"{mi['boundary_error']:.2f}", "tau px": f"{mi['threshold']:.2f}"}
+        for r in others:
+            s = a["summary"][m]["all"][r]
+            row[f"{r} advantage"] = f"{s['advantage']:+g} (p {_p(s['pvalue'])})"
+        rows.append(row)
+    cols = ("model", "accuracy", "boundary error px", "tau px", *(f"{r} advantage" for r in others))
+    return ResultTable("Models and each row's advantage over " + a["baseline"]
+                       + " (median touches saved to tau)", cols, tuple(rows))
+
+
+def sweep_table(art: Artifact) -> ResultTable:
+    """What the model-quality sweep ran."""
+    a, cfg = art.attrs, art.config
+    rows = (("sweep", f"{art.path} (sha256 {(art.sha256 or '?')[:16]}, kbcli {art.kbcli_version})"),
+            ("models", f"{len(a['models'])}: {', '.join(cfg['explorations'])} exploration x "
+                       f"{', '.join(str(b) for b in cfg['budgets'])} reaches"),
+            ("adaptations", str(a["n_experiments"])),
+            ("mode, arm", f"{cfg['mode']}, {cfg['arm']['preset']}"),
+            ("rows", ", ".join(a["rows"])),
+            ("repetitions per displacement", str(cfg["experiments"])),
+            ("touches per adaptation", str(a["max_steps"])),
+            ("seed", str(art.seed)))
+    return ResultTable("The sweep", ("what", "value"), tuple({"what": k, "value": v} for k, v in rows))

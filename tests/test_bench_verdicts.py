@@ -1,0 +1,112 @@
+"""``kbcli bench verdicts``: a report's verdicts and a run's stage timings as a result file's tables
+(what the documentation's results pages render for the paper's reproduction and the model-quality
+sweep)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+from helpers import one_line_error
+
+from kbcli.bench import verdicts
+from kbcli.cli import app
+from kbcli.io.artifact import read_artifact
+from kbcli.stages import report as stage
+
+ROOT = Path(__file__).resolve().parent.parent
+GOLDEN = ROOT / "data" / "golden"
+_spec = importlib.util.spec_from_file_location("docs_hooks", ROOT / "tools" / "docs_hooks.py")
+hooks = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(hooks)
+
+#: What benchmarks/reproduce.sh writes to $OUT/timings.txt.
+TIMINGS = """stage          wall s
+keyboard          0.9
+learn            41.3
+evaluate        612.0
+report           12.5
+total           666.7
+(config: pipelines/paper.toml; mode: ideal+dynamics; methods: all of the config; jobs 2; experiments per parametrization: config)
+(load average, 1/5/15 min: 1.02 0.80 0.50 before, 2.10 1.90 1.20 after; 2 cores)
+"""
+
+
+def test_smallest_p_reads_measured_p_values_not_the_papers_bounds():
+    assert verdicts.smallest_p("not at 8 px (p=1), 4 px (p=0.0012): p < 1e-05 needed") == "1.2e-03"
+    assert verdicts.smallest_p("rho = -0.62, p = 3.1e-07; (p=1)") == "3.1e-07"
+    assert verdicts.smallest_p("8 px: 0.00 -> 0.50 (p=1)") == "1"
+    assert verdicts.smallest_p("no threshold with p < 0.01") == "-"
+    assert verdicts.smallest_p("mean entropy t=5: 4.62 vs 6.32 nats") == "-"
+
+
+def test_timings_table_reads_what_reproduce_sh_writes():
+    stages, notes = verdicts.timings_table(TIMINGS)
+    assert stages.columns == ("stage", "wall s")
+    assert [r["stage"] for r in stages.rows] == ["keyboard", "learn", "evaluate", "report", "total"]
+    assert stages.rows[2]["wall s"] == "612.0"
+    assert {"note": "jobs 2"} in notes.rows and {"note": "2 cores"} in notes.rows
+    assert notes.rows[0] == {"note": "config: pipelines/paper.toml"}
+    empty, no_notes = verdicts.timings_table("")
+    assert empty.rows == () and no_notes.rows == ()
+
+
+def test_claim_table_has_one_row_per_claim_with_its_verdict():
+    art = stage.upgrade(read_artifact(GOLDEN / "evaluation.h5", ("evaluation",)))
+    claims = stage.claims(art)
+    t = verdicts.claim_table(claims)
+    assert t.columns == verdicts.CLAIM_COLUMNS and len(t.rows) == len(claims)
+    for row, c in zip(t.rows, claims, strict=True):
+        assert set(row) == set(t.columns)
+        assert row["verdict"] == c.verdict in stage.VERDICTS
+        assert row["the paper says"] == c.paper and row["kbcli measured"] == c.measured
+    counts = verdicts.verdict_counts(claims)
+    assert sum(int(r["claims"]) for r in counts.rows) == len(claims)
+
+
+def test_bench_verdicts_writes_a_result_file_that_regenerates_identically(tmp_path, runner):
+    (tmp_path / "timings.txt").write_text(TIMINGS)
+    pages, tables = [], []
+    for i in range(2):
+        out = tmp_path / f"r{i}" / "reproduce.json"
+        r = runner.invoke(app, ["bench", "--json", str(out), "verdicts",
+                                str(GOLDEN / "evaluation.h5"), "--timings",
+                                str(tmp_path / "timings.txt")])
+        assert r.exit_code == 0, r.output
+        d = json.loads(out.read_text())
+        assert d["command"].startswith("kbcli") and d["kbcli_version"] and d["machine"]
+        tables.append(d["tables"])
+        pages.append(hooks.results_markdown("reproduce", out.parent,
+                                            only=("Verdicts", "Wall time", "The paper's claims")))
+    assert tables[0] == tables[1]
+    assert pages[0] == pages[1]
+    titles = [t["title"] for t in tables[0]]
+    assert titles == ["The evaluation", "Verdicts", "The paper's claims, judged",
+                      "Wall time of each stage", "How it ran"]
+    assert "| evaluate | 612.0 |" in pages[0] and "| kbcli | agrees |" in pages[0]
+    assert "The evaluation" not in pages[0]
+
+
+def test_bench_verdicts_on_a_model_quality_sweep(tmp_path, runner):
+    out = tmp_path / "model-quality.json"
+    r = runner.invoke(app, ["bench", "--json", str(out), "verdicts",
+                            str(GOLDEN / "model_quality.h5")])
+    assert r.exit_code == 0, r.output
+    d = json.loads(out.read_text())
+    sweep, hyp, models = d["tables"]
+    assert hyp["title"].startswith("The paper's explanation") and hyp["rows"][0]["row"] == "infogain"
+    art = read_artifact(GOLDEN / "model_quality.h5", ("model_quality",))
+    assert len(models["rows"]) == len(art.attrs["models"])
+    assert "infogain advantage" in models["columns"] and "nan" not in json.dumps(d["tables"])
+
+
+def test_bench_verdicts_refuses_bad_input_in_one_line(tmp_path, runner):
+    r = runner.invoke(app, ["bench", "verdicts", str(GOLDEN / "model_quality.h5"),
+                            "--own-model", str(GOLDEN / "evaluation.h5")])
+    one_line_error(r, "--own-model")
+    r = runner.invoke(app, ["bench", "verdicts", str(GOLDEN / "model.h5")])
+    one_line_error(r, "model.h5")
+    r = runner.invoke(app, ["bench", "verdicts", str(GOLDEN / "evaluation.h5"), "--timings",
+                            str(tmp_path / "missing.txt")])
+    one_line_error(r, "missing.txt")
