@@ -145,3 +145,31 @@ def test_estimator_flag_reaches_the_run(runner, files):
     assert r.exit_code == 0, r.output
     cfg = read_artifact(files / "out.h5", "run").config
     assert cfg["adapt"]["robot"]["estimator"] == "ml"
+
+
+def test_every_paper_flag_is_declared_once_and_reaches_adapt_and_run():
+    """opts.with_paper_flags adds each of opts.PAPER_FLAGS to a command, typed as declared."""
+    import typer
+
+    assert set(opts._PAPER_TYPES) == set(opts.PAPER_FLAGS)
+    for name in ("adapt", "run"):
+        cmd = typer.main.get_command(app).commands[name]
+        flags = {o for p in cmd.params for o in p.opts}
+        missing = {"--" + f.replace("_", "-") for f in opts.PAPER_FLAGS} - flags
+        assert not missing, (name, missing)
+
+
+def test_with_paper_flags_hands_the_flags_over_as_one_dict():
+    seen = {}
+
+    @opts.with_paper_flags
+    def cmd(a: int = 1, paper_flags: dict | None = None, b: int = 2):
+        seen.update(paper_flags, a=a, b=b)
+
+    import inspect
+
+    names = list(inspect.signature(cmd).parameters)
+    assert names[0] == "a" and names[-1] == "b" and "paper_flags" not in names
+    assert names[1:-1] == list(opts._PAPER_TYPES)
+    cmd(a=3, b=4, kde_floor=0.5)
+    assert seen["kde_floor"] == 0.5 and seen["candidates"] is None and (seen["a"], seen["b"]) == (3, 4)

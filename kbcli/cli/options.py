@@ -331,7 +331,8 @@ ActiveKeep = _robot_option("active_keep", int, "Most confusing candidates active
 
 
 #: The Typer type of each flag of :data:`PAPER_FLAGS`.
-_PAPER_TYPES = {"kde_samples": KdeSamples, "kde_draw": KdeDraw, "kde_sampler": KdeSampler,
+_PAPER_TYPES = {"kde_samples": KdeSamples, "kde_draw": KdeDraw, "simulate_draw": SimulateDraw,
+                "kde_sampler": KdeSampler,
                 "kde_floor": KdeFloor, "ml_ties": MlTies, "stop_ml": StopMl,
                 "stop_mass": StopMass, "random_actions": RandomActions,
                 "candidates": Candidates, "active_keep": ActiveKeep}
