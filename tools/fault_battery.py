@@ -428,6 +428,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--keep", action="store_true", help="keep the work folder")
     ap.add_argument("--show", action="store_true", help="print each unclean case's stderr")
     args = ap.parse_args(argv)
+    # A shell starts a background job with SIGINT ignored, and every kbcli would inherit that
+    # (Python keeps an inherited SIG_IGN): the Ctrl-C cases would test nothing. Handled here, it
+    # is the default again in the children (an exec resets handled signals).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     cases = [c for c in all_cases() if args.k is None or args.k in c.name or args.k == c.cls]
     base = Path(tempfile.mkdtemp(prefix="kbcli-faults-"))
     inputs = base / "inputs"
