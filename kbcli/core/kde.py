@@ -295,11 +295,10 @@ def _binned_kde_reach(pts: np.ndarray, x0: float, y0: float, res: float, n: int,
     cols = sfft.rfft(inner if len(sets) == b else np.take(inner, sets, axis=0), n=size, axis=1)
     cols *= np.take(spec, sets, axis=0)[:, :, None]
     full = sfft.irfft(cols, n=size, axis=1)
-    if len(sets) == b:
-        np.maximum(full[:, pad:pad + n, :], 0.0, out=dens, dtype=np.float64)
-    else:
-        dens[sets] = np.maximum(full[:, pad:pad + n, :], 0.0, dtype=np.float64)
-    dens /= npts * res * res
+    scale = npts * res * res
+    for j, i in enumerate(sets):  # one set at a time (it stays in cache)
+        np.maximum(full[j, pad:pad + n, :], 0.0, out=dens[i], dtype=np.float64)
+        dens[i] /= scale
     return dens
 
 
@@ -404,9 +403,13 @@ def floored_log(dens: np.ndarray, grid: HypothesisGrid, eps: float, *,
         return np.log((1 - eps) * dens + eps * prior_density)
     if not dens.size:
         return np.log(dens)
-    axes = tuple(range(1, dens.ndim)) if batch else None
-    peak = np.max(dens, axis=axes, keepdims=True)
     if not overwrite:
+        axes = tuple(range(1, dens.ndim)) if batch else None
+        peak = np.max(dens, axis=axes, keepdims=True)
         return np.log(np.where(dens > ZERO_RTOL * peak, dens, ZERO_DENSITY))
-    np.copyto(dens, ZERO_DENSITY, where=dens <= ZERO_RTOL * peak)  # densities are never NaN
-    return np.log(dens, out=dens)
+    # in place, one term at a time (it stays in cache); densities are never NaN
+    dens = np.ascontiguousarray(dens, dtype=np.float64)
+    for term in dens.reshape((len(dens), -1)) if batch else dens.reshape(1, -1):
+        np.copyto(term, ZERO_DENSITY, where=term <= ZERO_RTOL * np.max(term))
+        np.log(term, out=term)
+    return dens

@@ -122,19 +122,25 @@ class Posterior:
     def entropies_after(self, terms: np.ndarray) -> np.ndarray:
         """(k,) the entropy (nats) of the posterior updated with each of ``k`` terms
         ``(k, *grid.shape)``: ``update(terms[i]).entropy()`` bit for bit, without building the
-        posteriors (one pass over the stacked terms; row sums add pairwise like a 1-D sum)."""
+        posteriors (one term at a time through two reused buffers, which stay in cache; a row's
+        sum adds pairwise like the 1-D sum of :func:`log_normalise`)."""
         k = len(terms)
-        logw = self.logp.reshape(1, -1) + np.asarray(terms, float).reshape(k, -1)
-        m = np.max(logw, axis=1, keepdims=True)
-        if not np.isfinite(m).all():
-            raise ValueError("a posterior needs at least one cell of finite log-probability")
-        p = np.subtract(logw, m)  # exp(logw - m), in place: the same numbers, one buffer fewer
-        np.exp(p, out=p)
-        total = p.sum(axis=1, keepdims=True)
-        p /= total
-        # math.log, as log_normalise takes it (numpy's vectorised log may round differently)
-        logw -= m + np.array([[math.log(t)] for t in total[:, 0]])
-        return np.array([-np.einsum("i,i->", p[i], logw[i]) for i in range(k)])
+        flat = self.logp.reshape(-1)
+        rows = np.asarray(terms, float).reshape(k, -1)
+        logw, p = np.empty_like(flat), np.empty_like(flat)
+        out = np.empty(k)
+        for i in range(k):
+            np.add(flat, rows[i], out=logw)
+            m = float(np.max(logw))
+            if not math.isfinite(m):
+                raise ValueError("a posterior needs at least one cell of finite log-probability")
+            np.subtract(logw, m, out=p)
+            np.exp(p, out=p)
+            total = float(p.sum())
+            p /= total
+            logw -= m + math.log(total)  # math.log, as log_normalise takes it
+            out[i] = -np.einsum("i,i->", p, logw)
+        return out
 
     def with_tie_seed(self, tie_seed: int | None) -> Posterior:
         """The same posterior (same arrays, no renormalisation) with another tie rule."""
