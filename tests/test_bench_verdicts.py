@@ -65,6 +65,28 @@ def test_claim_table_has_one_row_per_claim_with_its_verdict():
     assert sum(int(r["claims"]) for r in counts.rows) == len(claims)
 
 
+def test_other_methods_are_cut_where_a_known_label_starts():
+    """A claim's text has ``;`` and ``[verdict]`` of its own: only a known method label cuts it."""
+    beside = ("kbcli active: significant: not at 8 px (p=0.2) [underpowered]; smaller: 8 px: "
+              "0.4 -> 0.6 (p=0.7) [differs] [differs]; kbcli infogain: at 8 px (p=1e-06) [agrees]")
+    labels = ("kbcli active", "kbcli infogain", "paper-v1 active")
+    parts = verdicts.split_beside(beside, labels)
+    assert [(x, v) for x, _, v in parts] == [("kbcli active", "differs"), ("kbcli infogain", "agrees")]
+    assert parts[0][1].endswith("(p=0.7) [differs]") and parts[1][1] == "at 8 px (p=1e-06)"
+    assert verdicts.split_beside("", labels) == [] and verdicts.split_beside(beside, ()) == []
+    claim = stage.Claim("Sect. IV-B", "small: active beats random", "paper", "kde", "p=0.5",
+                        "underpowered", beside)
+    (row,) = verdicts.claim_table([claim], labels).rows
+    assert row["other methods"] == "kbcli active: differs; kbcli infogain: agrees"
+    others = verdicts.others_table([claim], labels)
+    assert [(r["method"], r["verdict"], r["smallest p"]) for r in others.rows] == [
+        ("kbcli active", "differs", "2.0e-01"), ("kbcli infogain", "agrees", "1.0e-06")]
+    counts = {(r["method"], r["verdict"]): r["claims"]
+              for r in verdicts.verdict_counts([claim, claim], labels).rows}
+    assert counts == {("paper", "underpowered"): "2", ("kbcli active", "differs"): "2",
+                      ("kbcli infogain", "agrees"): "2"}
+
+
 def test_bench_verdicts_writes_a_result_file_that_regenerates_identically(tmp_path, runner):
     (tmp_path / "timings.txt").write_text(TIMINGS)
     pages, tables = [], []
