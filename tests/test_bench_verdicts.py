@@ -62,7 +62,9 @@ def test_claim_table_has_one_row_per_claim_with_its_verdict():
         assert row["verdict"] == c.verdict in stage.VERDICTS
         assert row["the paper says"] == c.paper and row["kbcli measured"] == c.measured
     counts = verdicts.verdict_counts(claims)
-    assert sum(int(r["claims"]) for r in counts.rows) == len(claims)
+    assert counts.columns[0] == "method" and set(counts.columns[1:]) <= set(stage.VERDICTS)
+    (row,) = counts.rows
+    assert sum(int(row[v]) for v in counts.columns[1:]) == len(claims)
 
 
 def test_other_methods_are_cut_where_a_known_label_starts():
@@ -81,10 +83,13 @@ def test_other_methods_are_cut_where_a_known_label_starts():
     others = verdicts.others_table([claim], labels)
     assert [(r["method"], r["verdict"], r["smallest p"]) for r in others.rows] == [
         ("kbcli active", "differs", "2.0e-01"), ("kbcli infogain", "agrees", "1.0e-06")]
-    counts = {(r["method"], r["verdict"]): r["claims"]
-              for r in verdicts.verdict_counts([claim, claim], labels).rows}
-    assert counts == {("paper", "underpowered"): "2", ("kbcli active", "differs"): "2",
-                      ("kbcli infogain", "agrees"): "2"}
+    counts = verdicts.verdict_counts([claim, claim], labels)
+    assert counts.columns == ("method", "agrees", "differs", "underpowered")
+    assert counts.rows == ({"method": "paper", "agrees": "0", "differs": "0", "underpowered": "2"},
+                           {"method": "kbcli active", "agrees": "0", "differs": "2",
+                            "underpowered": "0"},
+                           {"method": "kbcli infogain", "agrees": "2", "differs": "0",
+                            "underpowered": "0"})
 
 
 def test_bench_verdicts_writes_a_result_file_that_regenerates_identically(tmp_path, runner):
@@ -104,9 +109,9 @@ def test_bench_verdicts_writes_a_result_file_that_regenerates_identically(tmp_pa
     assert tables[0] == tables[1]
     assert pages[0] == pages[1]
     titles = [t["title"] for t in tables[0]]
-    assert titles == ["The evaluation", "Verdicts", "The paper's claims, judged",
+    assert titles == ["The evaluation", "Verdicts (claims per method)", "The paper's claims, judged",
                       "Wall time of each stage", "How it ran"]
-    assert "| evaluate | 612.0 |" in pages[0] and "| kbcli | agrees |" in pages[0]
+    assert "| evaluate | 612.0 |" in pages[0] and "| method | agrees |" in pages[0]
     assert "The evaluation" not in pages[0]
 
 

@@ -71,7 +71,13 @@ def _table(rows: list[dict], columns: list[str]) -> list[str]:
 def _cell(v) -> str:
     if isinstance(v, float):
         return f"{v:.4g}"
-    return str(v).replace("|", "\\|")
+    return _escape(str(v)).replace("|", "\\|")
+
+
+def _escape(text: str) -> str:
+    """Measured text shown as it is: brackets and asterisks are not Markdown links or emphasis (a
+    verdict in brackets, ``[differs]``, would be read as a cross-reference)."""
+    return re.sub(r"([\[\]*])", r"\\\1", text)
 
 
 def results_markdown(name: str, root: Path = RESULTS, only: tuple[str, ...] = ()) -> str:
@@ -89,7 +95,7 @@ def results_markdown(name: str, root: Path = RESULTS, only: tuple[str, ...] = ()
     out = [f"Measured with `{d['command']}` on {d['date']}, kbcli {d['kbcli_version']}, "
            f"{d['machine']}.", ""]
     for t in tables:
-        out += [f"**{t['title']}**", ""] + _table(t["rows"], t["columns"]) + [""]
+        out += [f"**{_escape(t['title'])}**", ""] + _table(t["rows"], t["columns"]) + [""]
     return "\n".join(out)
 
 

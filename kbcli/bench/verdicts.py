@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from kbcli.stages import quality
 from kbcli.stages.artifact import Artifact
-from kbcli.stages.report.source import compared, methods_of, others, short
+from kbcli.stages.report.source import VERDICTS, compared, methods_of, others, short
 
 #: A p-value measured (``p=0.0012``, ``p = 3.1e-07``), not a bound quoted from the paper (``p <``).
 _P = re.compile(r"\bp ?= ?(\d+(?:\.\d+)?(?:e[-+]?\d+)?)\b")
@@ -92,17 +92,18 @@ def others_table(claims, labels: tuple[str, ...]) -> ResultTable:
 
 
 def verdict_counts(claims, labels: tuple[str, ...] = ()) -> ResultTable:
-    """How many claims got each verdict: on the judged method, then on each other method's
-    strategy (``labels`` from :func:`other_labels`)."""
-    counts: dict[tuple[str, str], int] = {}
+    """How many claims got each verdict (a column each): on the judged method, then on each other
+    method's strategy (``labels`` from :func:`other_labels`)."""
+    counts: dict[str, dict[str, int]] = {}
     for c in claims:
         for who, v in [(c.method, c.verdict),
                        *((x, v) for x, _, v in split_beside(c.beside, labels))]:
-            counts[who, v] = counts.get((who, v), 0) + 1
-    order = {w: i for i, w in enumerate(dict.fromkeys(w for w, _ in counts))}
-    rows = tuple({"method": w, "verdict": v, "claims": str(n)}
-                 for (w, v), n in sorted(counts.items(), key=lambda kv: (order[kv[0][0]], kv[0][1])))
-    return ResultTable("Verdicts", ("method", "verdict", "claims"), rows)
+            counts.setdefault(who, {})[v] = counts.get(who, {}).get(v, 0) + 1
+    seen = {v for by in counts.values() for v in by}
+    verdicts = [v for v in VERDICTS if v in seen] + sorted(seen - set(VERDICTS))
+    rows = tuple({"method": w, **{v: str(by.get(v, 0)) for v in verdicts}}
+                 for w, by in counts.items())
+    return ResultTable("Verdicts (claims per method)", ("method", *verdicts), rows)
 
 
 def evaluation_table(art: Artifact) -> ResultTable:
