@@ -137,3 +137,17 @@ def test_bench_verdicts_refuses_bad_input_in_one_line(tmp_path, runner):
     r = runner.invoke(app, ["bench", "verdicts", str(GOLDEN / "evaluation.h5"), "--timings",
                             str(tmp_path / "missing.txt")])
     one_line_error(r, "missing.txt")
+
+
+def test_timed_sh_writes_what_timings_table_reads(tmp_path):
+    """benchmarks/timed.sh (make model-quality's stage timer) appends in reproduce.sh's format."""
+    import subprocess
+
+    path = tmp_path / "t.txt"
+    for name in ("quality", "report"):
+        subprocess.run([str(ROOT / "benchmarks" / "timed.sh"), str(path), name, "true"], check=True)
+    failed = subprocess.run([str(ROOT / "benchmarks" / "timed.sh"), str(path), "x", "false"])
+    assert failed.returncode == 1  # a failing stage fails the recipe and is not timed
+    stages, _ = verdicts.timings_table(path.read_text())
+    assert [r["stage"] for r in stages.rows] == ["quality", "report"]
+    assert all(float(r["wall s"]) >= 0 for r in stages.rows)
