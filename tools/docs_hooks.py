@@ -80,14 +80,20 @@ def _escape(text: str) -> str:
     return re.sub(r"([\[\]*])", r"\\\1", text)
 
 
+#: How the result files of the long runs are made (the others: ``make results``).
+MAKES = {"reproduce": "`make reproduce`, then `make results-reproduce`,",
+         "model-quality": "`make model-quality`, then `make results-quality`,"}
+
+
 def results_markdown(name: str, root: Path = RESULTS, only: tuple[str, ...] = ()) -> str:
     """The tables of one result file (``{"command", "date", "machine", "kbcli_version", "tables":
     [{"title", "columns", "rows"}]}``) with where they came from; with ``only``, the tables whose
     title starts with one of those (in the file's order)."""
     path = root / f"{name}.json"
     if not path.exists():
+        how = MAKES.get(name, "`make results` (or the command on this page)")
         return (f"!!! note \"No stored result\"\n    `benchmarks/results/{name}.json` is not there yet: "
-                "run the command on this page to make it.\n")
+                f"{how} makes it.\n")
     d = json.loads(path.read_text())
     tables = [t for t in d["tables"] if not only or t["title"].startswith(only)]
     if not tables:
