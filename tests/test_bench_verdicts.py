@@ -62,7 +62,34 @@ def test_claim_table_has_one_row_per_claim_with_its_verdict():
         assert row["verdict"] == c.verdict in stage.VERDICTS
         assert row["the paper says"] == c.paper and row["kbcli measured"] == c.measured
     counts = verdicts.verdict_counts(claims)
-    assert sum(int(r["claims"]) for r in counts.rows) == len(claims)
+    assert counts.columns[0] == "method" and set(counts.columns[1:]) <= set(stage.VERDICTS)
+    (row,) = counts.rows
+    assert sum(int(row[v]) for v in counts.columns[1:]) == len(claims)
+
+
+def test_other_methods_are_cut_where_a_known_label_starts():
+    """A claim's text has ``;`` and ``[verdict]`` of its own: only a known method label cuts it."""
+    beside = ("kbcli active: significant: not at 8 px (p=0.2) [underpowered]; smaller: 8 px: "
+              "0.4 -> 0.6 (p=0.7) [differs] [differs]; kbcli infogain: at 8 px (p=1e-06) [agrees]")
+    labels = ("kbcli active", "kbcli infogain", "paper-v1 active")
+    parts = verdicts.split_beside(beside, labels)
+    assert [(x, v) for x, _, v in parts] == [("kbcli active", "differs"), ("kbcli infogain", "agrees")]
+    assert parts[0][1].endswith("(p=0.7) [differs]") and parts[1][1] == "at 8 px (p=1e-06)"
+    assert verdicts.split_beside("", labels) == [] and verdicts.split_beside(beside, ()) == []
+    claim = stage.Claim("Sect. IV-B", "small: active beats random", "paper", "kde", "p=0.5",
+                        "underpowered", beside)
+    (row,) = verdicts.claim_table([claim], labels).rows
+    assert row["other methods"] == "kbcli active: differs; kbcli infogain: agrees"
+    others = verdicts.others_table([claim], labels)
+    assert [(r["method"], r["verdict"], r["smallest p"]) for r in others.rows] == [
+        ("kbcli active", "differs", "2.0e-01"), ("kbcli infogain", "agrees", "1.0e-06")]
+    counts = verdicts.verdict_counts([claim, claim], labels)
+    assert counts.columns == ("method", "agrees", "differs", "underpowered")
+    assert counts.rows == ({"method": "paper", "agrees": "0", "differs": "0", "underpowered": "2"},
+                           {"method": "kbcli active", "agrees": "0", "differs": "2",
+                            "underpowered": "0"},
+                           {"method": "kbcli infogain", "agrees": "2", "differs": "0",
+                            "underpowered": "0"})
 
 
 def test_bench_verdicts_writes_a_result_file_that_regenerates_identically(tmp_path, runner):
@@ -82,9 +109,9 @@ def test_bench_verdicts_writes_a_result_file_that_regenerates_identically(tmp_pa
     assert tables[0] == tables[1]
     assert pages[0] == pages[1]
     titles = [t["title"] for t in tables[0]]
-    assert titles == ["The evaluation", "Verdicts", "The paper's claims, judged",
+    assert titles == ["The evaluation", "Verdicts (claims per method)", "The paper's claims, judged",
                       "Wall time of each stage", "How it ran"]
-    assert "| evaluate | 612.0 |" in pages[0] and "| kbcli | agrees |" in pages[0]
+    assert "| evaluate | 612.0 |" in pages[0] and "| method | agrees |" in pages[0]
     assert "The evaluation" not in pages[0]
 
 
@@ -110,3 +137,17 @@ def test_bench_verdicts_refuses_bad_input_in_one_line(tmp_path, runner):
     r = runner.invoke(app, ["bench", "verdicts", str(GOLDEN / "evaluation.h5"), "--timings",
                             str(tmp_path / "missing.txt")])
     one_line_error(r, "missing.txt")
+
+
+def test_timed_sh_writes_what_timings_table_reads(tmp_path):
+    """benchmarks/timed.sh (make model-quality's stage timer) appends in reproduce.sh's format."""
+    import subprocess
+
+    path = tmp_path / "t.txt"
+    for name in ("quality", "report"):
+        subprocess.run([str(ROOT / "benchmarks" / "timed.sh"), str(path), name, "true"], check=True)
+    failed = subprocess.run([str(ROOT / "benchmarks" / "timed.sh"), str(path), "x", "false"])
+    assert failed.returncode == 1  # a failing stage fails the recipe and is not timed
+    stages, _ = verdicts.timings_table(path.read_text())
+    assert [r["stage"] for r in stages.rows] == ["quality", "report"]
+    assert all(float(r["wall s"]) >= 0 for r in stages.rows)

@@ -81,6 +81,8 @@ def test_an_option_whose_value_a_config_fills_shows_the_default_it_takes():
 def test_a_default_taken_from_the_input_or_other_options_says_where_from():
     """Shown as Typer's described default, ``[default: (...)]``, never left blank."""
     assert _default_of("adapt", "--family") == "the scene's family"
-    assert _default_of("play", "--perturb-at") == "half of --steps"
-    assert _default_of("perturb", "--dx") == "0 when --dy or --angle is given"
-    assert _default_of("perturb", "--angle") == "0 when --dx or --dy is given"
+    perturb = dict(COMMANDS)["kbcli perturb"]
+    shown = {p.opts[0]: _record(perturb, p) for p in perturb.params if p.param_type_name == "option"}
+    for name, others in (("--dx", "--dy or --angle"), ("--dy", "--dx or --angle"),
+                         ("--angle", "--dx or --dy")):
+        assert f"[default: (0 when {others} is given)]" in " ".join(shown[name].split()), name

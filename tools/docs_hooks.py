@@ -71,7 +71,18 @@ def _table(rows: list[dict], columns: list[str]) -> list[str]:
 def _cell(v) -> str:
     if isinstance(v, float):
         return f"{v:.4g}"
-    return str(v).replace("|", "\\|")
+    return _escape(str(v)).replace("|", "\\|")
+
+
+def _escape(text: str) -> str:
+    """Measured text shown as it is: brackets and asterisks are not Markdown links or emphasis (a
+    verdict in brackets, ``[differs]``, would be read as a cross-reference)."""
+    return re.sub(r"([\[\]*])", r"\\\1", text)
+
+
+#: How the result files of the long runs are made (the others: ``make results``).
+MAKES = {"reproduce": "`make reproduce`, then `make results-reproduce`,",
+         "model-quality": "`make model-quality`, then `make results-quality`,"}
 
 
 def results_markdown(name: str, root: Path = RESULTS, only: tuple[str, ...] = ()) -> str:
@@ -80,8 +91,9 @@ def results_markdown(name: str, root: Path = RESULTS, only: tuple[str, ...] = ()
     title starts with one of those (in the file's order)."""
     path = root / f"{name}.json"
     if not path.exists():
+        how = MAKES.get(name, "`make results` (or the command on this page)")
         return (f"!!! note \"No stored result\"\n    `benchmarks/results/{name}.json` is not there yet: "
-                "run the command on this page to make it.\n")
+                f"{how} makes it.\n")
     d = json.loads(path.read_text())
     tables = [t for t in d["tables"] if not only or t["title"].startswith(only)]
     if not tables:
@@ -89,7 +101,7 @@ def results_markdown(name: str, root: Path = RESULTS, only: tuple[str, ...] = ()
     out = [f"Measured with `{d['command']}` on {d['date']}, kbcli {d['kbcli_version']}, "
            f"{d['machine']}.", ""]
     for t in tables:
-        out += [f"**{t['title']}**", ""] + _table(t["rows"], t["columns"]) + [""]
+        out += [f"**{_escape(t['title'])}**", ""] + _table(t["rows"], t["columns"]) + [""]
     return "\n".join(out)
 
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from kbcli.stages import quality
 from kbcli.stages.artifact import Artifact
-from kbcli.stages.report.source import methods_of, short
+from kbcli.stages.report.source import VERDICTS, compared, methods_of, others, short
 
 #: A p-value measured (``p=0.0012``, ``p = 3.1e-07``), not a bound quoted from the paper (``p <``).
 _P = re.compile(r"\bp ?= ?(\d+(?:\.\d+)?(?:e[-+]?\d+)?)\b")
@@ -45,27 +45,65 @@ def _p(p: float) -> str:
 
 CLAIM_COLUMNS = ("claim", "the paper says", "judged on", "kbcli measured", "verdict", "smallest p",
                  "other methods")
+OTHER_COLUMNS = ("claim", "method", "kbcli measured", "verdict", "smallest p")
 
 
-def claim_table(claims) -> ResultTable:
+def other_labels(art: Artifact) -> tuple[str, ...]:
+    """How a claim's text names each other method's strategy: ``"kbcli infogain"``."""
+    return tuple(f"{x} {s}" for x in others(art) for s in compared(art, x))
+
+
+def split_beside(beside: str, labels: tuple[str, ...]) -> list[tuple[str, str, str]]:
+    """A claim's other methods (``"kbcli active: TEXT [verdict]; kbcli infogain: ..."``) as
+    ``(label, text, verdict)``, cut where a known label starts (a text has ``;`` of its own)."""
+    if not beside or not labels:
+        return []
+    names = "|".join(re.escape(x) for x in sorted(labels, key=len, reverse=True))
+    starts = list(re.finditer(rf"(?:^|; )({names}): ", beside))
+    out = []
+    for m, nxt in zip(starts, [*starts[1:], None], strict=True):
+        text = beside[m.end():nxt.start() if nxt else len(beside)]
+        v = re.search(r" \[([^\]]+)\]$", text)
+        out.append((m.group(1), text[:v.start()] if v else text, v.group(1) if v else "-"))
+    return out
+
+
+def claim_table(claims, labels: tuple[str, ...] = ()) -> ResultTable:
     """The paper's claims (:class:`kbcli.stages.report.Claim`) with their verdicts: where the paper
     says it, what it says, the method judged (its options: :func:`evaluation_table`), what was
-    measured, the verdict, the smallest p-value measured for it, and the other methods beside it."""
-    rows = tuple({"claim": c.source, "the paper says": c.paper,
-                  "judged on": c.method, "kbcli measured": c.measured,
-                  "verdict": c.verdict, "smallest p": smallest_p(c.measured),
-                  "other methods": c.beside or "-"} for c in claims)
-    return ResultTable("The paper's claims, judged", CLAIM_COLUMNS, rows)
-
-
-def verdict_counts(claims) -> ResultTable:
-    """How many claims got each verdict, per method judged."""
-    counts: dict[tuple[str, str], int] = {}
+    measured, the verdict, the smallest p-value measured for it, and the other methods' verdicts
+    (their measurements: :func:`others_table`; ``labels`` from :func:`other_labels`)."""
+    rows = []
     for c in claims:
-        counts[c.method, c.verdict] = counts.get((c.method, c.verdict), 0) + 1
-    rows = tuple({"judged on": m, "verdict": v, "claims": str(n)}
-                 for (m, v), n in sorted(counts.items()))
-    return ResultTable("Verdicts", ("judged on", "verdict", "claims"), rows)
+        beside = split_beside(c.beside, labels)
+        summary = ("; ".join(f"{x}: {v}" for x, _, v in beside) if beside else c.beside) or "-"
+        rows.append({"claim": c.source, "the paper says": c.paper, "judged on": c.method,
+                     "kbcli measured": c.measured, "verdict": c.verdict,
+                     "smallest p": smallest_p(c.measured), "other methods": summary})
+    return ResultTable("The paper's claims, judged", CLAIM_COLUMNS, tuple(rows))
+
+
+def others_table(claims, labels: tuple[str, ...]) -> ResultTable:
+    """The same claims measured on every other method: one row per claim and method."""
+    rows = tuple({"claim": f"{c.source}: {c.paper}", "method": x, "kbcli measured": text,
+                  "verdict": v, "smallest p": smallest_p(text)}
+                 for c in claims for x, text, v in split_beside(c.beside, labels))
+    return ResultTable("The same claims on the other methods", OTHER_COLUMNS, rows)
+
+
+def verdict_counts(claims, labels: tuple[str, ...] = ()) -> ResultTable:
+    """How many claims got each verdict (a column each): on the judged method, then on each other
+    method's strategy (``labels`` from :func:`other_labels`)."""
+    counts: dict[str, dict[str, int]] = {}
+    for c in claims:
+        for who, v in [(c.method, c.verdict),
+                       *((x, v) for x, _, v in split_beside(c.beside, labels))]:
+            counts.setdefault(who, {})[v] = counts.get(who, {}).get(v, 0) + 1
+    seen = {v for by in counts.values() for v in by}
+    verdicts = [v for v in VERDICTS if v in seen] + sorted(seen - set(VERDICTS))
+    rows = tuple({"method": w, **{v: str(by.get(v, 0)) for v in verdicts}}
+                 for w, by in counts.items())
+    return ResultTable("Verdicts (claims per method)", ("method", *verdicts), rows)
 
 
 def evaluation_table(art: Artifact) -> ResultTable:

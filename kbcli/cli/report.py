@@ -146,8 +146,10 @@ def bench_verdicts_cmd(
         own = read_artifact(own_model, ("evaluation",)) if own_model else None
         with busy("judging the paper's claims"):
             claims = stage.claims(stage.upgrade(art), own)
-        tables = [bench.evaluation_table(art), bench.verdict_counts(claims),
-                  bench.claim_table(claims)]
+        labels = bench.other_labels(stage.upgrade(art))
+        tables = [bench.evaluation_table(art), bench.verdict_counts(claims, labels),
+                  bench.claim_table(claims, labels)]
+        tables += [t for t in (bench.others_table(claims, labels),) if t.rows]
     if timings is not None:
         tables += [t for t in bench.timings_table(timings.read_text(encoding="utf-8")) if t.rows]
     con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
