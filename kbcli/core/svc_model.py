@@ -75,12 +75,35 @@ _HARD_C = 1e6  # margin penalty of a pair's linear machine: a hard margin (its s
 
 
 def _separable(x: np.ndarray, y: np.ndarray) -> bool:
-    """Whether a straight line separates the points ``x`` (n, 2) of labels ``y`` in {0, 1}:
-    the linear program ``(2 y - 1) (w . x + b) >= 1`` is feasible."""
+    """Whether a hyperplane separates the points ``x`` (n, F) of labels ``y`` in {0, 1} (a
+    straight line for F = 2): the linear program ``(2 y - 1) (w . x + b) >= 1`` is feasible."""
     s = (2.0 * y - 1.0)[:, None]
-    res = linprog(np.zeros(3), A_ub=-s * np.column_stack([x, np.ones(len(x))]),
-                  b_ub=-np.ones(len(x)), bounds=[(None, None)] * 3, method="highs")
+    f = x.shape[1] + 1
+    res = linprog(np.zeros(f), A_ub=-s * np.column_stack([x, np.ones(len(x))]),
+                  b_ub=-np.ones(len(x)), bounds=[(None, None)] * f, method="highs")
     return res.status == 0
+
+
+class _CircleMachine:
+    """A hard-margin linear machine on the features ``(u, v, u^2 + v^2)`` of points (in length
+    scales, relative to the centre of its samples): its boundary is a circle (or a straight line,
+    its limit). Near a circle the feature-space margin is the geometric one times about twice the
+    radius, the same all round, so the circle runs midway between the samples on either side."""
+
+    def __init__(self, centre: np.ndarray) -> None:
+        self.centre_ = np.asarray(centre, float)
+
+    def features(self, x: np.ndarray) -> np.ndarray:
+        u, v = (np.asarray(x, float) - self.centre_).T
+        return np.column_stack([u, v, u * u + v * v])
+
+    def fit(self, x: np.ndarray, y: np.ndarray) -> _CircleMachine:
+        self.svm_ = SVC(kernel="linear", C=_HARD_C).fit(self.features(x), y)
+        self.n_support_ = self.svm_.n_support_
+        return self
+
+    def decision_function(self, x: np.ndarray) -> np.ndarray:
+        return self.svm_.decision_function(self.features(x))
 
 
 class SVCModel(ModelBase):
@@ -125,7 +148,8 @@ class SVCModel(ModelBase):
     def __init__(self, *, match_threshold: float = 1.5,
                  area: tuple[float, float, float, float] = (150.0, 200.0, 650.0, 500.0),
                  length_scale: float = 25.0, C: float = 1e3, local_radius: float = 30.0,
-                 n_neighbors: int = 8, linear_pairs: bool = True) -> None:
+                 n_neighbors: int = 8, linear_pairs: bool = True,
+                 circle_pairs: bool = True) -> None:
         self.match_threshold = match_threshold
         self.area = area
         self.length_scale = length_scale
@@ -133,6 +157,7 @@ class SVCModel(ModelBase):
         self.local_radius = local_radius
         self.n_neighbors = n_neighbors
         self.linear_pairs = linear_pairs
+        self.circle_pairs = circle_pairs
 
     # -- parameters -----------------------------------------------------------------------------
     def _check_params(self) -> None:
@@ -143,8 +168,10 @@ class SVCModel(ModelBase):
                 raise ConfigError(f"{name} must be a positive number, got {v!r}")
         if int(self.n_neighbors) < 2:
             raise ConfigError(f"n_neighbors must be >= 2, got {self.n_neighbors!r}")
-        if not isinstance(self.linear_pairs, (bool, np.bool_)):
-            raise ConfigError(f"linear_pairs must be True or False, got {self.linear_pairs!r}")
+        for name in ("linear_pairs", "circle_pairs"):
+            v = getattr(self, name)
+            if not isinstance(v, (bool, np.bool_)):
+                raise ConfigError(f"{name} must be True or False, got {v!r}")
 
     # -- fitting --------------------------------------------------------------------------------
     def _set_fitted(self, features: np.ndarray, actions: np.ndarray, labels: np.ndarray,
@@ -185,6 +212,12 @@ class SVCModel(ModelBase):
             svm = SVC(kernel="linear", C=_HARD_C).fit(x, y)
             if np.all((2 * y - 1) * svm.decision_function(x) > 0):
                 return svm
+        if self.circle_pairs and y.min() < y.max():
+            circle = _CircleMachine(x.mean(axis=0))
+            if _separable(circle.features(x), y):
+                circle.fit(x, y)
+                if np.all((2 * y - 1) * circle.decision_function(x) > 0):
+                    return circle
         return SVC(kernel="rbf", gamma=0.5, C=float(self.C)).fit(x, y)
 
     # -- the pairwise contests ------------------------------------------------------------------
@@ -297,6 +330,7 @@ class SVCModel(ModelBase):
             "local_radius": np.float64(self.local_radius),
             "n_neighbors": np.int64(self.n_neighbors),
             "linear_pairs": np.int64(bool(self.linear_pairs)),
+            "circle_pairs": np.int64(bool(self.circle_pairs)),
         }
 
     @classmethod
@@ -313,6 +347,8 @@ class SVCModel(ModelBase):
                 n_neighbors=int(d["n_neighbors"]),
                 # models stored before linear pairs existed had RBF machines only
                 linear_pairs=bool(int(d["linear_pairs"])) if "linear_pairs" in d else False,
+                # and before circle pairs existed, no circles
+                circle_pairs=bool(int(d["circle_pairs"])) if "circle_pairs" in d else False,
             )
             model._check_params()
             model._set_fitted(np.asarray(d["class_features"], float),
