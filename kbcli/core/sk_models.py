@@ -228,14 +228,13 @@ class ForestModel(SklearnModel):
 
     kind = "forest"
     _PARAMS = (("n_estimators", int), ("n_directions", int), ("min_samples_leaf", int),
-               ("random_state", int), ("radial", int))
+               ("random_state", int))
 
     def __init__(self, *, match_threshold: float = 1.5,
                  area: tuple[float, float, float, float] = (150.0, 200.0, 650.0, 500.0),
                  n_estimators: int = 120, n_directions: int = 6, min_samples_leaf: int = 1,
-                 random_state: int = 0, radial: int = 0, floor: float = 0.0) -> None:
+                 random_state: int = 0, floor: float = 0.0) -> None:
         self.match_threshold = match_threshold
-        self.radial = radial
         self.area = area
         self.n_estimators = n_estimators
         self.n_directions = n_directions
@@ -248,14 +247,6 @@ class ForestModel(SklearnModel):
         _positive_int(self, "n_directions", 2)
         _positive_int(self, "min_samples_leaf")
         _positive_int(self, "random_state", 0)
-        _positive_int(self, "radial", 0)
-
-    def _set_fitted(self, features, actions, labels, reach_sd) -> None:
-        a = np.asarray(actions, float).reshape(-1, 2)
-        lab = np.asarray(labels, np.int64)
-        self.centres_ = np.array([a[lab == c].mean(axis=0) for c in np.unique(lab[lab > 0])]
-                                 ).reshape(-1, 2)
-        super()._set_fitted(features, actions, labels, reach_sd)
 
     def _classifier(self):
         from sklearn.ensemble import RandomForestClassifier
@@ -270,12 +261,7 @@ class ForestModel(SklearnModel):
         x0, y0, x1, y1 = (float(v) for v in self.area)
         t = np.arange(int(self.n_directions)) * np.pi / int(self.n_directions)
         u = np.column_stack([np.cos(t), np.sin(t)])
-        p = np.asarray(points, float)
-        f = (p - ((x0 + x1) / 2, (y0 + y1) / 2)) @ u.T
-        if int(self.radial) and len(self.centres_):
-            d = cKDTree(self.centres_).query(p, k=min(2, len(self.centres_)))[0].reshape(len(p), -1)
-            f = np.column_stack([f, d[:, :1]] + ([d[:, 1] - d[:, 0]] if int(self.radial) > 1 and d.shape[1] > 1 else []))
-        return f
+        return (np.asarray(points, float) - ((x0 + x1) / 2, (y0 + y1) / 2)) @ u.T
 
 
 class KNNModel(SklearnModel):
