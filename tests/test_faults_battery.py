@@ -9,6 +9,9 @@ import importlib
 import os
 import resource
 import signal
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -79,3 +82,31 @@ def test_figure_write_failure_is_one_error_naming_the_file(tmp_path, suffix, lim
         save(fig, out)
     assert str(info.value) == f"{out}: cannot write (File too large)"
     assert list(tmp_path.iterdir()) == []
+
+
+_DEAF = """
+import os
+from joblib import Parallel, delayed
+from kbcli.io.processes import children_deaf_to_ctrl_c
+
+def blocked():
+    return open(f"/proc/{os.getpid()}/status").read().split("SigBlk:")[1].split()[0]
+
+with children_deaf_to_ctrl_c():
+    out = Parallel(n_jobs=2, backend="loky", return_as="generator_unordered")(
+        delayed(blocked)() for _ in range(4))
+print(" ".join(out))
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads /proc")
+def test_workers_never_see_ctrl_c():
+    """Ctrl-C reaches the whole process group: each loky worker printed a KeyboardInterrupt
+    traceback beside the parent's one line (battery sigint-evaluate*). The workers start with
+    SIGINT blocked, even after Python 3.11's resource tracker unblocked it while starting."""
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    r = subprocess.run([sys.executable, "-c", _DEAF], capture_output=True, text=True, env=env,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    masks = r.stdout.split()
+    assert len(masks) == 4 and all(int(m, 16) & (1 << (signal.SIGINT - 1)) for m in masks), masks

@@ -45,7 +45,7 @@ import numpy as np
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import hdf5_image
 from kbcli.io.atomic import atomic_path, describe_os_error, write_bytes
-from kbcli.io.processes import cap_jobs, watch_parent
+from kbcli.io.processes import cap_jobs, children_deaf_to_ctrl_c, watch_parent
 
 CHECKPOINT_FORMAT = 1
 CONNECT_TIMEOUT_S = 5.0
@@ -219,7 +219,9 @@ def _local(job: Job, todo: list[int], n_jobs: int) -> Iterator[tuple[int, dict]]
                                  [(i, job.tasks[i]) for i in piece])
         for piece in chunks(todo, n_jobs)
     )
-    for batch in par(calls):
+    with children_deaf_to_ctrl_c():  # (the workers start in this call)
+        batches = par(calls)
+    for batch in batches:
         yield from batch
 
 
