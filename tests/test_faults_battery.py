@@ -11,6 +11,7 @@ import resource
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -110,3 +111,20 @@ def test_workers_never_see_ctrl_c():
     assert r.returncode == 0, r.stderr
     masks = r.stdout.split()
     assert len(masks) == 4 and all(int(m, 16) & (1 << (signal.SIGINT - 1)) for m in masks), masks
+
+
+@pytest.mark.parametrize(("sig", "code", "word"), [(signal.SIGTERM, 143, "terminated"),
+                                                   (signal.SIGINT, 130, "interrupted")])
+def test_signal_while_kbcli_loads_is_one_line(tmp_path, sig, code, word):
+    """SIGTERM while kbcli's modules were loading killed it silently (exit -15, battery
+    sigterm-learn on a busy machine), and Ctrl-C printed an import's traceback."""
+    if sig == signal.SIGINT and signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        pytest.skip("SIGINT is ignored here (a background job): the child would ignore it too")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    p = subprocess.Popen([sys.executable, "-m", "kbcli", "learn", "--budget", "20", "-o",
+                          str(tmp_path / "m.h5")], env=env, stderr=subprocess.PIPE, text=True)
+    time.sleep(0.3)  # Python is up, kbcli's imports (seconds) are not done
+    p.send_signal(sig)
+    _, err = p.communicate(timeout=60)
+    assert (p.returncode, err) == (code, f"kbcli: {word}\n")
+    assert list(tmp_path.iterdir()) == []
