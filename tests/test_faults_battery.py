@@ -128,3 +128,21 @@ def test_signal_while_kbcli_loads_is_one_line(tmp_path, sig, code, word):
     _, err = p.communicate(timeout=60)
     assert (p.returncode, err) == (code, f"kbcli: {word}\n")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_checkpoint_whose_meta_cannot_be_written_leaves_no_folder(tmp_path, monkeypatch):
+    """A full disk at the checkpoint's first file left an empty OUTPUT.ckpt/ that the error line
+    did not mention and no --resume could use (battery disk-full-evaluate)."""
+    import kbcli.io.runner as runner_io
+    from kbcli.io.runner import Checkpoint
+
+    @contextlib.contextmanager
+    def full(path, suffix=".tmp"):
+        raise ArtifactError(f"{path}: cannot write (No space left on device)")
+        yield  # pragma: no cover
+
+    monkeypatch.setattr(runner_io, "atomic_path", full)
+    ckpt = Checkpoint(tmp_path / "ev.h5.ckpt", {"a": 1})
+    with pytest.raises(ArtifactError, match="meta.json: cannot write"):
+        ckpt.start()
+    assert list(tmp_path.iterdir()) == []

@@ -451,15 +451,22 @@ class Checkpoint:
 
     def start(self) -> None:
         """Create the folder and its ``meta.json`` (atomically) if they do not exist yet."""
+        made = not self.folder.exists()
         try:
             self.folder.mkdir(exist_ok=True)
         except OSError as exc:
             raise KbcliError(f"{self.folder}: cannot create the checkpoint folder "
                              f"({describe_os_error(exc)})") from None
         if not self.exists():
-            self._atomic(self.folder / "meta.json", lambda p: Path(p).write_text(
-                json.dumps({"format": CHECKPOINT_FORMAT, "fingerprint": self.fingerprint},
-                           sort_keys=True, indent=1), encoding="utf-8"))
+            try:
+                self._atomic(self.folder / "meta.json", lambda p: Path(p).write_text(
+                    json.dumps({"format": CHECKPOINT_FORMAT, "fingerprint": self.fingerprint},
+                               sort_keys=True, indent=1), encoding="utf-8"))
+            except BaseException:  # (a full disk): no folder left that nothing could resume
+                if made:
+                    with contextlib.suppress(OSError):
+                        self.folder.rmdir()
+                raise
 
     def add(self, index: int, result: dict) -> None:
         """Record one finished experiment; writes a part when enough are pending."""
