@@ -136,12 +136,10 @@ def test_checkpoint_whose_meta_cannot_be_written_leaves_no_folder(tmp_path, monk
     import kbcli.io.runner as runner_io
     from kbcli.io.runner import Checkpoint
 
-    @contextlib.contextmanager
-    def full(path, suffix=".tmp"):
+    def full(path, data, suffix=".tmp"):
         raise ArtifactError(f"{path}: cannot write (No space left on device)")
-        yield  # pragma: no cover
 
-    monkeypatch.setattr(runner_io, "atomic_path", full)
+    monkeypatch.setattr(runner_io, "write_bytes", full)
     ckpt = Checkpoint(tmp_path / "ev.h5.ckpt", {"a": 1})
     with pytest.raises(ArtifactError, match="meta.json: cannot write"):
         ckpt.start()

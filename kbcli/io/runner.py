@@ -44,7 +44,7 @@ import numpy as np
 
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import hdf5_image
-from kbcli.io.atomic import atomic_path, describe_os_error, write_bytes
+from kbcli.io.atomic import describe_os_error, write_bytes
 from kbcli.io.processes import cap_jobs, children_deaf_to_ctrl_c, watch_parent
 
 CHECKPOINT_FORMAT = 1
@@ -458,14 +458,13 @@ class Checkpoint:
             raise KbcliError(f"{self.folder}: cannot create the checkpoint folder "
                              f"({describe_os_error(exc)})") from None
         if not self.exists():
+            meta = json.dumps({"format": CHECKPOINT_FORMAT, "fingerprint": self.fingerprint},
+                              sort_keys=True, indent=1)
             try:
-                self._atomic(self.folder / "meta.json", lambda p: Path(p).write_text(
-                    json.dumps({"format": CHECKPOINT_FORMAT, "fingerprint": self.fingerprint},
-                               sort_keys=True, indent=1), encoding="utf-8"))
+                write_bytes(self.folder / "meta.json", meta.encode())
             except BaseException:  # (a full disk): no folder left that nothing could resume
-                if made:
-                    with contextlib.suppress(OSError):
-                        self.folder.rmdir()
+                with contextlib.suppress(OSError):
+                    _ = made and self.folder.rmdir()
                 raise
 
     def add(self, index: int, result: dict) -> None:
@@ -497,7 +496,3 @@ class Checkpoint:
         self._pending = {}
         if self.folder.is_dir():
             shutil.rmtree(self.folder)
-
-    def _atomic(self, path: Path, write) -> None:
-        with atomic_path(path) as tmp:
-            write(tmp)
