@@ -144,3 +144,32 @@ def test_checkpoint_whose_meta_cannot_be_written_leaves_no_folder(tmp_path, monk
     with pytest.raises(ArtifactError, match="meta.json: cannot write"):
         ckpt.start()
     assert list(tmp_path.iterdir()) == []
+
+
+_REFUSE_BEFORE_DRAWING = """
+import sys
+from typer.testing import CliRunner
+from kbcli.cli import app
+g = sys.argv[1] + "/"
+bad = "/no/such/folder/"
+for args in (["plot", "keyboard", g + "keyboard.h5", "-o", bad + "k.png"],
+             ["plot", "model", g + "model.h5", "-o", bad + "m.png"],
+             ["plot", "play", g + "history.h5", "-o", bad + "p.png"],
+             ["plot", "adapt", g + "run.h5", "-o", bad + "a.png"],
+             ["plot", "run", g + "closed_loop.h5", "-o", bad + "r.png"],
+             ["report", g + "evaluation.h5", "-o", bad + "rep"],
+             ["animate", g + "run.h5", "-o", bad + "a.gif"]):
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 1 and "does not exist" in r.output, (args, r.output)
+print("matplotlib" in sys.modules)
+"""
+
+
+def test_figure_commands_refuse_before_loading_matplotlib():
+    """An output that cannot be written was refused only after matplotlib had loaded (seconds: the
+    battery's read-only plot, report and animate cases were slow refusals)."""
+    root = Path(__file__).resolve().parents[1]
+    r = subprocess.run([sys.executable, "-c", _REFUSE_BEFORE_DRAWING, str(root / "data" / "golden")],
+                       capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(root)},
+                       timeout=120)
+    assert (r.returncode, r.stdout.strip()) == (0, "False"), r.stderr
