@@ -203,7 +203,10 @@ def writer_cases() -> list[Case]:
              words=words, quick=True, keep=("ev.h5.ckpt",)),
         Case("two-writers-evaluate-resume", "writers", [*WRITERS["evaluate"][0], "--resume"],
              holder=ev_long, words=words, quick=True, keep=("ev.h5.ckpt",)),
-        Case("two-writers-animate", "writers", anim, holder=anim, words=words, quick=True),
+        # (the holder animates the closed loop, 150 frames: run.h5's 9 were done before the
+        # second kbcli had loaded, which then rightly wrote a.gif)
+        Case("two-writers-animate", "writers", anim, words=words, quick=True,
+             holder=["animate", "{i}/closed_loop.h5", "-o", "{d}/a.gif"]),
         Case("stale-lock-dead-pid", "writers", learn, expect=(0,), lines=None,
              setup=_stale_lock("{pid}\n"), keep=("m.h5",)),
         Case("stale-lock-empty-old", "writers", learn, expect=(0,), lines=None,
