@@ -198,14 +198,16 @@ def writer_cases() -> list[Case]:
         Case("two-writers-learn-other-folder-spelling", "writers",
              ["learn", "--keyboard", KB, "--budget", "40", "-o", "{d}/./m.h5"],
              holder=learn_long, words=words, quick=True),
-        Case("two-writers-report", "writers", rep_long, holder=rep_long, words=words, quick=True),
+        # (the first writer may finish before it is released: its whole report may stay)
+        Case("two-writers-report", "writers", rep_long, holder=rep_long, words=words, quick=True,
+             keep=("rep",)),
         Case("two-writers-evaluate", "writers", WRITERS["evaluate"][0], holder=ev_long,
              words=words, quick=True, keep=("ev.h5.ckpt",)),
         Case("two-writers-evaluate-resume", "writers", [*WRITERS["evaluate"][0], "--resume"],
              holder=ev_long, words=words, quick=True, keep=("ev.h5.ckpt",)),
         # (the holder animates the closed loop, 150 frames: run.h5's 9 were done before the
         # second kbcli had loaded, which then rightly wrote a.gif)
-        Case("two-writers-animate", "writers", anim, words=words, quick=True,
+        Case("two-writers-animate", "writers", anim, words=words, quick=True, keep=("a.gif",),
              holder=["animate", "{i}/closed_loop.h5", "-o", "{d}/a.gif"]),
         Case("stale-lock-dead-pid", "writers", learn, expect=(0,), lines=None,
              setup=_stale_lock("{pid}\n"), keep=("m.h5",)),
