@@ -9,6 +9,10 @@ import importlib
 import os
 import resource
 import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -79,3 +83,93 @@ def test_figure_write_failure_is_one_error_naming_the_file(tmp_path, suffix, lim
         save(fig, out)
     assert str(info.value) == f"{out}: cannot write (File too large)"
     assert list(tmp_path.iterdir()) == []
+
+
+_DEAF = """
+import os
+from joblib import Parallel, delayed
+from kbcli.io.processes import children_deaf_to_ctrl_c
+
+def blocked():
+    return open(f"/proc/{os.getpid()}/status").read().split("SigBlk:")[1].split()[0]
+
+with children_deaf_to_ctrl_c():
+    out = Parallel(n_jobs=2, backend="loky", return_as="generator_unordered")(
+        delayed(blocked)() for _ in range(4))
+print(" ".join(out))
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads /proc")
+def test_workers_never_see_ctrl_c():
+    """Ctrl-C reaches the whole process group: each loky worker printed a KeyboardInterrupt
+    traceback beside the parent's one line (battery sigint-evaluate*). The workers start with
+    SIGINT blocked, even after Python 3.11's resource tracker unblocked it while starting."""
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    r = subprocess.run([sys.executable, "-c", _DEAF], capture_output=True, text=True, env=env,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    masks = r.stdout.split()
+    assert len(masks) == 4 and all(int(m, 16) & (1 << (signal.SIGINT - 1)) for m in masks), masks
+
+
+@pytest.mark.parametrize(("sig", "code", "word"), [(signal.SIGTERM, 143, "terminated"),
+                                                   (signal.SIGINT, 130, "interrupted")])
+def test_signal_while_kbcli_loads_is_one_line(tmp_path, sig, code, word):
+    """SIGTERM while kbcli's modules were loading killed it silently (exit -15, battery
+    sigterm-learn on a busy machine), and Ctrl-C printed an import's traceback."""
+    if sig == signal.SIGINT and signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        pytest.skip("SIGINT is ignored here (a background job): the child would ignore it too")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    p = subprocess.Popen([sys.executable, "-m", "kbcli", "learn", "--budget", "20", "-o",
+                          str(tmp_path / "m.h5")], env=env, stderr=subprocess.PIPE, text=True)
+    time.sleep(0.3)  # Python is up, kbcli's imports (seconds) are not done
+    p.send_signal(sig)
+    _, err = p.communicate(timeout=60)
+    assert (p.returncode, err) == (code, f"kbcli: {word}\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_checkpoint_whose_meta_cannot_be_written_leaves_no_folder(tmp_path, monkeypatch):
+    """A full disk at the checkpoint's first file left an empty OUTPUT.ckpt/ that the error line
+    did not mention and no --resume could use (battery disk-full-evaluate)."""
+    import kbcli.io.runner as runner_io
+    from kbcli.io.runner import Checkpoint
+
+    def full(path, data, suffix=".tmp"):
+        raise ArtifactError(f"{path}: cannot write (No space left on device)")
+
+    monkeypatch.setattr(runner_io, "write_bytes", full)
+    ckpt = Checkpoint(tmp_path / "ev.h5.ckpt", {"a": 1})
+    with pytest.raises(ArtifactError, match="meta.json: cannot write"):
+        ckpt.start()
+    assert list(tmp_path.iterdir()) == []
+
+
+_REFUSE_BEFORE_DRAWING = """
+import sys
+from typer.testing import CliRunner
+from kbcli.cli import app
+g = sys.argv[1] + "/"
+bad = "/no/such/folder/"
+for args in (["plot", "keyboard", g + "keyboard.h5", "-o", bad + "k.png"],
+             ["plot", "model", g + "model.h5", "-o", bad + "m.png"],
+             ["plot", "play", g + "history.h5", "-o", bad + "p.png"],
+             ["plot", "adapt", g + "run.h5", "-o", bad + "a.png"],
+             ["plot", "run", g + "closed_loop.h5", "-o", bad + "r.png"],
+             ["report", g + "evaluation.h5", "-o", bad + "rep"],
+             ["animate", g + "run.h5", "-o", bad + "a.gif"]):
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 1 and "does not exist" in r.output, (args, r.output)
+print("matplotlib" in sys.modules)
+"""
+
+
+def test_figure_commands_refuse_before_loading_matplotlib():
+    """An output that cannot be written was refused only after matplotlib had loaded (seconds: the
+    battery's read-only plot, report and animate cases were slow refusals)."""
+    root = Path(__file__).resolve().parents[1]
+    r = subprocess.run([sys.executable, "-c", _REFUSE_BEFORE_DRAWING, str(root / "data" / "golden")],
+                       capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(root)},
+                       timeout=120)
+    assert (r.returncode, r.stdout.strip()) == (0, "False"), r.stderr

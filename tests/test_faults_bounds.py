@@ -76,9 +76,21 @@ def test_quality_total_experiments_refused(tmp_path):
     from kbcli.stages.quality import QualityConfig
     from kbcli.stages.quality.plan import plan
 
-    cfg = QualityConfig().with_overrides(experiments=10_000, budgets=None)
     with pytest.raises(ConfigError, match="quality: .* experiments in all, more than 1,000,000"):
-        plan(cfg)
+        plan(QualityConfig().with_overrides(experiments=10_000, budgets=None))
+
+
+def test_quality_sweep_size_refused_before_any_model_is_learned(runner, tmp_path):
+    """The sweep's total was checked after the learning phase, and 5000 budgets were taken: the
+    battery's quality run learned models until it was killed."""
+    golden = str(ROOT / "pipelines" / "golden.toml")
+    base = ["quality", "--config", golden, "--keyboard", KB, "-o", str(tmp_path / "q.h5")]
+    r = runner.invoke(app, [*base, "--budgets", ",".join(map(str, range(10, 5010)))])
+    one_line_error(r, "quality.budgets must list at most 100 budgets, got 5000")
+    r = runner.invoke(app, ["quality", "--keyboard", KB, "-o", str(tmp_path / "q.h5"),
+                            "--experiments", "10000"])  # (the default sweep's config)
+    one_line_error(r, "quality: ", "experiments in all, more than 1,000,000")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_snapshots_note_stays_short(runner, tmp_path):

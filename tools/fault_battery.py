@@ -146,7 +146,10 @@ def _wait(p: subprocess.Popen, timeout: float) -> tuple[int | None, float]:
     """Wait for ``p`` (at most ``timeout`` s); its exit code (negative: the signal) and peak RSS."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
-        pid, status, usage = os.wait4(p.pid, os.WNOHANG)
+        try:
+            pid, status, usage = os.wait4(p.pid, os.WNOHANG)
+        except ChildProcessError:  # already reaped by a p.poll() (the signal cases' trigger loop)
+            return p.returncode, 0.0
         if pid:
             p.returncode = os.waitstatus_to_exitcode(status)
             return p.returncode, usage.ru_maxrss / 1024

@@ -176,9 +176,8 @@ def plot_adapt_cmd(
 
     Reads RUN (kind 'run'); writes the figure (PNG, PDF or SVG by the suffix of -o); prints its path.
     """
-    from kbcli.viz.adapt import plot_adapt
-
     check_io({"RUN": run}, figure_output(output))
+    from kbcli.viz.adapt import plot_adapt  # (matplotlib: seconds)
     art = read_artifact(run, "run")
     if len(art.data.get("errors", ())) == 0:
         raise ConfigError(f"{run}: holds no touches (a session that ended before the first one)")

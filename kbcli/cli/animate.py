@@ -40,9 +40,8 @@ def animate_cmd(
     (kbcli adapt --snapshots all stores every step).
     """
     from kbcli.io.artifact import read_artifact
-    from kbcli.viz.animate import animate, make_writer
-
     check_io({"ARTIFACT": artifact}, ("--output", output))
+    from kbcli.viz.animate import animate, make_writer  # (matplotlib: seconds)
     make_writer(output.suffix.lower(), fps)  # a bad format or no ffmpeg: fail before reading
     art = read_artifact(artifact, ("run", "closed_loop"))
     n = animate(art, output, fps=fps, max_frames=max_frames, dpi=dpi)

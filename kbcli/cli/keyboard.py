@@ -100,9 +100,8 @@ def plot_keyboard_cmd(
 ) -> None:
     """Draw the keyboard (any layout): keys labelled with note and tempo, the working area dashed.
     Writes the figure (PNG, PDF or SVG by the suffix of -o)."""
-    from kbcli.viz.keyboard import plot_keyboard
-
     check_io({"ARTIFACT": artifact}, figure_output(output))
+    from kbcli.viz.keyboard import plot_keyboard  # (matplotlib: seconds)
     art = read_artifact(artifact, "keyboard")
     with busy("drawing"):
         plot_keyboard(stage.load(art), output)

@@ -135,9 +135,8 @@ def plot_model_cmd(
     """Draw a model: the learned map (predicted key, uncertainty, reaches) beside the true layout,
     and the learning curve. Reads ARTIFACT (kind 'model'); writes the figure (PNG, PDF or SVG by the suffix of -o)."""
     from kbcli.stages.models import load_model
-    from kbcli.viz.model import plot_model
-
     check_io({"ARTIFACT": artifact}, figure_output(output))
+    from kbcli.viz.model import plot_model  # (matplotlib: seconds)
     art = read_artifact(artifact, "model")
     with busy("drawing"):
         plot_model(art, load_model(art), keyboard_stage.load(art), output)

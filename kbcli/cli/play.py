@@ -131,9 +131,8 @@ def plot_play_cmd(
 ) -> None:
     """Draw a play history: aimed note and result per step, running success rate, the move, and
     (with --detection) the detector's score and firings. Reads HISTORY; writes the figure (PNG, PDF or SVG by the suffix of -o)."""
-    from kbcli.viz.play import plot_play
-
     check_io({"HISTORY": history, "--detection": detection}, figure_output(output))
+    from kbcli.viz.play import plot_play  # (matplotlib: seconds)
     hist = read_artifact(history, "history")
     det = read_artifact(detection, "detection") if detection is not None else None
     if det is not None and det.inputs.get("history", {}).get("sha256") not in (None, hist.sha256):

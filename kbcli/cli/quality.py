@@ -18,6 +18,7 @@ from kbcli.io.paths import Output, checkout_file
 from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
 from kbcli.stages import quality as stage
 from kbcli.stages.config import MAX_BUDGET, MAX_EXPERIMENTS
+from kbcli.stages.quality.config import MAX_BUDGETS
 
 DEFAULT_CONFIG = Path("pipelines/model-quality.toml")
 DEFAULT_KEYBOARD = Path("data/keyboard.h5")
@@ -42,7 +43,8 @@ def quality_cmd(
         "--experiments", help="Repetitions per displacement, model and row, at most "
         f"{MAX_EXPERIMENTS}.", show_default="the config's")] = None,
     budgets: Annotated[str | None, typer.Option(
-        "--budgets", help=f"Reach budgets of the models, comma-separated, each at most {MAX_BUDGET}.",
+        "--budgets", help=f"Reach budgets of the models, comma-separated: at most {MAX_BUDGETS} "
+        f"budgets, each at most {MAX_BUDGET}.",
         show_default="the config's")] = None,
     jobs: opts.Jobs = 1,
     scheduler: opts.Scheduler = None,

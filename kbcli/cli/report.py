@@ -58,12 +58,11 @@ def report_cmd(
     explains each difference"; --own-model OWN.h5 judges the Sect. IV-C claims on that evaluation
     too. Prints each claim's verdict.
     """
-    from kbcli.viz import report as viz
-
     if fmt not in FIGURE_FORMATS:
         raise ConfigError(f"--format must be one of {', '.join(FIGURE_FORMATS)}, got {fmt!r}")
     inputs = {"EVALUATION": evaluation, "--ablations": ablations, "--own-model": own_model}
     check_io(inputs, Output(output, "report folder", folder=True))
+    from kbcli.viz import report as viz  # (matplotlib: seconds)
     art = read_artifact(evaluation, ("evaluation", "model_quality"))
     if art.kind == "model_quality":
         _quality_report(art, evaluation, output, fmt)

@@ -130,9 +130,8 @@ def plot_run_cmd(
 ) -> None:
     """Draw a closed-loop session: success over time, the move, the detection, the adaptation
     touches on the keyboard. Writes the figure (PNG, PDF or SVG by the suffix of -o)."""
-    from kbcli.viz.loop import plot_loop
-
     check_io({"ARTIFACT": artifact}, figure_output(output))
+    from kbcli.viz.loop import plot_loop  # (matplotlib: seconds)
     art = read_artifact(artifact, "closed_loop")
     with busy("drawing"):
         plot_loop(art.data["steps"], art.attrs, keyboard_stage.load(art), output,

@@ -9,9 +9,12 @@ which no handler can catch; on an error, Ctrl-C or SIGTERM joblib stops the work
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import threading
 import time
+from collections.abc import Iterator
 
 
 def usable_cores() -> int:
@@ -31,6 +34,31 @@ def cap_jobs(jobs: int, option: str = "--jobs") -> tuple[int, str | None]:
         return cores, (f"{option} {jobs} is more than the {cores} cores this machine lets kbcli "
                        f"use: running {cores} worker processes")
     return jobs, None
+
+
+@contextlib.contextmanager
+def children_deaf_to_ctrl_c() -> Iterator[None]:
+    """Start worker processes inside this block: they never see Ctrl-C.
+
+    A terminal sends Ctrl-C (SIGINT) to the whole process group: each loky worker printed a
+    ``KeyboardInterrupt`` traceback of its own (even while still importing), beside the one line
+    of the parent, which stops them itself. SIGINT is blocked in this thread for the block, and a
+    blocked signal stays blocked across fork and exec: the workers start with it blocked, and keep
+    it so. A Ctrl-C that arrives during the block is delivered to this process just after it.
+    """
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    from multiprocessing import resource_tracker
+
+    # Started first: Python 3.11's tracker unblocks SIGINT (SIG_UNBLOCK, not the old mask) after
+    # starting itself, which loky does just before its workers.
+    resource_tracker.ensure_running()
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 _WATCHING: list[int] = []

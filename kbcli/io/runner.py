@@ -44,8 +44,8 @@ import numpy as np
 
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import hdf5_image
-from kbcli.io.atomic import atomic_path, describe_os_error, write_bytes
-from kbcli.io.processes import cap_jobs, watch_parent
+from kbcli.io.atomic import describe_os_error, write_bytes
+from kbcli.io.processes import cap_jobs, children_deaf_to_ctrl_c, watch_parent
 
 CHECKPOINT_FORMAT = 1
 CONNECT_TIMEOUT_S = 5.0
@@ -219,7 +219,9 @@ def _local(job: Job, todo: list[int], n_jobs: int) -> Iterator[tuple[int, dict]]
                                  [(i, job.tasks[i]) for i in piece])
         for piece in chunks(todo, n_jobs)
     )
-    for batch in par(calls):
+    with children_deaf_to_ctrl_c():  # (the workers start in this call)
+        batches = par(calls)
+    for batch in batches:
         yield from batch
 
 
@@ -449,15 +451,21 @@ class Checkpoint:
 
     def start(self) -> None:
         """Create the folder and its ``meta.json`` (atomically) if they do not exist yet."""
+        made = not self.folder.exists()
         try:
             self.folder.mkdir(exist_ok=True)
         except OSError as exc:
             raise KbcliError(f"{self.folder}: cannot create the checkpoint folder "
                              f"({describe_os_error(exc)})") from None
         if not self.exists():
-            self._atomic(self.folder / "meta.json", lambda p: Path(p).write_text(
-                json.dumps({"format": CHECKPOINT_FORMAT, "fingerprint": self.fingerprint},
-                           sort_keys=True, indent=1), encoding="utf-8"))
+            meta = json.dumps({"format": CHECKPOINT_FORMAT, "fingerprint": self.fingerprint},
+                              sort_keys=True, indent=1)
+            try:
+                write_bytes(self.folder / "meta.json", meta.encode())
+            except BaseException:  # (a full disk): no folder left that nothing could resume
+                with contextlib.suppress(OSError):
+                    _ = made and self.folder.rmdir()
+                raise
 
     def add(self, index: int, result: dict) -> None:
         """Record one finished experiment; writes a part when enough are pending."""
@@ -488,7 +496,3 @@ class Checkpoint:
         self._pending = {}
         if self.folder.is_dir():
             shutil.rmtree(self.folder)
-
-    def _atomic(self, path: Path, write) -> None:
-        with atomic_path(path) as tmp:
-            write(tmp)

@@ -23,7 +23,7 @@ from kbcli.core.model_classes import EXACT  # the reference row's model: the exa
 from kbcli.errors import ConfigError
 from kbcli.sim.arms import arm_config
 from kbcli.sim.config import ModeName
-from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_BUDGET, MAX_EXPERIMENTS
+from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_BUDGET, MAX_EXPERIMENTS, check_total
 from kbcli.stages.evaluate import Category, _paper_categories
 
 #: Rows of the default sweep: name -> adapt options (strategy included).
@@ -39,6 +39,8 @@ IDEAL_ROW = "exact-infogain"
 FIXED = ("mode", "arm", "reach_noise", "max_steps", "family", "stop")
 #: Fewest reaches of a learned model.
 MIN_BUDGET = 10
+#: Most budgets of a sweep (models: budgets x explorations, each learned before any adaptation).
+MAX_BUDGETS = 100
 
 Budget = between(Whole, MIN_BUDGET, MAX_BUDGET)
 
@@ -102,6 +104,8 @@ class QualityConfig(Config):
     def _sorted_budgets(cls, v: tuple[int, ...]) -> tuple[int, ...]:
         if not v:
             raise ValueError("must list at least one budget")
+        if len(set(v)) > MAX_BUDGETS:
+            raise ValueError(f"must list at most {MAX_BUDGETS} budgets, got {len(set(v))}")
         return tuple(sorted(set(v)))
 
     @field_validator("explorations")
@@ -164,6 +168,15 @@ class QualityConfig(Config):
                 first = next(iter(configs))
                 raise ValueError(f"adapt.{option} does not apply to any row: "
                                  f"{why(option, configs[first].robot)} (row {first!r})")
+        return self
+
+    @model_validator(mode="after")
+    def _bounded(self) -> QualityConfig:
+        """The sweep's experiments in all, checked when the config is made: before any model is
+        learned (the plan's own check came after the learning phase)."""
+        cells = sum(len(c.displacements) for c in self.categories) * self.experiments
+        models = len(self.explorations) * len(self.budgets)
+        check_total((models * len(self.rows) + bool(self.ideal)) * cells, "quality")
         return self
 
     def to_dict(self) -> dict:
