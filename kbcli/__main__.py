@@ -31,5 +31,10 @@ def _load_guarded():
     return main
 
 
-if __name__ == "__main__":
+def run() -> None:
+    """The ``kbcli`` console script: the CLI, loaded under :func:`_load_guarded`."""
     _load_guarded()()
+
+
+if __name__ == "__main__":
+    run()

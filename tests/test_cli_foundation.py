@@ -122,3 +122,17 @@ def test_default_inputs_are_found_in_the_checkout_from_any_folder(tmp_path, monk
     assert checkout_file("pipelines/paper.toml", "--config") == Path("pipelines/paper.toml")
     with pytest.raises(KbcliError, match="pass --keyboard FILE"):
         checkout_file("data/no-such.h5", "--keyboard")
+
+
+def test_the_console_script_loads_the_cli_under_the_signal_guard():
+    """`kbcli` (the installed script) starts where `python -m kbcli` does: a Ctrl-C or SIGTERM
+    while the modules load is one line and 130 / 143, not a traceback (issue 29)."""
+    import importlib
+    import tomllib
+    from pathlib import Path
+
+    import kbcli.__main__ as entry
+
+    project = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
+    module, _, name = project["project"]["scripts"]["kbcli"].partition(":")
+    assert getattr(importlib.import_module(module), name) is entry.run
