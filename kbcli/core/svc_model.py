@@ -146,8 +146,8 @@ class SVCModel(ModelBase):
         load with False, their predictions unchanged.
     circle_pairs : bool
         Fit a hard-margin machine with a circular boundary to a pair whose samples a circle
-        separates and no line does, one sound an island in the other (:class:`_CircleMachine`). Models stored before this option
-        existed load with False, their predictions unchanged.
+        separates and no line does, one sound an island in the other (:class:`_CircleMachine`).
+        Models stored before this option existed load with False, their predictions unchanged.
 
     Attributes
     ----------
