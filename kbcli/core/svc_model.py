@@ -22,8 +22,9 @@ the finger landed, what was heard), the model
    on the features ``(u, v, u^2 + v^2)``), a hard-margin machine on those features: its boundary is
    the circle midway between the samples inside and out. (A key at the edge of a hex keyboard
    meets its neighbours too: circles there would not change the map but flatter the SVMs'
-   cross-validated score against the forest's, whose map is better, :mod:`kbcli.core.select`.) Elsewhere (the silence around the
-   keyboard, an L-shaped white key around a black key) the RBF boundary bends with the keys.
+   cross-validated score against the forest's, whose map is better, :mod:`kbcli.core.select`.)
+   Elsewhere (the silence around the keyboard, an L-shaped white key around a black key) the RBF
+   boundary bends with the keys.
    Fitting pairs locally keeps each machine small (tens of support vectors), so predicting a
    raster of the working area stays cheap;
 4. **reads probabilities off the margin**: at an action a whose ``n_neighbors`` nearest samples
