@@ -17,10 +17,14 @@ the finger landed, what was heard), the model
    keys), and the max-margin line between their samples is that edge, straight to its ends: where
    three keys meet, the straight pair boundaries cross in a sharp corner, which an RBF boundary
    would round off over about a length scale. Where no line separates the pair's samples but a
-   circle does (a round pad and the silence around it; ``circle_pairs``, the same linear program
+   circle does and one of the two sounds is an island in the other (at least :data:`ISLAND` of its
+   straddling edges are with it: a round pad in silence; ``circle_pairs``, the same linear program
    on the features ``(u, v, u^2 + v^2)``), a hard-margin machine on those features: its boundary is
-   the circle midway between the samples inside and out. Elsewhere (the silence around the
-   keyboard, an L-shaped white key around a black key) the RBF boundary bends with the keys.
+   the circle midway between the samples inside and out. (A key at the edge of a hex keyboard
+   meets its neighbours too: circles there would not change the map but flatter the SVMs'
+   cross-validated score against the forest's, whose map is better, :mod:`kbcli.core.select`.)
+   Elsewhere (the silence around the keyboard, an L-shaped white key around a black key) the RBF
+   boundary bends with the keys.
    Fitting pairs locally keeps each machine small (tens of support vectors), so predicting a
    raster of the working area stays cheap;
 4. **reads probabilities off the margin**: at an action a whose ``n_neighbors`` nearest samples
@@ -53,7 +57,8 @@ surrounded by samples) 97.30 / 99.18 and 97.18 / 99.25.
 Circle pairs (``circle_pairs``, on by default): an RBF machine of 25 px around a pad of radius 20 px
 leaves a crescent where it misplaces the circle by a pixel or two; refitted with circles on the
 samples ``kbcli bench learn --peer`` (seeds 0-2, ``auto``) gathered on pads by 800 reaches, the
-svc model's accuracy is 98.63 / 98.23 / 98.47 % instead of 97.37 / 96.94 / 97.26 %.
+svc model's accuracy is 98.63 / 98.23 / 98.47 % instead of 97.37 / 96.94 / 97.26 %; explored with
+circles (``auto`` explores with svc from 400 reaches), 99.05 / 99.20 / 98.99 %.
 
 Storage without pickle: :meth:`SVCModel.to_arrays` keeps the samples, the classes and the
 hyper-parameters; :meth:`SVCModel.from_arrays` refits the machines, which is deterministic (libsvm's
@@ -78,6 +83,11 @@ from kbcli.errors import ArtifactError, ConfigError
 _SQRT3 = float(np.sqrt(3.0))
 _EDGE_STEPS = 17  # points along a straddling edge where the boundary site is looked for
 SITE_GRID = 2.0  # px, grid on which boundary sites between straddling edges are looked for
+#: a sound whose straddling edges are at least this share with one other sound is an island in
+#: it (a pad in silence; early on a few edges cross the gap to the next pad): their pair may get a
+#: circle machine. Pads, ``kbcli bench learn --peer``'s kbcli side, seeds 0-2 at 800 reaches:
+#: 99.05 / 99.20 / 98.99 % with 0.75, 98.55 / 98.81 / 98.56 % with 0.9
+ISLAND = 0.75
 _HARD_C = 1e6  # margin penalty of a pair's linear machine: a hard margin (its samples separate)
 
 
@@ -137,8 +147,8 @@ class SVCModel(ModelBase):
         load with False, their predictions unchanged.
     circle_pairs : bool
         Fit a hard-margin machine with a circular boundary to a pair whose samples a circle
-        separates and no line does (:class:`_CircleMachine`). Models stored before this option
-        existed load with False, their predictions unchanged.
+        separates and no line does, one sound an island in the other (:class:`_CircleMachine`).
+        Models stored before this option existed load with False, their predictions unchanged.
 
     Attributes
     ----------
@@ -201,6 +211,8 @@ class SVCModel(ModelBase):
         self._support: dict[int, tuple[cKDTree, cKDTree, cKDTree]] = {}
         self._edge_code = code
         pairs = []
+        # straddling edges of each sound (an edge joins two different sounds: one for each)
+        per_sound = np.bincount(self.labels_[self.edges_].ravel(), minlength=nc)
         for c in np.unique(code):  # one machine per pair of neighbouring sounds
             i, j = divmod(int(c), nc)
             ends = np.unique(self.edges_[code == c])
@@ -208,22 +220,25 @@ class SVCModel(ModelBase):
             idx = np.unique(np.concatenate([ends, *[np.asarray(n, np.int64) for n in near]]))
             idx = idx[np.isin(self.labels_[idx], (i, j))]
             y = (self.labels_[idx] == j).astype(np.int64)
-            svm = self._pair_machine(self.actions_[idx] / self.length_scale, y)
+            # an island: nearly all of one sound's straddling edges are with the other
+            island = np.count_nonzero(code == c) >= ISLAND * min(per_sound[i], per_sound[j])
+            svm = self._pair_machine(self.actions_[idx] / self.length_scale, y, island)
             self._pairs[int(c)] = svm
             self._support[int(c)] = (cKDTree(self.actions_[idx]), cKDTree(self.actions_[idx][y == 0]),
                                      cKDTree(self.actions_[idx][y == 1]))
             pairs.append((i, j))
         self.pairs_ = np.array(pairs, np.int64).reshape(-1, 2)
 
-    def _pair_machine(self, x: np.ndarray, y: np.ndarray) -> SVC:
+    def _pair_machine(self, x: np.ndarray, y: np.ndarray, island: bool = False) -> SVC:
         """A pair's machine on its samples ``x`` (in length scales) of labels ``y`` in {0, 1}:
-        a hard-margin linear one when a straight line separates them (``linear_pairs``), else a
+        a hard-margin linear one when a straight line separates them (``linear_pairs``), else,
+        when one of the two sounds is an island in the other (``island``: a pad in silence), a
         hard-margin circle when one separates them (``circle_pairs``), else the RBF one."""
         if self.linear_pairs and y.min() < y.max() and _separable(x, y):
             svm = SVC(kernel="linear", C=_HARD_C).fit(x, y)
             if np.all((2 * y - 1) * svm.decision_function(x) > 0):
                 return svm
-        if self.circle_pairs and y.min() < y.max():
+        if self.circle_pairs and island and y.min() < y.max():
             circle = _CircleMachine(x.mean(axis=0))
             if _separable(circle.features(x), y):
                 circle.fit(x, y)
