@@ -151,3 +151,15 @@ def test_timed_sh_writes_what_timings_table_reads(tmp_path):
     stages, _ = verdicts.timings_table(path.read_text())
     assert [r["stage"] for r in stages.rows] == ["quality", "report"]
     assert all(float(r["wall s"]) >= 0 for r in stages.rows)
+
+
+def test_a_claim_that_names_other_methods_alone_is_split_by_method():
+    """Playing success reads a method's strategies at once ("kbcli: median ..."): cut there too;
+    a text naming no known label gives no rows (it crashed the real reproduction's verdicts)."""
+    beside = ("paper-v1: median 88.0 % (IQR 86.5 %-89.5 %; vs before p=5.1e-01) [differs]; "
+              "kbcli: median 88.0 % [agrees]")
+    labels = ("paper-v1 active", "kbcli infogain", "paper-v1", "kbcli")
+    parts = verdicts.split_beside(beside, labels)
+    assert [(x, v) for x, _, v in parts] == [("paper-v1", "differs"), ("kbcli", "agrees")]
+    assert "vs before p=5.1e-01" in parts[0][1]
+    assert verdicts.split_beside("nobody: 3 [agrees]", labels) == []

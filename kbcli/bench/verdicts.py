@@ -49,8 +49,9 @@ OTHER_COLUMNS = ("claim", "method", "kbcli measured", "verdict", "smallest p")
 
 
 def other_labels(art: Artifact) -> tuple[str, ...]:
-    """How a claim's text names each other method's strategy: ``"kbcli infogain"``."""
-    return tuple(f"{x} {s}" for x in others(art) for s in compared(art, x))
+    """How a claim's text names each other method's strategy (``"kbcli infogain"``), or the
+    method alone where a claim reads all its strategies at once (playing success: ``"kbcli"``)."""
+    return tuple(f"{x} {s}" for x in others(art) for s in compared(art, x)) + tuple(others(art))
 
 
 def split_beside(beside: str, labels: tuple[str, ...]) -> list[tuple[str, str, str]]:
@@ -60,6 +61,8 @@ def split_beside(beside: str, labels: tuple[str, ...]) -> list[tuple[str, str, s
         return []
     names = "|".join(re.escape(x) for x in sorted(labels, key=len, reverse=True))
     starts = list(re.finditer(rf"(?:^|; )({names}): ", beside))
+    if not starts:
+        return []
     out = []
     for m, nxt in zip(starts, [*starts[1:], None], strict=True):
         text = beside[m.end():nxt.start() if nxt else len(beside)]
