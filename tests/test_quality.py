@@ -81,6 +81,7 @@ def test_bad_quality_configs_are_refused(table):
     ({"budgets": [100, 5]}, ["quality.budgets", "a whole number in [10, 20000]", "got 5"]),
     ({"budgets": []}, ["quality.budgets", "at least one budget"]),
     ({"budgets": [True]}, ["quality.budgets", "whole number"]),
+    ({"budgets": [100, 150, 100]}, ["quality.budgets", "each budget once", "got 100"]),
     ({"seed": -1}, ["quality.seed", "greater than or equal to 0", "got -1"]),
     ({"experiments": 2.0}, ["quality.experiments", "whole number", "got 2.0"]),
     ({"reach_noise": -0.5}, ["quality.reach_noise", "greater than or equal to 0"]),
@@ -122,7 +123,7 @@ def test_quality_config_normalises_round_trips_and_copies():
     import copy
     import pickle
 
-    cfg = stage.QualityConfig.from_dict({"budgets": [400, 100, 100], "arm": "ideal",
+    cfg = stage.QualityConfig.from_dict({"budgets": [400, 100], "arm": "ideal",
                                          "reach_noise": 1, "adapt": {"robust": False}})
     assert cfg.budgets == (100, 400) and cfg.arm["preset"] == "ideal"
     assert cfg.reach_noise == 1.0 and isinstance(cfg.reach_noise, float)

@@ -106,7 +106,9 @@ class QualityConfig(Config):
             raise ValueError("must list at least one budget")
         if len(set(v)) > MAX_BUDGETS:
             raise ValueError(f"must list at most {MAX_BUDGETS} budgets, got {len(set(v))}")
-        return tuple(sorted(set(v)))
+        if twice := sorted({b for b in v if v.count(b) > 1}):  # one model each: say so, not merge
+            raise ValueError(f"must list each budget once, got {twice[0]} more than once")
+        return tuple(sorted(v))
 
     @field_validator("explorations")
     @classmethod
