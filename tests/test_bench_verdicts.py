@@ -163,3 +163,16 @@ def test_a_claim_that_names_other_methods_alone_is_split_by_method():
     assert [(x, v) for x, _, v in parts] == [("paper-v1", "differs"), ("kbcli", "agrees")]
     assert "vs before p=5.1e-01" in parts[0][1]
     assert verdicts.split_beside("nobody: 3 [agrees]", labels) == []
+
+
+def test_the_evaluation_table_names_the_own_model_evaluation_when_given():
+    """The own model's verdicts come from another evaluation: its size and model are named."""
+    art = read_artifact(GOLDEN / "evaluation.h5", ("evaluation",))
+    plain = {r["what"]: r["value"] for r in verdicts.evaluation_table(art).rows}
+    both = {r["what"]: r["value"] for r in verdicts.evaluation_table(art, art).rows}
+    assert "with the robot's own model" not in plain
+    row = both.pop("with the robot's own model")
+    assert both == plain
+    n = len(art.data["experiments"]["mode"])
+    assert f"{n} experiments, {int(art.config['experiments'])} per displacement" in row
+    assert "evaluation.h5" in row and "model " in row

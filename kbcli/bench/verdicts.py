@@ -109,9 +109,10 @@ def verdict_counts(claims, labels: tuple[str, ...] = ()) -> ResultTable:
     return ResultTable("Verdicts (claims per method)", ("method", *verdicts), rows)
 
 
-def evaluation_table(art: Artifact) -> ResultTable:
+def evaluation_table(art: Artifact, own: Artifact | None = None) -> ResultTable:
     """What the evaluation ran: its file, experiments, modes, methods (each with its posterior,
-    estimator and strategies), model and seed."""
+    estimator and strategies), model and seed; with ``own``, what the evaluation with the robot's
+    own model ran (its file, experiments, modes, methods and model)."""
     a, cfg = art.attrs, art.config
     model = art.inputs.get("model", {})
     rows = (("evaluation", f"{art.path} (sha256 {(art.sha256 or '?')[:16]}, kbcli "
@@ -126,9 +127,21 @@ def evaluation_table(art: Artifact) -> ResultTable:
             ("judged method", str(a["judged"])),
             ("model", f"{a.get('model_strategy')} (file {model.get('file')}, sha256 "
                       f"{str(model.get('sha256'))[:16]})"),
-            ("seed", str(art.seed)))
+            ("seed", str(art.seed)),
+            *(() if own is None else (("with the robot's own model", _own_row(own)),)))
     return ResultTable("The evaluation", ("what", "value"),
                        tuple({"what": k, "value": v} for k, v in rows))
+
+
+def _own_row(own: Artifact) -> str:
+    """The evaluation with the robot's own model in one line."""
+    model = own.inputs.get("model", {})
+    return (f"{own.path} (sha256 {(own.sha256 or '?')[:16]}): "
+            f"{len(own.data['experiments']['mode'])} experiments, "
+            f"{int(own.config['experiments'])} per displacement, method, strategy and mode; modes "
+            f"{', '.join(own.attrs['modes'])}; methods {', '.join(methods_of(own))}; model "
+            f"{own.attrs.get('model_strategy')} (file {model.get('file')}, sha256 "
+            f"{str(model.get('sha256'))[:16]})")
 
 
 def timings_table(text: str) -> tuple[ResultTable, ResultTable]:

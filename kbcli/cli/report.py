@@ -146,7 +146,7 @@ def bench_verdicts_cmd(
         with busy("judging the paper's claims"):
             claims = stage.claims(stage.upgrade(art), own)
         labels = bench.other_labels(stage.upgrade(art))
-        tables = [bench.evaluation_table(art), bench.verdict_counts(claims, labels),
+        tables = [bench.evaluation_table(art, own), bench.verdict_counts(claims, labels),
                   bench.claim_table(claims, labels)]
         tables += [t for t in (bench.others_table(claims, labels),) if t.rows]
     if timings is not None:
