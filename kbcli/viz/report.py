@@ -249,5 +249,7 @@ def plot_error(art: Artifact, path: str | os.PathLike, mode: str) -> None:
             if r == len(meths) - 1:
                 ax.set_xlabel("observations")
         axes[r, 0].set_ylabel(f"{x}: RMSE (px)")
-    fig.suptitle(f"Estimation error, {mode} mode", fontsize=10, y=1.01)
+    height = 3.0 * len(meths)  # the title half an inch above the panels' titles, whatever the rows
+    fig.subplots_adjust(top=1 - 0.55 / height)
+    fig.suptitle(f"Estimation error, {mode} mode", fontsize=10, y=1 - 0.12 / height)
     save(fig, path)
