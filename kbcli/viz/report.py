@@ -210,7 +210,10 @@ def plot_entropy(art: Artifact, path: str | os.PathLike) -> None:
             if r == len(modes) - 1:
                 ax.set_xlabel("observations")
         axes[r, 0].set_ylabel("posterior entropy (nats)")
-    axes[0, -1].legend(fontsize=7)
+    handles, labels = axes[0, -1].get_legend_handles_labels()  # beside the panels, never on a curve
+    fig.legend(handles, labels, loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8,
+               frameon=False)
+    fig.tight_layout()
     save(fig, path)
 
 
