@@ -811,9 +811,28 @@ def test_joblibs_cancel_warning_is_silenced_in_every_wording(head):
     assert [str(w.message) for w in seen] == ["an unrelated warning"]
 
 
-def test_a_sigterm_right_after_the_temporary_file_is_made_leaves_nothing(tmp_path, monkeypatch):
+@pytest.fixture(params=["alone", "beside another thread"])
+def threads(request):
+    """The process alone, or with a second thread alive: the kernel may then hand a
+    process-directed SIGTERM to that thread (CI's pytest-xdist worker has one)."""
+    import threading
+
+    if request.param == "alone":
+        yield request.param
+        return
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait, daemon=True)
+    other.start()
+    yield request.param
+    stop.set()
+    other.join()
+
+
+def test_a_sigterm_right_after_the_temporary_file_is_made_leaves_nothing(tmp_path, monkeypatch,
+                                                                         threads):
     """The signal lands between mkstemp and the cleanup knowing the file (CI saw
-    .part-000007.h5.kbcli-tmp-*.tmp left in a checkpoint): it is deferred, then removes it."""
+    .part-000007.h5.kbcli-tmp-*.tmp left in a checkpoint, and later, with another thread alive,
+    .a.h5.kbcli-tmp-*.tmp here): it is deferred, then removes it."""
     import tempfile
 
     from kbcli.io import atomic, signals
@@ -823,6 +842,7 @@ def test_a_sigterm_right_after_the_temporary_file_is_made_leaves_nothing(tmp_pat
     def mkstemp_then_sigterm(*args, **kwargs):
         made = real(*args, **kwargs)
         os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.05)  # time for another thread to take the signal
         return made
 
     monkeypatch.setattr(atomic.tempfile, "mkstemp", mkstemp_then_sigterm)
@@ -830,6 +850,31 @@ def test_a_sigterm_right_after_the_temporary_file_is_made_leaves_nothing(tmp_pat
     try:
         with pytest.raises(signals.Terminated), atomic.atomic_paths([tmp_path / "a.h5"]) as tmps:
             Path(tmps[0]).write_bytes(b"x")
+    finally:
+        signals.restore(old)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_sigterm_right_after_the_temporary_folder_is_made_leaves_nothing(tmp_path, monkeypatch,
+                                                                           threads):
+    """The same for a report's folder: mkdtemp, then SIGTERM, leaves no temporary folder."""
+    import tempfile
+
+    from kbcli.io import atomic, signals
+
+    real = tempfile.mkdtemp
+
+    def mkdtemp_then_sigterm(*args, **kwargs):
+        made = real(*args, **kwargs)
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.05)  # time for another thread to take the signal
+        return made
+
+    monkeypatch.setattr(atomic.tempfile, "mkdtemp", mkdtemp_then_sigterm)
+    old = signals.install()
+    try:
+        with pytest.raises(signals.Terminated), atomic.atomic_folder(tmp_path / "report") as tmp:
+            (tmp / "README.md").write_text("x")
     finally:
         signals.restore(old)
     assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -21,6 +21,7 @@ import re
 import shutil
 import signal
 import tempfile
+import threading
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
@@ -94,15 +95,33 @@ def _remove(tmp: str | os.PathLike) -> None:
 @contextlib.contextmanager
 def _signals_deferred() -> Iterator[None]:
     """Hold SIGINT and SIGTERM until the block is done (their handlers then run, and raise, just
-    after it): a temporary file is never created without being known to the cleanup."""
-    if not hasattr(signal, "pthread_sigmask"):
+    after it): a temporary file is never created without being known to the cleanup.
+
+    The hold is at the Python level: blocking the signals with ``pthread_sigmask`` is not enough,
+    since the kernel then hands a process-directed signal to another thread (pytest-xdist's, a
+    library's) and Python still runs the handler in the main thread, at once. Only the main thread
+    runs Python signal handlers, so elsewhere there is nothing to hold.
+    """
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    caught: list[int] = []
+
+    def hold(signum: int, frame: object) -> None:
+        caught.append(signum)
+
+    held = {}
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(signum)
+        if callable(handler):  # a Python handler (SIG_DFL and SIG_IGN need no hold)
+            held[signum] = signal.signal(signum, hold)
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for signum, handler in held.items():
+            signal.signal(signum, handler)
+        if caught:
+            held[caught[0]](caught[0], None)
 
 
 def write_error(path: str | os.PathLike, exc: OSError) -> ArtifactError:
@@ -212,12 +231,14 @@ def atomic_folder(path: str | os.PathLike, *, owned: Sequence[str] = ()) -> Iter
     path = Path(path)
     folder = _folder(path)
     clean_stale(path)
+    tmp: Path | None = None
     try:
-        tmp = Path(tempfile.mkdtemp(prefix=_prefix(path), dir=folder))
-    except OSError as exc:
-        raise KbcliError(f"{path}: cannot create the folder in {folder} "
-                         f"({describe_os_error(exc)})") from None
-    try:
+        try:
+            with _signals_deferred():  # a SIGTERM between mkdtemp and the assignment orphans tmp
+                tmp = Path(tempfile.mkdtemp(prefix=_prefix(path), dir=folder))
+        except OSError as exc:
+            raise KbcliError(f"{path}: cannot create the folder in {folder} "
+                             f"({describe_os_error(exc)})") from None
         yield tmp
         names = sorted(os.listdir(tmp), key=lambda n: (n == "README.md", n))
         for name in names:
@@ -236,6 +257,8 @@ def atomic_folder(path: str | os.PathLike, *, owned: Sequence[str] = ()) -> Iter
                             old.unlink()
             _remove(tmp)
     except BaseException as exc:
+        if tmp is None:
+            raise
         _remove(tmp)
         if isinstance(exc, OSError) and exc.errno is not None:
             where = path / Path(exc.filename).name if exc.filename is not None and \
