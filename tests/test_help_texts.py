@@ -86,3 +86,15 @@ def test_a_default_taken_from_the_input_or_other_options_says_where_from():
     for name, others in (("--dx", "--dy or --angle"), ("--dy", "--dx or --angle"),
                          ("--angle", "--dx or --dy")):
         assert f"[default: (0 when {others} is given)]" in " ".join(shown[name].split()), name
+
+
+def test_the_same_option_means_the_same_in_every_command():
+    """``--reach-noise`` said "landing scatter, px" in one command and "(standard deviation)" in
+    another: an option shared by several commands now has one help text."""
+    helps = {}
+    for path, cmd in COMMANDS:
+        for p in cmd.params:
+            if p.param_type_name == "option" and p.opts[0] == "--reach-noise":
+                helps[path] = " ".join(p.help.split())
+    assert {"kbcli adapt", "kbcli run", "kbcli learn", "kbcli play"} <= set(helps)
+    assert len(set(helps.values())) == 1, helps

@@ -64,9 +64,7 @@ def adapt_cmd(
     estimator: opts.estimator_option() = None,
     family: opts.family_option("the scene's family") = None,
     mode: opts.mode_option("ideal") = None,
-    reach_noise: Annotated[float | None, typer.Option(
-        "--reach-noise", help="Landing scatter of the arm (standard deviation), px.",
-        show_default="0")] = None,
+    reach_noise: opts.reach_noise_option("0.0") = None,
     feedback: Annotated[str | None, typer.Option(
         "--feedback", help="Where the robot updates its posterior: landed (where it feels its "
         "finger landed) or aim (where it aimed).", show_default="landed")] = None,

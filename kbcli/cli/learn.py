@@ -49,9 +49,7 @@ def learn_cmd(
         "--budget", help=f"Reaches to explore with, at most {MAX_BUDGET}; a run that hears fewer than "
         "two distinct sounds is refused (nothing written).")] = 800,
     seed: opts.seed_option("Seed of the exploration and arm noise.") = 0,
-    reach_noise: Annotated[float, typer.Option(
-        "--reach-noise", help="Landing scatter of a reach, px (motor noise in dynamics mode).")
-    ] = 0.0,
+    reach_noise: opts.ReachNoise = 0.0,
     arm: opts.arm_option() = "ideal",
     batch: Annotated[int, typer.Option("--batch", help=f"Reaches per refit, at most {MAX_BUDGET}.")] = 10,
     explore_radius: Annotated[float, typer.Option(
@@ -175,7 +173,7 @@ def bench_learn_cmd(
     keyboard: opts.keyboard_option("A keyboard artifact to learn instead of the layouts' "
                                    "defaults.", optional=True) = None,
     mode: opts.mode_option(help="Reaching") = "ideal",
-    reach_noise: Annotated[float, typer.Option("--reach-noise", help="Landing scatter, px.")] = 0.0,
+    reach_noise: opts.ReachNoise = 0.0,
     seed: opts.seed_option("Seed of the runs.") = 0,
     boundary_budget: Annotated[int, typer.Option(
         "--boundary-budget", help=opts.at_most("Reaches at which the boundary error and the learn "

@@ -225,7 +225,18 @@ def arm_option(default: str | None = None, optional: bool = False, files: bool =
                                                            show_default=_shown(default))]
 
 
-ReachNoise = Annotated[float, _opt("--reach-noise", help="Landing scatter of the arm, px.")]
+#: What ``--reach-noise`` means, the same words in every command.
+REACH_NOISE_HELP = ("Extra landing scatter of the arm (standard deviation, px) on top of the arm "
+                    "preset's own errors; in dynamics mode, motor noise.")
+
+
+def reach_noise_option(default: str | None = None) -> Any:
+    """``--reach-noise`` (None: the config's, named in ``default``)."""
+    return Annotated[float | None if default else float,
+                     _opt("--reach-noise", help=REACH_NOISE_HELP, show_default=_shown(default))]
+
+
+ReachNoise = reach_noise_option()
 
 MODEL_BLUR_HELP = (
     "Override: fix the blur (px, 0-50) of the model's key edges. Not given, the robust posterior "
