@@ -66,7 +66,8 @@ results: $(STAMP)
 results-reproduce: $(STAMP)
 	$(KBCLI) bench --json $(RESULTS)/reproduce.json verdicts $(OUT)/reproduce/eval.h5 \
 	    --timings $(OUT)/reproduce/timings.txt \
-	    $(if $(wildcard $(OUT)/reproduce/own-eval.h5),--own-model $(OUT)/reproduce/own-eval.h5,)
+	    $(if $(wildcard $(OUT)/reproduce/own-eval.h5),--own-model $(OUT)/reproduce/own-eval.h5,) \
+	    $(if $(wildcard $(OUT)/reproduce/ablations.h5),--ablations $(OUT)/reproduce/ablations.h5,)
 
 results-quality: $(STAMP)
 	$(KBCLI) bench --json $(RESULTS)/model-quality.json verdicts $(OUT)/quality.h5 \

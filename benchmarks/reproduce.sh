@@ -22,7 +22,8 @@
 #
 # The report is written for $OUT/eval.h5 (when it exists), reading beside it the ablation ladder
 # $OUT/ablations.h5 and the evaluation with the robot's own model $OUT/own-eval.h5 when they exist.
-# Then the verdicts and the timings are kept as a result file, $OUT/reproduce.json (`kbcli bench
+# Then the verdicts (with what explains each difference, when the ladder exists) and the timings
+# are kept as a result file, $OUT/reproduce.json (`kbcli bench
 # --json ... verdicts`, the format of benchmarks/results/*.json: `make results-reproduce` stores it
 # for the documentation's results page).
 #
@@ -98,5 +99,6 @@ fi
 if [[ $EVAL == eval.h5 && -f $OUT/eval.h5 ]]; then
     verdict_args=("$OUT/eval.h5" --timings "$timings")
     [[ -f $OUT/own-eval.h5 ]] && verdict_args+=(--own-model "$OUT/own-eval.h5")
+    [[ -f $OUT/ablations.h5 ]] && verdict_args+=(--ablations "$OUT/ablations.h5")
     "$KBCLI" bench --json "$OUT/reproduce.json" verdicts "${verdict_args[@]}" > /dev/null
 fi

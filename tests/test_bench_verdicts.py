@@ -132,6 +132,9 @@ def test_bench_verdicts_refuses_bad_input_in_one_line(tmp_path, runner):
     r = runner.invoke(app, ["bench", "verdicts", str(GOLDEN / "model_quality.h5"),
                             "--own-model", str(GOLDEN / "evaluation.h5")])
     one_line_error(r, "--own-model")
+    r = runner.invoke(app, ["bench", "verdicts", str(GOLDEN / "model_quality.h5"),
+                            "--ablations", str(GOLDEN / "evaluation.h5")])
+    one_line_error(r, "--ablations")
     r = runner.invoke(app, ["bench", "verdicts", str(GOLDEN / "model.h5")])
     one_line_error(r, "model.h5")
     r = runner.invoke(app, ["bench", "verdicts", str(GOLDEN / "evaluation.h5"), "--timings",
@@ -176,3 +179,18 @@ def test_the_evaluation_table_names_the_own_model_evaluation_when_given():
     n = len(art.data["experiments"]["mode"])
     assert f"{n} experiments, {int(art.config['experiments'])} per displacement" in row
     assert "evaluation.h5" in row and "model " in row
+
+
+def test_bench_verdicts_keeps_what_explains_each_difference(tmp_path, runner):
+    """--ablations adds the report's section "What explains each difference" as a table (here the
+    evaluation is its own ladder: its methods in order)."""
+    out = tmp_path / "reproduce.json"
+    r = runner.invoke(app, ["bench", "--json", str(out), "verdicts", str(GOLDEN / "evaluation.h5"),
+                            "--ablations", str(GOLDEN / "evaluation.h5")])
+    assert r.exit_code == 0, r.output
+    tables = {t["title"].split(" (")[0]: t for t in json.loads(out.read_text())["tables"]}
+    table = tables["What explains each difference"]
+    assert table["columns"] == list(verdicts.EXPLAIN_COLUMNS)
+    art = stage.upgrade(read_artifact(GOLDEN / "evaluation.h5", ("evaluation",)))
+    differs = {c.paper for c in stage.claims(art) if c.verdict == "differs"}
+    assert {row["claim"] for row in table["rows"]} == differs

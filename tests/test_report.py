@@ -393,6 +393,26 @@ def test_what_explains_each_difference_on_a_known_ladder():
     assert "What explains each difference" not in stage.build(main).readme
 
 
+def test_the_explanation_as_a_result_table_has_the_sections_rows():
+    """kbcli bench verdicts --ablations keeps the section as a result table: the same rows."""
+    from kbcli.bench.verdicts import EXPLAIN_COLUMNS, explain_table
+
+    bad, good = [1e-7, 1e-3, 1e-6], [1e-9] * 3
+    kde = {"posterior": "kde", "estimator": "ml", "model_blur": 0.0}
+    rungs = [("paper", kde, bad), ("r-posterior", {**kde, "posterior": "likelihood"}, good)]
+    main = _evaluation({**PAPER_LIKE, "small": bad})
+    ladder = _ladder(rungs)
+    readme = stage.build(main, ablations=ladder).readme
+    table = explain_table(stage.claims(main), ladder)
+    assert table.columns == EXPLAIN_COLUMNS and table.rows
+    for row in table.rows:
+        assert f"| {row['claim']} | {row['verdict along the ladder']} | {row['what flips it']} |" \
+            in readme
+    small = next(r for r in table.rows if r["claim"].startswith("small displacements"))
+    assert small["what flips it"].endswith("posterior kde -> likelihood")
+    assert table.title.startswith("What explains each difference")
+
+
 def test_dynamics_claims_on_the_robots_own_model_beside_the_default():
     both = ("ideal", "dynamics")
     main = _evaluation(PAPER_LIKE, modes=both, play=0.99)

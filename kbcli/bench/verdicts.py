@@ -109,6 +109,22 @@ def verdict_counts(claims, labels: tuple[str, ...] = ()) -> ResultTable:
     return ResultTable("Verdicts (claims per method)", ("method", *verdicts), rows)
 
 
+EXPLAIN_COLUMNS = ("claim", "verdict along the ladder", "what flips it")
+
+
+def explain_table(claims, ablations: Artifact) -> ResultTable:
+    """The report's "What explains each difference" as a result table: every claim marked
+    *differs* on the judged method, judged on each rung of the ablation ladder ``ablations``,
+    and the rungs whose changes flip it (:func:`kbcli.stages.report.ablation.explained`)."""
+    from kbcli.stages.report.ablation import explained
+
+    rows = tuple(dict(zip(EXPLAIN_COLUMNS, r, strict=True)) for r in explained(claims, ablations))
+    return ResultTable(f"What explains each difference (the ablation ladder {ablations.path}, "
+                       f"{len(ablations.data['experiments']['mode'])} experiments, "
+                       f"{int(ablations.config['experiments'])} per cell, modes "
+                       f"{', '.join(ablations.attrs['modes'])})", EXPLAIN_COLUMNS, rows)
+
+
 def evaluation_table(art: Artifact, own: Artifact | None = None) -> ResultTable:
     """What the evaluation ran: its file, experiments, modes, methods (each with its posterior,
     estimator and strategies), model and seed; with ``own``, what the evaluation with the robot's

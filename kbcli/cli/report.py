@@ -122,24 +122,30 @@ def bench_verdicts_cmd(
     own_model: Annotated[Path | None, typer.Option(
         help="Evaluation with the robot's own learned model: its Sect. IV-C claims too, as "
              "kbcli report --own-model judges them.")] = None,
+    ablations: Annotated[Path | None, typer.Option(
+        help="The ablation ladder's evaluation (make reproduce-ablations): what explains each "
+             "claim that differs, as kbcli report --ablations writes it.")] = None,
 ) -> None:
     """Print the verdicts of an evaluation or a model-quality sweep as tables, with stage timings.
 
     Reads EVALUATION (kind 'evaluation': the paper's claims judged as kbcli report judges them,
     with the smallest p-value each one measured; kind 'model_quality': the paper's explanation
-    tested and every model's advantage) and, with --timings, the wall time of each stage. Writes
+    tested and every model's advantage); with --ablations, what explains each claim that differs;
+    with --timings, the wall time of each stage. Writes
     nothing (kbcli bench --json FILE verdicts ... keeps the tables: the documentation's results
     pages are generated from benchmarks/results/reproduce.json and model-quality.json).
     """
     from kbcli.bench import verdicts as bench
 
-    inputs = {"EVALUATION": evaluation, "--timings": timings, "--own-model": own_model}
+    inputs = {"EVALUATION": evaluation, "--timings": timings, "--own-model": own_model,
+              "--ablations": ablations}
     check_io(inputs)
     art = read_artifact(evaluation, ("evaluation", "model_quality"))
     if art.kind == "model_quality":
-        if own_model is not None:
-            raise ConfigError("--own-model reads an evaluation's claims; EVALUATION is a "
-                              "model-quality sweep")
+        for flag, given in (("--own-model", own_model), ("--ablations", ablations)):
+            if given is not None:
+                raise ConfigError(f"{flag} reads an evaluation's claims; EVALUATION is a "
+                                  "model-quality sweep")
         tables = [bench.sweep_table(art), bench.hypothesis_table(art), bench.models_table(art)]
     else:
         own = read_artifact(own_model, ("evaluation",)) if own_model else None
@@ -149,6 +155,10 @@ def bench_verdicts_cmd(
         tables = [bench.evaluation_table(art, own), bench.verdict_counts(claims, labels),
                   bench.claim_table(claims, labels)]
         tables += [t for t in (bench.others_table(claims, labels),) if t.rows]
+        if ablations is not None:
+            ladder = read_artifact(ablations, ("evaluation",))
+            with busy("judging the claims along the ablation ladder"):
+                tables.append(bench.explain_table(claims, ladder))
     if timings is not None:
         tables += [t for t in bench.timings_table(timings.read_text(encoding="utf-8")) if t.rows]
     con = out if interactive() else Console(width=max(out.width, 160), highlight=False)

@@ -56,31 +56,43 @@ def ladder(ablations: Artifact, claim: str) -> list[tuple[str, str, str]] | None
     return out
 
 
-def explain(claims: list[Claim], ablations: Artifact) -> list[str]:
-    """The section "What explains each difference" (markdown lines): for every claim marked
-    *differs*, its verdict on every rung and the changes that flip it."""
+#: What the section "What explains each difference" says before its table.
+INTRO = ("Every claim marked *differs*, judged with the same rule on each rung of the ablation "
+         "ladder ({path}, its methods in order, each changing some options of the one before; a "
+         "rung is judged on its last strategy other than the baseline). A flip is a rung whose "
+         "verdict leaves or returns to *differs*; what flips it is what that rung changes.")
+
+
+def explained(claims: list[Claim], ablations: Artifact) -> list[tuple[str, str, str]]:
+    """``(claim, verdict along the ladder, what flips it)`` for every claim marked *differs* (its
+    paper text once), as the section's table rows (:func:`explain`; ``kbcli bench verdicts
+    --ablations`` keeps them as a result table)."""
     ablations = upgrade(ablations)
-    lines = ["## What explains each difference", "",
-             f"Every claim marked *differs*, judged with the same rule on each rung of the "
-             f"ablation ladder (`{ablations.path or 'an ablation evaluation'}`, its methods in "
-             "order, each changing some options of the one before; a rung is judged on its last "
-             "strategy other than the baseline). A flip is a rung whose verdict leaves or returns "
-             "to *differs*; what flips it is what that rung changes.", ""]
-    differs = [c for c in claims if c.verdict == "differs"]
-    if not differs:
-        return [*lines, "No claim is marked *differs*.", ""]
-    lines += ["| claim | verdict along the ladder | what flips it |", "|---|---|---|"]
+    rows = []
     seen = set()
-    for c in differs:
-        if c.paper in seen:
+    for c in claims:
+        if c.verdict != "differs" or c.paper in seen:
             continue
         seen.add(c.paper)
         steps = ladder(ablations, c.paper)
         if not steps:
-            lines.append(f"| {c.paper} | not measured by the ladder | - |")
+            rows.append((c.paper, "not measured by the ladder", "-"))
             continue
         path = " -> ".join(f"`{x}` ({s}) {v}" for x, s, v in steps)
-        lines.append(f"| {c.paper} | {path} | {_flips(ablations, steps)} |")
+        rows.append((c.paper, path, _flips(ablations, steps)))
+    return rows
+
+
+def explain(claims: list[Claim], ablations: Artifact) -> list[str]:
+    """The section "What explains each difference" (markdown lines): for every claim marked
+    *differs*, its verdict on every rung and the changes that flip it."""
+    where = f"`{ablations.path or 'an ablation evaluation'}`"
+    lines = ["## What explains each difference", "", INTRO.format(path=where), ""]
+    rows = explained(claims, ablations)
+    if not rows:
+        return [*lines, "No claim is marked *differs*.", ""]
+    lines += ["| claim | verdict along the ladder | what flips it |", "|---|---|---|"]
+    lines += [f"| {claim} | {path} | {flips} |" for claim, path, flips in rows]
     return [*lines, ""]
 
 
