@@ -121,7 +121,7 @@ def test_bench_verdicts_on_a_model_quality_sweep(tmp_path, runner):
                             str(GOLDEN / "model_quality.h5")])
     assert r.exit_code == 0, r.output
     d = json.loads(out.read_text())
-    sweep, hyp, models = d["tables"]
+    sweep, hyp, models, plateau = d["tables"]
     assert hyp["title"].startswith("The paper's explanation") and hyp["rows"][0]["row"] == "infogain"
     art = read_artifact(GOLDEN / "model_quality.h5", ("model_quality",))
     assert len(models["rows"]) == len(art.attrs["models"])
@@ -194,3 +194,27 @@ def test_bench_verdicts_keeps_what_explains_each_difference(tmp_path, runner):
     art = stage.upgrade(read_artifact(GOLDEN / "evaluation.h5", ("evaluation",)))
     differs = {c.paper for c in stage.claims(art) if c.verdict == "differs"}
     assert {row["claim"] for row in table["rows"]} == differs
+
+
+def test_plateau_budget_is_the_smallest_within_the_bound_of_the_largest():
+    assert verdicts.plateau_budget([100, 400, 800, 1600], [6.9, 1.6, 0.99, 0.87]) == 800
+    assert verdicts.plateau_budget([1600, 100, 800], [1.09, 6.8, 1.82]) == 1600  # any order
+    assert verdicts.plateau_budget([100, 200], [1.0, 1.0]) == 100  # flat from the start
+    assert verdicts.plateau_budget([100, 200], [1.3, 1.0], within=0.3) == 100
+    assert verdicts.plateau_budget([100, 200], [1.31, 1.0], within=0.3) == 200
+
+
+def test_the_sweep_names_the_budget_where_learning_levels_off(tmp_path, runner):
+    out = tmp_path / "model-quality.json"
+    r = runner.invoke(app, ["bench", "--json", str(out), "verdicts",
+                            str(GOLDEN / "model_quality.h5")])
+    assert r.exit_code == 0, r.output
+    (table,) = [t for t in json.loads(out.read_text())["tables"]
+                if t["title"].startswith("Where learning levels off")]
+    art = read_artifact(GOLDEN / "model_quality.h5", ("model_quality",))
+    explorations = {str(m["exploration"]) for m in art.attrs["models"].values()}
+    assert {row["exploration"] for row in table["rows"]} == explorations
+    for row in table["rows"]:
+        mine = {int(m["budget"]): m["boundary_error"] for m in art.attrs["models"].values()
+                if str(m["exploration"]) == row["exploration"]}
+        assert int(row["budget"]) == verdicts.plateau_budget(list(mine), list(mine.values()))

@@ -224,6 +224,49 @@ def models_table(art: Artifact) -> ResultTable:
                        + " (median touches saved to tau)", cols, tuple(rows))
 
 
+#: A model's boundary error "levels off" within this fraction above the largest budget's.
+PLATEAU = 0.2
+
+
+def plateau_budget(budgets, errors, within: float = PLATEAU) -> int:
+    """The smallest budget whose boundary error is within ``within`` (a fraction) above the
+    boundary error of the largest budget: where more reaches stop making the model better."""
+    pairs = sorted(zip((int(b) for b in budgets), (float(e) for e in errors), strict=True))
+    if not pairs:
+        raise ValueError("no budget to choose from")
+    bound = (1 + within) * pairs[-1][1]
+    return next(b for b, e in pairs if e <= bound)
+
+
+def plateau_table(art: Artifact, within: float = PLATEAU) -> ResultTable:
+    """Per exploration of a model-quality sweep, the budget where the boundary error levels off
+    (:func:`plateau_budget`) with its model's accuracy, boundary error and advantages: the budget
+    ``make reproduce-own-model`` learns the robot's own model with (``OWN_BUDGET``)."""
+    a = art.attrs
+    others = [r for r in a["rows"] if r != a["baseline"]]
+    by: dict[str, list[tuple[int, str, dict]]] = {}
+    for m, mi in a["models"].items():
+        by.setdefault(str(mi.get("exploration", "")), []).append((int(mi["budget"]), m, mi))
+    rows = []
+    for ex, models in sorted(by.items()):
+        models.sort()
+        b = plateau_budget([x[0] for x in models], [x[2]["boundary_error"] for x in models], within)
+        _, m, mi = next(x for x in models if x[0] == b)
+        top = models[-1]
+        row = {"exploration": ex, "budget": str(b), "model": m,
+               "accuracy": f"{100 * mi['accuracy']:.1f} %",
+               "boundary error px": f"{mi['boundary_error']:.2f}",
+               f"at {top[0]} reaches": f"{top[2]['boundary_error']:.2f} px"}
+        for r in others:
+            row[f"{r} advantage"] = f"{a['summary'][m]['all'][r]['advantage']:+g}"
+        rows.append(row)
+    top_col = f"at {max(int(mi['budget']) for mi in a['models'].values())} reaches"
+    cols = ("exploration", "budget", "model", "accuracy", "boundary error px", top_col,
+            *(f"{r} advantage" for r in others))
+    return ResultTable(f"Where learning levels off: the smallest budget whose boundary error is "
+                       f"within {100 * within:.0f} % of the largest budget's", cols, tuple(rows))
+
+
 def sweep_table(art: Artifact) -> ResultTable:
     """What the model-quality sweep ran."""
     a, cfg = art.attrs, art.config

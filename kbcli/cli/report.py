@@ -146,7 +146,8 @@ def bench_verdicts_cmd(
             if given is not None:
                 raise ConfigError(f"{flag} reads an evaluation's claims; EVALUATION is a "
                                   "model-quality sweep")
-        tables = [bench.sweep_table(art), bench.hypothesis_table(art), bench.models_table(art)]
+        tables = [bench.sweep_table(art), bench.hypothesis_table(art), bench.models_table(art),
+                  bench.plateau_table(art)]
     else:
         own = read_artifact(own_model, ("evaluation",)) if own_model else None
         with busy("judging the paper's claims"):
