@@ -258,13 +258,14 @@ def plateau_table(art: Artifact, within: float = PLATEAU) -> ResultTable:
                "boundary error px": f"{mi['boundary_error']:.2f}",
                f"at {top[0]} reaches": f"{top[2]['boundary_error']:.2f} px"}
         for r in others:
-            row[f"{r} advantage"] = f"{a['summary'][m]['all'][r]['advantage']:+g}"
+            row[f"{r} touches saved"] = f"{a['summary'][m]['all'][r]['advantage']:+g}"
         rows.append(row)
     top_col = f"at {max(int(mi['budget']) for mi in a['models'].values())} reaches"
     cols = ("exploration", "budget", "model", "accuracy", "boundary error px", top_col,
-            *(f"{r} advantage" for r in others))
+            *(f"{r} touches saved" for r in others))
     return ResultTable(f"Where learning levels off: the smallest budget whose boundary error is "
-                       f"within {100 * within:.0f} % of the largest budget's", cols, tuple(rows))
+                       f"within {100 * within:.0f} % of the largest budget's (touches saved: "
+                       f"median, to tau, over {a['baseline']})", cols, tuple(rows))
 
 
 def sweep_table(art: Artifact) -> ResultTable:
