@@ -828,53 +828,40 @@ def threads(request):
     other.join()
 
 
+def _write_file(atomic, tmp_path):
+    with atomic.atomic_paths([tmp_path / "a.h5"]) as tmps:
+        Path(tmps[0]).write_bytes(b"x")
+
+
+def _write_folder(atomic, tmp_path):
+    with atomic.atomic_folder(tmp_path / "report") as tmp:
+        (tmp / "README.md").write_text("x")
+
+
+@pytest.mark.parametrize(("maker", "write"), [("mkstemp", _write_file), ("mkdtemp", _write_folder)],
+                         ids=["file", "report folder"])
 def test_a_sigterm_right_after_the_temporary_file_is_made_leaves_nothing(tmp_path, monkeypatch,
-                                                                         threads):
-    """The signal lands between mkstemp and the cleanup knowing the file (CI saw
-    .part-000007.h5.kbcli-tmp-*.tmp left in a checkpoint, and later, with another thread alive,
-    .a.h5.kbcli-tmp-*.tmp here): it is deferred, then removes it."""
+                                                                         threads, maker, write):
+    """The signal lands between mkstemp (mkdtemp: a report's folder) and the cleanup knowing
+    the temporary (CI saw .part-000007.h5.kbcli-tmp-*.tmp left in a checkpoint, and later, with
+    another thread alive, .a.h5.kbcli-tmp-*.tmp here): it is deferred, then removes it."""
     import tempfile
 
     from kbcli.io import atomic, signals
 
-    real = tempfile.mkstemp
+    real = getattr(tempfile, maker)
 
-    def mkstemp_then_sigterm(*args, **kwargs):
+    def make_then_sigterm(*args, **kwargs):
         made = real(*args, **kwargs)
         os.kill(os.getpid(), signal.SIGTERM)
         time.sleep(0.05)  # time for another thread to take the signal
         return made
 
-    monkeypatch.setattr(atomic.tempfile, "mkstemp", mkstemp_then_sigterm)
+    monkeypatch.setattr(atomic.tempfile, maker, make_then_sigterm)
     old = signals.install()
     try:
-        with pytest.raises(signals.Terminated), atomic.atomic_paths([tmp_path / "a.h5"]) as tmps:
-            Path(tmps[0]).write_bytes(b"x")
-    finally:
-        signals.restore(old)
-    assert sorted(p.name for p in tmp_path.iterdir()) == []
-
-
-def test_a_sigterm_right_after_the_temporary_folder_is_made_leaves_nothing(tmp_path, monkeypatch,
-                                                                           threads):
-    """The same for a report's folder: mkdtemp, then SIGTERM, leaves no temporary folder."""
-    import tempfile
-
-    from kbcli.io import atomic, signals
-
-    real = tempfile.mkdtemp
-
-    def mkdtemp_then_sigterm(*args, **kwargs):
-        made = real(*args, **kwargs)
-        os.kill(os.getpid(), signal.SIGTERM)
-        time.sleep(0.05)  # time for another thread to take the signal
-        return made
-
-    monkeypatch.setattr(atomic.tempfile, "mkdtemp", mkdtemp_then_sigterm)
-    old = signals.install()
-    try:
-        with pytest.raises(signals.Terminated), atomic.atomic_folder(tmp_path / "report") as tmp:
-            (tmp / "README.md").write_text("x")
+        with pytest.raises(signals.Terminated):
+            write(atomic, tmp_path)
     finally:
         signals.restore(old)
     assert sorted(p.name for p in tmp_path.iterdir()) == []
