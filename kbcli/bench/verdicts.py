@@ -256,12 +256,11 @@ def plateau_table(art: Artifact, within: float = PLATEAU) -> ResultTable:
         row = {"exploration": ex, "budget": str(b), "model": m,
                "accuracy": f"{100 * mi['accuracy']:.1f} %",
                "boundary error px": f"{mi['boundary_error']:.2f}",
-               f"at {top[0]} reaches": f"{top[2]['boundary_error']:.2f} px"}
+               "at the largest budget": f"{top[2]['boundary_error']:.2f} px ({top[0]})"}
         for r in others:
             row[f"{r} touches saved"] = f"{a['summary'][m]['all'][r]['advantage']:+g}"
         rows.append(row)
-    top_col = f"at {max(int(mi['budget']) for mi in a['models'].values())} reaches"
-    cols = ("exploration", "budget", "model", "accuracy", "boundary error px", top_col,
+    cols = ("exploration", "budget", "model", "accuracy", "boundary error px", "at the largest budget",
             *(f"{r} touches saved" for r in others))
     return ResultTable(f"Where learning levels off: the smallest budget whose boundary error is "
                        f"within {100 * within:.0f} % of the largest budget's (touches saved: "
