@@ -61,13 +61,17 @@ results: $(STAMP)
 	$(KBCLI) bench --json $(RESULTS)/learn.json learn --seeds 3
 	$(KBCLI) bench --json $(RESULTS)/reliability.json reliability --seeds 3
 
+# The ablation ladder's evaluations (make reproduce-ablations: both modes, or one file per mode), as
+# the report's --ablations options.
+LADDERS = $(foreach f,$(sort $(wildcard $(OUT)/reproduce/ablations*.h5)),--ablations $(f))
+
 # The verdicts of the long runs, with their stage timings, as result files: those of the last
 # `make reproduce` (out/reproduce/) and `make model-quality` (out/quality.h5); seconds each.
 results-reproduce: $(STAMP)
 	$(KBCLI) bench --json $(RESULTS)/reproduce.json verdicts $(OUT)/reproduce/eval.h5 \
 	    --timings $(OUT)/reproduce/timings.txt \
 	    $(if $(wildcard $(OUT)/reproduce/own-eval.h5),--own-model $(OUT)/reproduce/own-eval.h5,) \
-	    $(if $(wildcard $(OUT)/reproduce/ablations.h5),--ablations $(OUT)/reproduce/ablations.h5,)
+	    $(LADDERS)
 
 results-quality: $(STAMP)
 	$(KBCLI) bench --json $(RESULTS)/model-quality.json verdicts $(OUT)/quality.h5 \
@@ -142,10 +146,12 @@ reproduce-earlier: $(STAMP)
 
 # The ablation ladder from `paper` to `kbcli` one factor at a time (pipelines/ablations.toml), on
 # the model of `make reproduce` (learned first when missing); the report of $(OUT)/reproduce/eval.h5
-# then gains "What explains each difference". Prints the wall time of each stage.
+# then gains "What explains each difference". Prints the wall time of each stage. Both modes write
+# ablations.h5; MODE=ideal or MODE=dynamics writes ablations-MODE.h5 (one mode at a time: each half
+# is a shorter run), and the report reads every ladder file there.
 reproduce-ablations: $(STAMP)
-	CONFIG=pipelines/ablations.toml EVAL=ablations.h5 LEARN=missing OUT=$(OUT)/reproduce \
-	    REPORT=$(OUT)/report benchmarks/reproduce.sh
+	CONFIG=pipelines/ablations.toml EVAL=ablations$(if $(MODE),-$(MODE),).h5 LEARN=missing \
+	    OUT=$(OUT)/reproduce REPORT=$(OUT)/report benchmarks/reproduce.sh
 
 # Sect. IV-C as the paper ran it: the dynamics claims on a model the robot learned itself
 # (dynamics mode, realistic arm, OWN_BUDGET reaches), evaluated beside the default model; the
@@ -163,8 +169,7 @@ reproduce-own-model: $(STAMP)
 	    $(if $(EXPERIMENTS),--experiments $(EXPERIMENTS),)
 	@test -f $(OUT)/reproduce/eval.h5 || { echo "run make reproduce first"; exit 1; }
 	$(KBCLI) report $(OUT)/reproduce/eval.h5 --own-model $(OUT)/reproduce/own-eval.h5 \
-	    $(if $(wildcard $(OUT)/reproduce/ablations.h5),--ablations $(OUT)/reproduce/ablations.h5,) \
-	    -o $(OUT)/report
+	    $(LADDERS) -o $(OUT)/report
 
 # Every layout (grid, hex, piano, pads, polygons): the learning and adaptation tables and one figure
 # per layout in $(OUT)/layouts/report/ (pipelines/layouts.toml; hours; interrupted runs continue).

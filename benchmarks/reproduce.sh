@@ -16,12 +16,14 @@
 #                                            # the earlier readings kept in paper.toml
 #                                            # (make reproduce-earlier)
 #   CONFIG=pipelines/ablations.toml EVAL=ablations.h5 LEARN=missing benchmarks/reproduce.sh
-#                                            # the ablation ladder (make reproduce-ablations)
+#                                            # the ablation ladder (make reproduce-ablations;
+#                                            # MODE=dynamics EVAL=ablations-dynamics.h5: one mode)
 #   OWN_MODEL=own-model.h5 benchmarks/reproduce.sh  # also the dynamics claims on that model's
 #                                            # evaluation ($OUT/own-eval.h5, made first)
 #
 # The report is written for $OUT/eval.h5 (when it exists), reading beside it the ablation ladder
-# $OUT/ablations.h5 and the evaluation with the robot's own model $OUT/own-eval.h5 when they exist.
+# $OUT/ablations*.h5 (one file, or one per mode) and the evaluation with the robot's own model
+# $OUT/own-eval.h5 when they exist.
 # Then the verdicts (with what explains each difference, when the ladder exists) and the timings
 # are kept as a result file, $OUT/reproduce.json (`kbcli bench
 # --json ... verdicts`, the format of benchmarks/results/*.json: `make results-reproduce` stores it
@@ -74,7 +76,9 @@ stage evaluate "$KBCLI" evaluate "${eval_args[@]}"
 timings="$OUT/timings.txt"
 [[ $EVAL != eval.h5 ]] && timings="$OUT/timings-${EVAL%.h5}.txt"
 report_args=("$OUT/eval.h5" -o "$REPORT")
-[[ -f $OUT/ablations.h5 ]] && report_args+=(--ablations "$OUT/ablations.h5")
+ladders=()  # the ablation ladder: ablations.h5 (both modes) or ablations-MODE.h5 (one mode each)
+for f in "$OUT"/ablations*.h5; do [[ -f $f ]] && ladders+=(--ablations "$f"); done
+report_args+=("${ladders[@]}")
 [[ -f $OUT/own-eval.h5 ]] && report_args+=(--own-model "$OUT/own-eval.h5")
 if [[ -f $OUT/eval.h5 ]]; then
     stage report "$KBCLI" report "${report_args[@]}"
@@ -99,6 +103,6 @@ fi
 if [[ $EVAL == eval.h5 && -f $OUT/eval.h5 ]]; then
     verdict_args=("$OUT/eval.h5" --timings "$timings")
     [[ -f $OUT/own-eval.h5 ]] && verdict_args+=(--own-model "$OUT/own-eval.h5")
-    [[ -f $OUT/ablations.h5 ]] && verdict_args+=(--ablations "$OUT/ablations.h5")
+    verdict_args+=("${ladders[@]}")
     "$KBCLI" bench --json "$OUT/reproduce.json" verdicts "${verdict_args[@]}" > /dev/null
 fi

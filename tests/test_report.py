@@ -15,6 +15,7 @@ from kbcli.stages import evaluate as evaluate_stage
 from kbcli.stages import report as stage
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.models import exact_artifact
+from kbcli.stages.report.ablation import explained
 
 #: Observations to each threshold (10 runs x 3 thresholds) per category, (active, random): the
 #: advantage A = P(active needs fewer) is 1 on small, about 0.8 on medium, 0.5 on large.
@@ -343,22 +344,23 @@ def test_departures_quote_the_paper_and_follow_the_options():
         in text
 
 
-def _ladder(rungs) -> Artifact:
-    """A synthetic ablation ladder: rungs ``(name, robot options, small p-values)`` built on
-    :func:`_evaluation` (every other claim as PAPER_LIKE)."""
+
+def _ladder(rungs, mode: str = "ideal") -> Artifact:
+    """A synthetic ablation ladder in one mode: rungs ``(name, robot options, small p-values)``
+    built on :func:`_evaluation` (every other claim as PAPER_LIKE)."""
     import copy
 
-    art = _evaluation(PAPER_LIKE)
+    art = _evaluation(PAPER_LIKE, modes=(mode,))
     base = art.attrs["methods"]["paper"]
     methods, order = {}, []
     for tree in ("curves", "pvalues", "entropy"):
-        paper = art.data[tree]["ideal"]["paper"]
-        art.data[tree]["ideal"] = {}
+        paper = art.data[tree][mode]["paper"]
+        art.data[tree][mode] = {}
         for name, _, small in rungs:
             t = copy.deepcopy(paper)
             if tree == "pvalues":
                 t["small"]["active"]["pvalue"] = np.asarray(small, float)
-            art.data[tree]["ideal"][name] = t
+            art.data[tree][mode][name] = t
     for name, opts, _ in rungs:
         m = copy.deepcopy(base)
         for by_s in m["options"].values():
@@ -391,6 +393,32 @@ def test_what_explains_each_difference_on_a_known_ladder():
     rep = stage.build(main, ablations=_ladder(rungs))
     assert "no rung flips it: it differs on every rung" in rep.readme
     assert "What explains each difference" not in stage.build(main).readme
+
+
+def test_a_ladder_run_one_mode_at_a_time_explains_the_claims_of_both_modes():
+    """Two ladder evaluations, ideal and dynamics (make reproduce-ablations MODE=...): the small
+    claim is explained by the ideal ladder (the posterior flips it), the dynamics claim by the
+    dynamics ladder (the estimator flips it); with the ideal ladder alone, the dynamics claim is
+    not measured."""
+    bad, good, flat = [1e-7, 1e-3, 1e-6], [1e-9] * 3, [0.5] * 3
+    kde = {"posterior": "kde", "estimator": "ml", "model_blur": 0.0}
+    ideal = _ladder([("paper", kde, bad), ("r-posterior", {**kde, "posterior": "likelihood"}, good)])
+    dyn = _ladder([("paper", kde, bad), ("r-estimator", {**kde, "estimator": "mean"}, flat)],
+                  mode="dynamics")
+    for c in ("medium", "large"):  # the dynamics claim is judged on every category
+        dyn.data["pvalues"]["dynamics"]["r-estimator"][c]["active"]["pvalue"] = np.asarray(flat)
+    ideal.path, dyn.path = "abl-ideal.h5", "abl-dynamics.h5"
+    main = _evaluation({**PAPER_LIKE, "small": bad}, modes=("ideal", "dynamics"))
+    rows = {c: (path, flips) for c, path, flips in explained(stage.claims(main), [ideal, dyn])}
+    small = next(v for c, v in rows.items() if c.startswith("small displacements"))
+    robot = next(v for c, v in rows.items() if c.startswith("with robot dynamics"))
+    assert small[0].startswith("abl-ideal.h5: ") and small[1].endswith("posterior kde -> likelihood")
+    assert robot[0].startswith("abl-dynamics.h5: ") and robot[1].endswith("estimator ml -> mean")
+    alone = {c: p for c, p, _ in explained(stage.claims(main), ideal)}
+    assert next(p for c, p in alone.items() if c.startswith("with robot dynamics")) == \
+        "not measured by the ladder"
+    readme = stage.build(main, ablations=[ideal, dyn]).readme
+    assert "`abl-ideal.h5` and `abl-dynamics.h5`" in readme
 
 
 def test_the_explanation_as_a_result_table_has_the_sections_rows():

@@ -112,17 +112,19 @@ def verdict_counts(claims, labels: tuple[str, ...] = ()) -> ResultTable:
 EXPLAIN_COLUMNS = ("claim", "verdict along the ladder", "what flips it")
 
 
-def explain_table(claims, ablations: Artifact) -> ResultTable:
+def explain_table(claims, ablations) -> ResultTable:
     """The report's "What explains each difference" as a result table: every claim marked
-    *differs* on the judged method, judged on each rung of the ablation ladder ``ablations``,
-    and the rungs whose changes flip it (:func:`kbcli.stages.report.ablation.explained`)."""
-    from kbcli.stages.report.ablation import explained
+    *differs* on the judged method, judged on each rung of the ablation ladder ``ablations`` (an
+    evaluation, or several: one per mode), and the rungs whose changes flip it
+    (:func:`kbcli.stages.report.ablation.explained`)."""
+    from kbcli.stages.report.ablation import as_ladders, explained
 
     rows = tuple(dict(zip(EXPLAIN_COLUMNS, r, strict=True)) for r in explained(claims, ablations))
-    return ResultTable(f"What explains each difference (the ablation ladder {ablations.path}, "
-                       f"{len(ablations.data['experiments']['mode'])} experiments, "
-                       f"{int(ablations.config['experiments'])} per cell, modes "
-                       f"{', '.join(ablations.attrs['modes'])})", EXPLAIN_COLUMNS, rows)
+    where = "; ".join(f"{a.path}, {len(a.data['experiments']['mode'])} experiments, "
+                      f"{int(a.config['experiments'])} per cell, modes {', '.join(a.attrs['modes'])}"
+                      for a in as_ladders(ablations))
+    return ResultTable(f"What explains each difference (the ablation ladder {where})",
+                       EXPLAIN_COLUMNS, rows)
 
 
 def evaluation_table(art: Artifact, own: Artifact | None = None) -> ResultTable:

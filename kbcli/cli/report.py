@@ -25,6 +25,11 @@ OWNED = ("README.md", *(f"{stem}.{fmt}" for stem in ("fig5_posterior", "fig6_ent
                         for fmt in FIGURE_FORMATS))
 
 
+def _repeated(flag: str, paths: list[Path] | None) -> dict[str, Path]:
+    """A repeated option's paths as ``check_io`` inputs: ``--flag``, ``--flag #2``, ..."""
+    return {flag if i == 0 else f"{flag} #{i + 1}": p for i, p in enumerate(paths or ())}
+
+
 def _write_text(path: Path, text: str) -> None:
     Path(path).write_text(text, encoding="utf-8")
 
@@ -35,10 +40,11 @@ def report_cmd(
     output: opts.output_option("Report folder to write (created if needed).") = Path("report"),
     fmt: Annotated[str, typer.Option(
         "--format", help=f"Figure format: {', '.join(FIGURE_FORMATS)}.")] = "png",
-    ablations: Annotated[Path | None, typer.Option(
+    ablations: Annotated[list[Path] | None, typer.Option(
         help="Evaluation of the ablation ladder (kbcli evaluate --config "
              "pipelines/ablations.toml): adds 'What explains each difference', the rung whose "
-             "change flips each claim that differs.")] = None,
+             "change flips each claim that differs. Repeat it for a ladder run one mode at a "
+             "time (make reproduce-ablations MODE=ideal, then MODE=dynamics).")] = None,
     own_model: Annotated[Path | None, typer.Option(
         help="Evaluation of the same protocol with the robot's own learned model (make "
              "reproduce-own-model): the Sect. IV-C claims are judged on it too, beside the "
@@ -60,7 +66,8 @@ def report_cmd(
     """
     if fmt not in FIGURE_FORMATS:
         raise ConfigError(f"--format must be one of {', '.join(FIGURE_FORMATS)}, got {fmt!r}")
-    inputs = {"EVALUATION": evaluation, "--ablations": ablations, "--own-model": own_model}
+    inputs = {"EVALUATION": evaluation, **_repeated("--ablations", ablations),
+              "--own-model": own_model}
     check_io(inputs, Output(output, "report folder", folder=True))
     from kbcli.viz import report as viz  # (matplotlib: seconds)
     art = read_artifact(evaluation, ("evaluation", "model_quality"))
@@ -68,9 +75,9 @@ def report_cmd(
         _quality_report(art, evaluation, output, fmt)
         return
     art = stage.upgrade(art)
-    ladder = read_artifact(ablations, ("evaluation",)) if ablations else None
+    ladders = [read_artifact(p, ("evaluation",)) for p in ablations or ()]
     own = read_artifact(own_model, ("evaluation",)) if own_model else None
-    rep = stage.build(art, ablations=ladder, own=own)
+    rep = stage.build(art, ablations=ladders, own=own)
     names = {f.name: str(Path(f.name).with_suffix("." + fmt)) for f in rep.figures}
     check_io(inputs,
              Output(output, "report folder", folder=True, files=("README.md", *names.values())))
@@ -122,9 +129,10 @@ def bench_verdicts_cmd(
     own_model: Annotated[Path | None, typer.Option(
         help="Evaluation with the robot's own learned model: its Sect. IV-C claims too, as "
              "kbcli report --own-model judges them.")] = None,
-    ablations: Annotated[Path | None, typer.Option(
+    ablations: Annotated[list[Path] | None, typer.Option(
         help="The ablation ladder's evaluation (make reproduce-ablations): what explains each "
-             "claim that differs, as kbcli report --ablations writes it.")] = None,
+             "claim that differs, as kbcli report --ablations writes it (repeat it for a ladder "
+             "run one mode at a time).")] = None,
 ) -> None:
     """Print the verdicts of an evaluation or a model-quality sweep as tables, with stage timings.
 
@@ -138,12 +146,12 @@ def bench_verdicts_cmd(
     from kbcli.bench import verdicts as bench
 
     inputs = {"EVALUATION": evaluation, "--timings": timings, "--own-model": own_model,
-              "--ablations": ablations}
+              **_repeated("--ablations", ablations)}
     check_io(inputs)
     art = read_artifact(evaluation, ("evaluation", "model_quality"))
     if art.kind == "model_quality":
         for flag, given in (("--own-model", own_model), ("--ablations", ablations)):
-            if given is not None:
+            if given:
                 raise ConfigError(f"{flag} reads an evaluation's claims; EVALUATION is a "
                                   "model-quality sweep")
         tables = [bench.sweep_table(art), bench.hypothesis_table(art), bench.models_table(art),
@@ -156,10 +164,10 @@ def bench_verdicts_cmd(
         tables = [bench.evaluation_table(art, own), bench.verdict_counts(claims, labels),
                   bench.claim_table(claims, labels)]
         tables += [t for t in (bench.others_table(claims, labels),) if t.rows]
-        if ablations is not None:
-            ladder = read_artifact(ablations, ("evaluation",))
+        if ablations:
+            ladders = [read_artifact(p, ("evaluation",)) for p in ablations]
             with busy("judging the claims along the ablation ladder"):
-                tables.append(bench.explain_table(claims, ladder))
+                tables.append(bench.explain_table(claims, ladders))
     if timings is not None:
         tables += [t for t in bench.timings_table(timings.read_text(encoding="utf-8")) if t.rows]
     con = out if interactive() else Console(width=max(out.width, 160), highlight=False)

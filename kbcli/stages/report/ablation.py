@@ -7,9 +7,15 @@ rule (:func:`kbcli.stages.report.paper.claim_rules`), and names the options whos
 verdict: the differences between the two rungs' resolved options, computed from the artifact,
 never written by hand. Each rung is judged on its last non-baseline strategy (``infogain`` on a
 rung that swaps ``active`` for it).
+
+The ladder may come as several evaluations of the same config, one per mode (``make
+reproduce-ablations MODE=ideal`` and ``MODE=dynamics``): each claim is explained by the first one
+that measures it.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.report.paper import claim_rules
@@ -63,30 +69,41 @@ INTRO = ("Every claim marked *differs*, judged with the same rule on each rung o
          "verdict leaves or returns to *differs*; what flips it is what that rung changes.")
 
 
-def explained(claims: list[Claim], ablations: Artifact) -> list[tuple[str, str, str]]:
+def explained(claims: list[Claim], ablations: Artifact | Sequence[Artifact],
+              ) -> list[tuple[str, str, str]]:
     """``(claim, verdict along the ladder, what flips it)`` for every claim marked *differs* (its
     paper text once), as the section's table rows (:func:`explain`; ``kbcli bench verdicts
-    --ablations`` keeps them as a result table)."""
-    ablations = upgrade(ablations)
+    --ablations`` keeps them as a result table). With several ladder evaluations (one per mode),
+    each claim is read on the first that measures it on some rung."""
+    ladders = [upgrade(a) for a in as_ladders(ablations)]
     rows = []
     seen = set()
     for c in claims:
         if c.verdict != "differs" or c.paper in seen:
             continue
         seen.add(c.paper)
-        steps = ladder(ablations, c.paper)
-        if not steps:
+        found = [(a, st) for a in ladders if (st := ladder(a, c.paper))
+                 and any(v != "not measured" for _, _, v in st)]
+        if not found:
             rows.append((c.paper, "not measured by the ladder", "-"))
             continue
+        art, steps = found[0]
         path = " -> ".join(f"`{x}` ({s}) {v}" for x, s, v in steps)
-        rows.append((c.paper, path, _flips(ablations, steps)))
+        if len(ladders) > 1:
+            path = f"{art.path or 'the ladder'}: {path}"
+        rows.append((c.paper, path, _flips(art, steps)))
     return rows
 
 
-def explain(claims: list[Claim], ablations: Artifact) -> list[str]:
+def as_ladders(ablations: Artifact | Sequence[Artifact]) -> list[Artifact]:
+    """The ladder's evaluations as a list (one artifact, or several: one per mode)."""
+    return [ablations] if isinstance(ablations, Artifact) else list(ablations)
+
+
+def explain(claims: list[Claim], ablations: Artifact | Sequence[Artifact]) -> list[str]:
     """The section "What explains each difference" (markdown lines): for every claim marked
     *differs*, its verdict on every rung and the changes that flip it."""
-    where = f"`{ablations.path or 'an ablation evaluation'}`"
+    where = " and ".join(f"`{a.path or 'an ablation evaluation'}`" for a in as_ladders(ablations))
     lines = ["## What explains each difference", "", INTRO.format(path=where), ""]
     rows = explained(claims, ablations)
     if not rows:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from kbcli.stages.artifact import Artifact
@@ -31,16 +33,18 @@ from kbcli.stages.report.tables import (
 )
 
 
-def build(art: Artifact, ablations: Artifact | None = None, own: Artifact | None = None) -> Report:
+def build(art: Artifact, ablations: Artifact | Sequence[Artifact] | None = None,
+          own: Artifact | None = None) -> Report:
     """The report of an evaluation artifact: README text, claims and figures; with
-    ``ablations`` (an evaluation of the ablation ladder, ``pipelines/ablations.toml``) also the
+    ``ablations`` (an evaluation of the ablation ladder, ``pipelines/ablations.toml``, or several:
+    one per mode) also the
     section "What explains each difference"; with ``own`` (the protocol evaluated with the robot's
     own learned model) the Sect. IV-C claims on that model too, beside those on ``art``'s."""
     art = upgrade(art)
     check(art)
     cl = claims(art, own)
     figs = figures(art)
-    why = explain(cl, ablations) if ablations is not None else []
+    why = explain(cl, ablations) if ablations else []
     lines = [*_header(art), *_claims_section(cl), "", _how_judged(), "", *why,
              *departures_table(art), *_methods_section(art), *_figures_section(figs), *_ablation_section(art)]
     for m in art.attrs["modes"]:
