@@ -15,6 +15,7 @@ ignored), each field typed and constrained with the aliases below. A bad value r
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import asdict
 from typing import Annotated, Any, ClassVar
 
 import numpy as np
@@ -185,6 +186,15 @@ class Config(BaseModel):
     def replace(self, **changes: Any) -> Config:
         """A copy with ``changes`` applied and validated (``dataclasses.replace`` for configs)."""
         return type(self)(**{**self.to_dict(), **changes})
+
+
+class Record:
+    """Base of a frozen dataclass of results that an artifact keeps as a plain dict (in its
+    attributes): :meth:`to_dict` gives its fields, and ``cls(**record.to_dict())`` rebuilds it."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fields, by name (:func:`dataclasses.asdict`)."""
+        return asdict(self)
 
 
 def _plain(v: Any) -> Any:
