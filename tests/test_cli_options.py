@@ -21,48 +21,23 @@ from kbcli.stages.models import exact_artifact
 from kbcli.stages.perturb import PerturbConfig
 from kbcli.stages.perturb import run as perturb_run
 
-#: (command, option, kind of part): each command's help of the option lists every registered name.
-LISTED = [
-    (("adapt",), "--posterior", "posterior"),
-    (("serve",), "--posterior", "posterior"),
-    (("run",), "--posterior", "posterior"),
-    (("adapt",), "--estimator", "estimator"),
-    (("serve",), "--estimator", "estimator"),
-    (("run",), "--estimator", "estimator"),
-    (("adapt",), "--family", "family"),
-    (("serve",), "--family", "family"),
-    (("run",), "--family", "family"),
-    (("perturb",), "--family", "family"),
-    (("adapt",), "--strategy", "strategy"),
-    (("serve",), "--strategy", "strategy"),
-    (("run",), "--strategy", "strategy"),
-    (("bench", "adapt"), "--strategy", "strategy"),
-    (("bench", "robust"), "--strategy", "strategy"),
-    (("learn",), "--strategy", "exploration"),
-    (("bench", "learn"), "--strategy", "exploration"),
-    (("adapt",), "--mode", "mode"),
-    (("learn",), "--mode", "mode"),
-    (("play",), "--mode", "mode"),
-    (("run",), "--mode", "mode"),
-    (("evaluate",), "--mode", "mode"),
-    (("bench", "learn"), "--mode", "mode"),
-    (("bench", "evaluate"), "--mode", "mode"),
-    (("bench", "reliability"), "--mode", "mode"),
-    (("adapt",), "--arm", "arm"),
-    (("learn",), "--arm", "arm"),
-    (("play",), "--arm", "arm"),
-    (("run",), "--arm", "arm"),
-    (("evaluate",), "--arm", "arm"),
-    (("bench", "reliability"), "--arm", "arm"),
-    (("keyboard",), "--layout", "layout"),
-    (("bench", "adapt"), "--layout", "layout"),
-    (("bench", "learn"), "--layout", "layout"),
-    (("bench", "layouts"), "--layout", "layout"),
-    (("learn",), "--model-class", "model class"),
-    (("bench", "learn"), "--model-class", "model class"),
-    (("detect",), "--detector", "detector"),
-    (("run",), "--detector", "detector"),
-]
+#: (option, kind of part) -> the commands whose help of the option lists every registered name.
+_LISTED_IN = {
+    ("--posterior", "posterior"): ["adapt", "serve", "run"],
+    ("--estimator", "estimator"): ["adapt", "serve", "run"],
+    ("--family", "family"): ["adapt", "serve", "run", "perturb"],
+    ("--strategy", "strategy"): ["adapt", "serve", "run", "bench adapt", "bench robust"],
+    ("--strategy", "exploration"): ["learn", "bench learn"],
+    ("--mode", "mode"): ["adapt", "learn", "play", "run", "evaluate", "bench learn",
+                         "bench evaluate", "bench reliability"],
+    ("--arm", "arm"): ["adapt", "learn", "play", "run", "evaluate", "bench reliability"],
+    ("--layout", "layout"): ["keyboard", "bench adapt", "bench learn", "bench layouts"],
+    ("--model-class", "model class"): ["learn", "bench learn"],
+    ("--detector", "detector"): ["detect", "run"],
+}
+#: (command, option, kind of part), one a row of :data:`_LISTED_IN`.
+LISTED = [(tuple(command.split()), option, kind)
+          for (option, kind), commands in _LISTED_IN.items() for command in commands]
 
 
 def _option_help(runner, command: tuple[str, ...], option: str) -> str:

@@ -38,21 +38,21 @@ SMALL = [
     (r"^python examples/external_robot\.py", r"\g<0> --max-steps 3"),
 ]
 
-#: The pipeline configs, shrunk in the temporary copy of pipelines/ (a regex on each line): one
-#: experiment of a few touches at one displacement per category, the smallest model sweep.
+#: Both evaluations shrunk: one experiment of a few touches at one displacement per category.
+_ONE_SHORT_EXPERIMENT = [(r"^experiments = \d+", "experiments = 1"),
+                         (r"^max_steps = \d+", "max_steps = 3"),
+                         (r"^(displacements = \[\[[^\]]*\]).*", r"\1]")]
+#: The pipeline configs, shrunk in the temporary copy of pipelines/ (a regex on each line): the
+#: paper's evaluation in the ideal mode, the smallest model sweep.
 SMALL_CONFIGS = {
-    "paper.toml": [(r"^experiments = \d+", "experiments = 1"),
+    "paper.toml": [*_ONE_SHORT_EXPERIMENT,
                    (r"^modes = .*", 'modes = ["ideal"]'),
-                   (r"^max_steps = \d+", "max_steps = 3"),
                    (r"^play_notes = \d+", "play_notes = 10"),
-                   (r"^kde_samples = \d+", "kde_samples = 500"),
-                   (r"^(displacements = \[\[[^\]]*\]).*", r"\1]")],
-    "model-quality.toml": [(r"^budgets = .*", "budgets = [100]"),
+                   (r"^kde_samples = \d+", "kde_samples = 500")],
+    "model-quality.toml": [*_ONE_SHORT_EXPERIMENT,
+                           (r"^budgets = .*", "budgets = [100]"),
                            (r"^explorations = .*", 'explorations = ["active"]'),
-                           (r"^experiments = \d+", "experiments = 1"),
-                           (r"^max_steps = \d+", "max_steps = 3"),
-                           (r"^ideal = true", "ideal = false"),
-                           (r"^(displacements = \[\[[^\]]*\]).*", r"\1]")],
+                           (r"^ideal = true", "ideal = false")],
 }
 
 #: Example lines not run here (a fragment of the line: why; each is tested elsewhere).

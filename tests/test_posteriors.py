@@ -17,7 +17,7 @@ from kbcli.core.adapter import Adapter
 from kbcli.core.adapter_config import AdapterConfig
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.model import ExactModel
-from kbcli.core.posteriors import POSTERIORS, Observation, PosteriorKind
+from kbcli.core.posteriors import POSTERIORS, KindBase, Observation, PosteriorKind
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import keyboard as keyboard_stage
@@ -27,12 +27,10 @@ from kbcli.stages.perturb import run as perturb_run
 
 
 @dataclass(frozen=True)
-class DeafPosterior:
+class DeafPosterior(KindBase):
     """Hears nothing: every touch leaves the posterior as it was (a flat term)."""
 
-    name: str = "deaf"
-    uses_samples: bool = False
-    robust: bool = False
+    name = "deaf"
 
     def term(self, obs: Observation) -> tuple[np.ndarray, None]:
         return np.zeros(obs.grid.shape), None

@@ -58,7 +58,7 @@ from kbcli.core import stats
 from kbcli.core.adapt_setup import build_samples, build_table
 from kbcli.core.adapter import Adapter
 from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.config import Config, Count, Name, NonNegative, NonNegativeInt
+from kbcli.core.config import Config, Count, Name, NonNegative, NonNegativeInt, each, member_of
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.layouts import LAYOUTS, example_config_fields
 from kbcli.core.model import ExactModel
@@ -185,26 +185,8 @@ def section_title(name: str, cfg: BenchConfig, model: str | None = None) -> str:
     return SECTIONS.get(name).title.format(noise=f"{cfg.noise:g}", model=desc)
 
 
-def _check_sections(v: tuple[str, ...]) -> tuple[str, ...]:
-    for s in v:
-        SECTIONS.get(s)
-    return v
-
-
-def _check_categories(v: tuple[str, ...]) -> tuple[str, ...]:
-    for c in v:
-        if c not in CATEGORIES:
-            raise ValueError(f"unknown category {c!r}; valid: {', '.join(CATEGORIES)}")
-    return v
-
-
 def _check_strategy(v: str) -> str:
     AdapterConfig(strategy=v)
-    return v
-
-
-def _check_layout(v: str) -> str:
-    LAYOUTS.get(v)
     return v
 
 
@@ -221,14 +203,15 @@ class BenchConfig(Config):
     experiments: Annotated[int, Strict(), Field(ge=2)] = 50
     max_steps: Count = 40
     seed: NonNegativeInt = 0
-    sections: Annotated[tuple[Name, ...], AfterValidator(_check_sections)] = (
+    sections: Annotated[tuple[Name, ...], AfterValidator(each(SECTIONS.get))] = (
         "exact", "noise", "rigid", "kde")
     strategies: Annotated[tuple[Annotated[Name, AfterValidator(_check_strategy)], ...],
                           Field(min_length=1)] = STRATEGY_ORDER
-    categories: Annotated[tuple[Name, ...], AfterValidator(_check_categories)] = tuple(CATEGORIES)
+    categories: Annotated[tuple[Name, ...], AfterValidator(
+        each(member_of("category", CATEGORIES)))] = tuple(CATEGORIES)
     noise: NonNegative = 2.0
     model_blur: Annotated[float | None, AfterValidator(_check_blur)] = None
-    layout: Annotated[Name, AfterValidator(_check_layout)] = "grid"
+    layout: Annotated[Name, AfterValidator(LAYOUTS.check)] = "grid"
 
 
 @dataclass

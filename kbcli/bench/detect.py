@@ -37,7 +37,7 @@ import numpy as np
 from pydantic import AfterValidator, Field, model_validator
 
 from kbcli.core import detect as det
-from kbcli.core.config import Config, Count, Name, Positive, Rate, Whole
+from kbcli.core.config import Config, Count, Name, Positive, Rate, Whole, each, member_of
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.melody import DEFAULT_MELODY, parse_melody
 from kbcli.core.model import ExactModel
@@ -47,20 +47,6 @@ from kbcli.stages.perturb import CATEGORIES, draw
 
 OURS = ("binomial", "cusum", "bocpd")
 RIVER = ("fhddm", "ddm", "adwin")
-
-
-def _check_categories(v: tuple[str, ...]) -> tuple[str, ...]:
-    for c in v:
-        if c not in CATEGORIES:
-            raise ValueError(f"unknown category {c!r}; valid: {', '.join(CATEGORIES)}")
-    return v
-
-
-def _check_detectors(v: tuple[str, ...]) -> tuple[str, ...]:
-    for d in v:
-        if d not in OURS + RIVER:
-            raise ValueError(f"unknown detector {d!r}; valid: {', '.join(OURS + RIVER)}")
-    return v
 
 
 class BenchConfig(Config):
@@ -95,7 +81,8 @@ class BenchConfig(Config):
 
     p_pre: Rate = 0.01
     p_post: tuple[Annotated[float, Field(gt=0, le=1)], ...] | None = None
-    categories: Annotated[tuple[Name, ...], AfterValidator(_check_categories)] = (
+    categories: Annotated[tuple[Name, ...],
+                          AfterValidator(each(member_of("category", CATEGORIES)))] = (
         "small", "medium", "large")
     streams: Count = 400
     change_min: Count = 300
@@ -105,7 +92,8 @@ class BenchConfig(Config):
     fa_target: Positive = 1.0
     n_lt: Whole = 100
     n_st: Whole = 10
-    detectors: Annotated[tuple[Name, ...], AfterValidator(_check_detectors)] = OURS + RIVER
+    detectors: Annotated[tuple[Name, ...],
+                         AfterValidator(each(member_of("detector", OURS + RIVER)))] = OURS + RIVER
 
     @model_validator(mode="after")
     def _consistent(self) -> BenchConfig:

@@ -33,7 +33,7 @@ from pydantic import AfterValidator, Field, model_validator
 from kbcli import __version__
 from kbcli.bench import adapt as adapt_bench
 from kbcli.bench import learn as learn_bench
-from kbcli.core.config import Config, Count, Name, Names, NonNegativeInt, Whole
+from kbcli.core.config import Config, Count, Name, Names, NonNegativeInt, Whole, each
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.layouts import LAYOUTS
 from kbcli.core.model_classes import check_learned
@@ -50,12 +50,6 @@ TARGET_800, TARGET_1600, TARGET_RATIO, TARGET_GRID_LINES = 0.97, 0.99, 0.5, 0.99
 TARGET_TOUCHES, TARGET_PX = 8.0, 2.0
 
 
-def _check_layouts(v: tuple[str, ...]) -> tuple[str, ...]:
-    for name in v:
-        LAYOUTS.get(name)
-    return v
-
-
 def _check_class(v: str) -> str:
     if v != "best":
         check_learned(v)
@@ -67,7 +61,7 @@ class LayoutsConfig(Config):
 
     what: ClassVar[str] = "layouts"
 
-    layouts: Annotated[Names, AfterValidator(_check_layouts)] = (
+    layouts: Annotated[Names, AfterValidator(each(LAYOUTS.get))] = (
         "grid", "hex", "piano", "pads", "polygons")
     keyboards: Name = "pipelines/layouts"
     seed: NonNegativeInt = 0

@@ -30,7 +30,7 @@ from pydantic import AfterValidator, Field, model_validator
 
 from kbcli import __version__
 from kbcli.core import accuracy as scoring
-from kbcli.core.config import Config, Count, Name, NonNegativeInt, Number, Positive
+from kbcli.core.config import Config, Count, Name, NonNegativeInt, Number, Positive, each, member_of
 from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.layouts import LAYOUTS, example_config_fields
@@ -50,25 +50,6 @@ def bench_keyboard(layout: str) -> Keyboard:
     return Keyboard(KeyboardConfig(layout=layout, **example_config_fields(layout)))
 
 
-def _check_strategies(v: tuple[str, ...]) -> tuple[str, ...]:
-    for s in v:
-        if s not in STRATEGIES:
-            raise ValueError(f"unknown strategy {s!r}; valid: {', '.join(sorted(STRATEGIES))}")
-    return v
-
-
-def _check_layouts(v: tuple[str, ...]) -> tuple[str, ...]:
-    for name in v:
-        LAYOUTS.get(name)
-    return v
-
-
-def _check_classes(v: tuple[str, ...]) -> tuple[str, ...]:
-    for name in v:
-        check_learned(name)
-    return v
-
-
 class BenchConfig(Config):
     """Benchmark settings (see the module docstring)."""
 
@@ -79,11 +60,11 @@ class BenchConfig(Config):
     budgets: Annotated[tuple[Count, ...], Field(min_length=1),
                        AfterValidator(lambda v: tuple(sorted(set(v))))] = DEFAULT_BUDGETS
     strategies: Annotated[tuple[Name, ...], Field(min_length=1),
-                          AfterValidator(_check_strategies)] = STRATEGY_ORDER
+                          AfterValidator(each(member_of("strategy", STRATEGIES)))] = STRATEGY_ORDER
     layouts: Annotated[tuple[Name, ...], Field(min_length=1),
-                       AfterValidator(_check_layouts)] = ("grid",)
+                       AfterValidator(each(LAYOUTS.get))] = ("grid",)
     model_classes: Annotated[tuple[Name, ...], Field(min_length=1),
-                             AfterValidator(_check_classes)] = ("lines",)
+                             AfterValidator(each(check_learned))] = ("lines",)
     mode: Name = "ideal"
     reach_noise: Number = 0.0
     seed: NonNegativeInt = 0

@@ -27,7 +27,7 @@ from kbcli.cli.app import (
     progress,
     ticker,
 )
-from kbcli.cli.record import show_table
+from kbcli.cli.record import load_average, show_table
 from kbcli.core.applies import refuse_unused
 from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError
@@ -196,14 +196,6 @@ def _fmt_p(p: float) -> str:
     return "1" if p >= 0.9995 else f"{p:.0e}" if p < 1e-3 else f"{p:.3f}"
 
 
-def _loadavg() -> str:
-    try:
-        with open("/proc/loadavg") as f:
-            return f" (load average {' '.join(f.read().split()[:3])})"
-    except OSError:
-        return ""
-
-
 def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: int,
                      con: Console) -> None:
     """Print the KDE step's speed on the learned model (the issue's target: <= 5 ms per step)."""
@@ -227,7 +219,8 @@ def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: 
                   f"{np.percentile(ms, 90):.2f}", f"{np.median(cpu):.2f}",
                   f"{np.median(cpu) / np.median(r['likelihood_cpu_ms']):.1f}x")
     show_table(con, t)
-    load = _loadavg()
+    load = load_average()
+    load = f" (load average {load})" if load else ""
     con.print(f"wall time per step on a shared machine{load}; CPU time: this process only")
     con.print(f"drawing one class's {10000} samples of p(action | sound) once: median "
               f"{r['sample_ms']:.0f} ms over the {r['classes']} classes heard (not per touch)")

@@ -37,6 +37,16 @@ def show_table(con: Console, table: Table) -> None:
         _recorded.append(table)
 
 
+def load_average() -> str | None:
+    """The machine's 1, 5 and 15 minute load averages (``/proc/loadavg``), for the note under a
+    timing table; None where the system does not say."""
+    try:
+        with open("/proc/loadavg") as f:
+            return " ".join(f.read().split()[:3])
+    except OSError:
+        return None
+
+
 def start(path: Path | None = None) -> None:
     """Keep every table shown from now on (for :func:`finish` to write to ``path``)."""
     global _recorded, _path

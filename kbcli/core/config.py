@@ -14,7 +14,8 @@ ignored), each field typed and constrained with the aliases below. A bad value r
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import asdict
 from typing import Annotated, Any, ClassVar
 
 import numpy as np
@@ -50,6 +51,31 @@ def _distinct(v: tuple[str, ...]) -> tuple[str, ...]:
 
 #: A non-empty list of distinct names.
 Names = Annotated[tuple[Name, ...], Field(min_length=1), AfterValidator(_distinct)]
+
+
+def member_of(kind: str, valid: Iterable[str]) -> Callable[[str], str]:
+    """A check of one name: the name itself when it is in ``valid`` (read at each check: a dict or
+    a registry filled later counts), else ``ValueError: unknown KIND 'x'; valid: a, b``."""
+
+    def check(name: str) -> str:
+        names = tuple(valid)
+        if name not in names:
+            raise ValueError(f"unknown {kind} {name!r}; valid: {', '.join(names)}")
+        return name
+
+    return check
+
+
+def each(check: Callable[[str], Any]) -> Callable[[tuple[str, ...] | None], tuple[str, ...] | None]:
+    """An after-validator of a list of names: ``check(name)`` of each (:func:`member_of`, a
+    registry's ``get``), which raises for an unknown one; the list (or None) passes as it is."""
+
+    def check_all(names: tuple[str, ...] | None) -> tuple[str, ...] | None:
+        for name in names or ():
+            check(name)
+        return names
+
+    return check_all
 
 def between(base: Any, low: float | None = None, high: float | None = None, *,
             low_open: bool = False, high_open: bool = False) -> Any:
@@ -185,6 +211,15 @@ class Config(BaseModel):
     def replace(self, **changes: Any) -> Config:
         """A copy with ``changes`` applied and validated (``dataclasses.replace`` for configs)."""
         return type(self)(**{**self.to_dict(), **changes})
+
+
+class Record:
+    """Base of a frozen dataclass of results that an artifact keeps as a plain dict (in its
+    attributes): :meth:`to_dict` gives its fields, and ``cls(**record.to_dict())`` rebuilds it."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fields, by name (:func:`dataclasses.asdict`)."""
+        return asdict(self)
 
 
 def _plain(v: Any) -> Any:

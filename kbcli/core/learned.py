@@ -55,10 +55,10 @@ from scipy.spatial import cKDTree
 from scipy.special import log_ndtr
 
 from kbcli.core import boundaries
-from kbcli.core.model import ModelBase
+from kbcli.core.model import DEFAULT_AREA, ModelBase
 from kbcli.core.pieces import fit_pieces, line_sides
 from kbcli.core.sounds import prepare_samples
-from kbcli.errors import ArtifactError, ConfigError
+from kbcli.errors import ConfigError
 
 #: The parameter checks of :meth:`LearnedModel._check_params`: (name, is it valid, what is allowed).
 _CHECKS = (
@@ -76,15 +76,40 @@ _CHECKS = (
 )
 
 
+def _stored_params(d: dict) -> dict:
+    """The parameters of a stored learned model (:meth:`LearnedModel.from_arrays`)."""
+    return {
+        "n_neighbors": int(d["n_neighbors"]),
+        "min_sd": float(d["min_sd"]),
+        "max_sd": float(d["max_sd"]),
+        "sd_scale": float(d.get("sd_scale", 1.0)),  # absent before model schema 2
+        "noise_sd": float(d.get("noise_sd", 0.0)),
+        "floor": float(d.get("floor", 0.0)),
+        "noise_tol": float(d.get("noise_tol", 0.0)),
+        "extrapolation": float(d["extrapolation"]),
+        "merge_angle": float(d["merge_angle"]),
+        "merge_offset": float(d["merge_offset"]),
+        "piece_reach": float(d["piece_reach"]),
+    }
+
+
+def _stored_pieces(d: dict) -> tuple[np.ndarray, ...]:
+    """The boundary pieces and lines of a stored learned model, as ``_set_fitted`` takes them."""
+    return (np.asarray(d["edges"], np.int64).reshape(-1, 2),
+            np.asarray(d["edge_piece"], np.int64),
+            np.asarray(d["piece_pair"], np.int64),
+            np.asarray(d["piece_line"], np.int64),
+            np.asarray(d["piece_sign"], float),
+            np.asarray(d["lines"], float))
+
+
 class LearnedModel(ModelBase):
     """p(sound | action) learned from exploration samples (see the module docstring).
 
     Parameters
     ----------
-    match_threshold : float
-        Manhattan distance under which two perceived sounds are the same sound (Eq. 2).
-    area : tuple of float
-        (xmin, ymin, xmax, ymax) working area: the support of p(action) and of :meth:`raster`.
+    match_threshold, area
+        As every class (:class:`~kbcli.core.model.ModelBase`).
     n_neighbors : int
         Samples looked at around an action to find the sounds it could make.
     min_sd, max_sd : float
@@ -115,35 +140,21 @@ class LearnedModel(ModelBase):
 
     Attributes
     ----------
-    class_features_ : (C, D) ndarray
-        Features of each class; row 0 (silence) is NaN.
-    actions_ : (n, 2) ndarray
-        Where the finger landed for each sample.
-    labels_ : (n,) int ndarray
-        Sound class of each sample.
-    edges_ : (m, 2) int ndarray
-        Straddling edges: sample indices, the lower class's end first.
-    edge_piece_ : (m,) int ndarray
-        Boundary piece of each straddling edge.
-    piece_pair_ : (P, 2) int ndarray
-        The two classes (lower first) each piece separates.
-    piece_line_ : (P,) int ndarray
-        The line each piece lies on.
-    piece_sign_ : (P,) ndarray
-        +1 where a piece's lower class is on its line's positive side, else -1.
+    class_features_, actions_, labels_, reach_sd_
+        As every class (:class:`~kbcli.core.model.ModelBase`).
+    edges_, edge_piece_, piece_pair_, piece_line_, piece_sign_ : ndarray
+        The boundary pieces, as :func:`~kbcli.core.pieces.fit_pieces` returns them (``edges``,
+        ``edge_piece``, ``pairs``, ``group``, ``sign``): the straddling edges (sample indices),
+        the piece of each edge, and each piece's pair of classes, line and side.
     lines_ : (L, 3) ndarray
         Boundary lines (nx, ny, c), unit normal: signed distance ``nx * x + ny * y - c``.
-    reach_sd_ : float
-        Landing scatter of a reach (px, per-axis rms of landing minus target), for information:
-        p(sound | action) is about where the finger *is*; a caller that only knows where it aimed
-        blurs it by this much.
     """
 
     def __init__(
         self,
         *,
         match_threshold: float = 1.5,
-        area: tuple[float, float, float, float] = (150.0, 200.0, 650.0, 500.0),
+        area: tuple[float, float, float, float] = DEFAULT_AREA,
         n_neighbors: int = 8,
         min_sd: float = 0.05,
         max_sd: float = 25.0,
@@ -323,66 +334,27 @@ class LearnedModel(ModelBase):
     def to_arrays(self) -> dict[str, np.ndarray]:
         """The fitted model as named arrays (for an HDF5 artifact group)."""
         self._check_fitted()
-        return {
-            "class_features": self.class_features_.copy(),
-            "actions": self.actions_.copy(),
-            "labels": self.labels_.copy(),
-            "edges": self.edges_.copy(),
-            "edge_piece": self.edge_piece_.copy(),
-            "piece_pair": self.piece_pair_.copy(),
-            "piece_line": self.piece_line_.copy(),
-            "piece_sign": self.piece_sign_.copy(),
-            "lines": self.lines_.copy(),
-            "merge_angle": np.float64(self.merge_angle),
-            "merge_offset": np.float64(self.merge_offset),
-            "piece_reach": np.float64(self.piece_reach),
-            "reach_sd_fitted": np.float64(self.reach_sd_),
-            "match_threshold": np.float64(self.match_threshold),
-            "area": np.asarray(self.area, float),
-            "n_neighbors": np.int64(self.n_neighbors),
-            "min_sd": np.float64(self.min_sd),
-            "max_sd": np.float64(self.max_sd),
-            "sd_scale": np.float64(self.sd_scale),
-            "noise_sd": np.float64(self.noise_sd),
-            "floor": np.float64(self.floor),
-            "noise_tol": np.float64(self.noise_tol),
-            "extrapolation": np.float64(self.extrapolation),
-        }
+        return self._arrays(
+            edges=self.edges_.copy(),
+            edge_piece=self.edge_piece_.copy(),
+            piece_pair=self.piece_pair_.copy(),
+            piece_line=self.piece_line_.copy(),
+            piece_sign=self.piece_sign_.copy(),
+            lines=self.lines_.copy(),
+            merge_angle=np.float64(self.merge_angle),
+            merge_offset=np.float64(self.merge_offset),
+            piece_reach=np.float64(self.piece_reach),
+            n_neighbors=np.int64(self.n_neighbors),
+            min_sd=np.float64(self.min_sd),
+            max_sd=np.float64(self.max_sd),
+            sd_scale=np.float64(self.sd_scale),
+            noise_sd=np.float64(self.noise_sd),
+            floor=np.float64(self.floor),
+            noise_tol=np.float64(self.noise_tol),
+            extrapolation=np.float64(self.extrapolation),
+        )
 
     @classmethod
     def from_arrays(cls, d: dict) -> LearnedModel:
         """Rebuild a fitted model from :meth:`to_arrays` output (exactly the same predictions)."""
-        try:
-            model = cls(
-                match_threshold=float(d["match_threshold"]),
-                area=tuple(float(v) for v in np.asarray(d["area"]).reshape(4)),
-                n_neighbors=int(d["n_neighbors"]),
-                min_sd=float(d["min_sd"]),
-                max_sd=float(d["max_sd"]),
-                sd_scale=float(d.get("sd_scale", 1.0)),  # absent before model schema 2
-                noise_sd=float(d.get("noise_sd", 0.0)),
-                floor=float(d.get("floor", 0.0)),
-                noise_tol=float(d.get("noise_tol", 0.0)),
-                extrapolation=float(d["extrapolation"]),
-                merge_angle=float(d["merge_angle"]),
-                merge_offset=float(d["merge_offset"]),
-                piece_reach=float(d["piece_reach"]),
-            )
-            model._check_params()
-            model._set_fitted(
-                np.asarray(d["class_features"], float),
-                np.asarray(d["actions"], float).reshape(-1, 2),
-                np.asarray(d["labels"], np.int64),
-                np.asarray(d["edges"], np.int64).reshape(-1, 2),
-                np.asarray(d["edge_piece"], np.int64),
-                np.asarray(d["piece_pair"], np.int64),
-                np.asarray(d["piece_line"], np.int64),
-                np.asarray(d["piece_sign"], float),
-                np.asarray(d["lines"], float),
-                float(d["reach_sd_fitted"]),
-            )
-        except (KeyError, TypeError, ValueError, IndexError) as exc:
-            raise ArtifactError(
-                f"not a stored learned model ({type(exc).__name__}: {exc})"
-            ) from None
-        return model
+        return cls._from_stored(d, "learned", _stored_params, _stored_pieces)

@@ -18,6 +18,7 @@ learned classes live in :mod:`kbcli.core.learned` (``lines``) and :mod:`kbcli.co
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -27,7 +28,7 @@ from sklearn.exceptions import NotFittedError
 
 from kbcli.core.keyboard import Keyboard
 from kbcli.core.sounds import SILENCE, classify_features, prepare_samples
-from kbcli.errors import ConfigError
+from kbcli.errors import ArtifactError, ConfigError
 
 
 @dataclass(frozen=True)
@@ -128,6 +129,9 @@ _CHUNK = 16384
 #: contest the model knows nothing about (z = 0) is neutral instead of penalising the candidates
 #: that take part in more contests (which made wide, honest boundary bands cost accuracy).
 _NEUTRAL = float(np.log(2.0))
+#: Default ``area`` of the learned classes: the default keyboard's working area (xmin, ymin, xmax,
+#: ymax).
+DEFAULT_AREA = (150.0, 200.0, 650.0, 500.0)
 
 
 class ModelBase(ClassifierMixin, BaseEstimator):
@@ -139,14 +143,33 @@ class ModelBase(ClassifierMixin, BaseEstimator):
     sounds at an action are the classes of its ``n_neighbors`` nearest samples; each pair of
     candidates with a boundary contests the action, and a candidate's log-score sums
     ``log 2 p(on its side)`` over its contests; p(sound | action) is their softmax. A subclass fits
-    the contests: after ``fit`` it has
+    the contests: after ``fit`` it has the attributes below,
 
-    - ``class_features_`` (C, D), ``actions_`` (n, 2), ``labels_`` (n,), ``reach_sd_``;
     - ``_tree``: a :class:`scipy.spatial.cKDTree` of ``actions_``;
     - ``_pairs``: pair code ``lower * C + higher`` -> what decides the pair's contests, for the
       pairs of sounds that have a boundary;
 
     and implements ``_pair_logp(code, q) -> (log p(lower's side), log p(higher's side))``.
+
+    Parameters
+    ----------
+    match_threshold : float
+        Manhattan distance under which two perceived sounds are the same sound (Eq. 2).
+    area : tuple of float
+        (xmin, ymin, xmax, ymax) working area: the support of p(action) and of :meth:`raster`.
+
+    Attributes
+    ----------
+    class_features_ : (C, D) ndarray
+        Features of each class; row 0 (silence) is NaN.
+    actions_ : (n, 2) ndarray
+        Where the finger landed for each sample.
+    labels_ : (n,) int ndarray
+        Sound class of each sample.
+    reach_sd_ : float
+        Landing scatter of a reach (px, per-axis rms of landing minus target), for information:
+        p(sound | action) is about where the finger *is*; a caller that only knows where it aimed
+        blurs it by this much.
     """
 
     #: True only for the exact model (the keyboard's own geometry, :class:`ExactModel`).
@@ -209,6 +232,48 @@ class ModelBase(ClassifierMixin, BaseEstimator):
         if not (x1 > x0 and y1 > y0):
             raise ConfigError(
                 f"area must be (xmin, ymin, xmax, ymax) with max > min, got {self.area!r}")
+
+    # -- storage (a subclass's ``to_arrays`` / ``from_arrays``) ------------------------------------
+    def _arrays(self, **own: np.ndarray) -> dict[str, np.ndarray]:
+        """The fitted model as named arrays: the samples, their classes, the landing scatter, the
+        parameters every class has and ``own`` (the class's own parameters and what it learned).
+        """
+        self._check_fitted()
+        return {
+            "class_features": self.class_features_.copy(),
+            "actions": self.actions_.copy(),
+            "labels": self.labels_.copy(),
+            "reach_sd_fitted": np.float64(self.reach_sd_),
+            "match_threshold": np.float64(self.match_threshold),
+            "area": np.asarray(self.area, float),
+            **own,
+        }
+
+    @classmethod
+    def _from_stored(cls, d: Mapping, kind: str, params: Callable[[Mapping], dict],
+                     fitted: Callable[[Mapping], tuple] = lambda d: ()) -> ModelBase:
+        """Rebuild a model from :meth:`_arrays` output: the class built with the stored
+        ``match_threshold``, ``area`` and ``params(d)``, then ``_set_fitted`` with the stored
+        samples, ``fitted(d)`` (what the class learned besides) and the landing scatter.
+
+        Raises
+        ------
+        ArtifactError
+            Where ``d`` is not a stored ``kind`` model (a key missing, a value of the wrong type).
+        """
+        try:
+            model = cls(match_threshold=float(d["match_threshold"]),
+                        area=tuple(float(v) for v in np.asarray(d["area"]).reshape(4)),
+                        **params(d))
+            model._check_params()
+            model._set_fitted(np.asarray(d["class_features"], float),
+                              np.asarray(d["actions"], float).reshape(-1, 2),
+                              np.asarray(d["labels"], np.int64), *fitted(d),
+                              float(d["reach_sd_fitted"]))
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise ArtifactError(
+                f"not a stored {kind} model ({type(exc).__name__}: {exc})") from None
+        return model
 
     def _pair_logp(self, code: int, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(log p(on the lower class's side), log p(on the higher's)) of the pair ``code`` at

@@ -66,12 +66,13 @@ from __future__ import annotations
 
 import copy
 import itertools
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 from sklearn.base import clone
 
 from kbcli.core.accuracy import boundary_error as _boundary_error
+from kbcli.core.config import Record
 from kbcli.core.model import grid_points
 from kbcli.core.sounds import classify_features
 
@@ -88,7 +89,7 @@ SE_MARGIN = 1.0
 
 
 @dataclass(frozen=True)
-class Reliability:
+class Reliability(Record):
     """A model's own estimate of how good it is (see the module docstring)."""
 
     folds: int
@@ -99,9 +100,6 @@ class Reliability:
     boundary_error: float
     calibration: dict
     expected_error: float
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 def _area_weights(x: np.ndarray, k: int = 6) -> np.ndarray:

@@ -33,10 +33,11 @@ chosen class on every sample (:func:`choose`).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
+from kbcli.core.config import Record
 from kbcli.core.model_classes import AUTO, fit_model, learned_classes
 from kbcli.core.reliability import FOLDS, _area_weights, _class_map, _fold_ids, _held_out_probs
 from kbcli.errors import ConfigError
@@ -61,7 +62,7 @@ EXPLORE_PARAMS: dict[str, dict] = {"forest": {"n_estimators": 60}}
 
 
 @dataclass(frozen=True)
-class Selection:
+class Selection(Record):
     """The class ``auto`` chose, and why.
 
     Attributes
@@ -78,9 +79,6 @@ class Selection:
     explored_with: str
     cv_error: dict
     folds: int
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
     def summary(self) -> str:
         """One line: the choice and every candidate's score."""

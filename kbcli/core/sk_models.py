@@ -42,8 +42,8 @@ import warnings
 import numpy as np
 from scipy.spatial import cKDTree
 
-from kbcli.core.model import ModelBase
-from kbcli.errors import ArtifactError, ConfigError
+from kbcli.core.model import DEFAULT_AREA, ModelBase
+from kbcli.errors import ConfigError
 
 SITE_GRID = 2.0  # px, grid on which boundary sites are looked for
 _CHUNK = 65536  # query points per block of a prediction
@@ -158,39 +158,22 @@ class SklearnModel(ModelBase):
     def to_arrays(self) -> dict[str, np.ndarray]:
         """The fitted model as named arrays: the samples, their classes and the hyper-parameters
         (:meth:`from_arrays` refits the classifier, deterministically)."""
-        self._check_fitted()
-        d = {
-            "class_features": self.class_features_.copy(),
-            "actions": self.actions_.copy(),
-            "labels": self.labels_.copy(),
-            "reach_sd_fitted": np.float64(self.reach_sd_),
-            "match_threshold": np.float64(self.match_threshold),
-            "area": np.asarray(self.area, float),
+        own = {
             "floor": np.float64(self.floor),
             # every stored learned model has it (the artifact schema); 0: no neighbours looked at
             "n_neighbors": np.int64(getattr(self, "n_neighbors", 0)),
         }
         for name, typ in self._PARAMS:
-            d[name] = (np.int64 if typ is int else np.float64)(getattr(self, name))
-        return d
+            own[name] = (np.int64 if typ is int else np.float64)(getattr(self, name))
+        return self._arrays(**own)
 
     @classmethod
     def from_arrays(cls, d: dict) -> SklearnModel:
         """Rebuild a fitted model from :meth:`to_arrays` output (the same predictions: the
         classifier is refitted on the stored samples with the stored ``random_state``)."""
-        try:
-            model = cls(match_threshold=float(d["match_threshold"]),
-                        area=tuple(float(v) for v in np.asarray(d["area"]).reshape(4)),
-                        floor=float(d["floor"]),
-                        **{name: typ(np.asarray(d[name]).item()) for name, typ in cls._PARAMS})
-            model._check_params()
-            model._set_fitted(np.asarray(d["class_features"], float),
-                              np.asarray(d["actions"], float).reshape(-1, 2),
-                              np.asarray(d["labels"], np.int64), float(d["reach_sd_fitted"]))
-        except (KeyError, TypeError, ValueError, IndexError) as exc:
-            raise ArtifactError(
-                f"not a stored {cls.kind} model ({type(exc).__name__}: {exc})") from None
-        return model
+        return cls._from_stored(d, cls.kind, lambda d: {
+            "floor": float(d["floor"]),
+            **{name: typ(np.asarray(d[name]).item()) for name, typ in cls._PARAMS}})
 
 
 def _positive_int(model, name: str, least: int = 1) -> None:
@@ -204,10 +187,8 @@ class ForestModel(SklearnModel):
 
     Parameters
     ----------
-    match_threshold : float
-        Manhattan distance under which two perceived sounds are the same sound (Eq. 2).
-    area : tuple of float
-        (xmin, ymin, xmax, ymax) working area.
+    match_threshold, area
+        As every class (:class:`~kbcli.core.model.ModelBase`).
     n_estimators : int
         Trees (120: on the samples of seeds 1 and 2 of ``kbcli bench learn --peer``'s at 800
         reaches, piano 99.59 / 99.57 % against 99.52 / 99.51 % with 60 trees, 99.59 / 99.61 %
@@ -231,7 +212,7 @@ class ForestModel(SklearnModel):
                ("random_state", int))
 
     def __init__(self, *, match_threshold: float = 1.5,
-                 area: tuple[float, float, float, float] = (150.0, 200.0, 650.0, 500.0),
+                 area: tuple[float, float, float, float] = DEFAULT_AREA,
                  n_estimators: int = 120, n_directions: int = 6, min_samples_leaf: int = 1,
                  random_state: int = 0, floor: float = 0.0) -> None:
         self.match_threshold = match_threshold
@@ -270,7 +251,7 @@ class KNNModel(SklearnModel):
     Parameters
     ----------
     match_threshold, area
-        As every class.
+        As every class (:class:`~kbcli.core.model.ModelBase`).
     n_neighbors : int
         Neighbours that vote.
     floor : float
@@ -281,7 +262,7 @@ class KNNModel(SklearnModel):
     _PARAMS = (("n_neighbors", int),)
 
     def __init__(self, *, match_threshold: float = 1.5,
-                 area: tuple[float, float, float, float] = (150.0, 200.0, 650.0, 500.0),
+                 area: tuple[float, float, float, float] = DEFAULT_AREA,
                  n_neighbors: int = 5, floor: float = 0.0) -> None:
         self.match_threshold = match_threshold
         self.area = area

@@ -76,7 +76,7 @@ from scipy.spatial import cKDTree
 from scipy.special import log_ndtr
 from sklearn.svm import SVC
 
-from kbcli.core.model import ModelBase
+from kbcli.core.model import DEFAULT_AREA, ModelBase
 from kbcli.core.sounds import straddling_edges
 from kbcli.errors import ArtifactError, ConfigError
 
@@ -123,15 +123,27 @@ class _CircleMachine:
         return self.svm_.decision_function(self.features(x))
 
 
+def _stored_params(d: dict) -> dict:
+    """The parameters of a stored svc model (:meth:`SVCModel.from_arrays`)."""
+    return {
+        "length_scale": float(d["length_scale"]),
+        "C": float(d["C"]),
+        "local_radius": float(d["local_radius"]),
+        "n_neighbors": int(d["n_neighbors"]),
+        # models stored before linear pairs existed had RBF machines only
+        "linear_pairs": bool(int(d["linear_pairs"])) if "linear_pairs" in d else False,
+        # and before circle pairs existed, no circles
+        "circle_pairs": bool(int(d["circle_pairs"])) if "circle_pairs" in d else False,
+    }
+
+
 class SVCModel(ModelBase):
     """p(sound | action) from pairwise linear or RBF SVMs (see the module docstring).
 
     Parameters
     ----------
-    match_threshold : float
-        Manhattan distance under which two perceived sounds are the same sound (Eq. 2).
-    area : tuple of float
-        (xmin, ymin, xmax, ymax) working area: the support of p(action) and of :meth:`raster`.
+    match_threshold, area
+        As every class (:class:`~kbcli.core.model.ModelBase`).
     length_scale : float
         Length scale (px) of the RBF kernel: ``exp(-|a - b|^2 / (2 length_scale^2))``.
     C : float
@@ -152,22 +164,16 @@ class SVCModel(ModelBase):
 
     Attributes
     ----------
-    class_features_ : (C, D) ndarray
-        Features of each class; row 0 (silence) is NaN.
-    actions_ : (n, 2) ndarray
-        Where the finger landed for each sample.
-    labels_ : (n,) int ndarray
-        Sound class of each sample.
+    class_features_, actions_, labels_, reach_sd_
+        As every class (:class:`~kbcli.core.model.ModelBase`).
     pairs_ : (P, 2) int ndarray
         The neighbouring pairs of classes (lower first) that have a machine.
     edges_ : (m, 2) int ndarray
         Straddling edges: sample indices, the lower class's end first.
-    reach_sd_ : float
-        Landing scatter of a reach (px, per-axis rms of landing minus target), for information.
     """
 
     def __init__(self, *, match_threshold: float = 1.5,
-                 area: tuple[float, float, float, float] = (150.0, 200.0, 650.0, 500.0),
+                 area: tuple[float, float, float, float] = DEFAULT_AREA,
                  length_scale: float = 25.0, C: float = 1e3, local_radius: float = 30.0,
                  n_neighbors: int = 8, linear_pairs: bool = True,
                  circle_pairs: bool = True) -> None:
@@ -340,49 +346,23 @@ class SVCModel(ModelBase):
         """The fitted model as named arrays: the samples, their classes and the hyper-parameters
         (:meth:`from_arrays` refits the machines, deterministically)."""
         self._check_fitted()
-        return {
-            "class_features": self.class_features_.copy(),
-            "actions": self.actions_.copy(),
-            "labels": self.labels_.copy(),
-            "pairs": self.pairs_.copy(),
-            "n_support": np.array([int(self._pairs[int(c)].n_support_.sum()) for c in
-                                   self.pairs_[:, 0] * self.n_classes + self.pairs_[:, 1]],
-                                  np.int64),
-            "reach_sd_fitted": np.float64(self.reach_sd_),
-            "match_threshold": np.float64(self.match_threshold),
-            "area": np.asarray(self.area, float),
-            "length_scale": np.float64(self.length_scale),
-            "C": np.float64(self.C),
-            "local_radius": np.float64(self.local_radius),
-            "n_neighbors": np.int64(self.n_neighbors),
-            "linear_pairs": np.int64(bool(self.linear_pairs)),
-            "circle_pairs": np.int64(bool(self.circle_pairs)),
-        }
+        return self._arrays(
+            pairs=self.pairs_.copy(),
+            n_support=np.array([int(self._pairs[int(c)].n_support_.sum()) for c in
+                                self.pairs_[:, 0] * self.n_classes + self.pairs_[:, 1]], np.int64),
+            length_scale=np.float64(self.length_scale),
+            C=np.float64(self.C),
+            local_radius=np.float64(self.local_radius),
+            n_neighbors=np.int64(self.n_neighbors),
+            linear_pairs=np.int64(bool(self.linear_pairs)),
+            circle_pairs=np.int64(bool(self.circle_pairs)),
+        )
 
     @classmethod
     def from_arrays(cls, d: dict) -> SVCModel:
         """Rebuild a fitted model from :meth:`to_arrays` output (the same predictions: the
         machines are refitted on the stored samples; nothing is unpickled)."""
-        try:
-            model = cls(
-                match_threshold=float(d["match_threshold"]),
-                area=tuple(float(v) for v in np.asarray(d["area"]).reshape(4)),
-                length_scale=float(d["length_scale"]),
-                C=float(d["C"]),
-                local_radius=float(d["local_radius"]),
-                n_neighbors=int(d["n_neighbors"]),
-                # models stored before linear pairs existed had RBF machines only
-                linear_pairs=bool(int(d["linear_pairs"])) if "linear_pairs" in d else False,
-                # and before circle pairs existed, no circles
-                circle_pairs=bool(int(d["circle_pairs"])) if "circle_pairs" in d else False,
-            )
-            model._check_params()
-            model._set_fitted(np.asarray(d["class_features"], float),
-                              np.asarray(d["actions"], float).reshape(-1, 2),
-                              np.asarray(d["labels"], np.int64), float(d["reach_sd_fitted"]))
-        except (KeyError, TypeError, ValueError, IndexError) as exc:
-            raise ArtifactError(
-                f"not a stored svc model ({type(exc).__name__}: {exc})") from None
+        model = cls._from_stored(d, "svc", _stored_params)
         if "pairs" in d and not np.array_equal(np.asarray(d["pairs"]).reshape(-1, 2),
                                                model.pairs_):
             raise ArtifactError("stored svc model: refitting found other pairs of sounds than "

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from kbcli.core.geometry import KeyShapes
-from kbcli.core.notes import name_to_midi
+from kbcli.core.notes import name_to_midi, scale_pitches
 from kbcli.core.registry import Registry
 from kbcli.errors import ConfigError
 
@@ -93,10 +93,25 @@ def layout(name: str, summary: str, defaults: dict[str, Any], **kw: Any):
     return deco
 
 
-def check_count(rows: int, cols: int) -> None:
-    """ConfigError when ``rows * cols`` exceeds :data:`MAX_KEYS`."""
+def rows_cols(cfg: KeyboardConfig) -> tuple[int, int]:
+    """The config's ``rows`` and ``cols`` (ConfigError when ``rows * cols`` exceeds
+    :data:`MAX_KEYS`)."""
+    rows, cols = cfg.rows, cfg.cols
     if rows * cols > MAX_KEYS:
         raise ConfigError(f"rows x cols must be at most {MAX_KEYS} keys, got {rows * cols}")
+    return rows, cols
+
+
+def rowcol_geometry(cfg: KeyboardConfig, shapes: KeyShapes,
+                    bounds: tuple[float, float, float, float],
+                    pitches: np.ndarray | None = None) -> LayoutGeometry:
+    """The geometry of ``rows`` x ``cols`` keys numbered row by row: their tempi by row and column
+    (:func:`rowcol_tempo`) and, unless given, pitches climbing the config's ``scale`` from its
+    ``base_note``."""
+    rows, cols = cfg.rows, cfg.cols
+    if pitches is None:
+        pitches = scale_pitches(base_midi(cfg), cfg.scale, rows * cols)
+    return LayoutGeometry(shapes, pitches, rowcol_tempo(cfg, rows, cols), bounds)
 
 
 def rowcol_tempo(cfg: KeyboardConfig, rows: int, cols: int) -> np.ndarray:

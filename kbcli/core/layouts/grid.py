@@ -12,12 +12,10 @@ from kbcli.core.geometry import KeyShapes
 from kbcli.core.layouts.base import (
     KeyboardConfig,
     LayoutGeometry,
-    base_midi,
-    check_count,
     layout,
-    rowcol_tempo,
+    rowcol_geometry,
+    rows_cols,
 )
-from kbcli.core.notes import scale_pitches
 
 
 class GridShapes(KeyShapes):
@@ -68,9 +66,6 @@ def _describe(cfg: KeyboardConfig, n_keys: int) -> str:
         describe=_describe)
 def build(cfg: KeyboardConfig) -> LayoutGeometry:
     """The grid's keys, pitches and tempi."""
-    rows, cols = cfg.rows, cfg.cols
-    check_count(rows, cols)
-    s = cfg.key_size
-    shapes = GridShapes(rows, cols, s)
-    return LayoutGeometry(shapes, scale_pitches(base_midi(cfg), cfg.scale, rows * cols),
-                          rowcol_tempo(cfg, rows, cols), shapes.bounds)
+    rows, cols = rows_cols(cfg)
+    shapes = GridShapes(rows, cols, cfg.key_size)
+    return rowcol_geometry(cfg, shapes, shapes.bounds)

@@ -17,9 +17,9 @@ from kbcli.core.layouts.base import (
     KeyboardConfig,
     LayoutGeometry,
     base_midi,
-    check_count,
     layout,
-    rowcol_tempo,
+    rowcol_geometry,
+    rows_cols,
 )
 
 
@@ -31,8 +31,7 @@ def _describe(cfg: KeyboardConfig, n_keys: int) -> str:
         uses_scale=False, describe=_describe)
 def build(cfg: KeyboardConfig) -> LayoutGeometry:
     """The hexagons, their Wicki-Hayden pitches and their tempi."""
-    rows, cols = cfg.rows, cfg.cols
-    check_count(rows, cols)
+    rows, cols = rows_cols(cfg)
     w = cfg.key_size
     rad = w / math.sqrt(3)  # circumradius of a hexagon w across the flats
     k = np.arange(rows * cols)
@@ -46,5 +45,4 @@ def build(cfg: KeyboardConfig) -> LayoutGeometry:
              for x, y in zip(ix, iy, strict=True)]
     pitches = base_midi(cfg) + 2 * (c - r // 2) + 7 * r
     shapes = KeyShapes(polygons=polys)
-    return LayoutGeometry(shapes, pitches.astype(np.int64), rowcol_tempo(cfg, rows, cols),
-                          shapes.bounds)
+    return rowcol_geometry(cfg, shapes, shapes.bounds, pitches.astype(np.int64))

@@ -12,12 +12,10 @@ from kbcli.core.geometry import MIN_AREA, KeyShapes
 from kbcli.core.layouts.base import (
     KeyboardConfig,
     LayoutGeometry,
-    base_midi,
-    check_count,
     layout,
-    rowcol_tempo,
+    rowcol_geometry,
+    rows_cols,
 )
-from kbcli.core.notes import scale_pitches
 from kbcli.errors import ConfigError
 
 
@@ -29,8 +27,7 @@ def _describe(cfg: KeyboardConfig, n_keys: int) -> str:
         {"rows": 4, "cols": 8, "key_size": 50.0, "pad_radius": 20.0}, describe=_describe)
 def build(cfg: KeyboardConfig) -> LayoutGeometry:
     """The pads (discs), their pitches and tempi, and their cells' bounds."""
-    rows, cols = cfg.rows, cfg.cols
-    check_count(rows, cols)
+    rows, cols = rows_cols(cfg)
     s, r = cfg.key_size, cfg.pad_radius
     if np.pi * r * r < MIN_AREA:
         raise ConfigError(f"pad_radius ({r:g}) must be at least {np.ceil(100 * np.sqrt(MIN_AREA / np.pi)) / 100:g} px: "
@@ -40,5 +37,4 @@ def build(cfg: KeyboardConfig) -> LayoutGeometry:
                           "distance between pad centres: pads would overlap")
     k = np.arange(rows * cols)
     discs = np.column_stack([(k % cols + 0.5) * s, (k // cols + 0.5) * s, np.full(len(k), r)])
-    return LayoutGeometry(KeyShapes(discs=discs), scale_pitches(base_midi(cfg), cfg.scale, len(k)),
-                          rowcol_tempo(cfg, rows, cols), (0.0, 0.0, cols * s, rows * s))
+    return rowcol_geometry(cfg, KeyShapes(discs=discs), (0.0, 0.0, cols * s, rows * s))

@@ -19,6 +19,6 @@ from kbcli.core.posteriors import likelihood as _likelihood  # noqa: F401  regis
 
 # isort: split
 from kbcli.core.posteriors import kde as _kde  # noqa: F401  registers "kde"
-from kbcli.core.posteriors.base import POSTERIORS, Observation, PosteriorKind, RobustKind
+from kbcli.core.posteriors.base import POSTERIORS, KindBase, Observation, PosteriorKind, RobustKind
 
-__all__ = ["POSTERIORS", "Observation", "PosteriorKind", "RobustKind"]
+__all__ = ["POSTERIORS", "KindBase", "Observation", "PosteriorKind", "RobustKind"]

@@ -3,15 +3,15 @@
 A kind of posterior turns one classified touch into a log term over the hypothesis grid (Eq. 8
 multiplies the posterior by it). The adaptation (:class:`kbcli.core.adapter.Adapter`) never asks a
 kind's name: it asks the registered object (``POSTERIORS.get(cfg.posterior)``) for its term and for
-what it needs. Adding a posterior is one module with a class that follows :class:`PosteriorKind`,
-registered with ``POSTERIORS.register(name, kind, summary=...)`` (see ``tests/test_posteriors.py``
+what it needs. Adding a posterior is one module with a class that follows :class:`PosteriorKind`
+(most simply a subclass of :class:`KindBase`), registered with ``POSTERIORS.register(name, kind, summary=...)`` (see ``tests/test_posteriors.py``
 for a toy one).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -74,6 +74,17 @@ class PosteriorKind(Protocol):
     def term(self, obs: Observation) -> tuple[np.ndarray, float | None]:
         """``(log term of grid.shape, kernel bandwidth px or None)`` of one observation."""
         ...
+
+
+@dataclass(frozen=True)
+class KindBase:
+    """What most kinds of posterior are: terms that need no samples of p(action | sound), and no
+    robust posterior. A kind that subclasses it names itself (``name = "kde"``) and sets only the
+    attributes of :class:`PosteriorKind` it differs in."""
+
+    name: ClassVar[str]
+    uses_samples: ClassVar[bool] = False
+    robust: ClassVar[bool] = False
 
 
 class RobustKind(PosteriorKind, Protocol):

@@ -11,17 +11,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from kbcli.core.kde import kde_term, kde_terms
-from kbcli.core.posteriors.base import POSTERIORS, Observation
+from kbcli.core.posteriors.base import POSTERIORS, KindBase, Observation
 from kbcli.core.registry import Uses
 
 
 @dataclass(frozen=True)
-class KdePosterior:
+class KdePosterior(KindBase):
     """The paper's product of KDEs of p(action | sound), from per-class samples of the model."""
 
-    name: str = "kde"
-    uses_samples: bool = True
-    robust: bool = False
+    name = "kde"
+    uses_samples = True
 
     def term(self, obs: Observation) -> tuple[np.ndarray, float]:
         """``log KDE_t(h)`` with the floor ``cfg.kde_eps`` (``kde_floor``, or ``outlier`` when

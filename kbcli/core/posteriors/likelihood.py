@@ -10,19 +10,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from kbcli.core.likelihood import cell_sigma, likelihood_term
-from kbcli.core.posteriors.base import POSTERIORS, Observation
+from kbcli.core.posteriors.base import POSTERIORS, KindBase, Observation
 from kbcli.core.registry import Uses
 from kbcli.core.robust import ROBUST_OPTIONS, Nuisance, robust_terms
 from kbcli.core.transforms import FAMILIES
 
 
 @dataclass(frozen=True)
-class LikelihoodPosterior:
+class LikelihoodPosterior(KindBase):
     """The model's classifier at each touch; the robust posterior applies to it."""
 
-    name: str = "likelihood"
-    uses_samples: bool = False
-    robust: bool = True
+    name = "likelihood"
+    robust = True
 
     def term(self, obs: Observation) -> tuple[np.ndarray, None]:
         """``log p_eps(cls | T_h^-1(action))``, cell-averaged when ``cfg.cell_average``."""

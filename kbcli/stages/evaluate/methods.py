@@ -10,7 +10,7 @@ from typing import Any, ClassVar
 
 from pydantic import Field, field_validator, model_validator
 
-from kbcli.core.config import Name, Names
+from kbcli.core.config import Name, Names, each, member_of
 from kbcli.errors import ConfigError
 from kbcli.sim import MODES
 from kbcli.stages.config import StageConfig
@@ -60,12 +60,9 @@ def known_strategies() -> tuple[str, ...]:
     return tuple(STRATEGIES)
 
 
-def check_modes(names: tuple[str, ...] | None) -> tuple[str, ...] | None:
-    """``names`` itself when each is a mode of :data:`kbcli.sim.MODES` (for validators)."""
-    for m in names or ():
-        if m not in MODES:
-            raise ValueError(f"unknown mode {m!r}; valid: {', '.join(MODES)}")
-    return names
+#: ``check_modes(names)``: ``names`` itself when each is a mode of :data:`kbcli.sim.MODES` (for
+#: validators; None passes).
+check_modes = each(member_of("mode", MODES))
 
 
 class Method(StageConfig):
