@@ -77,6 +77,7 @@ def each(check: Callable[[str], Any]) -> Callable[[tuple[str, ...] | None], tupl
 
     return check_all
 
+
 def between(base: Any, low: float | None = None, high: float | None = None, *,
             low_open: bool = False, high_open: bool = False) -> Any:
     """``base`` (:data:`Number`, :data:`Whole`, ...) within an interval; a value outside it is

@@ -4,8 +4,8 @@ A kind of posterior turns one classified touch into a log term over the hypothes
 multiplies the posterior by it). The adaptation (:class:`kbcli.core.adapter.Adapter`) never asks a
 kind's name: it asks the registered object (``POSTERIORS.get(cfg.posterior)``) for its term and for
 what it needs. Adding a posterior is one module with a class that follows :class:`PosteriorKind`
-(most simply a subclass of :class:`KindBase`), registered with ``POSTERIORS.register(name, kind, summary=...)`` (see ``tests/test_posteriors.py``
-for a toy one).
+(most simply a subclass of :class:`KindBase`), registered with ``POSTERIORS.register(name, kind,
+summary=...)`` (see ``tests/test_posteriors.py`` for a toy one).
 """
 
 from __future__ import annotations
