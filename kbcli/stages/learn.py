@@ -24,7 +24,8 @@ finger landed: what the model is fitted on), ``samples/perceived`` (NaN rows: si
 class reads them), ``curve/{reaches,accuracy}`` and ``evaluation/predicted_keys`` (the key the model
 predicts in each 1 px cell of the working area, -1 silence, -2 a sound that is no key; row i is y,
 from ``evaluation/origin``). Its attrs hold the final ``accuracy``, ``boundary_error_px``,
-``reaches_to_97`` and ``reaches_to_99`` (first curve point at or above 97 % / 99 %, or None), the
+``reaches_to_97`` and ``reaches_to_99`` (first curve point at or above 97 % / 99 %; the whole
+budget when only the final model, of another class than the explorer's, gets there; or None), the
 ``model_class``, ``n_classes`` and ``reliability``: what the model estimates of itself from its
 samples alone (cross-validated mislabel rate, log loss, calibration error and boundary error, and
 the calibration it chose; :mod:`kbcli.core.reliability`). The final model is calibrated that way.
@@ -233,10 +234,8 @@ class Learning:
         berr = scoring.boundary_error(pred, true, EVAL_STEP)
         curve_acc = np.asarray(self.curve_accuracy, float)
         curve_n = np.asarray(self.curve_reaches, np.int64)
-        first = {}
-        for level in LEVELS:
-            hit = np.flatnonzero(curve_acc >= level)
-            first[level] = int(curve_n[hit[0]]) if len(hit) else None
+        first = {level: reaches_to(level, curve_n, curve_acc, acc, len(ex.targets))
+                 for level in LEVELS}
         samples = {
             "actions": ex.targets,
             "landed": ex.landed,
@@ -279,6 +278,18 @@ class Learning:
             },
             inputs={"keyboard": ref(self.keyboard_art)},
         )
+
+
+def reaches_to(level: float, reaches: np.ndarray, accuracy: np.ndarray, final: float,
+               budget: int) -> int | None:
+    """The first learning-curve point (``reaches``, ``accuracy``) at or above ``level``; else the
+    whole ``budget`` when the final model's accuracy ``final`` reaches it (the curve is the
+    explorer's: the final model may be another class, or the same with its final parameters);
+    else None."""
+    hit = np.flatnonzero(np.asarray(accuracy, float) >= level)
+    if len(hit):
+        return int(np.asarray(reaches)[hit[0]])
+    return int(budget) if final >= level else None
 
 
 def learn(cfg: LearnConfig, keyboard_art: Artifact, *, rng: np.random.Generator,
