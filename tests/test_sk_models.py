@@ -2,7 +2,10 @@
 
 Known answers: each separates two half-planes and a disc, its probabilities are calibrated on a
 noisy synthetic case (after the floor chosen by cross-validation), its stored arrays refit to the
-same predictions (no pickle), and bad hyper-parameters are one line.
+same predictions (no pickle), and bad hyper-parameters are one line. The calibration's ``sharpen``
+(p ** k renormalised) leaves the classifier's votes alone at k = 1, sharpens them above without
+moving the argmax, loads as 1 from a model stored without it, and is chosen above 1 by
+cross-validation where the labels are deterministic and the votes spread across the boundary.
 """
 
 from __future__ import annotations
@@ -112,6 +115,11 @@ def test_forest_seed_is_stored_and_changes_the_trees():
     ("forest", {"random_state": -1}, "random_state must be a whole number >= 0"),
     ("knn", {"n_neighbors": 2.5}, "n_neighbors must be a whole number >= 1, got 2.5"),
     ("knn", {"floor": 1.0}, r"floor must be in \[0, 1\)"),
+    ("forest", {"sharpen": 0.5}, r"sharpen must be a number in \[1, 16\], got 0.5"),
+    ("forest", {"sharpen": float("nan")}, r"sharpen must be a number in \[1, 16\], got nan"),
+    ("knn", {"sharpen": 17}, r"sharpen must be a number in \[1, 16\], got 17"),
+    ("knn", {"sharpen": True}, r"sharpen must be a number in \[1, 16\], got True"),
+    ("forest", {"sharpen": "2"}, r"sharpen must be a number in \[1, 16\], got '2'"),
 ])
 def test_bad_hyper_parameters_are_one_line(name, params, msg):
     x = _lattice(20.0)
@@ -121,6 +129,96 @@ def test_bad_hyper_parameters_are_one_line(name, params, msg):
 
 def test_registered_with_their_parameters():
     assert set(MODEL_CLASSES.get("forest").params) == {
-        "n_estimators", "n_directions", "min_samples_leaf", "random_state", "floor"}
-    assert set(MODEL_CLASSES.get("knn").params) == {"n_neighbors", "floor"}
+        "n_estimators", "n_directions", "min_samples_leaf", "random_state", "floor", "sharpen"}
+    assert set(MODEL_CLASSES.get("knn").params) == {"n_neighbors", "floor", "sharpen"}
     assert MODEL_CLASSES.get("knn").estimator() is KNNModel
+
+
+def _raw_votes(model, q: np.ndarray) -> np.ndarray:
+    """The classifier's own probabilities in the model's classes (the predictions before
+    ``sharpen`` existed)."""
+    p = np.zeros((len(q), model.n_classes))
+    p[:, model.classifier_.classes_] = model.classifier_.predict_proba(model._features(q))
+    return p
+
+
+def _band(rng: np.random.Generator, n: int = 60) -> np.ndarray:
+    """A 20 px lattice and ``n`` touches in the band x in [380, 400] (active exploration's
+    bisections of the boundary x = 393)."""
+    return np.vstack([_lattice(20.0), np.column_stack([rng.uniform(380.0, 400.0, n),
+                                                       rng.uniform(210.0, 490.0, n)])])
+
+
+def _half_planes(x: np.ndarray) -> np.ndarray:
+    return np.where((x[:, 0] < 393.0)[:, None], [A], [B])
+
+
+@pytest.mark.parametrize("name", NEW)
+def test_sharpen_one_is_the_classifier_s_own_votes(name):
+    x = _band(np.random.default_rng(0))
+    model = make_model(name, match_threshold=1.5, area=AREA).fit(x, _half_planes(x))
+    assert model.sharpen == 1.0
+    q = np.random.default_rng(1).uniform((300.0, 210.0), (480.0, 490.0), size=(3000, 2))
+    np.testing.assert_array_equal(model.predict_proba(q), _raw_votes(model, q))
+    floored = make_model(name, match_threshold=1.5, area=AREA, floor=0.01, sharpen=1).fit(
+        x, _half_planes(x))
+    np.testing.assert_array_equal(floored.predict_proba(q), 0.99 * _raw_votes(model, q) + 0.01 / 3)
+
+
+@pytest.mark.parametrize("name", NEW)
+@pytest.mark.parametrize("k", [2.0, 4.0, 8.0])
+def test_sharpen_raises_the_top_probability_and_keeps_the_argmax(name, k):
+    x = _band(np.random.default_rng(0))
+    heard = _half_planes(x)
+    plain = make_model(name, match_threshold=1.5, area=AREA).fit(x, heard)
+    sharp = make_model(name, match_threshold=1.5, area=AREA, sharpen=k).fit(x, heard)
+    q = np.random.default_rng(1).uniform((300.0, 210.0), (480.0, 490.0), size=(3000, 2))
+    p0, p1 = plain.predict_proba(q), sharp.predict_proba(q)
+    np.testing.assert_allclose(p1.sum(axis=1), 1.0)
+    np.testing.assert_array_equal(sharp.predict_class(q), plain.predict_class(q))
+    np.testing.assert_array_equal(p1.argmax(axis=1), p0.argmax(axis=1))
+    top0, top1 = p0.max(axis=1), p1.max(axis=1)
+    torn = (top0 < 1.0) & (np.sort(p0, axis=1)[:, -2] < top0)  # not sure, no tie
+    assert torn.sum() > 50  # the forest's and the neighbours' votes spread near x = 393
+    assert np.all(top1[torn] > top0[torn])
+    np.testing.assert_array_equal(top1[~torn & (top0 == 1.0)], 1.0)
+    want = p0 ** k / (p0 ** k).sum(axis=1, keepdims=True)
+    np.testing.assert_allclose(p1, want, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("name", NEW)
+def test_stored_sharpen_round_trips_and_old_models_load_with_one(name):
+    x = _band(np.random.default_rng(0))
+    heard = _half_planes(x)
+    q = np.random.default_rng(2).uniform((300.0, 210.0), (480.0, 490.0), size=(2000, 2))
+    sharp = make_model(name, match_threshold=1.5, area=AREA, sharpen=4.0).fit(x, heard)
+    d = sharp.to_arrays()
+    assert float(d["sharpen"]) == 4.0
+    back = model_from_arrays(d, name)
+    assert back.sharpen == 4.0
+    np.testing.assert_array_equal(back.predict_proba(q), sharp.predict_proba(q))
+    old = {k: v for k, v in make_model(name, match_threshold=1.5, area=AREA).fit(x, heard)
+           .to_arrays().items() if k != "sharpen"}  # as stored before sharpen existed
+    loaded = model_from_arrays(old, name)
+    assert loaded.sharpen == 1.0
+    np.testing.assert_array_equal(loaded.predict_proba(q), _raw_votes(loaded, q))
+    np.testing.assert_array_equal(
+        loaded.predict_proba(q), make_model(name, match_threshold=1.5, area=AREA).fit(
+            x, heard).predict_proba(q))
+
+
+def test_assess_sharpens_the_forest_on_deterministic_half_planes():
+    """Two half-planes, heard without noise, explored on a 20 px lattice and in the boundary
+    band: the forest's votes spread across x = 393 wider than the band the boundary can lie in;
+    cross-validation chooses ``sharpen`` > 1, which lowers the calibration error on the pad."""
+    rng = np.random.default_rng(0)
+    x = _band(rng)
+    model = ForestModel(area=AREA).fit(x, _half_planes(x))
+    calibrated, rel = assess(model, x, _half_planes(x), rng=np.random.default_rng(0))
+    assert rel.calibration["sharpen"] > 1.0
+    assert calibrated.sharpen == rel.calibration["sharpen"] and model.sharpen == 1.0
+    q = rng.uniform((160.0, 210.0), (640.0, 490.0), size=(20000, 2))
+    truth = np.eye(3)[np.where(q[:, 0] < 393.0, 1, 2)]
+    before = expected_calibration_error(model.predict_proba(q), truth)
+    after = expected_calibration_error(calibrated.predict_proba(q), truth)
+    assert after < 0.5 * before
