@@ -11,6 +11,7 @@ timings ``benchmarks/reproduce.sh`` writes (``timings.txt``). Pure: no I/O.
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from kbcli.stages import quality
@@ -112,7 +113,7 @@ def verdict_counts(claims, labels: tuple[str, ...] = ()) -> ResultTable:
 EXPLAIN_COLUMNS = ("claim", "verdict along the ladder", "what flips it")
 
 
-def explain_table(claims, ablations) -> ResultTable:
+def explain_table(claims, ablations: Artifact | Sequence[Artifact]) -> ResultTable:
     """The report's "What explains each difference" as a result table: every claim marked
     *differs* on the judged method, judged on each rung of the ablation ladder ``ablations`` (an
     evaluation, or several: one per mode), and the rungs whose changes flip it

@@ -82,12 +82,12 @@ def explained(claims: list[Claim], ablations: Artifact | Sequence[Artifact],
         if c.verdict != "differs" or c.paper in seen:
             continue
         seen.add(c.paper)
-        found = [(a, st) for a in ladders if (st := ladder(a, c.paper))
-                 and any(v != "not measured" for _, _, v in st)]
-        if not found:
+        found = next(((a, st) for a in ladders if (st := ladder(a, c.paper))
+                      and any(v != "not measured" for _, _, v in st)), None)
+        if found is None:
             rows.append((c.paper, "not measured by the ladder", "-"))
             continue
-        art, steps = found[0]
+        art, steps = found
         path = " -> ".join(f"`{x}` ({s}) {v}" for x, s, v in steps)
         if len(ladders) > 1:
             path = f"{art.path or 'the ladder'}: {path}"
