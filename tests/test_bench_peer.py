@@ -79,3 +79,17 @@ def test_bench_learn_peer_cli_writes_the_result_file(runner, tmp_path):
     d = json.loads(path.read_text())
     assert {"command", "date", "machine", "kbcli_version", "tables"} <= set(d)
     assert [len(t["rows"]) for t in d["tables"]] == [1 + len(peer.PEERS), 1]
+
+
+def test_runs_in_worker_processes_give_the_same_numbers_in_the_same_order(runner):
+    cfg = peer.PeerConfig(layouts=("grid",), peers=("knn-margin",), seeds=2, budgets=(20,),
+                          pool=300, eval_step=8.0)
+    serial = list(peer.runs(cfg))
+    assert [(lay, who, i) for lay, who, i, _ in serial] == [
+        ("grid", "kbcli", 0), ("grid", "knn-margin", 0), ("grid", "kbcli", 1),
+        ("grid", "knn-margin", 1)]
+    assert list(peer.runs(cfg, jobs=2)) == serial
+    from kbcli.cli import app
+
+    r = runner.invoke(app, ["bench", "learn", "--jobs", "2", "--seeds", "1"])
+    assert r.exit_code == 1 and "--jobs applies to --peer runs only" in r.output

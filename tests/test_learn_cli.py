@@ -51,7 +51,7 @@ def test_learn_writes_a_model_artifact_and_plots_it(runner, files):
     sel = a["model_selection"]
     assert art.config["model_class_requested"] == "auto"
     assert a["model_class"] == art.config["model_class"] == sel["chosen"]
-    assert set(sel["cv_error"]) == {"lines", "forest", "svc", "knn"}
+    assert set(sel["cv_error"]) == {"lines", "forest", "forest-xy", "svc", "knn"}
     assert sel["cv_error"][sel["chosen"]] == min(sel["cv_error"].values())
     assert type(model) is MODEL_CLASSES.get(sel["chosen"]).estimator() and model.n_classes == 7
     assert r.stderr.count("model class: ") == 1 and "chosen by 5-fold cross-validation" in r.stderr

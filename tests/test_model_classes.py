@@ -54,9 +54,9 @@ def pads_svc():
 
 # -- the registry -----------------------------------------------------------------------------------
 def test_registry_lists_the_classes_and_refuses_unknown_names():
-    assert list(MODEL_CLASSES) == ["lines", "svc", "forest", "knn", "exact"]
-    assert learned_classes() == ("lines", "svc", "forest", "knn")
-    with pytest.raises(ConfigError, match="unknown model class 'gp'; valid: lines, svc, forest, knn, exact"):
+    assert list(MODEL_CLASSES) == ["lines", "svc", "forest", "forest-xy", "knn", "exact"]
+    assert learned_classes() == ("lines", "svc", "forest", "forest-xy", "knn")
+    with pytest.raises(ConfigError, match="unknown model class 'gp'; valid: lines, svc, forest, forest-xy, knn, exact"):
         MODEL_CLASSES.get("gp")
     with pytest.raises(ConfigError, match="takes no parameter 'gamma'"):
         make_model("svc", match_threshold=1.5, area=PADS.area, gamma=3.0)
@@ -285,7 +285,7 @@ def test_learn_cli_model_class_and_bad_names(runner, tmp_path):
     r = runner.invoke(app, ["learn", "--keyboard", str(kb), "--model-class", "tree", "-o",
                             str(bad)])
     assert r.exit_code == 1
-    assert "unknown model class 'tree'; valid: auto, lines, svc, forest, knn" in r.output
+    assert "unknown model class 'tree'; valid: auto, lines, svc, forest, forest-xy, knn" in r.output
     assert not bad.exists()
 
 

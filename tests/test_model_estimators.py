@@ -133,11 +133,11 @@ def test_set_params_recalibrates_a_fitted_lines_model():
 def test_unknown_model_class_is_one_line_listing_the_valid_ones():
     with pytest.raises(ConfigError) as err:
         MODEL_CLASSES.get("gp")
-    assert str(err.value) == "unknown model class 'gp'; valid: lines, svc, forest, knn, exact"
+    assert str(err.value) == "unknown model class 'gp'; valid: lines, svc, forest, forest-xy, knn, exact"
     with pytest.raises(ConfigError) as err:
         make_model("exact", match_threshold=1.5, area=AREA)
     assert str(err.value) == ("model class 'exact' is not learned from samples; valid: "
-                              "lines, svc, forest, knn")
+                              "lines, svc, forest, forest-xy, knn")
     from kbcli.stages.learn import LearnConfig
 
     with pytest.raises(ConfigError) as err:

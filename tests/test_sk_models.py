@@ -1,4 +1,5 @@
-"""The model classes on plain scikit-learn classifiers (issue 27): ``forest`` and ``knn``.
+"""The model classes on plain scikit-learn classifiers (issue 27): ``forest``, ``forest-xy`` and
+``knn``.
 
 Known answers: each separates two half-planes and a disc, its probabilities are calibrated on a
 noisy synthetic case (after the floor chosen by cross-validation), its stored arrays refit to the
@@ -15,12 +16,12 @@ import pytest
 
 from kbcli.core.model_classes import MODEL_CLASSES, make_model, model_from_arrays
 from kbcli.core.reliability import assess, expected_calibration_error
-from kbcli.core.sk_models import ForestModel, KNNModel
+from kbcli.core.sk_models import ForestModel, ForestXYModel, KNNModel
 from kbcli.errors import ArtifactError, ConfigError
 
 AREA = (150.0, 200.0, 650.0, 500.0)
 A, B = [10.0, 10.0], [20.0, 20.0]
-NEW = ("forest", "knn")
+NEW = ("forest", "forest-xy", "knn")
 
 
 def _lattice(step: float = 10.0) -> np.ndarray:
@@ -113,6 +114,7 @@ def test_forest_seed_is_stored_and_changes_the_trees():
     ("forest", {"n_estimators": 0}, "n_estimators must be a whole number >= 1, got 0"),
     ("forest", {"n_directions": 1}, "n_directions must be a whole number >= 2"),
     ("forest", {"random_state": -1}, "random_state must be a whole number >= 0"),
+    ("forest-xy", {"n_estimators": -3}, "n_estimators must be a whole number >= 1, got -3"),
     ("knn", {"n_neighbors": 2.5}, "n_neighbors must be a whole number >= 1, got 2.5"),
     ("knn", {"floor": 1.0}, r"floor must be in \[0, 1\)"),
     ("forest", {"sharpen": 0.5}, r"sharpen must be a number in \[1, 16\], got 0.5"),
@@ -132,6 +134,31 @@ def test_registered_with_their_parameters():
         "n_estimators", "n_directions", "min_samples_leaf", "random_state", "floor", "sharpen"}
     assert set(MODEL_CLASSES.get("knn").params) == {"n_neighbors", "floor", "sharpen"}
     assert MODEL_CLASSES.get("knn").estimator() is KNNModel
+    xy = MODEL_CLASSES.get("forest-xy")
+    assert xy.estimator() is ForestXYModel and set(xy.params) == set(
+        MODEL_CLASSES.get("forest").params)
+    assert xy.estimator()().n_directions == 2 and ForestModel().n_directions == 6
+
+
+def test_forest_xy_splits_on_the_coordinates_only():
+    """Its features are x and y themselves (relative to the area's centre): every split is a
+    horizontal or vertical line, so the map of a model of an axis-aligned square has straight
+    sides; a stored forest-xy reloads as one (its n_directions stored)."""
+    m = ForestXYModel(area=AREA)
+    pts = np.array([[400.0, 350.0], [410.0, 330.0]])
+    np.testing.assert_allclose(m._features(pts), [[0.0, 0.0], [10.0, -20.0]], atol=1e-12)
+    x = np.random.default_rng(4).uniform((160.0, 210.0), (640.0, 490.0), size=(1500, 2))
+    inside = (abs(x[:, 0] - 400) < 80) & (abs(x[:, 1] - 350) < 60)
+    heard = np.where(inside[:, None], [B], np.nan)
+    m.fit(x, heard)
+    cls = m.predict_class(np.column_stack([np.full(200, 400.0), np.linspace(210, 490, 200)]))
+    top = np.linspace(210, 490, 200)[cls == 1]
+    # along a vertical line through the square, exactly one run of "inside", edges within the
+    # nearest samples' spacing of the truth
+    assert np.all(np.diff(np.flatnonzero(cls == 1)) == 1)
+    assert abs(top.min() - 290) < 6 and abs(top.max() - 410) < 6
+    back = model_from_arrays(m.to_arrays(), "forest-xy")
+    assert isinstance(back, ForestXYModel) and back.n_directions == 2
 
 
 def _raw_votes(model, q: np.ndarray) -> np.ndarray:

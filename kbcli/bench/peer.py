@@ -185,16 +185,30 @@ def kbcli_run(cfg: PeerConfig, kb: Keyboard, seed: np.random.SeedSequence
     return out
 
 
-def runs(cfg: PeerConfig) -> Iterator[tuple[str, str, int, dict[int, tuple[float, float]]]]:
-    """(layout, learner, seed index, scores) for kbcli and every peer, seed by seed."""
+def _one(cfg: PeerConfig, layout: str, who: str, i: int, seed: np.random.SeedSequence
+         ) -> tuple[str, str, int, dict[int, tuple[float, float]]]:
+    kb = bench_keyboard(layout)
+    got = kbcli_run(cfg, kb, seed) if who == "kbcli" else peer_run(cfg, kb, who, seed)
+    return layout, who, i, got
+
+
+def runs(cfg: PeerConfig, jobs: int = 1
+         ) -> Iterator[tuple[str, str, int, dict[int, tuple[float, float]]]]:
+    """(layout, learner, seed index, scores) for kbcli and every peer, seed by seed, in that
+    order whatever ``jobs`` (local worker processes, joblib: each run is seeded by its own
+    index, so the numbers do not depend on how many run at once)."""
     _check(cfg)
     seeds = np.random.SeedSequence(cfg.seed).spawn(cfg.seeds)
-    for layout in cfg.layouts:
-        kb = bench_keyboard(layout)
-        for i, s in enumerate(seeds):
-            yield layout, "kbcli", i, kbcli_run(cfg, kb, s)
-            for name in cfg.peers:
-                yield layout, name, i, peer_run(cfg, kb, name, s)
+    tasks = [(layout, who, i, s) for layout in cfg.layouts for i, s in enumerate(seeds)
+             for who in ("kbcli", *cfg.peers)]
+    if jobs <= 1:
+        for t in tasks:
+            yield _one(cfg, *t)
+        return
+    from joblib import Parallel, delayed
+
+    yield from Parallel(n_jobs=jobs, return_as="generator")(delayed(_one)(cfg, *t)
+                                                            for t in tasks)
 
 
 def summarize(cfg: PeerConfig, results: list[tuple]) -> list[dict]:

@@ -61,7 +61,8 @@ def learn_cmd(
     model_class: opts.model_class_option(
         "Model class: auto or one of {classes}. auto: explore with forest, keep the class with the "
         "best cross-validated score on the samples (on stderr); lines: straight key edges; svc, "
-        "forest, knn: scikit-learn SVMs, random forest, nearest samples (any key shape).")
+        "forest, knn: scikit-learn SVMs, random forest, nearest samples (any key shape); "
+        "forest-xy: a forest splitting on x and y only (horizontal and vertical key edges).")
         = "auto",
 ) -> None:
     """Learn the instrument model by exploring the pad with the simulated arm.
@@ -188,6 +189,7 @@ def bench_learn_cmd(
         "uncertainty sampling around scikit-learn classifiers, same simulator, seeds and scorer, "
         "with a verdict per layout and budget; on grid, hex, piano, pads and polygons unless "
         "--layout is given.")] = False,
+    jobs: opts.Jobs = 1,
 ) -> None:
     """Benchmark learning the model: sample efficiency and speed, per layout, model class and
     strategy.
@@ -197,13 +199,16 @@ def bench_learn_cmd(
     until 97 % and 99 % accuracy, the median boundary error (px) at the boundary budget and the
     median time of one fit at the largest budget; active / random reaches to 97 %; then the wall
     time of one `kbcli learn` stage run at the boundary budget and the dynamics simulator's
-    reaches per second.
+    reaches per second. With --peer, --jobs runs that many learning runs at once (the numbers do
+    not change; without --peer it is refused).
     """
     from kbcli.bench import learn as bench
 
     opts.check_counts(("--seeds", seeds, opts.MAX_SEEDS),
                       ("--boundary-budget", boundary_budget, MAX_BUDGET))
-    if _bench_peer(peer, seeds, budgets, layout, seed, eval_step):
+    if jobs > 1 and not peer:
+        raise ConfigError("--jobs applies to --peer runs only")
+    if _bench_peer(peer, seeds, budgets, layout, seed, eval_step, jobs):
         return
     kb = None
     if keyboard is not None:
@@ -242,7 +247,7 @@ def bench_learn_cmd(
 
 
 def _bench_peer(peer: bool, seeds: int, budgets: str | None, layout: list[str] | None, seed: int,
-                eval_step: float) -> bool:
+                eval_step: float, jobs: int = 1) -> bool:
     """``kbcli bench learn --peer``: run and print the tables (``kbcli bench --json FILE learn
     --peer`` also writes them); False (nothing done) without ``--peer``."""
     if not peer:
@@ -255,7 +260,7 @@ def _bench_peer(peer: bool, seeds: int, budgets: str | None, layout: list[str] |
         fields["layouts"] = tuple(layout)
     cfg = bench.PeerConfig(**fields)
     n = len(cfg.layouts) * cfg.seeds * (1 + len(cfg.peers))
-    results = list(progress(bench.runs(cfg), n, "learning runs (kbcli and peers)"))
+    results = list(progress(bench.runs(cfg, jobs), n, "learning runs (kbcli and peers)"))
     tables = bench.tables(cfg, bench.summarize(cfg, results))
     con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
     for tb in tables:

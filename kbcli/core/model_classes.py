@@ -30,6 +30,9 @@ is a scikit-learn estimator deriving from :class:`~kbcli.core.model.ModelBase`):
 ``forest`` (:class:`~kbcli.core.sk_models.ForestModel`)
     scikit-learn's random forest on the two coordinates and oblique projections: p is the share of
     trees voting for a sound (any key shape; axis-aligned keys exactly).
+``forest-xy`` (:class:`~kbcli.core.sk_models.ForestXYModel`)
+    The same forest splitting on the two coordinates only: exact and sharper where every key edge
+    is horizontal or vertical (piano, grid); it staircases a slanted edge.
 ``knn`` (:class:`~kbcli.core.sk_models.KNNModel`)
     scikit-learn's k nearest samples, distance-weighted votes (any key shape).
 
@@ -119,6 +122,12 @@ def _forest() -> type:
     return ForestModel
 
 
+def _forest_xy() -> type:
+    from kbcli.core.sk_models import ForestXYModel
+
+    return ForestXYModel
+
+
 def _knn() -> type:
     from kbcli.core.sk_models import KNNModel
 
@@ -137,6 +146,8 @@ MODEL_CLASSES.register("svc", ModelClass(_svc), summary="scikit-learn SVMs per p
                        "neighbouring sounds, linear or RBF (any key shape)")
 MODEL_CLASSES.register("forest", ModelClass(_forest), summary="scikit-learn random forest on the "
                        "coordinates and oblique projections (any key shape)")
+MODEL_CLASSES.register("forest-xy", ModelClass(_forest_xy), summary="scikit-learn random forest "
+                       "on the two coordinates only (keys with horizontal and vertical edges)")
 MODEL_CLASSES.register("knn", ModelClass(_knn), summary="scikit-learn k nearest samples, "
                        "distance-weighted votes (any key shape)")
 MODEL_CLASSES.register(EXACT, ModelClass(_exact, learned=False),

@@ -24,7 +24,7 @@ over the exploration samples (each fold's model fitted on the other folds), this
 
 and **calibrates** p(sound | action): among a few values of the model's calibration parameters
 (for the line model: ``sd_scale`` on its boundary uncertainty, ``noise_sd`` for label noise near
-boundaries, ``floor`` spread evenly over all sounds; for ``forest`` and ``knn``: ``sharpen``, an
+boundaries, ``floor`` spread evenly over all sounds; for ``forest``, ``forest-xy`` and ``knn``: ``sharpen``, an
 exponent on their votes, and ``floor``), it keeps those with the lowest held-out
 Brier score ``sum_c (p_c - [c = heard])^2`` (a proper scoring rule), weighted for the distance
 shift below, provided they beat the model's own settings by more than one standard error of the

@@ -4,7 +4,7 @@ The simulated arm (``ideal`` or ``dynamics`` mode, :mod:`kbcli.sim`) reaches for
 an exploration strategy (:mod:`kbcli.core.explore`) on the pad where the keyboard lies at its
 reference pose; the robot hears what its finger played and fits a model of p(sound | action) of the
 chosen class (:mod:`kbcli.core.model_classes`: ``lines``, :class:`~kbcli.core.learned.LearnedModel`;
-``svc``, :class:`~kbcli.core.svc_model.SVCModel`; ``forest`` and ``knn``,
+``svc``, :class:`~kbcli.core.svc_model.SVCModel`; ``forest``, ``forest-xy`` and ``knn``,
 :mod:`kbcli.core.sk_models`) or, by default (``auto``), explores with the ``forest`` class (the
 class it refits re-chosen every 200 reaches among ``forest`` and ``svc``) and then fits the class
 that cross-validation on the samples prefers (:mod:`kbcli.core.select`; the artifact's config then names the class chosen, its
