@@ -11,7 +11,7 @@ SEED   ?= 0
 
 JOBS   ?= 2
 
-.PHONY: help install demo test lint docs docs-serve docs-figures results results-reproduce results-quality data data-files reproduce reproduce-ideal reproduce-earlier reproduce-ablations reproduce-own-model model-quality reproduce-layouts bench clean
+.PHONY: help install demo test lint docs docs-serve docs-figures results results-peer results-reproduce results-quality data data-files reproduce reproduce-ideal reproduce-earlier reproduce-ablations reproduce-own-model model-quality reproduce-layouts bench clean
 
 help:
 	@echo "make demo        install, then run the main job on the embedded default model"
@@ -24,6 +24,7 @@ help:
 	@echo "make reproduce-layouts  learn and adapt on every layout (out/layouts/report/; hours)"
 	@echo "make model-quality  test the paper's Sect. IV-C hypothesis: advantage vs model quality"
 	@echo "make results-reproduce, results-quality  keep their verdicts as benchmarks/results/*.json"
+	@echo "make results-peer  kbcli's learner beside scikit-activeml's, 5 seeds (about an hour on 2 cores)"
 	@echo "make bench       print the benchmark tables"
 	@echo "make docs        build the documentation site (site/index.html); make docs-serve serves it"
 
@@ -60,6 +61,11 @@ results: $(STAMP)
 	$(KBCLI) bench --json $(RESULTS)/speed.json speed --repeats 5
 	$(KBCLI) bench --json $(RESULTS)/learn.json learn --seeds 3
 	$(KBCLI) bench --json $(RESULTS)/reliability.json reliability --seeds 3
+
+# kbcli's default learner beside scikit-activeml's (issue 27): 5 layouts x 5 seeds x 6 learners,
+# about an hour on 2 cores with both at work.
+results-peer: $(STAMP)
+	$(KBCLI) bench --json $(RESULTS)/learn-peer.json learn --peer --seeds 5 --jobs 2
 
 # The ablation ladder's evaluations (make reproduce-ablations: both modes, or one file per mode), as
 # the report's --ablations options.
