@@ -187,6 +187,9 @@ def kbcli_run(cfg: PeerConfig, kb: Keyboard, seed: np.random.SeedSequence
 
 def _one(cfg: PeerConfig, layout: str, who: str, i: int, seed: np.random.SeedSequence
          ) -> tuple[str, str, int, dict[int, tuple[float, float]]]:
+    from kbcli.io.runner import no_leak_restarts
+
+    no_leak_restarts()  # in a worker: its caches grow past loky's 300 MB "leak" and restarts
     kb = bench_keyboard(layout)
     got = kbcli_run(cfg, kb, seed) if who == "kbcli" else peer_run(cfg, kb, who, seed)
     return layout, who, i, got

@@ -114,7 +114,7 @@ def _state_for(setup: str, context: Any, key: str) -> Any:
     return _STATE[token]
 
 
-def _no_leak_restarts() -> None:
+def no_leak_restarts() -> None:
     """Tell loky (in this worker) not to take the per-process caches for a leak.
 
     loky restarts a worker whose memory grew by more than 300 MB since its first task; the state a
@@ -138,7 +138,7 @@ def run_tasks(
     """
     from threadpoolctl import threadpool_limits
 
-    _no_leak_restarts()
+    no_leak_restarts()
     with threadpool_limits(limits=1):
         state = _state_for(setup, context, key)
         fn = resolve(run)
