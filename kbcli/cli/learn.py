@@ -191,23 +191,19 @@ def bench_learn_cmd(
         "--layout is given.")] = False,
     jobs: opts.Jobs = 1,
 ) -> None:
-    """Benchmark learning the model: sample efficiency and speed, per layout, model class and
-    strategy.
+    """Benchmark learning the model: sample efficiency and speed per layout, class and strategy.
 
     Reads nothing (or --keyboard); writes nothing. Prints, per row over SEEDS runs: the median
     accuracy (on a grid of --eval-step px over the working area) at each budget, the median reaches
     until 97 % and 99 % accuracy, the median boundary error (px) at the boundary budget and the
     median time of one fit at the largest budget; active / random reaches to 97 %; then the wall
     time of one `kbcli learn` stage run at the boundary budget and the dynamics simulator's
-    reaches per second. With --peer, --jobs runs that many learning runs at once (the numbers do
-    not change; without --peer it is refused).
+    reaches per second. --jobs: with --peer, learning runs at once (the same numbers).
     """
     from kbcli.bench import learn as bench
 
     opts.check_counts(("--seeds", seeds, opts.MAX_SEEDS),
                       ("--boundary-budget", boundary_budget, MAX_BUDGET))
-    if jobs > 1 and not peer:
-        raise ConfigError("--jobs applies to --peer runs only")
     if _bench_peer(peer, seeds, budgets, layout, seed, eval_step, jobs):
         return
     kb = None
@@ -251,6 +247,8 @@ def _bench_peer(peer: bool, seeds: int, budgets: str | None, layout: list[str] |
     """``kbcli bench learn --peer``: run and print the tables (``kbcli bench --json FILE learn
     --peer`` also writes them); False (nothing done) without ``--peer``."""
     if not peer:
+        if jobs > 1:
+            raise ConfigError("--jobs applies to --peer runs only")
         return False
     budgets = budgets or "150,300,800"
     from kbcli.bench import peer as bench
