@@ -71,7 +71,7 @@ def _samples_and_lines(ax, art: Artifact, handles: list) -> str:
                               label=f"fitted boundaries ({len(lines)})"))
     a = art.attrs
     sel = a.get("model_selection")
-    chosen = (f" (auto: lowest cross-validated mislabel rate, "
+    chosen = (f" (auto: chosen by cross-validation, held-out mislabel rate "
               f"{100 * _num(sel['cv_error'][sel['chosen']]):.1f} %)" if sel else "")
     return (f"learned {model_class_of(art)} model{chosen}: {a.get('strategy')} "
             f"exploration, {a.get('mode')} mode, "
