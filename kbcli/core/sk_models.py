@@ -66,7 +66,8 @@ FLOOR_GRID = (0.0, 0.002, 0.01, 0.03)
 #: 0.113 / 0.107 / 0.088 / 0.057, then 0.113 / 0.011 / 0.011 / 0.003. With ``forest-xy`` among
 #: ``auto``'s candidates (chosen on the grid from 300 reaches), active: 0.154 / 0.053 / 0.010 /
 #: 0.000: the one-standard-error rule keeps too little sharpening of its votes (seed 1 at 300
-#: kept 1, 0.192; sharpen 4 measures 0.003 / 0.010 / 0.010 on seeds 0-2).
+#: kept 1, 0.192; sharpen 4 measures 0.003 / 0.010 / 0.010 on seeds 0-2, but with the realistic
+#: arm 0.045-0.058, where sharpen 2 is best: 0.015 / 0.010 / 0.005).
 SHARPEN_GRID = (1.0, 2.0, 4.0, 8.0)
 #: Largest ``sharpen`` accepted (p ** 16 of the smallest share of 120 trees is 5e-34: no
 #: underflow of a class that has a vote).
