@@ -181,10 +181,19 @@ def _half_planes(x: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize("name", NEW)
+def test_own_sharpen_is_the_first_candidate_of_the_calibration(name):
+    """The held-out choice keeps a class's own ``sharpen`` unless another beats it: the own
+    value must be among the candidates (first), 2 for the forests and 1 for k-NN."""
+    model = make_model(name, match_threshold=1.5, area=AREA)
+    grid = type(model).calibration_grid()["sharpen"]
+    assert model.sharpen == grid[0] == (1.0 if name == "knn" else 2.0)
+    assert list(grid) == sorted(grid) and min(grid) >= 1.0
+
+
+@pytest.mark.parametrize("name", NEW)
 def test_sharpen_one_is_the_classifier_s_own_votes(name):
     x = _band(np.random.default_rng(0))
-    model = make_model(name, match_threshold=1.5, area=AREA).fit(x, _half_planes(x))
-    assert model.sharpen == 1.0
+    model = make_model(name, match_threshold=1.5, area=AREA, sharpen=1).fit(x, _half_planes(x))
     q = np.random.default_rng(1).uniform((300.0, 210.0), (480.0, 490.0), size=(3000, 2))
     np.testing.assert_array_equal(model.predict_proba(q), _raw_votes(model, q))
     floored = make_model(name, match_threshold=1.5, area=AREA, floor=0.01, sharpen=1).fit(
@@ -197,7 +206,7 @@ def test_sharpen_one_is_the_classifier_s_own_votes(name):
 def test_sharpen_raises_the_top_probability_and_keeps_the_argmax(name, k):
     x = _band(np.random.default_rng(0))
     heard = _half_planes(x)
-    plain = make_model(name, match_threshold=1.5, area=AREA).fit(x, heard)
+    plain = make_model(name, match_threshold=1.5, area=AREA, sharpen=1).fit(x, heard)
     sharp = make_model(name, match_threshold=1.5, area=AREA, sharpen=k).fit(x, heard)
     q = np.random.default_rng(1).uniform((300.0, 210.0), (480.0, 490.0), size=(3000, 2))
     p0, p1 = plain.predict_proba(q), sharp.predict_proba(q)
@@ -230,22 +239,24 @@ def test_stored_sharpen_round_trips_and_old_models_load_with_one(name):
     assert loaded.sharpen == 1.0
     np.testing.assert_array_equal(loaded.predict_proba(q), _raw_votes(loaded, q))
     np.testing.assert_array_equal(
-        loaded.predict_proba(q), make_model(name, match_threshold=1.5, area=AREA).fit(
+        loaded.predict_proba(q), make_model(name, match_threshold=1.5, area=AREA, sharpen=1).fit(
             x, heard).predict_proba(q))
 
 
 def test_assess_sharpens_the_forest_on_deterministic_half_planes():
     """Two half-planes, heard without noise, explored on a 20 px lattice and in the boundary
     band: the forest's votes spread across x = 393 wider than the band the boundary can lie in;
-    cross-validation chooses ``sharpen`` > 1, which lowers the calibration error on the pad."""
+    cross-validation keeps a ``sharpen`` of at least the forest's own 2, which halves the
+    calibration error of the raw votes on the pad."""
     rng = np.random.default_rng(0)
     x = _band(rng)
     model = ForestModel(area=AREA).fit(x, _half_planes(x))
     calibrated, rel = assess(model, x, _half_planes(x), rng=np.random.default_rng(0))
-    assert rel.calibration["sharpen"] > 1.0
-    assert calibrated.sharpen == rel.calibration["sharpen"] and model.sharpen == 1.0
+    assert rel.calibration["sharpen"] >= 2.0
+    assert calibrated.sharpen == rel.calibration["sharpen"] and model.sharpen == 2.0
     q = rng.uniform((160.0, 210.0), (640.0, 490.0), size=(20000, 2))
     truth = np.eye(3)[np.where(q[:, 0] < 393.0, 1, 2)]
-    before = expected_calibration_error(model.predict_proba(q), truth)
+    raw = ForestModel(area=AREA, sharpen=1).fit(x, _half_planes(x))
+    before = expected_calibration_error(raw.predict_proba(q), truth)
     after = expected_calibration_error(calibrated.predict_proba(q), truth)
     assert after < 0.5 * before

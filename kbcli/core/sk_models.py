@@ -13,8 +13,9 @@ M_INST = p(sound | action) from a general-purpose classifier fitted to the explo
    held-out Brier score (:meth:`SklearnModel.calibration_grid`). ``sharpen`` > 1 undoes the
    under-confidence of the forest's votes: with a deterministic instrument (ideal mode) the
    sound is certain but within a sample spacing of a boundary, while the bootstrap spreads the
-   share of votes over a wider band around it (``kbcli bench reliability``: see
-   :data:`SHARPEN_GRID`);
+   share of votes over a wider band around it. The forests' own ``sharpen`` is 2, which the
+   held-out choice keeps unless 4 or 8 beats it (``kbcli bench reliability``: see
+   :data:`FOREST_SHARPEN_GRID`); k-NN's is 1;
 
    ``forest`` (:class:`ForestModel`)
        scikit-learn's :class:`~sklearn.ensemble.RandomForestClassifier` (fully grown trees on
@@ -58,16 +59,20 @@ SITE_GRID = 2.0  # px, grid on which boundary sites are looked for
 _CHUNK = 65536  # query points per block of a prediction
 #: Candidate values of the calibration's uniform floor (:meth:`SklearnModel.calibration_grid`).
 FLOOR_GRID = (0.0, 0.002, 0.01, 0.03)
-#: Candidate values of the calibration's exponent ``sharpen`` (1: the classifier's own votes).
-#: ``kbcli bench reliability --seeds 3`` (ideal mode, medians over seeds 0-2, calibration error
-#: against the simulator at 150 / 300 / 800 / 1600 reaches), active exploration: 0.154 / 0.138 /
-#: 0.060 / 0.025 with the floor alone, 0.154 / 0.029 / 0.004 / 0.000 with this grid (the models'
-#: own expected mislabel rate at 800: 0.4 % for a measured 0.1 %, was 6.0 %); random exploration:
-#: 0.113 / 0.107 / 0.088 / 0.057, then 0.113 / 0.011 / 0.011 / 0.003. With ``forest-xy`` among
-#: ``auto``'s candidates (chosen on the grid from 300 reaches), active: 0.154 / 0.053 / 0.010 /
-#: 0.000: the one-standard-error rule keeps too little sharpening of its votes (seed 1 at 300
-#: kept 1, 0.192; sharpen 4 measures 0.003 / 0.010 / 0.010 on seeds 0-2, but with the realistic
-#: arm 0.045-0.058, where sharpen 2 is best: 0.015 / 0.010 / 0.005).
+#: Candidate values of the calibration's exponent ``sharpen`` of the forests, whose own
+#: ``sharpen`` is 2 (the first value: the one kept unless another beats it on held-out touches by
+#: a standard error). ``kbcli bench reliability --seeds 3`` (medians over seeds 0-2, calibration
+#: error against the simulator at 150 / 300 / 800 / 1600 reaches, active exploration), with the
+#: forests' own ``sharpen`` 1 and 1 among the candidates: ideal arm 0.154 / 0.053 / 0.010 / 0.000
+#: (the held-out choice kept the votes' own spread where they were too flat: the models expected a
+#: 27 % mislabel rate at 150 reaches for a measured 13 %), realistic arm (``--mode dynamics --arm
+#: realistic``) 0.022 / 0.011 / 0.056 / 0.045 (sharpen 1 kept at 800 and 1600: an expected 9.8 %
+#: mislabel rate for 2.6 %). With this grid: ideal 0.014 / 0.035 / 0.007 / 0.000 (random
+#: exploration 0.038 / 0.011 / 0.014 / 0.003, was 0.113 / 0.011 / 0.011 / 0.003), realistic
+#: 0.022 / 0.011 / 0.026 / 0.027. Sharpen 4 for every model would measure 0.003-0.010 at 300
+#: ideal reaches but 0.045-0.058 with the realistic arm, hence 2 as the default.
+FOREST_SHARPEN_GRID = (2.0, 4.0, 8.0)
+#: Candidate values of ``sharpen`` for k-NN, whose own is 1 (its distance-weighted votes).
 SHARPEN_GRID = (1.0, 2.0, 4.0, 8.0)
 #: Largest ``sharpen`` accepted (p ** 16 of the smallest share of 120 trees is 5e-34: no
 #: underflow of a class that has a vote).
@@ -130,13 +135,15 @@ class SklearnModel(ModelBase):
 
     kind = "sklearn"
     _PARAMS: tuple[tuple[str, type], ...] = ()
+    _SHARPEN_GRID: tuple[float, ...] = SHARPEN_GRID
 
     # -- parameters -----------------------------------------------------------------------------
-    @staticmethod
-    def calibration_grid() -> dict[str, tuple[float, ...]]:
+    @classmethod
+    def calibration_grid(cls) -> dict[str, tuple[float, ...]]:
         """Candidate values of the prediction-time calibration: the exponent ``sharpen`` on the
-        classifier's probabilities and the uniform ``floor`` mixed in after it."""
-        return {"floor": FLOOR_GRID, "sharpen": SHARPEN_GRID}
+        classifier's probabilities (the class's own default first) and the uniform ``floor``
+        mixed in after it."""
+        return {"floor": FLOOR_GRID, "sharpen": cls._SHARPEN_GRID}
 
     def _check_params(self) -> None:
         self._check_common()
@@ -251,7 +258,8 @@ class ForestModel(SklearnModel):
     sharpen : float
         Exponent in [1, 16] on the share of votes, renormalised over the sounds (calibration:
         ``p_c ** sharpen / sum_c' p_c' ** sharpen``; 1 leaves the votes as they are, the most
-        probable sound never changes).
+        probable sound never changes). 2 by default: the bootstrap spreads the votes wider than
+        the band a boundary can lie in (:data:`FOREST_SHARPEN_GRID`).
     floor : float
         Probability spread evenly over the sounds after ``sharpen`` (calibration).
     """
@@ -259,11 +267,12 @@ class ForestModel(SklearnModel):
     kind = "forest"
     _PARAMS = (("n_estimators", int), ("n_directions", int), ("min_samples_leaf", int),
                ("random_state", int))
+    _SHARPEN_GRID = FOREST_SHARPEN_GRID
 
     def __init__(self, *, match_threshold: float = 1.5,
                  area: tuple[float, float, float, float] = DEFAULT_AREA,
                  n_estimators: int = 120, n_directions: int = 6, min_samples_leaf: int = 1,
-                 random_state: int = 0, floor: float = 0.0, sharpen: float = 1.0) -> None:
+                 random_state: int = 0, floor: float = 0.0, sharpen: float = 2.0) -> None:
         self.match_threshold = match_threshold
         self.area = area
         self.n_estimators = n_estimators
@@ -312,7 +321,7 @@ class ForestXYModel(ForestModel):
     def __init__(self, *, match_threshold: float = 1.5,
                  area: tuple[float, float, float, float] = DEFAULT_AREA,
                  n_estimators: int = 120, n_directions: int = 2, min_samples_leaf: int = 1,
-                 random_state: int = 0, floor: float = 0.0, sharpen: float = 1.0) -> None:
+                 random_state: int = 0, floor: float = 0.0, sharpen: float = 2.0) -> None:
         super().__init__(match_threshold=match_threshold, area=area, n_estimators=n_estimators,
                          n_directions=n_directions, min_samples_leaf=min_samples_leaf,
                          random_state=random_state, floor=floor, sharpen=sharpen)
