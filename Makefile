@@ -24,7 +24,7 @@ help:
 	@echo "make reproduce-layouts  learn and adapt on every layout (out/layouts/report/; hours)"
 	@echo "make model-quality  test the paper's Sect. IV-C hypothesis: advantage vs model quality"
 	@echo "make results-reproduce, results-quality  keep their verdicts as benchmarks/results/*.json"
-	@echo "make results-peer  kbcli's learner beside scikit-activeml's, 5 seeds (about an hour on 2 cores)"
+	@echo "make results-peer  kbcli's learner beside scikit-activeml's, 5 seeds (about 20 minutes on 2 cores)"
 	@echo "make bench       print the benchmark tables"
 	@echo "make docs        build the documentation site (site/index.html); make docs-serve serves it"
 
@@ -62,8 +62,8 @@ results: $(STAMP)
 	$(KBCLI) bench --json $(RESULTS)/learn.json learn --seeds 3
 	$(KBCLI) bench --json $(RESULTS)/reliability.json reliability --seeds 3
 
-# kbcli's default learner beside scikit-activeml's (issue 27): 5 layouts x 5 seeds x 6 learners,
-# about an hour on 2 cores with both at work.
+# kbcli's default learner beside scikit-activeml's (issue 27): 5 layouts x 5 seeds x 5 learners,
+# about 20 minutes on 2 cores with both at work (18 min measured, 2026-12-05).
 results-peer: $(STAMP)
 	$(KBCLI) bench --json $(RESULTS)/learn-peer.json learn --peer --seeds 5 --jobs 2
 
