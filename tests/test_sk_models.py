@@ -181,13 +181,17 @@ def _half_planes(x: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize("name", NEW)
-def test_own_sharpen_is_the_first_candidate_of_the_calibration(name):
-    """The held-out choice keeps a class's own ``sharpen`` unless another beats it: the own
-    value must be among the candidates (first), 2 for the forests and 1 for k-NN."""
+def test_own_calibration_is_the_first_candidate(name):
+    """The held-out choice keeps a class's own calibration unless another beats it: its own
+    values must be among the candidates (first): sharpen 2 for the forests, 1 for k-NN (its
+    distance-weighted votes), floor 0; the forests' floors stop at 0.01 (0.03 over 33 sounds
+    takes 3 % off every certain prediction)."""
     model = make_model(name, match_threshold=1.5, area=AREA)
-    grid = type(model).calibration_grid()["sharpen"]
-    assert model.sharpen == grid[0] == (1.0 if name == "knn" else 2.0)
-    assert list(grid) == sorted(grid) and min(grid) >= 1.0
+    grid = type(model).calibration_grid()
+    assert model.sharpen == grid["sharpen"][0] == (1.0 if name == "knn" else 2.0)
+    assert model.floor == grid["floor"][0] == 0.0
+    assert list(grid["sharpen"]) == sorted(grid["sharpen"]) and min(grid["sharpen"]) >= 1.0
+    assert max(grid["floor"]) == (0.03 if name == "knn" else 0.01)
 
 
 @pytest.mark.parametrize("name", NEW)
