@@ -270,8 +270,8 @@ def _robot_option(name: str, kind: Any, help: str, default: str | None = None) -
 
 
 #: The adapter options of the flags above (and those every adapting command has), by flag.
-PAPER_FLAGS = ("kde_samples", "kde_draw", "simulate_draw", "kde_sampler", "kde_floor", "ml_ties",
-               "stop_ml", "stop_mass", "random_actions", "candidates", "active_keep")
+PAPER_FLAGS = ("kde_samples", "kde_draw", "simulate_draw", "kde_sampler", "kde_beyond", "kde_floor",
+               "ml_ties", "stop_ml", "stop_mass", "random_actions", "candidates", "active_keep")
 
 
 def robot_given(flags: Mapping[str, Any], table: Mapping[str, Any] | None = None,
@@ -310,6 +310,11 @@ KdeSampler = _robot_option("kde_sampler", str, "What draws actions from p(action
                            "model (the model's own rejection sampler: exact, ~250 ms per 10,000 "
                            "draws) or raster (the model's raster: a cell by p(sound | cell), then a "
                            "point in it; ~1 ms)")
+#: ``--kde-beyond``: what the KDE posterior knows beyond the working area.
+KdeBeyond = _robot_option("kde_beyond", str, "kde posterior: the pad beyond the working area is "
+                          "silent (silence's samples cover it as far as a hypothesis can move a "
+                          "touch back) or unknown (no samples there: without a floor a silent "
+                          "touch mapped there rules its hypothesis out)")
 #: ``--kde-floor``: the uniform floor of each KDE term.
 KdeFloor = _robot_option("kde_floor", float, "kde posterior: weight in [0, 1) of the uniform floor "
                          "mixed into each KDE term; 0: none (Eq. 7 as written: a displacement no "
@@ -343,7 +348,7 @@ ActiveKeep = _robot_option("active_keep", int, "Most confusing candidates active
 
 #: The Typer type of each flag of :data:`PAPER_FLAGS`.
 _PAPER_TYPES = {"kde_samples": KdeSamples, "kde_draw": KdeDraw, "simulate_draw": SimulateDraw,
-                "kde_sampler": KdeSampler,
+                "kde_sampler": KdeSampler, "kde_beyond": KdeBeyond,
                 "kde_floor": KdeFloor, "ml_ties": MlTies, "stop_ml": StopMl,
                 "stop_mass": StopMass, "random_actions": RandomActions,
                 "candidates": Candidates, "active_keep": ActiveKeep}

@@ -9,8 +9,12 @@ either stands where a model's sampler is expected):
   p(action | sound) proportional to it), then a point uniform within the cell. It is the model's
   p(action | sound) to within one raster cell, at about 1 ms per 10,000 draws.
 
-Silence is drawn like any sound, over the raster (the model's working area, where it was learned
-and where it can say that a touch is silent), never beyond it: so is the model's own sampler.
+Silence is drawn like any sound over the raster (the model's working area, where it was learned);
+so is the model's own sampler. Beyond the working area the pad is silent (the keyboard lies within
+it at its reference pose: the likelihood table reads the outside as silence too), which neither
+sampler knows: :class:`SilentBeyond` adds that ring to silence's samples, so that a hypothesis that
+maps a silent touch beyond the working area is supported, not ruled out because the samples stop
+there (``AdapterConfig.kde_beyond = "silent"``, kbcli's reading of what the paper leaves open).
 
 :class:`FreshSamples` serves the KDE posterior's terms with new draws at every observation
 (Algorithm 2 as written, ``AdapterConfig.kde_draw = "fresh"``), where
@@ -22,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from kbcli.core.kde import scott_bandwidth
+from kbcli.core.sounds import SILENCE
 
 #: Raster cells below this fraction of a class's largest p(sound | cell) are left out of its
 #: support. A learned model is positive everywhere: the default model gives every class an
@@ -150,3 +155,72 @@ class FreshSamples:
             res = self.resolution
             bw = float(np.clip(scott_bandwidth(s), res, max(res, self.max_bandwidth)))
         return s, float(bw)
+
+
+class SilentBeyond:
+    """Draws of p(action | sound) where the pad beyond the working area is silent.
+
+    With a uniform prior over actions, ``p(action | silence)`` is proportional to
+    ``p(silence | action)``: the model's own answer inside its raster, 1 on the ring of width
+    ``margin`` px around it (the pad beyond the keyboard, reached by the hypotheses that move a
+    touch back by up to the prior's extent). Silence's ``n`` draws are split between the two by
+    their masses (a binomial draw): the ring's area, and the sum of ``p(silence | cell)`` times the
+    cell area over the raster. Every other sound is drawn by ``source`` unchanged.
+
+    Parameters
+    ----------
+    source : object
+        ``sample_actions(cls, n, rng)`` inside the working area: the model or a
+        :class:`RasterSampler`.
+    table : LikelihoodTable
+        The model raster: its extent and silence's mass in it.
+    margin : float
+        Width of the silent ring beyond the raster, px (0: ``source`` alone).
+    """
+
+    def __init__(self, source, table, margin: float) -> None:
+        self.source = source
+        self.margin = max(0.0, float(margin))
+        h, w = table.shape
+        s = float(table.step)
+        x0, y0 = (float(v) - s / 2 for v in table.origin)
+        x1, y1 = x0 + w * s, y0 + h * s
+        m = self.margin
+        #: the ring as four rectangles (x0, y0, x1, y1): below, above, left, right
+        self.strips = np.array([[x0 - m, y0 - m, x1 + m, y0], [x0 - m, y1, x1 + m, y1 + m],
+                                [x0 - m, y0, x0, y1], [x1, y0, x1 + m, y1]])
+        sizes = (self.strips[:, 2] - self.strips[:, 0]) * (self.strips[:, 3] - self.strips[:, 1])
+        ring = float(sizes.sum())
+        silent = (table.classes == SILENCE).sum() if table.hard else \
+            float(np.sum(table.probs[..., SILENCE], dtype=np.float64))
+        inside = float(silent) * s * s
+        #: the share of silence's mass on the ring
+        self.beyond = ring / (ring + inside) if ring > 0 else 0.0
+        self._strip_p = sizes / ring if ring > 0 else sizes
+
+    def sample_actions(self, cls: int, n: int, rng: np.random.Generator) -> np.ndarray:
+        """(n, 2) draws from p(action | sound ``cls``), pad px (silence: on the ring too)."""
+        cls, n = int(cls), int(n)
+        if cls != SILENCE or self.beyond <= 0:
+            return self.source.sample_actions(cls, n, rng)
+        k = int(rng.binomial(n, self.beyond))
+        inside = np.asarray(self.source.sample_actions(cls, n - k, rng), float).reshape(-1, 2) \
+            if k < n else np.zeros((0, 2))
+        strip = self.strips[rng.choice(len(self.strips), size=k, p=self._strip_p)]
+        u = rng.random((k, 2))
+        ring = strip[:, :2] + u * (strip[:, 2:] - strip[:, :2])
+        return np.concatenate([inside, ring])
+
+
+def beyond_margin(grid, area: tuple[float, float, float, float], reach: float) -> float:
+    """How far beyond ``area`` (px) a touch inside it can be moved back by a hypothesis of
+    ``grid``, plus ``reach`` (a kernel's): the width of the silent ring :class:`SilentBeyond`
+    needs. A translation moves a point by at most the prior's half-width per axis; a rotation of
+    the rigid family by up to ``2 r sin(angle / 2)`` more, ``r`` the farthest corner from its
+    centre."""
+    shift = float(np.max(np.abs(np.concatenate([grid.dx, grid.dy]))))
+    x0, y0, x1, y1 = area
+    corners = np.array([[x0, y0], [x0, y1], [x1, y0], [x1, y1]], float)
+    r = float(np.max(np.hypot(*(corners - np.asarray(grid.centre, float)).T)))
+    turn = 2 * r * np.sin(np.radians(float(np.max(np.abs(grid.angles)))) / 2)
+    return shift + float(turn) + float(reach)

@@ -9,7 +9,9 @@ import math
 
 import numpy as np
 
+from kbcli.core.action_sampler import SilentBeyond, beyond_margin
 from kbcli.core.adapter_config import LEARNED_BLUR, AdapterConfig, _size
+from kbcli.core.grid import HypothesisGrid
 from kbcli.core.kde import ActionSamples
 from kbcli.core.table import LikelihoodTable, exact_map
 from kbcli.core.transforms import FAMILIES
@@ -60,10 +62,47 @@ def build_table(model, cfg: AdapterConfig,
     return LikelihoodTable.from_model(model, step, eps=cfg.outlier, blur=blur, area=area)
 
 
-def build_samples(model, cfg: AdapterConfig, seed) -> ActionSamples:
+#: The widest kernel of the KDE's bandwidth rule (px) and its reach in kernel widths: how far
+#: beyond a sample a KDE term is non-zero (:mod:`kbcli.core.kde`).
+MAX_BANDWIDTH, KERNEL_REACH = 4.0, 4.0
+
+
+def hypothesis_grid(cfg: AdapterConfig, area: tuple[float, float, float, float],
+                    centre: np.ndarray | None = None) -> HypothesisGrid:
+    """The hypothesis grid of ``cfg`` for a working area (rotation centre: the area's centre
+    unless given, the keyboard's centre at its reference pose)."""
+    x0, y0, x1, y1 = area
+    c = np.array([(x0 + x1) / 2, (y0 + y1) / 2]) if centre is None else np.asarray(centre, float)
+    return HypothesisGrid.build(cfg.family, prior_halfwidth=cfg.prior_halfwidth,
+                                resolution=cfg.resolution, centre=c, max_angle=cfg.max_angle,
+                                angle_resolution=cfg.angle_resolution)
+
+
+def kde_source(source, cfg: AdapterConfig, table: LikelihoodTable, grid: HypothesisGrid,
+               area: tuple[float, float, float, float]):
+    """What the KDE posterior draws p(action | sound) from: ``source`` (the model or its raster
+    sampler), with ``cfg.kde_beyond = "silent"`` wrapped so that silence covers the pad beyond
+    the working area as far as the hypotheses of ``grid`` and a kernel reach
+    (:class:`~kbcli.core.action_sampler.SilentBeyond`)."""
+    if cfg.kde_beyond != "silent":
+        return source
+    reach = KERNEL_REACH * (MAX_BANDWIDTH if cfg.kde_bandwidth is None else cfg.kde_bandwidth)
+    return SilentBeyond(source, table, beyond_margin(grid, area, reach))
+
+
+def build_samples(model, cfg: AdapterConfig, seed, *, table: LikelihoodTable | None = None,
+                  source=None) -> ActionSamples:
     """The ``kde`` posterior's per-class samples of p(action | sound) for ``cfg`` (drawn lazily,
-    once per class, from ``SeedSequence([*seed, cls])``; share it across adaptations)."""
-    return ActionSamples(model, cfg.kde_samples, seed, bandwidth=cfg.kde_bandwidth,
+    once per class, from ``SeedSequence([*seed, cls])``; share it across adaptations), drawn
+    from ``source`` (default: the model, as :func:`kde_source` wraps it for ``cfg``; ``table``,
+    the model's raster for ``cfg``, is built when not given and needed)."""
+    if source is None:
+        source = model
+        if cfg.kde_beyond == "silent":
+            area = tuple(float(v) for v in model.area)
+            table = build_table(model, cfg, area) if table is None else table
+            source = kde_source(model, cfg, table, hypothesis_grid(cfg, area), area)
+    return ActionSamples(source, cfg.kde_samples, seed, bandwidth=cfg.kde_bandwidth,
                          resolution=cfg.resolution)
 
 

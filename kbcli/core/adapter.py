@@ -37,10 +37,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from kbcli.core.action_sampler import FreshSamples
-from kbcli.core.adapt_setup import build_samples, build_table, spot_count
+from kbcli.core.adapt_setup import (
+    build_samples,
+    build_table,
+    hypothesis_grid,
+    kde_source,
+    spot_count,
+)
 from kbcli.core.adapter_config import AdapterConfig, learning_rate, redundancy_radius
 from kbcli.core.estimators import ESTIMATORS
-from kbcli.core.grid import HypothesisGrid
 from kbcli.core.kde import ActionSamples
 from kbcli.core.posterior import Posterior
 from kbcli.core.posteriors import POSTERIORS, Observation
@@ -114,12 +119,7 @@ class Adapter:
         self.cfg = cfg
         self.rng = rng
         self.area = tuple(float(v) for v in (model.area if area is None else area))
-        x0, y0, x1, y1 = self.area
-        c = np.array([(x0 + x1) / 2, (y0 + y1) / 2]) if centre is None else np.asarray(centre, float)
-        self.grid = HypothesisGrid.build(cfg.family, prior_halfwidth=cfg.prior_halfwidth,
-                                         resolution=cfg.resolution, centre=c,
-                                         max_angle=cfg.max_angle,
-                                         angle_resolution=cfg.angle_resolution)
+        self.grid = hypothesis_grid(cfg, self.area, centre)
         self.table = build_table(model, cfg, self.area) if table is None else table
         # the adapter's own generators, by name (spawning does not move ``rng``'s stream, so the
         # historical options draw exactly as before): ties of the ML cell, and fresh KDE samples
@@ -143,10 +143,12 @@ class Adapter:
         #: the kind of posterior (:data:`kbcli.core.posteriors.POSTERIORS`)
         self.kind = POSTERIORS.get(cfg.posterior)
         if self.kind.uses_samples and cfg.kde_draw == "fresh":  # Algorithm 2: new every touch
-            samples = FreshSamples(self.action_source(), cfg.kde_samples, own["kde"],
+            samples = FreshSamples(self.kde_source(), cfg.kde_samples, own["kde"],
                                    bandwidth=cfg.kde_bandwidth, resolution=cfg.resolution)
         elif self.kind.uses_samples and samples is None:
-            samples = build_samples(model, cfg, [int(v) for v in rng.integers(2**32, size=2)])
+            samples = build_samples(model, cfg, [int(v) for v in rng.integers(2**32, size=2)],
+                                    source=kde_source(model, cfg, self.table, self.grid,
+                                                      self.area))
         self.samples = samples
         #: the samples of the simulated touches (``paper-active``): ``samples`` unless
         #: ``simulate_draw`` says otherwise (:meth:`_simulation_samples`)
@@ -211,9 +213,9 @@ class Adapter:
             return self.samples
         own = rng.spawn(1)[0]
         if draw == "fresh":
-            return FreshSamples(self.action_source(), cfg.kde_samples, own,
+            return FreshSamples(self.kde_source(), cfg.kde_samples, own,
                                 bandwidth=cfg.kde_bandwidth, resolution=cfg.resolution)
-        return ActionSamples(self.action_source(), cfg.kde_samples,
+        return ActionSamples(self.kde_source(), cfg.kde_samples,
                              [int(v) for v in own.integers(2**32, size=2)],
                              bandwidth=cfg.kde_bandwidth, resolution=cfg.resolution)
 
@@ -231,6 +233,12 @@ class Adapter:
         """What draws actions from p(action | sound) (``cfg.kde_sampler``): the model's own
         sampler, or the model's raster (:class:`~kbcli.core.action_sampler.RasterSampler`)."""
         return self.table.sampler() if self.cfg.kde_sampler == "raster" else self.model
+
+    def kde_source(self):
+        """What the KDE posterior's terms draw p(action | sound) from: :meth:`action_source`,
+        with silence extended beyond the working area as ``cfg.kde_beyond`` says
+        (:func:`kbcli.core.adapt_setup.kde_source`). The strategies' own draws stay inside it."""
+        return kde_source(self.action_source(), self.cfg, self.table, self.grid, self.area)
 
     def simulate(self, action: np.ndarray, cls: int) -> np.ndarray:
         """The log term a touch read at ``action`` that gave ``cls`` would multiply the posterior

@@ -93,6 +93,8 @@ def _choice(*names: str) -> AfterValidator:
 KDE_DRAWS = ("shared", "fresh")
 #: What draws those samples (``AdapterConfig.kde_sampler``).
 KDE_SAMPLERS = ("model", "raster")
+#: What silence's samples of p(action | silence) cover (``AdapterConfig.kde_beyond``).
+KDE_BEYOND = ("silent", "unknown")
 #: How ties of the maximum-likelihood cell are broken (``AdapterConfig.ml_ties``).
 ML_TIES = ("first", "random")
 #: Where the ``random`` strategy's actions come from (``AdapterConfig.random_actions``).
@@ -199,8 +201,15 @@ class AdapterConfig(Config):
         sampler: exact, ~250 ms per 10,000 draws of the default learned model) or ``raster`` (the
         model rasterised at ``resolution``: a cell drawn with weight p(sound | cell), then a point
         uniform in it; ~1 ms; :class:`kbcli.core.action_sampler.RasterSampler`). Silence is drawn
-        like any sound, over the working area the model was learned on (where the model can say a
-        touch is silent), never beyond it.
+        like any sound over the working area the model was learned on; beyond it as
+        ``kde_beyond`` says.
+    kde_beyond : str
+        What the KDE posterior knows of the pad beyond the working area (where the paper is
+        silent): ``silent`` (it is silent, as the likelihood table reads it: silence's samples
+        cover a ring beyond the working area as wide as the hypotheses can move a touch back,
+        :class:`kbcli.core.action_sampler.SilentBeyond`, so a silent touch never rules out a
+        hypothesis because the samples stop at the area's edge) or ``unknown`` (no samples there:
+        without a floor such a hypothesis is ruled out; before issue 39 the only behaviour).
     kde_floor : float or None
         Weight of the uniform floor mixed into each KDE term (``(1 - w) KDE + w / |prior|``);
         0: none (Eq. 7 as written: a hypothesis that no sample supports is ruled out by that
@@ -254,6 +263,7 @@ class AdapterConfig(Config):
     simulate_draw: Annotated[Annotated[Name, _choice(*KDE_DRAWS)] | None,
                              Field(exclude_if=lambda v: v is None)] = None
     kde_sampler: Annotated[Name, _choice(*KDE_SAMPLERS)] = "model"
+    kde_beyond: Annotated[Name, _choice(*KDE_BEYOND)] = "silent"
     kde_floor: Floor | None = None
     kde_bandwidth: Positive | None = None
     estimator: Annotated[Name, _registered(ESTIMATORS)] = "mean"

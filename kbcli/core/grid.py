@@ -112,6 +112,23 @@ class HypothesisGrid:
         return int(np.ravel_multi_index((iy, ix), self.shape))
 
 
+    def around(self, params: np.ndarray) -> tuple[slice, ...]:
+        """Index of the block of cells that brackets ``params`` (P,) on every axis (two cells
+        per axis, one at the grid's edge or on an axis of one cell): where a point between the
+        cells gets its value by interpolation."""
+        p = np.asarray(params, float)
+
+        def bracket(values: np.ndarray, v: float) -> slice:
+            if len(values) < 2:
+                return slice(0, 1)
+            step = float(values[1] - values[0])
+            i = int(np.clip(np.floor((v - values[0]) / step), 0, len(values) - 2))
+            return slice(i, i + 2)
+
+        xy = (bracket(self.dy, p[-1]), bracket(self.dx, p[-2]))
+        return (bracket(self.angles, p[0]), *xy) if self.rigid else xy
+
+
 def grid_cells_per_axis(halfwidth: float, step: float) -> int:
     """Cells of a symmetric axis ``[-halfwidth, +halfwidth]`` at ``step`` (odd, centred on 0)."""
     return 2 * int(math.floor(halfwidth / step + 1e-9)) + 1

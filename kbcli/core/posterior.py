@@ -119,6 +119,13 @@ class Posterior:
         """Multiply in one observation's term (Eq. 8: add its log)."""
         return Posterior(self.grid, self.logp + term, self.n_obs + 1, self.tie_seed)
 
+    def log_ratio_at(self, params: np.ndarray) -> float:
+        """``log(p(params) / max p)``: how far below the most probable cell the posterior puts
+        ``params`` (P,), read on the cells that bracket it (:meth:`HypothesisGrid.around`: the
+        most probable of them, an upper bound of any interpolation between them). 0 where
+        ``params`` is among the most probable; about -27.6 is 1e-12 of the maximum."""
+        return float(np.max(self.logp[self.grid.around(params)]) - np.max(self.logp))
+
     def entropies_after(self, terms: np.ndarray) -> np.ndarray:
         """(k,) the entropy (nats) of the posterior updated with each of ``k`` terms
         ``(k, *grid.shape)``: ``update(terms[i]).entropy()`` bit for bit, without building the

@@ -45,5 +45,5 @@ def _fresh(cfg) -> bool:
 
 POSTERIORS.register("kde", KdePosterior(),
                     summary="the paper's product of KDEs of p(action | sound) (Eq. 7)",
-                    uses=("kde_samples", "kde_draw", "kde_floor", "kde_bandwidth",
+                    uses=("kde_samples", "kde_draw", "kde_beyond", "kde_floor", "kde_bandwidth",
                           Uses("kde_sampler", _fresh, 'kde_draw = "fresh"', 'kde_draw = "shared"')))

@@ -121,7 +121,9 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         ``estimates`` (T, P) maximum-likelihood cell, ``means`` (T, P) posterior mean,
         ``errors`` (T,) px error of the estimate (``cfg.robot.estimator``) vs truth, ``ml_errors`` (T,),
         ``angle_errors`` (T,) deg, ``entropy`` (T,) nats, ``ml_prob`` (T,), ``mass`` (T,),
-        ``stop`` (T,) bool, ``step_ms`` (T,); ``joint_angles`` (T, 2) the arm's pose after each
+        ``stop`` (T,) bool, ``step_ms`` (T,); ``truth_logratio`` (T,) the log of the posterior at
+        the truth over its maximum (:meth:`~kbcli.core.posterior.Posterior.log_ratio_at`; world
+        side, for the evaluation); ``joint_angles`` (T, 2) the arm's pose after each
         touch (dynamics mode); ``snapshot_steps`` (S,), ``snapshots`` (S, ny, nx)
         log translation marginals, ``snapshot_angles`` (S, A) angle marginals (rigid); ``dx``,
         ``dy``, ``angles`` grid axes.
@@ -133,20 +135,33 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     touch = _Touches(World(keyboard, make_reacher(cfg.sim_config()), truth, world_family),
                      world_rng)
     rec = Recorder(adapter, [s for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps])
-    for st in adapt(adapter, touch, cfg.max_steps, use_landed=cfg.feedback == "landed",
-                    stop=cfg.stop):
-        err, aerr = _errors(st.estimate, truth, cfg.robot.family, world_family)
-        ml_err, _ = _errors(st.ml, truth, cfg.robot.family, world_family)
-        rec.add(st, (err, ml_err, aerr), touch.pose())
-        if on_step is not None:
-            on_step(st.t)
+    ratios = _run(cfg, adapter, touch, rec, truth, world_family, on_step)
     out = rec.arrays()
+    out["truth_logratio"] = ratios
     out["true_landed"] = np.asarray(touch.true_landed, float).reshape(-1, 2)
     if play is not None:
         res = _play_after(cfg, model, keyboard, truth, world_family, out, play,
                           rng=rng.spawn(1)[0], pool=play_pool, reference_rng=reference_rng)
         out.update({f"play_{k}": np.float64(v) for k, v in res.items()})
     return out
+
+
+def _run(cfg: AdaptConfig, adapter: Adapter, touch: _Touches, rec: Recorder, truth: np.ndarray,
+         world_family: str, on_step: Callable[[int], None] | None) -> np.ndarray:
+    """Adapt for ``cfg.max_steps`` touches (or to the stop), recording each step with its errors
+    against the truth in ``rec``; returns (T,) the log of the posterior at the truth over its
+    maximum after each step (world side: only the evaluation reads it)."""
+    truth_robot = _as_family(truth, world_family, cfg.robot.family)
+    ratios = []
+    for st in adapt(adapter, touch, cfg.max_steps, use_landed=cfg.feedback == "landed",
+                    stop=cfg.stop):
+        err, aerr = _errors(st.estimate, truth, cfg.robot.family, world_family)
+        ml_err, _ = _errors(st.ml, truth, cfg.robot.family, world_family)
+        rec.add(st, (err, ml_err, aerr), touch.pose())
+        ratios.append(adapter.posterior.log_ratio_at(truth_robot))
+        if on_step is not None:
+            on_step(st.t)
+    return np.asarray(ratios, float)
 
 
 def _prepared(cfg: AdaptConfig, model, rng: np.random.Generator, table, samples,
@@ -218,9 +233,11 @@ def build_shared_table(cfg: AdaptConfig, model) -> LikelihoodTable:
     return build_table(model, cfg.adapter_config())
 
 
-def build_shared_samples(cfg: AdaptConfig, model, seed) -> ActionSamples | None:
+def build_shared_samples(cfg: AdaptConfig, model, seed,
+                         table: LikelihoodTable | None = None) -> ActionSamples | None:
     """The ``kde`` posterior's per-class samples for ``cfg`` (None for other posteriors), drawn
-    from ``seed`` once per class, to share across many :func:`experiment` calls."""
+    from ``seed`` once per class, to share across many :func:`experiment` calls (``table``: the
+    model raster for ``cfg``, built when needed and not given)."""
     if not POSTERIORS.get(cfg.robot.posterior).uses_samples:
         return None
-    return build_samples(model, cfg.adapter_config(), seed)
+    return build_samples(model, cfg.adapter_config(), seed, table=table)

@@ -223,3 +223,49 @@ def _load_model(model_art: Artifact):
 
     return load_model(model_art)
 
+
+
+def resummarise(art: Artifact, rows: np.ndarray | None = None, *,
+                error_scale: float = 1.0) -> Artifact:
+    """The evaluation ``art`` with its summaries (``curves/``, ``pvalues/``, ``entropy/``)
+    recomputed from its per-run records, as :func:`assemble` computes them.
+
+    Parameters
+    ----------
+    rows : (n,) int ndarray, optional
+        The experiment rows to summarise, in this order, repeats allowed (a bootstrap resample);
+        default: every row.
+    error_scale : float
+        Every per-step error multiplied by it first (another reading of the error: 1 / sqrt(2)
+        reads each run's RMSE over the two coordinates instead of its Euclidean error).
+
+    Returns
+    -------
+    Artifact
+        In memory (no sha256), without example runs.
+
+    Raises
+    ------
+    ConfigError
+        When the artifact's config or records cannot be read by this version (an evaluation made
+        before the per-run records it needs were kept).
+    """
+    cfg = EvaluateConfig.from_dict(art.config)
+    exp, steps = art.data["experiments"], art.data.get("steps", {})
+    missing = [k for k in ("errors", "entropy") if k not in steps]
+    if missing:
+        raise ConfigError(f"{art.path or 'the evaluation'} has no per-run {missing[0]!r}")
+    idx = np.arange(len(exp["mode"])) if rows is None else np.asarray(rows, np.int64)
+    table = {k: np.asarray(v)[idx] for k, v in exp.items()}
+    st = {k: np.asarray(v)[idx] for k, v in steps.items()}
+    for k in ERRORS.values():
+        if k in st:
+            st[k] = st[k] * error_scale
+        else:
+            st[k] = np.full(st["errors"].shape, np.nan)
+    curves, pvalues, entropy, _ = _summaries(cfg, [], {}, table, st, art.array("thresholds"))
+    data = {**art.data, "experiments": table, "steps": st, "curves": curves,
+            "pvalues": pvalues, "entropy": entropy, "examples": {}}
+    return Artifact(kind=art.kind, config=art.config, seed=art.seed, data=data,
+                    attrs=art.attrs, inputs=art.inputs, schema_version=art.schema_version,
+                    kbcli_version=art.kbcli_version, path=art.path)

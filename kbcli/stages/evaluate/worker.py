@@ -18,9 +18,14 @@ from kbcli.stages.evaluate.planning import Task, _key
 EXAMPLE_KEYS = ("snapshots", "snapshot_steps", "snapshot_angles", "dx", "dy", "angles")
 #: Per-step outputs of an experiment kept for every run, each (T, ...): ``errors`` are those of the
 #: method's estimator; ``ml_errors`` and ``mean_errors`` those of both estimates (for the
-#: estimator ablation, from the same runs).
+#: estimator ablation, from the same runs); ``ml_prob`` and ``mass`` what the paper's stopping
+#: rule and ours read; ``truth_logratio`` the log of the posterior at the truth over its maximum.
 STEP_KEYS = ("errors", "ml_errors", "mean_errors", "entropy", "estimates", "actions", "classes",
-             "angle_errors")
+             "angle_errors", "ml_prob", "mass", "truth_logratio")
+#: Per-step outputs an experiment function may leave out (NaN in the artifact): the stopping
+#: rules' readings (``ml_prob``, ``mass``) and the truth's place in the posterior
+#: (``truth_logratio``), recorded since issue 39.
+OPTIONAL_STEP_KEYS = ("ml_errors", "mean_errors", "ml_prob", "mass", "truth_logratio")
 #: Playing success per experiment (floats, NaN when not measured).
 PLAY_KEYS = ("play_before", "play_unadapted", "play_adapted")
 #: Draws of p(action | sound) per melody class that the replays resample (drawn once per process
@@ -116,9 +121,11 @@ def _samples(state: dict, acfg, seed: int):
     r = acfg.adapter_config()
     if r.kde_draw != "shared":  # drawn anew for every observation, by the adapter itself
         return None
-    key = (r.kde_samples, r.kde_bandwidth, r.resolution)
+    key = (r.kde_samples, r.kde_bandwidth, r.resolution, r.kde_beyond, r.family,
+           r.prior_halfwidth, r.max_angle, r.angle_resolution)
     if key not in state["samples"]:
-        state["samples"][key] = adapt.build_shared_samples(acfg, state["model"], [seed])
+        state["samples"][key] = adapt.build_shared_samples(acfg, state["model"], [seed],
+                                                           table=_table(state, acfg))
     return state["samples"][key]
 
 
@@ -135,16 +142,15 @@ def _normalise(out: dict, steps: int, n_params: int, keep_extra: bool) -> dict[s
     taken = len(np.asarray(out["errors"]))
     res["steps_taken"] = np.int64(taken)
     res["stop_step"] = np.int64(out.get("stop_step", -1))
-    shapes = {"errors": (), "ml_errors": (), "mean_errors": (), "entropy": (),
-              "estimates": (n_params,), "actions": (2,), "classes": (), "angle_errors": ()}
+    shapes = {"estimates": (n_params,), "actions": (2,)}
     for k in STEP_KEYS:
         if k in out:
             a = np.asarray(out[k])
             a = a.astype(np.int64) if k == "classes" else a.astype(np.float64)
-            res[k] = _pad(a.reshape((len(a),) + shapes[k]), steps)
+            res[k] = _pad(a.reshape((len(a),) + shapes.get(k, ())), steps)
         elif k == "angle_errors":
             res[k] = np.zeros(steps)
-        elif k in ("ml_errors", "mean_errors"):
+        elif k in OPTIONAL_STEP_KEYS:
             res[k] = np.full(steps, np.nan)
         else:
             raise KeyError(f"the experiment returned no {k!r}")
