@@ -115,8 +115,10 @@ demo: $(STAMP)
 # better: on 2026-12-05, auto (forest-xy) in dynamics mode, seed 0, 800 reaches: 99.92 % accurate,
 # boundary error 0.03 px, against the stored lines model's 99.46 % and 1.04 px; but infogain adapts
 # no faster with it (kbcli bench adapt --section learned --strategy random --strategy infogain
-# --experiments 20: median touches to 2 px 5 / 5 / 4 per category against 5 / 4 / 4), and the paper
-# reproduction's stored results (benchmarks/results/reproduce.json) were run on this model.
+# --experiments 20: median touches to 2 px 5 / 5 / 4 per category against 5 / 4 / 4). The paper
+# reproduction (make reproduce) learns its own model with kbcli learn's defaults; the sha256 of that
+# model is recorded in benchmarks/results/reproduce.json, and tests/test_stored_results.py learns it
+# again and fails when the bytes differ (the stored verdicts would be stale).
 # $(DATA)/platform.json names the platform that built them (numpy's SIMD level, the BLAS kernel,
 # the libraries' versions): the bytes are reproduced on that platform only (kbcli/io/platform.py).
 DATA ?= data

@@ -150,3 +150,38 @@ def serve_transcript(steps: int = 2) -> str:
         who, _, msg = line.partition(" ")
         out.append(f"{who:5s} {json.dumps(_rounded(json.loads(msg)))}")
     return "```\n" + "\n".join(out) + "\n```\n"
+
+
+#: The README's generated section: between these markers, the "What reproduces" table of
+#: ``benchmarks/results/reproduce.json`` (``python tools/docs_hooks.py --readme`` rewrites it).
+README_START = "<!-- what-reproduces: generated from benchmarks/results/reproduce.json by `python tools/docs_hooks.py --readme` -->"
+README_END = "<!-- /what-reproduces -->"
+
+
+def readme_section(root: Path = RESULTS) -> str:
+    """The README's "What reproduces" section: the table of that title in ``reproduce.json``
+    with the command and date that measured it (GitHub renders the README, not MkDocs: the
+    table is written into the file, and a test checks that it is current)."""
+    return results_markdown("reproduce", root, only=("What reproduces",))
+
+
+def rewrite_readme(path: Path = ROOT / "README.md", root: Path = RESULTS) -> bool:
+    """Replace the README's generated section with :func:`readme_section`; True if it changed."""
+    text = path.read_text(encoding="utf-8")
+    head, sep, rest = text.partition(README_START)
+    _, sep2, tail = rest.partition(README_END)
+    if not sep or not sep2:
+        raise ValueError(f"{path} has no generated section ({README_START} ... {README_END})")
+    new = f"{head}{README_START}\n\n{readme_section(root)}\n{README_END}{tail}"
+    if new != text:
+        path.write_text(new, encoding="utf-8")
+    return new != text
+
+
+if __name__ == "__main__":
+    import sys
+
+    if sys.argv[1:] == ["--readme"]:
+        print("README.md " + ("rewritten" if rewrite_readme() else "already current"))
+    else:
+        sys.exit("usage: python tools/docs_hooks.py --readme")

@@ -15,7 +15,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from kbcli.stages import quality
+from kbcli.stages import report as stage
 from kbcli.stages.artifact import Artifact
+from kbcli.stages.report import readings, reproduces, runs
+from kbcli.stages.report.departures import departures
+from kbcli.stages.report.readings import as_verdicts
+from kbcli.stages.report.readme import power_texts
 from kbcli.stages.report.source import VERDICTS, compared, methods_of, others, short
 
 #: A p-value measured (``p=0.0012``, ``p = 3.1e-07``), not a bound quoted from the paper (``p <``).
@@ -45,7 +50,7 @@ def _p(p: float) -> str:
 
 
 CLAIM_COLUMNS = ("claim", "the paper says", "judged on", "kbcli measured", "verdict", "smallest p",
-                 "other methods")
+                 "under the other readings", "other methods")
 OTHER_COLUMNS = ("claim", "method", "kbcli measured", "verdict", "smallest p")
 
 
@@ -83,7 +88,9 @@ def claim_table(claims, labels: tuple[str, ...] = ()) -> ResultTable:
         summary = ("; ".join(f"{x}: {v}" for x, _, v in beside) if beside else c.beside) or "-"
         rows.append({"claim": c.source, "the paper says": c.paper, "judged on": c.method,
                      "kbcli measured": c.measured, "verdict": c.verdict,
-                     "smallest p": smallest_p(c.measured), "other methods": summary})
+                     "smallest p": smallest_p(c.measured),
+                     "under the other readings": as_verdicts(c.readings),
+                     "other methods": summary})
     return ResultTable("The paper's claims, judged", CLAIM_COLUMNS, tuple(rows))
 
 
@@ -113,14 +120,78 @@ def verdict_counts(claims, labels: tuple[str, ...] = ()) -> ResultTable:
 EXPLAIN_COLUMNS = ("claim", "verdict along the ladder", "what flips it")
 
 
-def explain_table(claims, ablations: Artifact | Sequence[Artifact]) -> ResultTable:
+def evaluation_tables(art: Artifact, own: Artifact | None = None,
+                      ladders: Sequence[Artifact] = (), *,
+                      replicates: int = reproduces.REPLICATES) -> list[ResultTable]:
+    """Every table of an evaluation's verdicts, in the order the results page shows them: what
+    reproduces, what ran, the verdict counts, the claims (and on the other methods), what
+    explains each difference (with ``ladders``), the judging rules, the departures, the runs that
+    ruled out the truth and the stopping rules."""
+    art = stage.upgrade(art)
+    claims = stage.claims(art, own)
+    labels = other_labels(art)
+    power = reproduces.powers(art, claims, own, replicates=replicates)
+    texts = power_texts(claims, power)
+    explained = []
+    if ladders:
+        from kbcli.stages.report.ablation import explained as ladder_rows
+
+        explained = ladder_rows(claims, ladders, texts)
+    tables = [ResultTable("What reproduces", reproduces.COLUMNS,
+                          tuple(reproduces.rows(claims, explained, power))),
+              evaluation_table(art, own), verdict_counts(claims, labels),
+              claim_table(claims, labels)]
+    tables += [t for t in (others_table(claims, labels),) if t.rows]
+    if ladders:
+        tables.append(explain_table(claims, ladders, explained))
+    tables += [judging_table(), departures_table(art), *runs_tables(art)]
+    return tables
+
+
+def judging_table() -> ResultTable:
+    """The judging rules the paper does not state: kbcli's and the plainest other reading."""
+    cols = ("decides", "the paper says", "kbcli's rule", "the plainest other reading")
+    return ResultTable("Judging rules the paper does not state", cols, tuple(
+        dict(zip(cols, (r.claims, r.quote, r.ours, f"{r.name}: {r.other}"), strict=True))
+        for r in readings.READINGS.values()))
+
+
+def departures_table(art: Artifact) -> ResultTable:
+    """Where the judged method departs from the paper's text or decides what it leaves open."""
+    cols = ("source", "the paper says", "kbcli does", "why")
+    return ResultTable(f"Departures from the paper (the judged method `{art.attrs['judged']}`)",
+                       cols, tuple(dict(zip(cols, (d.source, d.quote.strip(), does, d.why),
+                                            strict=True)) for d, does in departures(art)))
+
+
+def runs_tables(art: Artifact) -> list[ResultTable]:
+    """The runs that ruled out the truth, and the stopping rules per mode (when recorded)."""
+    out = []
+    rows = runs.excluded(art)
+    if rows:
+        out.append(ResultTable(f"Runs that ruled out the truth (posterior at the truth below "
+                               f"{runs.EXCLUDED:g} of its maximum at some step)",
+                               tuple(rows[0]), tuple(rows)))
+    for m in art.attrs["modes"]:
+        rows = runs.stopping(art, m)
+        if rows:
+            out.append(ResultTable(f"Stopping rules applied to every run ({m} mode)",
+                                   tuple(rows[0]), tuple(rows)))
+    return out
+
+
+def explain_table(claims, ablations: Artifact | Sequence[Artifact],
+                  explained_rows: Sequence[tuple[str, str, str]] | None = None) -> ResultTable:
     """The report's "What explains each difference" as a result table: every claim marked
     *differs* on the judged method, judged on each rung of the ablation ladder ``ablations`` (an
     evaluation, or several: one per mode), and the rungs whose changes flip it
-    (:func:`kbcli.stages.report.ablation.explained`)."""
+    (:func:`kbcli.stages.report.ablation.explained`; ``explained_rows``: those rows, computed
+    already)."""
     from kbcli.stages.report.ablation import as_ladders, explained
 
-    rows = tuple(dict(zip(EXPLAIN_COLUMNS, r, strict=True)) for r in explained(claims, ablations))
+    if explained_rows is None:
+        explained_rows = explained(claims, ablations)
+    rows = tuple(dict(zip(EXPLAIN_COLUMNS, r, strict=True)) for r in explained_rows)
     where = "; ".join(f"{a.path}, {len(a.data['experiments']['mode'])} experiments, "
                       f"{int(a.config['experiments'])} per cell, modes {', '.join(a.attrs['modes'])}"
                       for a in as_ladders(ablations))
@@ -193,7 +264,7 @@ def hypothesis_table(art: Artifact) -> ResultTable:
     a = art.attrs
     rows = []
     for r in a["rows"]:
-        if r == a["baseline"]:
+        if r not in quality.compared_rows(a):
             continue
         h = quality.hypothesis(art, r)
         rows.append({"row": r, "Spearman rho": "-" if h["rho"] != h["rho"] else f"{h['rho']:.2f}",
@@ -211,7 +282,7 @@ def models_table(art: Artifact) -> ResultTable:
     """Each model of a model-quality sweep: accuracy, boundary error, threshold, and each row's
     advantage over the baseline (median touches saved to tau, all categories, with its p)."""
     a = art.attrs
-    others = [r for r in a["rows"] if r != a["baseline"]]
+    others = quality.compared_rows(a)
     models = sorted(a["models"].items(), key=lambda kv: (str(kv[1].get("exploration", "")),
                                                          float(kv[1].get("budget", 0)), kv[0]))
     rows = []
@@ -246,7 +317,7 @@ def plateau_table(art: Artifact, within: float = PLATEAU) -> ResultTable:
     (:func:`plateau_budget`) with its model's accuracy, boundary error and advantages: the budget
     ``make reproduce-own-model`` learns the robot's own model with (``OWN_BUDGET``)."""
     a = art.attrs
-    others = [r for r in a["rows"] if r != a["baseline"]]
+    others = quality.compared_rows(a)
     by: dict[str, list[tuple[int, str, dict]]] = {}
     for m, mi in a["models"].items():
         by.setdefault(str(mi.get("exploration", "")), []).append((int(mi["budget"]), m, mi))

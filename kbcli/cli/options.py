@@ -346,6 +346,13 @@ ActiveKeep = _robot_option("active_keep", int, "Most confusing candidates active
                            f"{MAX_CANDIDATES}")
 
 
+#: ``--replicates``: bootstrap replicates of each claim that differs (kbcli report, bench verdicts).
+Replicates = Annotated[int, _opt(
+    "--replicates", min=0, max=10000,
+    help="Bootstrap replicates (at the paper's 50 runs per parametrization) of each claim that "
+         "differs, to state how likely the paper's verdict is if the effect is ours; 0: none.")]
+
+
 #: The Typer type of each flag of :data:`PAPER_FLAGS`.
 _PAPER_TYPES = {"kde_samples": KdeSamples, "kde_draw": KdeDraw, "simulate_draw": SimulateDraw,
                 "kde_sampler": KdeSampler, "kde_beyond": KdeBeyond,
@@ -400,7 +407,7 @@ def model_class_option(help: str, many: bool = False, **kw: Any) -> Any:
                                 **kw)]
 
 
-def detector_option(default_note: str = "binomial is the paper's") -> Any:
+def detector_option(default_note: str = "binomial: Eq. 4-6 with the upper tail of Eq. 6") -> Any:
     """``--detector``: one of the registered detectors."""
     return Annotated[str, _opt(
         "--detector", help=f"Failure detector: {', '.join(names_of('detector'))} ({default_note}).")]

@@ -183,7 +183,7 @@ def _summary(art) -> None:
     from rich.table import Table
 
     a = art.attrs
-    rows = [r for r in a["rows"] if r != a["baseline"]]
+    rows = stage.compared_rows(a)
     t = Table(title=f"advantage over {a['baseline']} (touches saved to tau, all categories; p)",
               title_justify="left")
     for col in ("model", "accuracy", "boundary err", *rows):

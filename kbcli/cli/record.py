@@ -2,8 +2,10 @@
 
 Every table a bench command shows goes through :func:`show_table`; with ``--json`` the tables are
 also written, when the command ends, to one JSON file with the command line, the date, the machine
-and the kbcli version: ``{"command", "date", "machine", "kbcli_version", "platform", "tables":
-[{"title", "columns", "rows": [{column: cell}]}]}``. The documentation's results pages are
+and the kbcli version, the git commit of the code and whether its tree was clean, and the sha256 of
+every input file the command named: ``{"command", "date", "machine", "kbcli_version",
+"platform", "git", "inputs", "tables": [{"title", "columns", "rows": [{column: cell}]}]}``
+(:mod:`kbcli.io.provenance`). The documentation's results pages are
 generated from such files (``benchmarks/results/*.json``, ``tools/docs_hooks.py``), so no measured
 number in the docs is typed by hand.
 """
@@ -25,6 +27,7 @@ from rich.text import Text
 from kbcli import __version__
 from kbcli.io.atomic import atomic_path
 from kbcli.io.platform import fingerprint
+from kbcli.io.provenance import git_state, inputs
 
 _recorded: list[Table] | None = None
 _path: Path | None = None
@@ -91,9 +94,11 @@ def write(path: Path, argv: list[str] | None = None) -> None:
     """Write the tables kept so far to ``path`` (atomically) and stop keeping them."""
     global _recorded
     tables, _recorded = _recorded or [], None
-    d = {"command": shlex.join(["kbcli", *(sys.argv[1:] if argv is None else argv)]),
+    args = sys.argv[1:] if argv is None else argv
+    d = {"command": shlex.join(["kbcli", *args]),
          "date": datetime.date.today().isoformat(), "machine": machine(),
          "kbcli_version": __version__, "platform": fingerprint(),
+         "git": git_state(), "inputs": inputs(args),
          "tables": [table_dict(t) for t in tables]}
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path, suffix=".json") as tmp:

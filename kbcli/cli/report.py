@@ -17,6 +17,7 @@ from kbcli.io.artifact import read_artifact
 from kbcli.io.atomic import atomic_folder
 from kbcli.io.paths import FIGURE_FORMATS, Output
 from kbcli.stages import report as stage
+from kbcli.stages.report.power import REPLICATES
 
 #: The files a report writes (any format): a new report removes those of an older one it did not
 #: write again, and nothing else (the folder is written aside, then moved into place).
@@ -49,6 +50,7 @@ def report_cmd(
         help="Evaluation of the same protocol with the robot's own learned model (make "
              "reproduce-own-model): the Sect. IV-C claims are judged on it too, beside the "
              "main evaluation's model.")] = None,
+    replicates: opts.Replicates = REPLICATES,
 ) -> None:
     """Write the reproduction report of an evaluation (or of a model-quality sweep).
 
@@ -77,7 +79,8 @@ def report_cmd(
     art = stage.upgrade(art)
     ladders = [read_artifact(p, ("evaluation",)) for p in ablations or ()]
     own = read_artifact(own_model, ("evaluation",)) if own_model else None
-    rep = stage.build(art, ablations=ladders, own=own)
+    with busy("judging the paper's claims (and replicating those that differ)"):
+        rep = stage.build(art, ablations=ladders, own=own, replicates=replicates)
     names = {f.name: str(Path(f.name).with_suffix("." + fmt)) for f in rep.figures}
     check_io(inputs,
              Output(output, "report folder", folder=True, files=("README.md", *names.values())))
@@ -133,6 +136,7 @@ def bench_verdicts_cmd(
         help="The ablation ladder's evaluation (make reproduce-ablations): what explains each "
              "claim that differs, as kbcli report --ablations writes it (repeat it for a ladder "
              "run one mode at a time).")] = None,
+    replicates: opts.Replicates = REPLICATES,
 ) -> None:
     """Print the verdicts of an evaluation or a model-quality sweep as tables, with stage timings.
 
@@ -158,16 +162,9 @@ def bench_verdicts_cmd(
                   bench.plateau_table(art)]
     else:
         own = read_artifact(own_model, ("evaluation",)) if own_model else None
-        with busy("judging the paper's claims"):
-            claims = stage.claims(stage.upgrade(art), own)
-        labels = bench.other_labels(stage.upgrade(art))
-        tables = [bench.evaluation_table(art, own), bench.verdict_counts(claims, labels),
-                  bench.claim_table(claims, labels)]
-        tables += [t for t in (bench.others_table(claims, labels),) if t.rows]
-        if ablations:
-            ladders = [read_artifact(p, ("evaluation",)) for p in ablations]
-            with busy("judging the claims along the ablation ladder"):
-                tables.append(bench.explain_table(claims, ladders))
+        ladders = [read_artifact(p, ("evaluation",)) for p in ablations or ()]
+        with busy("judging the paper's claims (and replicating those that differ)"):
+            tables = bench.evaluation_tables(art, own, ladders, replicates=replicates)
     if timings is not None:
         tables += [t for t in bench.timings_table(timings.read_text(encoding="utf-8")) if t.rows]
     con = out if interactive() else Console(width=max(out.width, 160), highlight=False)

@@ -7,7 +7,7 @@ has gone up (the keyboard has probably moved).
 Every detector here produces a *score* in (0, 1] at each step and fires when the score drops below
 ``threshold``; small scores are strong evidence of a change. The detectors:
 
-``binomial`` (the paper's, the default)
+``binomial`` (Eq. 4-6 as kbcli reads them, the default)
     The last ``n_st`` results form the short-term window, the ``n_lt`` results before them the
     long-term window. The long-term window gives the failure probability (Eq. 4),
     ``p_fail = (k_lt + a) / (n_lt + a + b)`` where ``k_lt`` counts its failures and ``(a, b)`` are
@@ -209,7 +209,7 @@ def make_bank(cfg: DetectorConfig, n_streams: int) -> Bank:
     return DETECTORS.get(cfg.detector)(cfg, n_streams)
 
 
-# -- the paper's binomial detector (Eq. 4-6) -----------------------------------------------------
+# -- the binomial detector (Eq. 4-6, the upper tail of Eq. 6) -----------------------------------
 def binomial_tail_table(n_lt: int, n_st: int, prior: tuple[float, float]) -> np.ndarray:
     """Upper tails ``P(X >= n_f; n_st, p_fail(k_lt))`` for every ``k_lt`` and ``n_f``.
 
@@ -340,7 +340,7 @@ class Detector:
 
     Examples
     --------
-    >>> det = Detector(detector="binomial")   # the paper's, N_LT 100, N_ST 10, threshold 0.01
+    >>> det = Detector(detector="binomial")   # Eq. 4-6, N_LT 100, N_ST 10, threshold 0.01
     >>> fired = [det.update(x) for x in ["MATCH"] * 110 + ["NO_MATCH"] * 3]
     >>> fired.index(True)  # the second failure in a row after 110 successes
     111

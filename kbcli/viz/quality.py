@@ -13,6 +13,7 @@ import numpy as np  # noqa: E402
 from matplotlib.ticker import FixedLocator, NullFormatter, ScalarFormatter  # noqa: E402
 
 from kbcli.stages.artifact import Artifact  # noqa: E402
+from kbcli.stages.quality.config import baseline_of, compared_rows  # noqa: E402
 from kbcli.viz.common import place_labels, save  # noqa: E402
 
 MARKERS = {"active": "o", "random": "s"}
@@ -23,8 +24,8 @@ def plot_advantage(art: Artifact, path: str | os.PathLike) -> None:
     against the model's boundary error, one panel per row; filled markers: p < 0.01. Right panel:
     the median final error of every row against the boundary error, with the line y = max(1, x)."""
     a = art.attrs
-    info, summ, base = a["models"], a["summary"], a["baseline"]
-    rows = [r for r in a["rows"] if r != base]
+    info, summ = a["models"], a["summary"]
+    rows = compared_rows(a)
     n = len(rows) + 1
     ncol = min(n, 3)
     nrow = -(-n // ncol)
@@ -54,8 +55,8 @@ def plot_advantage(art: Artifact, path: str | os.PathLike) -> None:
         ax.axhline(0, color="black", lw=0.8)
         _px_axis(ax, x_lo, x_hi)
         ax.set_xlabel("model's boundary error (px, log scale)")
-        ax.set_ylabel(f"touches saved over {base} (median of pairs)")
-        ax.set_title(f"{r} vs {base}", fontsize=10)
+        ax.set_ylabel(f"touches saved over {baseline_of(a, r)} (median of pairs)")
+        ax.set_title(f"{r} vs {baseline_of(a, r)}", fontsize=10)
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7, loc="best")
     ax = axes[-1]

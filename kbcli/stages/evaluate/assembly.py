@@ -225,8 +225,8 @@ def _load_model(model_art: Artifact):
 
 
 
-def resummarise(art: Artifact, rows: np.ndarray | None = None, *,
-                error_scale: float = 1.0) -> Artifact:
+def resummarise(art: Artifact, rows: np.ndarray | None = None, *, error_scale: float = 1.0,
+                only: tuple[str, str] | None = None) -> Artifact:
     """The evaluation ``art`` with its summaries (``curves/``, ``pvalues/``, ``entropy/``)
     recomputed from its per-run records, as :func:`assemble` computes them.
 
@@ -238,6 +238,8 @@ def resummarise(art: Artifact, rows: np.ndarray | None = None, *,
     error_scale : float
         Every per-step error multiplied by it first (another reading of the error: 1 / sqrt(2)
         reads each run's RMSE over the two coordinates instead of its Euclidean error).
+    only : (mode, method), optional
+        Summarise this mode and method alone (``rows`` then holds only theirs).
 
     Returns
     -------
@@ -251,6 +253,8 @@ def resummarise(art: Artifact, rows: np.ndarray | None = None, *,
         before the per-run records it needs were kept).
     """
     cfg = EvaluateConfig.from_dict(art.config)
+    if only is not None:
+        cfg = cfg.with_overrides(mode=only[0], methods=(only[1],))
     exp, steps = art.data["experiments"], art.data.get("steps", {})
     missing = [k for k in ("errors", "entropy") if k not in steps]
     if missing:

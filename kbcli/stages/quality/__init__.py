@@ -41,6 +41,8 @@ from kbcli.stages.quality.config import (
     IDEAL_ROW,
     QualityConfig,
     adapt_config,
+    baseline_of,
+    compared_rows,
     model_names,
 )
 from kbcli.stages.quality.plan import ADAPT_KEY, LEARN_KEY, LearnTask, Task, learn_tasks, plan
@@ -49,5 +51,6 @@ from kbcli.stages.quality.workers import adapt_one, adapt_setup, learn_one, lear
 
 __all__ = ["ADAPT_KEY", "DEFAULT_ROWS", "EXACT", "FIXED", "IDEAL_ROW", "LEARN_KEY", "LearnTask",
            "QualityConfig", "Task", "adapt_config", "adapt_one", "adapt_setup", "assemble",
+           "baseline_of", "compared_rows",
            "fingerprint", "hypothesis", "learn_one", "learn_setup", "learn_tasks", "model_names",
            "paired_test", "plan", "report", "targets", "threshold", "touches_to", "verdict"]

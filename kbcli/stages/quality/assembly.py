@@ -9,7 +9,14 @@ from scipy import stats as sps
 
 from kbcli.core.adapter_config import REDUNDANCY_FACTOR, blur_grid, own_boundary_error, temper
 from kbcli.stages.artifact import Artifact, ref
-from kbcli.stages.quality.config import EXACT, IDEAL_ROW, QualityConfig, adapt_config, model_names
+from kbcli.stages.quality.config import (
+    EXACT,
+    IDEAL_ROW,
+    QualityConfig,
+    adapt_config,
+    compared_rows,
+    model_names,
+)
 from kbcli.stages.quality.plan import Task
 
 
@@ -56,6 +63,7 @@ def assemble(cfg: QualityConfig, models: dict[str, Artifact], tasks: list[Task],
                 for g in groups}
     attrs = {"models": model_info, "summary": summary, "rows": list(cfg.rows),
              "baseline": cfg.baseline, "max_steps": cfg.max_steps,
+             **({"baselines": dict(cfg.baselines)} if cfg.baselines else {}),
              "categories": [c.name for c in cfg.categories], "n_experiments": n,
              "rows_resolved": {r: adapt_config(cfg, r).to_dict()
                                for r in [*cfg.rows, *([IDEAL_ROW] if exact.any() else [])]}}
@@ -105,11 +113,11 @@ def _paired(exp: dict, sel: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndar
 
 
 def _group_summary(cfg: QualityConfig, exp: dict, name: str, group: str, tau: float) -> dict:
-    """Row -> final error, touches to tau and (but the baseline) the paired advantage, of one
-    model's runs in one category (or ``all``)."""
+    """Row -> final error, touches to tau and (but for baseline rows) the paired advantage over
+    its baseline row, of one model's runs in one category (or ``all``)."""
     row = exp["row"]
     sel_m = (exp["model"] == name) & ((exp["category"] == group) if group != "all" else True)
-    base_t, base_final = _paired(exp, sel_m & (row == cfg.baseline), tau)
+    compared = compared_rows(cfg.to_dict())
     per = {}
     for r in cfg.rows:
         sel = sel_m & (row == r)
@@ -121,7 +129,8 @@ def _group_summary(cfg: QualityConfig, exp: dict, name: str, group: str, tau: fl
             "reached": float(np.mean(t <= cfg.max_steps)),
             "runs": int(sel.sum()),
         }
-        if r != cfg.baseline:
+        if r in compared:
+            base_t, base_final = _paired(exp, sel_m & (row == cfg.baseline_of(r)), tau)
             adv, p = paired_test(base_t, t)
             cell["advantage"] = adv  # median paired difference: touches saved
             cell["pvalue"] = p

@@ -45,6 +45,19 @@ MAX_BUDGETS = 100
 Budget = between(Whole, MIN_BUDGET, MAX_BUDGET)
 
 
+def baseline_of(d: Mapping[str, Any], row: str) -> str:
+    """The row ``row`` is compared with, in a sweep's config or attributes (``baselines`` when
+    it names the row, else ``baseline``)."""
+    return (d.get("baselines") or {}).get(row, d["baseline"])
+
+
+def compared_rows(d: Mapping[str, Any]) -> list[str]:
+    """The rows of a sweep's config or attributes that are compared with a baseline: every row
+    that is no row's baseline."""
+    bases = {d["baseline"], *(d.get("baselines") or {}).values()}
+    return [r for r in d["rows"] if r not in bases]
+
+
 class QualityConfig(Config):
     """The model-quality sweep (the ``[quality]`` table of ``pipelines/model-quality.toml``).
 
@@ -66,6 +79,10 @@ class QualityConfig(Config):
         Name -> adapt options (``strategy`` and any adapt option, e.g. ``robust = false``).
     baseline : str
         The row the others are compared with.
+    baselines : mapping
+        Rows compared with another row than ``baseline``: row -> its baseline row (the paper's
+        ``paper-active`` against the paper's own ``paper-random``, both on the paper's
+        posterior). A row that is a baseline is not compared itself.
     experiments : int
         Repetitions per displacement, model and row.
     max_steps : int
@@ -98,6 +115,7 @@ class QualityConfig(Config):
     ideal: Flag = True
     rows: Any = Field(default_factory=lambda: dict(DEFAULT_ROWS))
     baseline: Name = "random"
+    baselines: Any = Field(default_factory=dict)
 
     @field_validator("budgets")
     @classmethod
@@ -153,6 +171,25 @@ class QualityConfig(Config):
             raise ValueError(f"{v!r} must name a row ({', '.join(rows)})")
         return v
 
+    @field_validator("baselines")
+    @classmethod
+    def _baselines_are_rows(cls, v: Any, info: ValidationInfo) -> MappingProxyType:
+        if not isinstance(v, Mapping):
+            raise ValueError("must be a table of row = baseline row")
+        rows = info.data.get("rows") or {}
+        for row, base in v.items():
+            for what, name in (("row", row), ("baseline", base)):
+                if name not in rows:
+                    raise ValueError(f"{what} {name!r} of {row} = {base!r} must name a row "
+                                     f"({', '.join(rows)})")
+            if row == base:
+                raise ValueError(f"row {row!r} cannot be its own baseline")
+        return MappingProxyType(dict(v))
+
+    def baseline_of(self, row: str) -> str:
+        """The row ``row`` is compared with."""
+        return baseline_of(self.to_dict(), row)
+
     @model_validator(mode="after")
     def _rows_adapt(self) -> QualityConfig:
         """Let the adapt stage check every row's options (the shared ones and the row's); a row's
@@ -188,6 +225,8 @@ class QualityConfig(Config):
             "explorations": list(self.explorations), "mode": self.mode, "arm": dict(self.arm),
             "reach_noise": float(self.reach_noise),
             "rows": {k: dict(v) for k, v in self.rows.items()}, "baseline": self.baseline,
+            # written only when set: a sweep's config stored before it existed reads back equal
+            **({"baselines": dict(self.baselines)} if self.baselines else {}),
             "experiments": self.experiments, "max_steps": self.max_steps,
             "categories": {c.name: c.to_dict() for c in self.categories},
             "adapt": dict(self.adapt), "ideal": self.ideal,

@@ -8,6 +8,7 @@ import numpy as np
 from scipy import stats as sps
 
 from kbcli.stages.artifact import Artifact
+from kbcli.stages.quality.config import baseline_of, compared_rows
 
 
 def hypothesis(art: Artifact, row: str) -> dict:
@@ -55,7 +56,7 @@ def verdict(h: dict) -> str:
 def targets(art: Artifact, row: str = "infogain") -> list[dict]:
     """Issue 9's targets, per model and category, as measured (for the report's table)."""
     info, summ = art.attrs["models"], art.attrs["summary"]
-    base = art.attrs["baseline"]
+    base = baseline_of(art.attrs, row)
     out = []
     for m, mi in _ordered(info):
         for c in art.attrs["categories"]:
@@ -124,7 +125,7 @@ def _header(art: Artifact) -> list[str]:
 def _hypothesis_table(art: Artifact) -> list[str]:
     """The paper's explanation tested on every row but the baseline."""
     a = art.attrs
-    rows = [r for r in a["rows"] if r != a["baseline"]]
+    rows = compared_rows(a)
     lines = [
         "## The paper's explanation, tested",
         "",

@@ -70,11 +70,12 @@ INTRO = ("Every claim marked *differs*, judged with the same rule on each rung o
 
 
 def explained(claims: list[Claim], ablations: Artifact | Sequence[Artifact],
-              ) -> list[tuple[str, str, str]]:
+              power: dict[str, str] | None = None) -> list[tuple[str, str, str]]:
     """``(claim, verdict along the ladder, what flips it)`` for every claim marked *differs* (its
     paper text once), as the section's table rows (:func:`explain`; ``kbcli bench verdicts
     --ablations`` keeps them as a result table). With several ladder evaluations (one per mode),
-    each claim is read on the first that measures it on some rung."""
+    each claim is read on the first that measures it on some rung. ``power``: by claim text, the
+    replication statement (:mod:`.power`) a claim that no rung flips is given."""
     ladders = [upgrade(a) for a in as_ladders(ablations)]
     rows = []
     seen = set()
@@ -91,7 +92,10 @@ def explained(claims: list[Claim], ablations: Artifact | Sequence[Artifact],
         path = " -> ".join(f"`{x}` ({s}) {v}" for x, s, v in steps)
         if len(ladders) > 1:
             path = f"{art.path or 'the ladder'}: {path}"
-        rows.append((c.paper, path, _flips(art, steps)))
+        flips = _flips(art, steps)
+        if flips.startswith("no rung flips it: it differs") and (power or {}).get(c.paper):
+            flips = f"{flips}; {power[c.paper]}"
+        rows.append((c.paper, path, flips))
     return rows
 
 
@@ -100,12 +104,13 @@ def as_ladders(ablations: Artifact | Sequence[Artifact]) -> list[Artifact]:
     return [ablations] if isinstance(ablations, Artifact) else list(ablations)
 
 
-def explain(claims: list[Claim], ablations: Artifact | Sequence[Artifact]) -> list[str]:
+def explain(claims: list[Claim], ablations: Artifact | Sequence[Artifact],
+            power: dict[str, str] | None = None) -> list[str]:
     """The section "What explains each difference" (markdown lines): for every claim marked
     *differs*, its verdict on every rung and the changes that flip it."""
     where = " and ".join(f"`{a.path or 'an ablation evaluation'}`" for a in as_ladders(ablations))
     lines = ["## What explains each difference", "", INTRO.format(path=where), ""]
-    rows = explained(claims, ablations)
+    rows = explained(claims, ablations, power)
     if not rows:
         return [*lines, "No claim is marked *differs*.", ""]
     lines += ["| claim | verdict along the ladder | what flips it |", "|---|---|---|"]
@@ -124,5 +129,5 @@ def _flips(art: Artifact, steps: list[tuple[str, str, str]]) -> str:
     if flips:
         return "; ".join(flips)
     if measured and all(v == "differs" for _, _, v in measured):
-        return "no rung flips it: it differs on every rung (none of these factors explains it)"
+        return "no rung flips it: it differs on every rung"
     return "no rung flips it: it does not differ on any measured rung of the ladder"

@@ -134,3 +134,39 @@ def shrinks(art: Artifact, mode: str, method: str, strategy: str, cats: list[str
             f"{' -> '.join(cats)}, one-sided p of the fall {cats[0]} -> {cats[-1]}: "
             + "; ".join(parts))
     return text, verdict
+
+
+#: The thresholds the paper quotes its significance up to (Sect. IV-B: "up to 10 pixels" for small
+#: displacements, "up to 8 pixels" for medium): the other reading of the trend reads these.
+PAPER_UPTO = 10.0
+
+
+def falls(art: Artifact, mode: str, method: str, strategy: str, cats: list[str],
+          upto: float = PAPER_UPTO, sfx: str = "") -> tuple[str, str]:
+    """(measured text, verdict) of the plainest other reading of 'the advantage shrinks along
+    ``cats``': on the thresholds <= ``upto`` px informative in the first and last category, the
+    advantage in the last is significantly below the first's at one of them at least (one-sided
+    p < :data:`EFFECT_LEVEL`) and significantly above it at none."""
+    thr = art.array("thresholds")
+    first, last = cats[0], cats[-1]
+    adv = {c: advantages(art, mode, method, c, strategy, sfx) for c in (first, last)}
+    if any(v is None for v in adv.values()):
+        return "per-run counts not in this evaluation", "not measured"
+    common = adv[first]["informative"] & adv[last]["informative"] & (thr <= upto)
+    if not common.any():
+        return f"no threshold <= {upto:g} px informative in {first} and {last}", "not measured"
+    fell, rose, parts = [], [], []
+    for j in np.flatnonzero(common):
+        a0, a1 = (float(adv[first]["A"][j]), float(adv[first]["var"][j])), \
+            (float(adv[last]["A"][j]), float(adv[last]["var"][j]))
+        p_fall, p_rise = smaller_pvalue(a0, a1), smaller_pvalue(a1, a0)
+        if p_fall < EFFECT_LEVEL:
+            fell.append(f"{thr[j]:g} px")
+        if p_rise < EFFECT_LEVEL:
+            rose.append(f"{thr[j]:g} px")
+        parts.append(f"{thr[j]:g} px: {a0[0]:.2f} -> {a1[0]:.2f}")
+    verdict = "agrees" if fell and not rose else "differs"
+    text = (f"A over {first} -> {last} at the thresholds <= {upto:g} px: " + "; ".join(parts)
+            + f"; significant fall (p < {EFFECT_LEVEL:g}) at " + (", ".join(fell) or "none")
+            + ", significant rise at " + (", ".join(rose) or "none"))
+    return text, verdict

@@ -6,7 +6,7 @@ from dataclasses import replace
 from functools import partial
 
 from kbcli.stages.artifact import Artifact
-from kbcli.stages.report.effects import shrinks
+from kbcli.stages.report.effects import falls, shrinks
 from kbcli.stages.report.judge import (
     beside,
     combine,
@@ -17,6 +17,7 @@ from kbcli.stages.report.judge import (
     significance,
     whole,
 )
+from kbcli.stages.report.readings import join, reading, rms_view
 from kbcli.stages.report.source import (
     Claim,
     check,
@@ -59,8 +60,9 @@ def claims(art: Artifact, own: Artifact | None = None) -> list[Claim]:
     check(art)
     modes = art.attrs["modes"]
     ideal = "ideal" if "ideal" in modes else None
-    out = [*_entropy_claims(art, ideal), *_displacement_claims(art, ideal),
-           *_dynamics_claims(art)]
+    rms = rms_view(art)
+    out = [*_entropy_claims(art, ideal), *_displacement_claims(art, ideal, rms),
+           *_dynamics_claims(art, rms)]
     return out + (own_model_claims(own) if own is not None else [])
 
 
@@ -76,7 +78,7 @@ def own_model_claims(own: Artifact) -> list[Claim]:
     label = (f"with the robot's own model ({own.attrs.get('model_strategy')}, file "
              f"{model.get('file')}, sha256 `{str(model.get('sha256'))[:16]}`)")
     return [replace(c, source=OWN_SOURCE, measured=f"{label}: {c.measured}")
-            for c in _dynamics_claims(own)]
+            for c in _dynamics_claims(own, rms_view(own))]
 
 
 def _entropy_claims(art: Artifact, ideal: str | None) -> list[Claim]:
@@ -90,8 +92,9 @@ def _entropy_claims(art: Artifact, ideal: str | None) -> list[Claim]:
             continue
         measured, verdict = entropy_claim(art, ideal, judged, s)
         others_ = beside(art, lambda x, s2: entropy_claim(art, ideal, x, s2))
+        alt = join(reading("entropy", entropy_claim(art, ideal, judged, s, every_step=True)))
         out.append(Claim("Sect. IV-A, Fig. 6", FIG6, judged, opts, f"{s} vs {base}: {measured}",
-                         verdict, others_))
+                         verdict, others_, readings=alt, mode=ideal, strategy=s))
     return out
 
 
@@ -134,7 +137,22 @@ def _other_estimate(art: Artifact, method: str, fn_of_sfx, s: str, verdict: str)
     return f"; {label}: {text} [{v}]{note}"
 
 
-def _displacement_claims(art: Artifact, ideal: str | None) -> list[Claim]:
+def _alternatives(art: Artifact, rms: Artifact | None, mode: str, cat: str, rule: tuple,
+                  method: str, strategy: str) -> tuple:
+    """A displacement claim under the plainest other reading of each unstated rule it rests on
+    (:mod:`.readings`)."""
+    parts = [reading("error", rule_fn(rms, mode, cat, rule)(method, strategy)
+                     if rms is not None else None)]
+    if len(rule) > 3:  # medium: its stated threshold alone
+        parts.append(reading("medium", rule_fn(art, mode, cat, rule[:3])(method, strategy)))
+    if rule[0] == "ns":
+        parts.append(reading("ns", not_significant(art, mode, method, cat, strategy,
+                                                   two_sided=True)))
+    return join(*parts)
+
+
+def _displacement_claims(art: Artifact, ideal: str | None,
+                         rms: Artifact | None = None) -> list[Claim]:
     judged, base = art.attrs["judged"], art.attrs["baseline"]
     opts = short(art, judged)
     out = []
@@ -150,11 +168,12 @@ def _displacement_claims(art: Artifact, ideal: str | None) -> list[Claim]:
                                         verdict)
             why = large_why(art, ideal) if cat == "large" else ""
             out.append(Claim(source, text, judged, opts, f"{s} vs {base}: {measured}", verdict,
-                             beside(art, fn), why))
-    return out + _trend_claims(art, ideal)
+                             beside(art, fn), why,
+                             _alternatives(art, rms, ideal, cat, rule, judged, s), ideal, s))
+    return out + _trend_claims(art, ideal, rms)
 
 
-def _trend_claims(art: Artifact, ideal: str | None) -> list[Claim]:
+def _trend_claims(art: Artifact, ideal: str | None, rms: Artifact | None = None) -> list[Claim]:
     judged, base = art.attrs["judged"], art.attrs["baseline"]
     opts = short(art, judged)
     cats = [c for c, *_ in DISPLACEMENT_CLAIMS]
@@ -167,16 +186,19 @@ def _trend_claims(art: Artifact, ideal: str | None) -> list[Claim]:
         fn = _trend_fn(art, ideal)
         measured, verdict = fn(judged, s)
         measured += _other_estimate(art, judged, partial(_trend_fn, art, ideal), s, verdict)
+        alt = join(reading("error", _trend_fn(rms, ideal)(judged, s) if rms is not None else None),
+                   reading("trend", falls(art, ideal, judged, s, cats)))
         out.append(Claim(*TREND, judged, opts, f"{s} vs {base}: {measured}", verdict,
-                         beside(art, fn)))
+                         beside(art, fn), readings=alt, mode=ideal, strategy=s))
     return out
 
 
-def _dynamics(art: Artifact, x: str, s: str, sfx: str = "") -> tuple[str, str]:
+def _dynamics(art: Artifact, x: str, s: str, sfx: str = "", *,
+              two_sided: bool = False) -> tuple[str, str]:
     """'Not significant' in dynamics mode over every category, one verdict."""
     parts, verdicts = [], []
     for cat in art.attrs["categories"]:
-        m, v = not_significant(art, "dynamics", x, cat, s, sfx)
+        m, v = not_significant(art, "dynamics", x, cat, s, sfx, two_sided=two_sided)
         if m == "not evaluated":
             continue
         parts.append(f"{cat}: {m}")
@@ -186,7 +208,7 @@ def _dynamics(art: Artifact, x: str, s: str, sfx: str = "") -> tuple[str, str]:
     return "; ".join(parts), combine(verdicts)
 
 
-def _dynamics_claims(art: Artifact) -> list[Claim]:
+def _dynamics_claims(art: Artifact, rms: Artifact | None = None) -> list[Claim]:
     judged, base = art.attrs["judged"], art.attrs["baseline"]
     opts = short(art, judged)
     if "dynamics" not in art.attrs["modes"]:
@@ -197,15 +219,19 @@ def _dynamics_claims(art: Artifact) -> list[Claim]:
     measured, verdict = restores(art, judged)
     others_ = "; ".join(f"{x}: {restores(art, x)[0]} [{restores(art, x)[1]}]"
                         for x in others(art) if "dynamics" in methods_of(art)[x]["modes"])
-    out = [Claim("Sect. IV-C", DYN_RESTORES, judged, opts, measured, verdict, others_)]
+    out = [Claim("Sect. IV-C", DYN_RESTORES, judged, opts, measured, verdict, others_,
+                 readings=join(reading("restore", restores(art, judged, test=True))),
+                 mode="dynamics")]
 
     dyn = partial(_dynamics, art)
     for s in compared(art, judged):
         measured, verdict = dyn(judged, s)
         measured += _other_estimate(art, judged, lambda sfx: partial(_dynamics, art, sfx=sfx), s,
                                     verdict)
+        alt = join(reading("error", _dynamics(rms, judged, s) if rms is not None else None),
+                   reading("ns", _dynamics(art, judged, s, two_sided=True)))
         out.append(Claim("Sect. IV-C", DYN_NS, judged, opts, f"{s} vs {base}: {measured}",
-                         verdict, beside(art, dyn)))
+                         verdict, beside(art, dyn), readings=alt, mode="dynamics", strategy=s))
     return out
 
 

@@ -7,11 +7,17 @@ from collections.abc import Sequence
 import numpy as np
 
 from kbcli.stages.artifact import Artifact
-from kbcli.stages.report.ablation import explain
+from kbcli.stages.report.ablation import explain, explained
 from kbcli.stages.report.captions import figures
 from kbcli.stages.report.departures import departures_table
 from kbcli.stages.report.effects import EFFECT_LEVEL
 from kbcli.stages.report.paper import claims
+from kbcli.stages.report.power import REPLICATES
+from kbcli.stages.report.readings import as_text, as_verdicts
+from kbcli.stages.report.readings import table as judging_table
+from kbcli.stages.report.reproduces import powers
+from kbcli.stages.report.reproduces import table as reproduces_table
+from kbcli.stages.report.runs import sections as runs_sections
 from kbcli.stages.report.source import (
     ENTROPY_STEPS,
     NOT_SIGNIFICANT,
@@ -34,24 +40,41 @@ from kbcli.stages.report.tables import (
 
 
 def build(art: Artifact, ablations: Artifact | Sequence[Artifact] | None = None,
-          own: Artifact | None = None) -> Report:
+          own: Artifact | None = None, *, replicates: int = REPLICATES) -> Report:
     """The report of an evaluation artifact: README text, claims and figures; with
     ``ablations`` (an evaluation of the ablation ladder, ``pipelines/ablations.toml``, or several:
     one per mode) also the
     section "What explains each difference"; with ``own`` (the protocol evaluated with the robot's
-    own learned model) the Sect. IV-C claims on that model too, beside those on ``art``'s."""
+    own learned model) the Sect. IV-C claims on that model too, beside those on ``art``'s.
+    ``replicates``: bootstrap replicates per differing claim for its replication statement
+    (:mod:`.power`; 0: none)."""
     art = upgrade(art)
     check(art)
     cl = claims(art, own)
     figs = figures(art)
-    why = explain(cl, ablations) if ablations else []
-    lines = [*_header(art), *_claims_section(cl), "", _how_judged(), "", *why,
-             *departures_table(art), *_methods_section(art), *_figures_section(figs), *_ablation_section(art)]
+    power = powers(art, cl, own, replicates=replicates)
+    texts = power_texts(cl, power)
+    explained_rows = explained(cl, ablations, texts) if ablations else []
+    why = explain(cl, ablations, texts) if ablations else []
+    lines = [*_header(art), "", *reproduces_table(cl, explained_rows, power),
+             *_claims_section(cl), "", _how_judged(), "", *judging_table(), *why,
+             *departures_table(art), *runs_sections(art), *_methods_section(art),
+             *_figures_section(figs), *_ablation_section(art)]
     for m in art.attrs["modes"]:
         lines += _mode_sections(art, m)
     lines += ["## Playing success (measured; median and interquartile range over runs)", "",
               *play_table(art), ""]
     return Report(readme="\n".join(lines), claims=cl, figures=figs)
+
+
+def power_texts(cl: list[Claim], power: dict) -> dict[str, str]:
+    """The replication statement of each differing claim, by its paper text (the first claim
+    of a text: the main evaluation's before the own model's)."""
+    out: dict[str, str] = {}
+    for i, c in enumerate(cl):
+        if power.get(i) is not None and c.paper not in out:
+            out[c.paper] = power[i].text()
+    return out
 
 
 def _header(art: Artifact) -> list[str]:
@@ -100,20 +123,28 @@ def _play_notes(art: Artifact) -> list[str]:
 
 
 def _claims_section(cl: list[Claim]) -> list[str]:
+    """The claims as one short row each (the verdict, and the verdict under each other reading of
+    an unstated rule), then each claim's measurements in full below the table."""
     lines = [
         "",
         "## The paper's claims against our measurements",
         "",
-        "| source | the paper says | judged on | options | we measured | verdict | beside it "
-        "(other methods) |",
-        "|---|---|---|---|---|---|---|",
+        "| # | source | the paper says | judged on | verdict | under the other readings |",
+        "|---|---|---|---|---|---|",
     ]
-    for c in cl:
-        lines.append(f"| {c.source} | {c.paper} | `{c.method}` | {c.options} | {c.measured} | "
-                     f"**{c.verdict}** | {c.beside or '-'} |")
-    whys = [c.why for c in cl if c.why]
-    if whys:
-        lines += ["", *[f"{w}." for w in whys]]
+    for i, c in enumerate(cl, 1):
+        lines.append(f"| {i} | {c.source} | {c.paper} | `{c.method}` | **{c.verdict}** | "
+                     f"{as_verdicts(c.readings)} |")
+    lines += ["", "### What each verdict rests on", ""]
+    for i, c in enumerate(cl, 1):
+        lines += [f"{i}. **{c.paper}** ({c.source}; `{c.method}`: {c.options}): {c.measured} "
+                  f"[**{c.verdict}**]"]
+        if c.readings:
+            lines += [f"    - other readings: {as_text(c.readings)}"]
+        if c.beside:
+            lines += [f"    - other methods: {c.beside}"]
+        if c.why:
+            lines += [f"    - {c.why}."]
     return lines
 
 

@@ -39,6 +39,11 @@ class Claim:
     verdict: str  # one of VERDICTS
     beside: str = ""  # the other methods' measurements
     why: str = ""  # a measured explanation of a difference
+    #: the claim under the plainest other reading of each unstated rule it rests on:
+    #: ``(label, measured text, verdict)`` (:mod:`kbcli.stages.report.readings`)
+    readings: tuple[tuple[str, str, str], ...] = ()
+    mode: str = ""  # the mode the claim is judged in
+    strategy: str = ""  # the compared strategy ('' : every strategy of the method)
 
 
 @dataclass(frozen=True)
@@ -87,7 +92,7 @@ def upgrade(art: Artifact) -> Artifact:
     measured, so it is dropped (NaN).
     """
     if (art.schema_version or 1) >= 2 or "methods" in art.attrs:
-        return art
+        return traced(art)
     check(art)
     data = dict(art.data)
     name = "kbcli"
@@ -121,7 +126,40 @@ def upgrade(art: Artifact) -> Artifact:
     attrs["judged"] = name
     attrs["method_order"] = [name]
     attrs.setdefault("play_notes", 0)
-    return Artifact(kind=art.kind, config=art.config, seed=art.seed, data=data, attrs=attrs,
+    return traced(Artifact(kind=art.kind, config=art.config, seed=art.seed, data=data,
+                           attrs=attrs, inputs=art.inputs, schema_version=art.schema_version,
+                           kbcli_version=art.kbcli_version, sha256=art.sha256, path=art.path))
+
+
+class MissingData(ArtifactError, KeyError):
+    """A dataset the report reads is not in the evaluation: one line naming the file and the
+    dataset (a ``KeyError`` too, for the lookups that expect one)."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+class _Tree(dict):
+    """An artifact's data group whose missing entries raise :class:`MissingData` naming the
+    file and the dataset's path (``.get`` still returns its default)."""
+
+    def __init__(self, d: dict, path: str, where: str) -> None:
+        super().__init__((k, _Tree(v, f"{path}{k}/", where) if isinstance(v, dict) else v)
+                         for k, v in d.items())
+        self.path, self.where = path, where
+
+    def __missing__(self, key):
+        raise MissingData(f"{self.where}: the evaluation has no dataset '{self.path}{key}', which "
+                          "the report reads (written by another kbcli version, or damaged)")
+
+
+def traced(art: Artifact) -> Artifact:
+    """``art`` with its data as :class:`_Tree` groups (a report on a damaged evaluation names
+    what it lacks, in one line)."""
+    if isinstance(art.data, _Tree):
+        return art
+    return Artifact(kind=art.kind, config=art.config, seed=art.seed,
+                    data=_Tree(art.data, "", art.path or "the evaluation"), attrs=art.attrs,
                     inputs=art.inputs, schema_version=art.schema_version,
                     kbcli_version=art.kbcli_version, sha256=art.sha256, path=art.path)
 

@@ -1,0 +1,77 @@
+"""The stored results are the current code's (issue 39).
+
+Every result file (``benchmarks/results/*.json``) names the commit of the code that made it,
+whether its tree was clean, and the sha256 of every input it read. The reproduction's verdicts
+(``reproduce.json``) rest on a model that ``make reproduce`` learns: this suite learns it again,
+the same way, and fails when the bytes differ, so a change to learning that stales the stored
+verdicts is caught here, not by a reviewer.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from kbcli.cli import app
+from kbcli.io.artifact import sha256_file
+from kbcli.io.platform import fingerprint
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+REPRODUCE = RESULTS / "reproduce.json"
+#: The commands ``benchmarks/reproduce.sh`` learns the reproduction's model with (SEED=0).
+KEYBOARD = 'keyboard --config pipelines/keyboard.toml -o "$OUT/keyboard.h5"'
+LEARN = 'learn --keyboard "$OUT/keyboard.h5" -o "$OUT/model.h5" --seed "$SEED"'
+REGENERATE = "regenerate it: make reproduce && make results-reproduce (see the Makefile)"
+
+
+def _result(path: Path) -> dict:
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+def reproduction_model(d: dict) -> str:
+    """The full sha256 of the model the stored reproduction's evaluation was run with."""
+    evals = [v for k, v in d.get("inputs", {}).items() if v.get("kind") == "evaluation"
+             and "own" not in Path(k).name and "ablation" not in Path(k).name]
+    assert evals, f"{REPRODUCE.name} names no evaluation among its inputs: {REGENERATE}"
+    return evals[0]["inputs"]["model"]["sha256"]
+
+
+@pytest.mark.parametrize("path", sorted(RESULTS.glob("*.json")), ids=lambda p: p.name)
+def test_every_result_file_names_its_provenance(path):
+    d = _result(path)
+    git = d.get("git")
+    assert git is not None and re.fullmatch(r"[0-9a-f]{40}", git.get("commit", "")), \
+        f"{path.name} does not name the commit of the code that made it: regenerate it"
+    assert git["clean"] is True, f"{path.name} was made from a tree with changes: {git['changed']}"
+    for name, entry in d["inputs"].items():
+        assert re.fullmatch(r"[0-9a-f]{64}", entry["sha256"]), name
+
+
+def test_the_reproduction_learns_its_model_as_this_suite_does():
+    text = (ROOT / "benchmarks" / "reproduce.sh").read_text(encoding="utf-8")
+    assert KEYBOARD in text and LEARN in text
+    assert 'SEED=${SEED:-0}' in text
+
+
+def test_the_stored_reproduction_is_the_current_codes(runner, tmp_path):
+    """Learn the reproduction's model as ``make reproduce`` does; its bytes are the model the
+    stored verdicts were computed on (on the platform that made them: numpy's kernels decide
+    the last bit of a learned model, :mod:`kbcli.io.platform`)."""
+    d = _result(REPRODUCE)
+    want = reproduction_model(d)
+    if d.get("platform") != fingerprint():
+        pytest.skip("benchmarks/results/reproduce.json was made on another platform "
+                    f"({d.get('platform', {}).get('numpy_simd')}): its model's bytes are that "
+                    "platform's")
+    kb, model = tmp_path / "keyboard.h5", tmp_path / "model.h5"
+    for args in (["keyboard", "--config", str(ROOT / "pipelines" / "keyboard.toml"), "-o", str(kb)],
+                 ["learn", "--keyboard", str(kb), "-o", str(model), "--seed", "0"]):
+        r = runner.invoke(app, args)
+        assert r.exit_code == 0, r.output
+    assert sha256_file(model) == want, (
+        "the model make reproduce learns today is not the one benchmarks/results/reproduce.json "
+        f"was computed on: the learning code changed since; {REGENERATE}")
