@@ -135,3 +135,36 @@ def test_a_bench_command_writes_the_result_file_the_docs_render(tmp_path):
     bad = CliRunner().invoke(app, ["bench", "--json", str(tmp_path / "arm.h5"), "arm"])
     assert bad.exit_code == 1 and "must end in .json" in bad.output
     assert not (tmp_path / "arm.h5").exists()
+
+
+def test_the_readme_says_what_reproduces_from_the_stored_result():
+    """The README's "What reproduces" is the table of benchmarks/results/reproduce.json, written
+    by ``python tools/docs_hooks.py --readme``: regenerating it changes nothing."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert hooks.README_START in text and hooks.README_END in text
+    section = text.split(hooks.README_START)[1].split(hooks.README_END)[0]
+    assert section.strip() == hooks.readme_section().strip(), \
+        "README.md is stale: run python tools/docs_hooks.py --readme"
+    assert "| claim |" in section
+
+
+def test_rewriting_the_readme_replaces_only_its_generated_section(tmp_path):
+    results = tmp_path / "results"
+    results.mkdir()
+    (results / "reproduce.json").write_text(json.dumps({
+        "command": "kbcli bench verdicts e.h5", "date": "2026-12-07", "machine": "m",
+        "kbcli_version": "0", "tables": [
+            {"title": "What reproduces", "columns": ["claim", "verdict"],
+             "rows": [{"claim": "small", "verdict": "agrees"}]},
+            {"title": "Other", "columns": ["x"], "rows": [{"x": "1"}]}]}))
+    readme = tmp_path / "README.md"
+    readme.write_text(f"# title\n\nbefore\n\n{hooks.README_START}\nold table\n{hooks.README_END}\n"
+                      "after\n", encoding="utf-8")
+    assert hooks.rewrite_readme(readme, results) is True
+    new = readme.read_text(encoding="utf-8")
+    assert new.startswith("# title\n\nbefore\n\n") and new.endswith(f"{hooks.README_END}\nafter\n")
+    assert "old table" not in new and "| small | agrees |" in new and "| 1 |" not in new
+    assert hooks.rewrite_readme(readme, results) is False  # a second run changes nothing
+    readme.write_text("no markers\n", encoding="utf-8")
+    with pytest.raises(ValueError, match="no generated section"):
+        hooks.rewrite_readme(readme, results)
