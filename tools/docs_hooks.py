@@ -82,7 +82,8 @@ def _escape(text: str) -> str:
 
 #: How the result files of the long runs are made (the others: ``make results``).
 MAKES = {"reproduce": "`make reproduce`, then `make results-reproduce`,",
-         "model-quality": "`make model-quality`, then `make results-quality`,"}
+         "model-quality": "`make model-quality`, then `make results-quality`,",
+         "default-model": "`make results-default-model`"}
 
 
 def results_markdown(name: str, root: Path = RESULTS, only: tuple[str, ...] = ()) -> str:

@@ -165,8 +165,13 @@ def departures_table(art: Artifact) -> ResultTable:
 
 
 def runs_tables(art: Artifact) -> list[ResultTable]:
-    """The runs that ruled out the truth, and the stopping rules per mode (when recorded)."""
+    """The final errors, the runs that ruled out the truth, and the stopping rules per mode (when
+    recorded)."""
     out = []
+    rows = runs.final_errors(art)
+    if rows:
+        out.append(ResultTable("Final error of every cell (RMSE over runs, and the largest)",
+                               tuple(rows[0]), tuple(rows)))
     rows = runs.excluded(art)
     if rows:
         out.append(ResultTable(f"Runs that ruled out the truth (posterior at the truth below "

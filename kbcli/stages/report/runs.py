@@ -81,6 +81,28 @@ def excluded_total(art: Artifact, method: str | None = None) -> int | None:
     return sum(int(r["truth ruled out"]) for r in rows if method in (None, r["method"]))
 
 
+def final_errors(art: Artifact) -> list[dict[str, str]] | None:
+    """Per mode, method, category and strategy: the RMSE over runs of the error after the last
+    touch and the largest final error (px); None when the evaluation holds no per-run errors."""
+    errors = _step(art, "errors")
+    if errors is None:
+        return None
+    T = errors.shape[1]
+    out = []
+    for m in art.attrs["modes"]:
+        for x, info in methods_of(art).items():
+            for c in art.attrs["categories"]:
+                for s in info["strategies"]:
+                    sel = _rows(art, m, x, s, c)
+                    if sel.any():
+                        e = errors[sel, -1]
+                        out.append({"mode": m, "method": x, "category": c, "strategy": s,
+                                    "runs": str(int(sel.sum())),
+                                    f"RMSE at t={T} px": f"{np.sqrt(np.mean(e ** 2)):.2f}",
+                                    "largest final error px": f"{np.max(e):.2f}"})
+    return out
+
+
 def rules(art: Artifact) -> dict[str, tuple[str, str, float]]:
     """The two stopping rules applied to every run: name -> (label, per-step record, threshold)."""
     judged = robot(art, art.attrs["judged"])
