@@ -63,7 +63,8 @@ def make_env(cfg: GymBenchConfig, model: str | None = None, **options) -> gymnas
 
 
 def plan(cfg: GymBenchConfig, env: gymnasium.Env) -> list[adapt_bench.Cell]:
-    """One batch per agent and category, with ``kbcli bench adapt``'s displacements and seeds."""
+    """One batch per agent and category, with ``kbcli bench adapt``'s displacements and seeds
+    (``Cell.strategy``: the agent as given, ``Cell.label``: its name in the table)."""
     base = env.unwrapped
     rigid = FAMILIES.get(base.config.family).rotates
     bcfg = adapt_bench.BenchConfig(
@@ -71,9 +72,15 @@ def plan(cfg: GymBenchConfig, env: gymnasium.Env) -> list[adapt_bench.Cell]:
         sections=("learned-rigid" if rigid else "learned",), categories=cfg.categories,
         strategies=("random",))
     templates = {c.category: c for c in adapt_bench.plan(bcfg, base.model, base.keyboard)}
-    return [adapt_bench.Cell("gym", agent, agent, cat, base.adapt_cfg, base.model,
+    return [adapt_bench.Cell("gym", label(agent), agent, cat, base.adapt_cfg, base.model,
                              templates[cat].truths, templates[cat].seeds, keyboard=base.keyboard)
             for agent in cfg.agents for cat in cfg.categories]
+
+
+def label(agent: str) -> str:
+    """An agent's name in the table: ``file.py:factory`` without its folders (a ``/`` in a label
+    would make it a variant of another row, whose p-values are then against another reference)."""
+    return agent.rsplit("/", 1)[-1]
 
 
 def run_cells(cells: list[adapt_bench.Cell], env: gymnasium.Env,
@@ -81,7 +88,7 @@ def run_cells(cells: list[adapt_bench.Cell], env: gymnasium.Env,
     """Run every episode of every batch, yielding ``(cell, i)`` after each (a progress bar)."""
     for cell in cells:
         for i, truth in enumerate(cell.truths):
-            errors, angles, ms = episode(env, agents[cell.label], cell.seeds[i], truth)
+            errors, angles, ms = episode(env, agents[cell.strategy], cell.seeds[i], truth)
             cell.errors.append(errors)
             cell.angle_errors.append(angles)
             cell.step_ms.append(ms)
@@ -193,5 +200,5 @@ def _env_steps(env, agent, ss, truth, steps: int, out: dict) -> np.ndarray:
     return np.asarray(estimates)
 
 
-__all__ = ["BUILTIN", "GymBenchConfig", "make_env", "plan", "run_cells", "episode", "fresh", "agent_seed",
+__all__ = ["BUILTIN", "GymBenchConfig", "make_env", "plan", "label", "run_cells", "episode", "fresh", "agent_seed",
            "summarize", "step_cost"]
