@@ -66,6 +66,9 @@ def test_an_agent_from_a_module_or_a_file(tmp_path, monkeypatch):
 
         def nothing(env):
             return 3
+
+        def broken(env):
+            raise FileNotFoundError("policy.zip: no trained policy")
         """))
     monkeypatch.chdir(tmp_path)
     cfg = bench.GymBenchConfig(experiments=2, max_steps=2, categories=("small",),
@@ -83,6 +86,8 @@ def test_an_agent_from_a_module_or_a_file(tmp_path, monkeypatch):
     assert [c.label for c in cells] == ["my_agents:corner", "my_agents.py:centre"]
     for spec, fragment in (("my_agents:missing", "has no callable 'missing'"),
                            ("my_agents:nothing", "returned int, not an agent"),
+                           ("my_agents:broken", "broken(env) failed: FileNotFoundError: "
+                                                "policy.zip: no trained policy"),
                            ("no_such_module:agent", "No module named 'no_such_module'"),
                            ("gone.py:agent", "gone.py: no such file"),
                            ("infogainn", "unknown agent 'infogainn'")):

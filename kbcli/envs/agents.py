@@ -97,8 +97,8 @@ def load_agent(spec: str, env: gymnasium.Env) -> Agent:
     Raises
     ------
     ConfigError
-        An unknown name, a module or file that cannot be loaded, a missing factory, or a factory
-        that returns no callable agent.
+        An unknown name, a module or file that cannot be imported, a missing factory, a factory
+        that fails (its exception's message in the line) or returns no callable agent.
     """
     if spec in STRATEGIES:
         return StrategyAgent(spec, env)
@@ -110,7 +110,11 @@ def load_agent(spec: str, env: gymnasium.Env) -> Agent:
     factory = getattr(_module(where, spec), name, None)
     if not callable(factory):
         raise ConfigError(f"agent {spec}: {where} has no callable {name!r}")
-    agent = factory(env)
+    try:
+        agent = factory(env)
+    except Exception as exc:  # the user's code, at the boundary: one line saying what failed
+        raise ConfigError(f"agent {spec}: {name}(env) failed: {type(exc).__name__}: "
+                          f"{exc}") from exc
     act = agent if callable(agent) else getattr(agent, "act", None)
     if not callable(act):
         raise ConfigError(f"agent {spec}: {name}(env) returned {type(agent).__name__}, not an "
@@ -126,13 +130,16 @@ def _module(where: str, spec: str) -> Any:
             raise ConfigError(f"agent {spec}: {where}: no such file")
         mod_spec = importlib.util.spec_from_file_location(f"kbcli_agent_{path.stem}", path)
         module = importlib.util.module_from_spec(mod_spec)
-        mod_spec.loader.exec_module(module)
+        try:
+            mod_spec.loader.exec_module(module)
+        except ImportError as exc:  # what the agent's file needs is not installed
+            raise ConfigError(f"agent {spec}: {exc}") from None
         return module
     if os.getcwd() not in sys.path:
         sys.path.insert(0, os.getcwd())
     try:
         return importlib.import_module(where)
-    except ModuleNotFoundError as exc:
+    except ImportError as exc:
         raise ConfigError(f"agent {spec}: {exc}") from None
 
 
