@@ -249,3 +249,16 @@ def test_strategy_agent_needs_its_environment_current_step():
         envs.StrategyAgent("nope", env)
     with pytest.raises(ConfigError, match="acts in a kbcli environment"):
         envs.StrategyAgent("infogain", gymnasium.make("CartPole-v1"))
+
+
+def test_the_tutorial_random_agent_runs(monkeypatch, capsys):
+    """The ten-line random agent of docs/tutorials/agent.md runs its episode to the end."""
+    import re
+
+    text = (ROOT / "docs" / "tutorials" / "agent.md").read_text()
+    code = re.search(r"<!-- agent-example -->\s*```python\n(.*?)```", text, re.S).group(1)
+    assert len(code.strip().splitlines()) <= 12
+    monkeypatch.chdir(ROOT)
+    exec(compile(code, "agent.md", "exec"), {"__name__": "tutorial"})
+    assert re.search(r"^\d+ touches: estimate \[.*\], error [\d.]+ px$", capsys.readouterr().out,
+                     re.M)
