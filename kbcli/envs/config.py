@@ -43,9 +43,10 @@ def _table(v: Any) -> Any:
 
 
 class EnvConfig(Config):
-    """The options of ``kbcli/KeyboardAdapt-v0`` and ``kbcli/KeyboardAdaptDynamics-v0``.
+    """The options of ``kbcli/KeyboardAdapt-v0`` and ``kbcli/KeyboardAdaptDynamics-v0``
+    (keywords of ``gymnasium.make``).
 
-    Parameters
+    Attributes
     ----------
     model : str, optional
         The robot's model artifact (``.h5``, kind ``model``); None: the embedded default model
