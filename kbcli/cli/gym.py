@@ -22,9 +22,9 @@ MAX_SPEED_EPISODES = 1000
 @command(bench_app, name="gym")
 def bench_gym_cmd(
     agent: Annotated[list[str] | None, typer.Option(
-        "--agent", help="Agents to run (repeat): a kbcli strategy (random, active, infogain, "
-        "paper-active), or module:factory or path/file.py:factory, where factory(env) returns "
-        "a callable obs -> action.", show_default="random, active, infogain")] = None,
+        "--agent", help=f"Agents to run (repeat): a kbcli strategy ({opts.one_of('strategy')}), "
+        "or module:factory or path/file.py:factory, where factory(env) returns a callable "
+        "obs -> action.", show_default="random, active, infogain")] = None,
     model: opts.model_option("The robot's model artifact; its keyboard is the world's.",
                              optional=True, show_default="the embedded default model") = None,
     dynamics: Annotated[bool, typer.Option(
