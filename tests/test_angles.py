@@ -29,9 +29,9 @@ def test_wrap_degrees_known_answers():
 
 
 def test_angle_error_is_the_short_way_round():
-    from kbcli.stages.adapt.loop import _errors
+    from kbcli.stages.adapt import estimate_errors
 
-    _, err = _errors(np.array([179.0, 0, 0]), np.array([-179.0, 0, 0]), "rigid", "rigid")
+    _, err = estimate_errors(np.array([179.0, 0, 0]), np.array([-179.0, 0, 0]), "rigid", "rigid")
     assert err == pytest.approx(2.0)
 
 

@@ -59,6 +59,8 @@ SMALL_CONFIGS = {
 NOT_RUN = {
     "--scheduler tcp://HEAD": "needs a running Dask cluster (tests/test_evaluate.py starts one)",
     "--socket /tmp/kb.sock": "waits for a robot to connect (tests/test_serve.py connects one)",
+    "examples/ppo_agent.py": "needs the rl extra (torch, Stable-Baselines3: never in make test) "
+                             "and minutes of training",
 }
 
 #: What a command reads on stdin (a robot that says goodbye at once).

@@ -1,5 +1,5 @@
 """Structure checks of the kbcli package: module and function sizes, import cycles and imports up
-the layers (core <- sim <- stages <- io <- viz, bench <- api, cli). Run as a script to print a
+the layers (core <- sim <- stages <- io <- viz, envs, bench <- api, cli). Run as a script to print a
 report; ``tests/test_structure.py`` asserts the targets."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ ROOT = Path(__file__).resolve().parents[1] / "kbcli"
 
 #: Layer rank of each subpackage; a module may import only its own rank or below.
 LAYERS = {"errors": 0, "core": 1, "sim": 2, "stages": 3, "io": 4, "viz": 5,
-          "bench": 5, "api": 6, "cli": 7, "__init__": 0, "__main__": 8}
+          "envs": 5, "bench": 5, "api": 6, "cli": 7, "__init__": 0, "__main__": 8}
 
 
 def modules() -> dict[str, Path]:

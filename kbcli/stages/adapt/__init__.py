@@ -41,6 +41,7 @@ from kbcli.stages.adapt.config import (
 from kbcli.stages.adapt.loop import (
     build_shared_samples,
     build_shared_table,
+    estimate_errors,
     experiment,
     play_success,
 )
@@ -55,6 +56,6 @@ from kbcli.stages.adapt.record import (
 from kbcli.stages.adapt.stage import check_inputs, run
 
 __all__ = ["AdaptConfig", "PlayCheck", "play_success", "experiment", "run", "check_inputs",
-           "steps_below", "build_shared_table", "build_shared_samples", "LOOP_FIELDS",
-           "Recorder", "run_attrs", "run_data", "RECORDS", "POSTERIORS", "FEEDBACKS",
+           "steps_below", "build_shared_table", "build_shared_samples", "estimate_errors",
+           "LOOP_FIELDS", "Recorder", "run_attrs", "run_data", "RECORDS", "POSTERIORS", "FEEDBACKS",
            "DEFAULT_SNAPSHOTS", "end_angles"]

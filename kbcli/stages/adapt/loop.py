@@ -61,8 +61,8 @@ def play_success(model, keyboard: Keyboard, sim: SimConfig, family: str, truth: 
         out[name] = float(np.mean(hist == MATCH))
     return out
 
-def _errors(est: np.ndarray, truth: np.ndarray, robot_family: str,
-            world_family: str) -> tuple[float, float]:
+def estimate_errors(est: np.ndarray, truth: np.ndarray, robot_family: str,
+                    world_family: str) -> tuple[float, float]:
     """Translation error (px) and angle error (deg) of an estimate against the truth."""
     t_err = float(np.hypot(*(est[-2:] - truth[-2:])))
     a_est = transforms.FAMILIES.get(robot_family).angle(est)
@@ -155,8 +155,8 @@ def _run(cfg: AdaptConfig, adapter: Adapter, touch: _Touches, rec: Recorder, tru
     ratios = []
     for st in adapt(adapter, touch, cfg.max_steps, use_landed=cfg.feedback == "landed",
                     stop=cfg.stop):
-        err, aerr = _errors(st.estimate, truth, cfg.robot.family, world_family)
-        ml_err, _ = _errors(st.ml, truth, cfg.robot.family, world_family)
+        err, aerr = estimate_errors(st.estimate, truth, cfg.robot.family, world_family)
+        ml_err, _ = estimate_errors(st.ml, truth, cfg.robot.family, world_family)
         rec.add(st, (err, ml_err, aerr), touch.pose())
         ratios.append(adapter.posterior.log_ratio_at(truth_robot))
         if on_step is not None:
