@@ -77,7 +77,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
                play_pool: ActionSamples | None = None,
                reference_rng: np.random.Generator | None = None,
                on_step: Callable[[int], None] | None = None,
-               timings: dict[str, float] | None = None) -> dict[str, np.ndarray]:
+               timings: dict[str, float] | None = None,
+               keep: dict | None = None) -> dict[str, np.ndarray]:
     """One adaptation against a world whose keyboard sits at ``true_params``.
 
     Parameters
@@ -112,6 +113,9 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     timings : dict, optional
         Receives ``setup_ms``: the wall-clock time of the adapter's set-up before the first touch
         (the model raster, :meth:`Adapter.prepare`), which ``step_ms`` leaves out.
+    keep : dict, optional
+        Receives ``adapter``: the robot's adapter after the last touch (its belief, its repaired
+        model: ``--model-out``).
 
     Returns
     -------
@@ -140,6 +144,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         rec.add(st, (err, ml_err, aerr), touch.pose())
         if on_step is not None:
             on_step(st.t)
+    if keep is not None:
+        keep["adapter"] = adapter
     out = rec.arrays()
     out["true_landed"] = np.asarray(touch.true_landed, float).reshape(-1, 2)
     if play is not None:
