@@ -237,6 +237,23 @@ class Touches:
         return len(self.classes)
 
 
+def repaired_map(rmap: RepairMap, touches: Touches, shift: np.ndarray,
+                 scale: float = DEFAULT_SCALE) -> np.ndarray:
+    """(H, W, C) the Dirichlet parameters ``alpha`` of the map repaired by ``touches`` mapped back
+    by ``shift`` (the map one hypothesis of the joint belief carries), on ``rmap``'s raster: the
+    model's prior ``kappa q_s`` plus each touch's kernel-weighted count of its sound. Its argmax
+    is the repaired map's most probable sound, ``alpha / alpha.sum(-1)`` its predictive."""
+    t = rmap.table
+    h, w = t.shape
+    gx, gy = np.meshgrid(t.origin[0] + t.step * np.arange(w), t.origin[1] + t.step * np.arange(h))
+    prior = np.stack([rmap.prob(gx, gy, c, scale) for c in range(t.n_classes)], axis=-1)
+    alpha = rmap.kappa[..., None].astype(float) * prior
+    pts = touches.points - np.asarray(shift, float)[-2:]
+    for p, c in zip(pts, touches.classes, strict=True):
+        alpha[..., c] += kernel((gx - p[0]) ** 2 + (gy - p[1]) ** 2, rmap.width)
+    return alpha
+
+
 def repair_terms(grid: HypothesisGrid, rmap: RepairMap, touches: Touches, action: np.ndarray,
                  cls: int, nuisance: Nuisance) -> np.ndarray:
     """``log p(cls | action, h, D_<t)`` under every nuisance value (scale, outlier) and cell h:
