@@ -33,6 +33,7 @@ from kbcli.core.table import LikelihoodTable
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig, World, make_reacher
 
+
 @pytest.fixture(scope="module")
 def keyboard():
     return Keyboard(KeyboardConfig())

@@ -40,16 +40,7 @@ def inspect_cmd(
     for k, v in _flatten(d["config"], hidden=hidden):
         cfg.add_row(k, json.dumps(v))
     out.print(cfg)
-    if d["attrs"]:
-        at = Table(title="summary", show_header=True)
-        at.add_column("key")
-        at.add_column("value")
-        attrs = {k: v for k, v in d["attrs"].items() if k != "lineage"}
-        for k, v in _flatten(_unread_resolved(d["config"], attrs, hidden), hidden=hidden):
-            at.add_row(k, json.dumps(v) if not isinstance(v, str) else v)
-        out.print(at)
-    if d["attrs"].get("lineage"):
-        _print_lineage(d["attrs"]["lineage"])
+    _print_summary(d, hidden)
     if hidden:
         out.print(f"{len(hidden)} robot options the method does not read (its posterior, "
                   "estimator, family, strategy and stopping rules) are not shown; --json prints "
@@ -74,6 +65,21 @@ def inspect_cmd(
     out.print(ds)
     if d["problem"]:
         raise ArtifactError(f"{artifact}: {d['problem']}")
+
+
+def _print_summary(d: dict, hidden: list) -> None:
+    """The summary attributes (the options the method does not read added to ``hidden``), and a
+    repaired model's lineage apart."""
+    if d["attrs"]:
+        at = Table(title="summary", show_header=True)
+        at.add_column("key")
+        at.add_column("value")
+        attrs = {k: v for k, v in d["attrs"].items() if k != "lineage"}
+        for k, v in _flatten(_unread_resolved(d["config"], attrs, hidden), hidden=hidden):
+            at.add_row(k, json.dumps(v) if not isinstance(v, str) else v)
+        out.print(at)
+    if d["attrs"].get("lineage"):
+        _print_lineage(d["attrs"]["lineage"])
 
 
 def _print_lineage(lineage: list) -> None:

@@ -73,8 +73,7 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
                rng: np.random.Generator, world_family: str | None = None,
                table: LikelihoodTable | None = None,
                snapshot_steps: tuple[int, ...] = (), samples: ActionSamples | None = None,
-               play: PlayCheck | None = None,
-               play_pool: ActionSamples | None = None,
+               play: PlayCheck | None = None, play_pool: ActionSamples | None = None,
                reference_rng: np.random.Generator | None = None,
                on_step: Callable[[int], None] | None = None,
                timings: dict[str, float] | None = None,
@@ -114,8 +113,7 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         Receives ``setup_ms``: the wall-clock time of the adapter's set-up before the first touch
         (the model raster, :meth:`Adapter.prepare`), which ``step_ms`` leaves out.
     keep : dict, optional
-        Receives ``adapter``: the robot's adapter after the last touch (its belief, its repaired
-        model: ``--model-out``).
+        Receives ``adapter``: the robot's adapter (at the end, its state after the last touch).
 
     Returns
     -------
@@ -133,7 +131,7 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     world_family = cfg.robot.family if world_family is None else world_family
     truth = np.asarray(true_params, float)
     robot_rng, world_rng = rng.spawn(2)
-    adapter = _prepared(cfg, model, robot_rng, table, samples, timings)
+    adapter = _prepared(cfg, model, robot_rng, table, samples, timings, keep)
     touch = _Touches(World(keyboard, make_reacher(cfg.sim_config()), truth, world_family),
                      world_rng)
     rec = Recorder(adapter, [s for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps])
@@ -144,8 +142,6 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         rec.add(st, (err, ml_err, aerr), touch.pose())
         if on_step is not None:
             on_step(st.t)
-    if keep is not None:
-        keep["adapter"] = adapter
     out = rec.arrays()
     out["true_landed"] = np.asarray(touch.true_landed, float).reshape(-1, 2)
     if play is not None:
@@ -156,12 +152,15 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
 
 
 def _prepared(cfg: AdaptConfig, model, rng: np.random.Generator, table, samples,
-              timings: dict[str, float] | None) -> Adapter:
-    """The robot's adapter, prepared for its first touch; its set-up time in ``timings``."""
+              timings: dict[str, float] | None, keep: dict | None = None) -> Adapter:
+    """The robot's adapter, prepared for its first touch; its set-up time in ``timings``, itself
+    in ``keep`` (``adapter``)."""
     t0 = time.perf_counter()
     adapter = Adapter(model, cfg.adapter_config(), rng=rng, table=table, samples=samples).prepare()
     if timings is not None:
         timings["setup_ms"] = 1e3 * (time.perf_counter() - t0)
+    if keep is not None:
+        keep["adapter"] = adapter
     return adapter
 
 
