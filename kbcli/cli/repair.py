@@ -66,7 +66,7 @@ def bench_repair_cmd(
 ) -> None:
     """Adaptation that repairs the model, side by side with plain infogain and the exact model.
 
-    Learns the weak models of issue 42 in memory (kbcli learn --strategy random --budget 250
+    Learns the weak models in memory (kbcli learn --strategy random --budget 250
     --seed 1..N, ideal arm and --mode dynamics --arm realistic), adapts each to --moves
     displacements with --touches infogain touches: plain (the robust posterior), repair (the
     repaired belief) and exact (the keyboard's own map), paired. Prints the median final error,
