@@ -28,12 +28,14 @@ from kbcli.cli.app import (
     ticker,
 )
 from kbcli.cli.record import load_average, show_table
+from kbcli.cli.repair import check_model_out, write_repaired
 from kbcli.core.applies import refuse_unused
 from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm, load_stage_table
 from kbcli.stages import adapt as stage
+from kbcli.stages import repair as repair_stage
 from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_EXPERIMENTS
 
 
@@ -70,6 +72,8 @@ def adapt_cmd(
         "finger landed) or aim (where it aimed).", show_default="landed")] = None,
     arm: opts.arm_option("ideal", optional=True) = None,
     model_blur: opts.ModelBlur = None,
+    repair: opts.Repair = None,
+    model_out: opts.ModelOut = None,
     max_steps: opts.max_steps_option(f"Touches (observations) at most, at most {MAX_ADAPT_STEPS}.",
                                      show_default="40") = None,
     resolution: opts.Resolution = None,
@@ -92,30 +96,38 @@ def adapt_cmd(
     Writes OUTPUT (kind 'run'): per step the action, where it landed, the sound heard and its class,
     the estimate, its error against the scene's true pose, the posterior entropy and the time
     spent; plus posterior snapshots. Prints the final error and the steps to an error below 1 px.
+    With --repair --model-out, also writes the model repaired by the touches (kind 'model').
     """
     check_io({"--model": model, "--scene": scene, "--config": config, "--arm": arm_file(arm)},
-             ("--output", output))
+             ("--output", output), ("--model-out", model_out))
     flags = {"strategy": strategy, "posterior": posterior, "estimator": estimator,
              "family": family, "mode": mode, "reach_noise": reach_noise, "feedback": feedback,
-             "model_blur": model_blur, "max_steps": max_steps, "resolution": resolution,
+             "model_blur": model_blur, "repair": repair, "max_steps": max_steps,
+             "resolution": resolution,
              "prior_halfwidth": prior_halfwidth, "stop": stop, **(paper_flags or {})}
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
     cfg, scene_family = _adapt_config(config, flags, arm,
                                       scene_art.config.get("family", "translation"))
+    check_model_out(model_out, cfg.repair)
     steps = _snapshots(snapshots, cfg.max_steps)
     _note_beyond(steps, cfg.max_steps)
     stage.check_inputs(model_art, scene_art)
     note_arm(cfg.arm, cfg.mode)
     what = f"adapting ({cfg.strategy}, {cfg.posterior} posterior), observations"
     timings: dict[str, float] = {}
+    keep: dict = {}
     with ticker(cfg.max_steps, what) as tick:
         art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
-                        snapshot_steps=steps, on_step=tick, timings=timings)
+                        snapshot_steps=steps, on_step=tick, timings=timings, keep=keep)
     write_artifact(art, output)
     if scene_family:  # (said once the inputs passed every check: a refusal stays one line)
         note_default("family", cfg.family, "the scene's (--family to choose)")
     _report_run(art, cfg, output, timings.get("setup_ms"))
+    if model_out is not None:
+        ad = keep["adapter"]
+        write_repaired(model_art, ad.model, [repair_stage.run_adaptation(ad, art)], model_out,
+                       "adapt")
 
 
 def _note_beyond(steps: list[int], max_steps: int) -> None:

@@ -40,13 +40,7 @@ def inspect_cmd(
     for k, v in _flatten(d["config"], hidden=hidden):
         cfg.add_row(k, json.dumps(v))
     out.print(cfg)
-    if d["attrs"]:
-        at = Table(title="summary", show_header=True)
-        at.add_column("key")
-        at.add_column("value")
-        for k, v in _flatten(_unread_resolved(d["config"], d["attrs"], hidden), hidden=hidden):
-            at.add_row(k, json.dumps(v) if not isinstance(v, str) else v)
-        out.print(at)
+    _print_summary(d, hidden)
     if hidden:
         out.print(f"{len(hidden)} robot options the method does not read (its posterior, "
                   "estimator, family, strategy and stopping rules) are not shown; --json prints "
@@ -71,6 +65,34 @@ def inspect_cmd(
     out.print(ds)
     if d["problem"]:
         raise ArtifactError(f"{artifact}: {d['problem']}")
+
+
+def _print_summary(d: dict, hidden: list) -> None:
+    """The summary attributes (the options the method does not read added to ``hidden``), and a
+    repaired model's lineage apart."""
+    if d["attrs"]:
+        at = Table(title="summary", show_header=True)
+        at.add_column("key")
+        at.add_column("value")
+        attrs = {k: v for k, v in d["attrs"].items() if k != "lineage"}
+        for k, v in _flatten(_unread_resolved(d["config"], attrs, hidden), hidden=hidden):
+            at.add_row(k, json.dumps(v) if not isinstance(v, str) else v)
+        out.print(at)
+    if d["attrs"].get("lineage"):
+        _print_lineage(d["attrs"]["lineage"])
+
+
+def _print_lineage(lineage: list) -> None:
+    """A repaired model's generations (``kbcli adapt/run --repair --model-out``), oldest first."""
+    t = Table(title="lineage (repaired by adaptations; the parent of each generation)")
+    for col in ("gen", "source", "parent", "parent sha256", "absorbed", "skipped", "shifts (dx, dy)"):
+        t.add_column(col)
+    for i, g in enumerate(lineage, 1):
+        shifts = "; ".join(f"{s[0]:+.2f}, {s[1]:+.2f}" for s in g.get("shifts", []))
+        t.add_row(str(i), str(g.get("source")), str(g.get("parent_file")),
+                  str(g.get("parent_sha256")), str(g.get("absorbed")), str(g.get("skipped")),
+                  shifts or "-")
+    out.print(t)
 
 
 def _robot_of(tree: dict) -> dict | None:

@@ -246,6 +246,17 @@ MODEL_BLUR_HELP = (
 #: ``--model-blur``: fix the blur of the model's key edges (None: the posterior's own).
 ModelBlur = Annotated[float | None, _opt("--model-blur", help=MODEL_BLUR_HELP,
                                          show_default="learned from the touches")]
+#: ``--repair``: the repaired belief (issue 42).
+Repair = Annotated[bool | None, _opt(
+    "--repair/--no-repair", help="Adapt with the model repaired by the touches: a joint belief over "
+    "the shift and the model's map (each hypothesis scored by the map its own touches repaired, "
+    "the model's local uncertainty), infogain planning under it; translation family, likelihood "
+    "posterior. Needed by --model-out.", show_default="--no-repair")]
+#: ``--model-out``: where the repaired model goes.
+ModelOut = Annotated[Path | None, _opt(
+    "--model-out", help="Also write the model repaired by this run's adaptation touches (kind "
+    "'model', recording its parent's sha256 and the touches it absorbed; never the input model's "
+    "path): the robot's next run can start from it. Needs --repair.")]
 #: ``--resolution``: the hypothesis grid step.
 Resolution = Annotated[float | None, _opt(
     "--resolution", help="Hypothesis grid step, px.", show_default="0.5")]

@@ -20,6 +20,7 @@ from kbcli.cli.app import (
     plot_app,
     progress,
 )
+from kbcli.cli.repair import check_model_out, write_repaired
 from kbcli.core.applies import refuse_unused
 from kbcli.core.detect import MAX_N_LT, MAX_N_ST, DetectorConfig
 from kbcli.core.loop import PLAY
@@ -27,6 +28,7 @@ from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm
 from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages import repair as repair_stage
 from kbcli.stages import run as stage
 from kbcli.stages.adapt import AdaptConfig
 from kbcli.stages.config import MAX_ADAPT_STEPS
@@ -56,6 +58,8 @@ def run_cmd(
     arm: opts.arm_option() = "ideal",
     max_adapt_steps: Annotated[int, typer.Option(
         help=f"Touches at most per adaptation (at most {MAX_ADAPT_STEPS}).")] = 40,
+    repair: opts.Repair = None,
+    model_out: opts.ModelOut = None,
     detector: opts.detector_option() = "binomial",
     n_lt: Annotated[int, typer.Option(
         help=f"Detector long-term window N_LT, at most {MAX_N_LT}.")] = 100,
@@ -70,14 +74,17 @@ def run_cmd(
     Reads MODEL and SCENE; the keyboard moves to the scene's pose after --perturb-at touches (the
     robot is not told). Writes OUTPUT (kind 'closed_loop': every touch with its phase, result and
     detector score) and prints the success rate before the move, after it, and after adaptation.
+    With --repair --model-out, also writes the model repaired by the adaptations' touches.
     """
-    check_io({"--model": model, "--scene": scene, "--arm": arm_file(arm)}, ("--output", output))
+    check_io({"--model": model, "--scene": scene, "--arm": arm_file(arm)}, ("--output", output),
+             ("--model-out", model_out))
+    check_model_out(model_out, bool(repair))
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
     scene_family = family is None  # like adapt: estimate what the scene moved (rigid: an angle)
     if scene_family:
         family = scene_art.config.get("family", "translation")
-    given = {"estimator": estimator, **(paper_flags or {})}
+    given = {"estimator": estimator, "repair": repair, **(paper_flags or {})}
     adapt = AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
                              reach_noise=reach_noise, arm=load_arm(arm), stop=True,
                              **{k: v for k, v in given.items() if v is not None})
@@ -104,6 +111,10 @@ def run_cmd(
     if scene_family:  # (said once the inputs passed every check: a refusal stays one line)
         note_default("family", family, "the scene's (--family to choose)")
     _report_loop(art.attrs, output)
+    if model_out is not None:
+        write_repaired(model_art, session.model,
+                       repair_stage.session_adaptations(session.steps, session.model), model_out,
+                       "run")
 
 
 def _report_loop(a: dict, output: Path) -> None:

@@ -49,6 +49,7 @@ from kbcli.core.estimators import ESTIMATORS
 from kbcli.core.kde import ActionSamples
 from kbcli.core.posterior import Posterior
 from kbcli.core.posteriors import POSTERIORS, Observation
+from kbcli.core.repair import RepairBelief, absorb
 from kbcli.core.robust import RobustPosterior, blurred_map, planning_table
 from kbcli.core.sounds import UNKNOWN
 from kbcli.core.strategies import STRATEGIES, Context
@@ -131,10 +132,14 @@ class Adapter:
         #: the robust posterior (None with the plain one); ``posterior`` is then its marginal
         self.robust: RobustPosterior | None = (
             RobustPosterior(self.grid, cfg.nuisance(model), eta=learning_rate(model, cfg))
-            if cfg.is_robust else None)
+            if cfg.is_robust and not cfg.repair else None)
+        #: the joint belief over the shift and the repaired map (``cfg.repair``; None otherwise):
+        #: ``posterior`` is then its marginal over the shift (:mod:`kbcli.core.repair`)
+        self.repair: RepairBelief | None = (
+            RepairBelief.for_model(self.grid, self.table, model, cfg) if cfg.repair else None)
         self._strategy = STRATEGIES.get(cfg.strategy)
         #: px: touches this close count as one spot (robust posterior; see AdapterConfig)
-        self.redundancy_radius = redundancy_radius(model, cfg) if cfg.is_robust else 0.0
+        self.redundancy_radius = redundancy_radius(model, cfg) if self.robust is not None else 0.0
         #: where each observed touch was read (felt position, or the aim)
         self.points: list[np.ndarray] = []
         self._edges: np.ndarray | None = None
@@ -222,7 +227,11 @@ class Adapter:
     # -- deciding ----------------------------------------------------------------------------------
     def planning_table(self) -> LikelihoodTable:
         """The map the strategies plan with: the model's, or with the robust posterior, blurred by
-        the most probable boundary blur and floored at the most probable outlier rate."""
+        the most probable boundary blur and floored at the most probable outlier rate; with the
+        repaired belief, the model's map locally blurred, floored at its most probable outlier
+        rate."""
+        if self.repair is not None:
+            return self.repair.planning_table()
         if self.robust is None:
             return self.table
         i, j = self.robust.map_index()
@@ -280,7 +289,8 @@ class Adapter:
                        self._corners, self.cfg, touched=self.touched(),
                        redundancy_radius=self.redundancy_radius,
                        sampler=self.action_source(), simulate=self.simulate,
-                       simulate_many=self.simulate_many)
+                       simulate_many=self.simulate_many,
+                       outcome=None if self.repair is None else self.repair.outcome)
 
     def touched(self) -> np.ndarray:
         """(k, 2) where the observed touches were read (felt positions, or the aims)."""
@@ -368,6 +378,11 @@ class Adapter:
             return
         obs = Observation(self.grid, self.table, self.model, self.cfg, self.samples,
                           np.asarray(action, float).reshape(2), int(cls))
+        if self.repair is not None:
+            self.points.append(obs.action)
+            self.repair = self.repair.update(obs.action, obs.cls)
+            self.posterior = self._tied(self.repair.marginal())
+            return
         if self.robust is not None:
             self._observe_robust(obs)
             return
@@ -385,9 +400,28 @@ class Adapter:
             terms = terms * np.float32(1.0 / (k + 1))
         self.points.append(obs.action)
         self.robust = self.robust.update(terms)
-        self.posterior = self.robust.marginal()
-        if self.tie_seed is not None:
-            self.posterior = self.posterior.with_tie_seed(self.tie_seed)
+        self.posterior = self._tied(self.robust.marginal())
+
+    def _tied(self, posterior: Posterior) -> Posterior:
+        """``posterior`` with this adapter's tie rule (``ml_ties``)."""
+        return posterior if self.tie_seed is None else posterior.with_tie_seed(self.tie_seed)
+
+    def repaired_model(self):
+        """The model refitted with this adaptation's touches, mapped back into its reference
+        frame by the estimate (:func:`kbcli.core.repair.absorb`): what the robot keeps of what
+        it learned (``cfg.repair``; the model itself is left as it is).
+
+        Raises
+        ------
+        ConfigError
+            Without ``repair``, or with the exact model (nothing to repair).
+        """
+        if self.repair is None:
+            raise ConfigError("repaired_model needs an adapter with repair = true")
+        if not hasattr(self.model, "actions_"):
+            raise ConfigError("the exact model has nothing to repair: repair a learned model")
+        t = self.repair.touches
+        return absorb(self.model, t.points, t.classes, self.estimate())
 
     # -- reading -----------------------------------------------------------------------------------
     def estimates(self) -> Estimate:

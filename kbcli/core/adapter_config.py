@@ -230,6 +230,21 @@ class AdapterConfig(Config):
         ``stop_angle`` deg) of the estimate; ``stop_mass`` 0 (or None): ours is off (the paper's alone).
     max_memory_mb : float
         Refuse hypothesis grids (and model rasters) that would need more working memory.
+    repair : bool
+        Adapt with the model repaired by the touches (:mod:`kbcli.core.repair`): a joint belief
+        over the shift and the model's map, each hypothesis scored by the map its own touches
+        repaired, the model's local uncertainty in place of one global blur, and infogain planning
+        under the same belief (the translation family and the likelihood posterior, robust). Off
+        by default; recorded in an artifact's config only when on.
+    repair_kernel : float or None
+        Width (px) of the kernel a touch's (and a training sample's) sound is counted with on the
+        repaired map (None: ``kbcli.core.repair.DEFAULT_KERNEL``, 10 px).
+    repair_scale : float or None
+        Scale ``s`` of the model's local blur ``s d(x)``, ``d`` the distance to its nearest
+        training sample (None: ``DEFAULT_SCALE``, 0.6, about ``1 / sqrt(3)``).
+    repair_blur : float or None
+        Blur (px) under the local one everywhere (None: the model's own landing scatter,
+        ``reach_sd_``).
     """
 
     what: ClassVar[str] = "adapt"
@@ -273,6 +288,12 @@ class AdapterConfig(Config):
     stop_radius: Positive = 1.0
     stop_angle: Positive = 0.5
     max_memory_mb: Positive = 2048.0
+    # the repair's options are written to artifacts only when set: configs stored before they
+    # existed read back to the same dict
+    repair: Annotated[Flag, Field(exclude_if=lambda v: not v)] = False
+    repair_kernel: Annotated[Positive | None, Field(exclude_if=lambda v: v is None)] = None
+    repair_scale: Annotated[NonNegative | None, Field(exclude_if=lambda v: v is None)] = None
+    repair_blur: Annotated[Blur | None, Field(exclude_if=lambda v: v is None)] = None
 
     @model_validator(mode="before")
     @classmethod
@@ -283,6 +304,15 @@ class AdapterConfig(Config):
             rotates = fam in FAMILIES and FAMILIES.get(fam).rotates
             data = {**data, "robust_outliers": RIGID_OUTLIERS if rotates else DEFAULT_OUTLIERS}
         return data
+
+    @model_validator(mode="after")
+    def _repairable(self) -> AdapterConfig:
+        """``repair`` needs a translation grid and the robust likelihood posterior."""
+        if self.repair and (FAMILIES.get(self.family).rotates or not self.is_robust):
+            raise ValueError("repair works with the translation family and the robust likelihood "
+                             f"posterior (got family {self.family!r}, posterior "
+                             f"{self.posterior!r}, robust = {str(self.robust).lower()})")
+        return self
 
     @model_validator(mode="after")
     def _fits(self) -> AdapterConfig:

@@ -102,6 +102,10 @@ class Context:
     simulate: Callable[[np.ndarray, int], np.ndarray] | None = None
     #: ``simulate_many(actions (k, 2), classes (k,)) -> (k, *grid.shape)``: ``simulate`` of each
     simulate_many: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+    #: ``outcome(table, hyp (K, P), weights (K,), actions (M, 2)) -> (pred (M, C), cond (M,))``:
+    #: the adapter's own predictive of a touch's outcome when it is not the table's (the
+    #: repaired belief, :func:`kbcli.core.repair.repair_outcome`); None: ``outcome_distribution``
+    outcome: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None
 
     @property
     def family(self) -> str:
@@ -348,7 +352,11 @@ def infogain_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
         uniform_actions(ctx.area, n_uniform, rng),
         boundary_candidates(ctx, n_edges, m - n_uniform - n_edges, hyp, w, rng),
     ])
-    gain = information_gain(ctx.table, ctx.family, hyp, w, cands, ctx.centre)
+    if ctx.outcome is None:
+        gain = information_gain(ctx.table, ctx.family, hyp, w, cands, ctx.centre)
+    else:  # the adapter's own predictive (the repaired belief)
+        pred, cond = ctx.outcome(ctx.table, hyp, w, cands)
+        gain = entropy_rows(pred) - cond
     if ctx.redundancy_radius > 0 and len(ctx.touched):
         # the (k + 1)-th touch at a spot enters the posterior with weight 1 / (k + 1): so does
         # its gain (a model wrong at a spot is wrong there every time)

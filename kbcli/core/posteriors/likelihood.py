@@ -40,6 +40,20 @@ def _robust(cfg) -> bool:
     return bool(cfg.robust)
 
 
+def _robust_unrepaired(cfg) -> bool:
+    """The robust posterior's own options: not read by the repaired belief (which keeps only
+    ``robust_outliers``)."""
+    return bool(cfg.robust) and not getattr(cfg, "repair", False)
+
+
+def _repair(cfg) -> bool:
+    return bool(getattr(cfg, "repair", False))
+
+
+#: The repaired belief's options (:mod:`kbcli.core.repair`).
+REPAIR_OPTIONS = ("repair_kernel", "repair_scale", "repair_blur")
+
+
 def _cell_averaged(cfg) -> bool:
     """The plain posterior always cell-averages; the robust one on a rotating grid only."""
     return not cfg.robust or (cfg.family in FAMILIES and FAMILIES.get(cfg.family).rotates)
@@ -49,4 +63,9 @@ POSTERIORS.register(
     "likelihood", LikelihoodPosterior(), summary="the model's classifier at each touch (ours)",
     uses=("robust", Uses("cell_average", _cell_averaged, "robust = false or the family rotates",
                          "robust = true and the family does not rotate"),
-          *(Uses(o, _robust, "robust = true", "robust = false") for o in ROBUST_OPTIONS)))
+          *(Uses(o, _robust, "robust = true", "robust = false") for o in ("robust_outliers",)),
+          *(Uses(o, _robust_unrepaired, "robust = true and repair = false",
+                 "robust = false or repair = true") for o in ROBUST_OPTIONS
+            if o != "robust_outliers"),
+          "repair",
+          *(Uses(o, _repair, "repair = true", "repair = false") for o in REPAIR_OPTIONS)))

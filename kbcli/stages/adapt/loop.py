@@ -73,11 +73,11 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
                rng: np.random.Generator, world_family: str | None = None,
                table: LikelihoodTable | None = None,
                snapshot_steps: tuple[int, ...] = (), samples: ActionSamples | None = None,
-               play: PlayCheck | None = None,
-               play_pool: ActionSamples | None = None,
+               play: PlayCheck | None = None, play_pool: ActionSamples | None = None,
                reference_rng: np.random.Generator | None = None,
                on_step: Callable[[int], None] | None = None,
-               timings: dict[str, float] | None = None) -> dict[str, np.ndarray]:
+               timings: dict[str, float] | None = None,
+               keep: dict | None = None) -> dict[str, np.ndarray]:
     """One adaptation against a world whose keyboard sits at ``true_params``.
 
     Parameters
@@ -112,6 +112,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     timings : dict, optional
         Receives ``setup_ms``: the wall-clock time of the adapter's set-up before the first touch
         (the model raster, :meth:`Adapter.prepare`), which ``step_ms`` leaves out.
+    keep : dict, optional
+        Receives ``adapter``: the robot's adapter (at the end, its state after the last touch).
 
     Returns
     -------
@@ -131,7 +133,7 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     world_family = cfg.robot.family if world_family is None else world_family
     truth = np.asarray(true_params, float)
     robot_rng, world_rng = rng.spawn(2)
-    adapter = _prepared(cfg, model, robot_rng, table, samples, timings)
+    adapter = _prepared(cfg, model, robot_rng, table, samples, timings, keep)
     touch = _Touches(World(keyboard, make_reacher(cfg.sim_config()), truth, world_family),
                      world_rng)
     rec = Recorder(adapter, [s for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps])
@@ -165,12 +167,15 @@ def _run(cfg: AdaptConfig, adapter: Adapter, touch: _Touches, rec: Recorder, tru
 
 
 def _prepared(cfg: AdaptConfig, model, rng: np.random.Generator, table, samples,
-              timings: dict[str, float] | None) -> Adapter:
-    """The robot's adapter, prepared for its first touch; its set-up time in ``timings``."""
+              timings: dict[str, float] | None, keep: dict | None = None) -> Adapter:
+    """The robot's adapter, prepared for its first touch; its set-up time in ``timings``, itself
+    in ``keep`` (``adapter``)."""
     t0 = time.perf_counter()
     adapter = Adapter(model, cfg.adapter_config(), rng=rng, table=table, samples=samples).prepare()
     if timings is not None:
         timings["setup_ms"] = 1e3 * (time.perf_counter() - t0)
+    if keep is not None:
+        keep["adapter"] = adapter
     return adapter
 
 

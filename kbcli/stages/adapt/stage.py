@@ -57,7 +57,7 @@ def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
         rng: np.random.Generator, seed: int | None = None,
         snapshot_steps: tuple[int, ...] = DEFAULT_SNAPSHOTS, model=None,
         on_step: Callable[[int], None] | None = None,
-        timings: dict[str, float] | None = None) -> Artifact:
+        timings: dict[str, float] | None = None, keep: dict | None = None) -> Artifact:
     """Adapt to a scene with a model: the ``run`` artifact.
 
     Parameters
@@ -71,6 +71,9 @@ def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
     timings : dict, optional
         Receives ``setup_ms``: the wall-clock time from the model artifact to the adapter ready
         for its first touch (loading the model, its raster, :meth:`Adapter.prepare`).
+    keep : dict, optional
+        Receives ``adapter``, the robot's adapter after the last touch
+        (:func:`~kbcli.stages.adapt.experiment`).
 
     Raises
     ------
@@ -85,7 +88,7 @@ def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
     world_family = scene_artifact.config["family"]
     truth = np.asarray(scene_artifact.config["params"], float)
     res = experiment(cfg, model, kb, truth, rng=rng, world_family=world_family,
-                     snapshot_steps=snapshot_steps, on_step=on_step, timings=timings)
+                     snapshot_steps=snapshot_steps, on_step=on_step, timings=timings, keep=keep)
     if timings is not None:
         timings["setup_ms"] = timings.get("setup_ms", 0.0) + load_ms
     attrs = run_attrs(res, cfg.adapter_config(), truth=truth, world_family=world_family)

@@ -1,0 +1,148 @@
+"""The repaired model of ``kbcli adapt --repair --model-out`` and ``kbcli run --repair
+--model-out`` (issue 42): writing it and saying what it absorbed."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from kbcli.cli import options as opts
+from kbcli.cli.app import (
+    bench_app,
+    busy,
+    check_io,
+    command,
+    figure_output,
+    interactive,
+    out,
+    progress,
+)
+from kbcli.cli.record import show_table
+from kbcli.errors import ConfigError
+from kbcli.io.artifact import write_artifact
+from kbcli.stages import repair as repair_stage
+from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_EXPERIMENTS
+
+
+def check_model_out(model_out: Path | None, repair: bool) -> None:
+    """``--model-out`` needs the repaired belief."""
+    if model_out is not None and not repair:
+        raise ConfigError("--model-out writes the model repaired by the adaptation: add --repair "
+                          "(or repair = true in the [adapt] table)")
+
+
+def write_repaired(model_art, model, adaptations, model_out: Path, source: str) -> None:
+    """Refit, calibrate and score the repaired model, write it to ``model_out``, say what it
+    absorbed and how its boundary error moved (against the simulator's keyboard)."""
+    with busy("refitting the repaired model (5-fold cross-validation)"):
+        art, s = repair_stage.repaired_model(model_art, model, adaptations, source=source)
+    write_artifact(art, model_out)
+    before = s["parent_boundary_error_px"]
+    moved = (f"boundary error {before:.2f} -> {s['boundary_error_px']:.2f} px"
+             if before is not None else f"boundary error {s['boundary_error_px']:.2f} px")
+    skipped = (f"; {s['skipped']} adaptation(s) not absorbed (90 % credible radius above "
+               f"{repair_stage.ABSORB_RADIUS:g} px)" if s["skipped"] else "")
+    out.print(f"wrote {model_out}: generation {s['generation']}, {s['absorbed']} touches absorbed, "
+              f"accuracy {100 * s['accuracy']:.2f} %, {moved}{skipped}")
+
+
+@command(bench_app, name="repair")
+def bench_repair_cmd(
+    moves: Annotated[int, typer.Option("--moves", help=opts.at_most(
+        "Displacements per weak model (5-30 px)", MAX_EXPERIMENTS))] = 8,
+    touches: Annotated[int, typer.Option("--touches", "-T", help=opts.at_most(
+        "Infogain touches per adaptation", MAX_ADAPT_STEPS))] = 30,
+    seeds: Annotated[int, typer.Option("--seeds", help="Weak models per arm (learn seeds 1..N), "
+                                       "at most 10.")] = 3,
+    episodes: Annotated[int, typer.Option("--episodes", help="Moves in a row of the lifelong "
+                                          "section, at most 20 (0: skip it).")] = 5,
+    plot: Annotated[Path, typer.Option("--plot", help="Figure of the lifelong section (PNG, PDF "
+                                       "or SVG by the suffix).")] = Path("repair-lifelong.png"),
+    seed: opts.seed_option("Seed of the adaptations.") = 0,
+) -> None:
+    """Adaptation that repairs the model, side by side with plain infogain and the exact model.
+
+    Learns the weak models in memory (kbcli learn --strategy random --budget 250
+    --seed 1..N, ideal arm and --mode dynamics --arm realistic), adapts each to --moves
+    displacements with --touches infogain touches: plain (the robust posterior), repair (the
+    repaired belief) and exact (the keyboard's own map), paired. Prints the median final error,
+    the share under 1 px, the touches to stay under 1 px, the runs made worse than plain by more
+    than 0.5 px, the coverage of the 90 % credible discs and the time per touch; then the lifelong
+    section (the first ideal-arm model carried over --episodes moves) and writes its figure.
+    """
+    from kbcli.bench import repair as bench
+
+    opts.check_counts(("--moves", moves, MAX_EXPERIMENTS), ("--touches", touches, MAX_ADAPT_STEPS),
+                      ("--seeds", seeds, 10), ("--episodes", episodes, 20))
+    check_io({}, figure_output(plot))
+    with busy("learning the weak models"):
+        models = bench.weak_models(seeds=tuple(range(1, seeds + 1)))
+    total = len(models) * len(bench.METHODS) * moves
+    bar = progress(iter(range(total)), total, "adaptations")
+    runs = bench.side_by_side(models, n_moves=moves, touches=touches, seed=seed,
+                              progress=lambda n: next(bar, None))
+    for _ in bar:
+        pass
+    con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
+    _side_table(con, bench.summarize(runs, touches), models, moves, touches)
+    if episodes:
+        bar = progress(iter(range(episodes)), episodes, "lifelong moves")
+        start, eps = bench.lifelong(models[0], episodes=episodes, touches=touches, seed=seed,
+                                    progress=lambda n: next(bar, None))
+        for _ in bar:
+            pass
+        _lifelong_table(con, models[0], start, eps, touches)
+        from kbcli.viz.repair import plot_lifelong  # (matplotlib: seconds)
+        with busy("drawing"):
+            plot_lifelong(start, eps, plot, touches=touches,
+                          title=f"lifelong: {models[0].name} model carried over {episodes} moves")
+        con.print(f"wrote {plot}")
+
+
+def _side_table(con, rows: list[dict], models, moves: int, touches: int) -> None:
+    t = Table(title=f"repair vs plain infogain vs exact model: {len(models)} weak models "
+                    f"(random, 250 reaches) x {moves} moves (5-30 px), {touches} touches",
+              title_justify="left")
+    for col in ("method", "runs", "median final px", "under 1 px", "touches to stay < 1 px",
+                "never", "worse than plain by > 0.5 px", "90 % disc covers truth",
+                "ms / touch (median)", "x plain"):
+        t.add_column(col, justify="left" if col == "method" else "right")
+    for r in rows:
+        t.add_row(r["method"], str(r["runs"]), f"{r['median_final_px']:.2f}",
+                  f"{100 * r['under_1px']:.0f} %", f"{r['median_touches_stay_1px']:g}",
+                  str(r["never_stay_1px"]), str(r["worse_than_plain"]),
+                  f"{100 * r['coverage_90']:.0f} %", f"{r['median_ms']:.1f}",
+                  f"{r['ms_ratio']:.2f}")
+    show_table(con, t)
+    pm = Table(title="median final error per model, px", title_justify="left")
+    pm.add_column("method")
+    names = [m.name for m in models]
+    for n in names:
+        pm.add_column(n, justify="right")
+    for r in rows:
+        pm.add_row(r["method"], *(f"{r['per_model'][n]:.2f}" for n in names))
+    show_table(con, pm)
+
+
+def _lifelong_table(con, wm, start: float, eps: list, touches: int) -> None:
+    t = Table(title=f"lifelong: the {wm.name} model (boundary error {start:.2f} px as learned) "
+                    f"carried over {len(eps)} moves, {touches} touches each",
+              title_justify="left")
+    for col in ("move", "dx", "dy", "repair: touches to stay < 1 px", "repair final px",
+                "plain: touches to stay < 1 px", "plain final px", "touches absorbed",
+                "carried model's boundary error px"):
+        t.add_column(col, justify="right")
+    for e in eps:
+        t.add_row(str(e.episode), f"{e.truth[0]:+.1f}", f"{e.truth[1]:+.1f}",
+                  _stay(e.repair_stay, touches), f"{e.repair_final:.2f}",
+                  _stay(e.plain_stay, touches), f"{e.plain_final:.2f}", str(e.absorbed),
+                  f"{e.boundary_error:.2f}")
+    show_table(con, t)
+
+
+def _stay(v: int, touches: int) -> str:
+    return f">{touches}" if v > touches else str(v)

@@ -1,0 +1,177 @@
+"""The robot keeps what it learned (issue 42): a model artifact repaired by adaptations' touches.
+
+``kbcli adapt --repair --model-out`` and ``kbcli run --repair --model-out`` write, beside their
+run, a new ``model`` artifact: the input model refitted (:func:`kbcli.core.repair.absorb`) with the
+touches of its adaptations, each mapped back into the model's reference frame by that
+adaptation's estimate, then calibrated and self-assessed again as ``kbcli learn`` does
+(:func:`kbcli.core.reliability.assess`), so the robot's next run starts from it. An adaptation
+whose posterior is not sure enough (its 90 % credible disc wider than ``absorb_radius`` px,
+:mod:`kbcli.core.credible`) gives nothing: a belief that does not know where the keyboard is
+writes no labels.
+
+Lineage: the artifact's ``inputs`` hold its ``parent`` (the model it repaired, with its sha256,
+recursively) and the keyboard; its attrs ``lineage`` lists every generation (the parent's sha256,
+the touches absorbed, the shift they were mapped back by, the credible radius), the parent's own
+lineage first. A model without lineage (every model ``kbcli learn`` writes) is generation 0.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+
+from kbcli.core import accuracy as scoring
+from kbcli.core import reliability
+from kbcli.core.credible import LEVEL, radius, radius_of
+from kbcli.core.loop import ADAPT
+from kbcli.core.repair import absorb
+from kbcli.errors import ConfigError
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages.artifact import Artifact, ref
+
+#: An adaptation whose 90 % credible disc is wider than this (px) is not absorbed: its touches,
+#: mapped back, are then off by less than a weak model's own edges (3.7-4.2 px at 250 reaches).
+ABSORB_RADIUS = 3.0
+#: Grid (px) of the repaired model's accuracy and boundary error (``kbcli learn``'s).
+EVAL_STEP = 1.0
+#: Spawn key of the generator of the repaired model's cross-validation folds.
+REPAIR_KEY = 42
+
+
+@dataclass(frozen=True)
+class Adaptation:
+    """The touches of one adaptation and what it concluded.
+
+    Attributes
+    ----------
+    aims, felt : (n, 2) ndarrays
+        Where each touch aimed and where the robot felt it land (pad px).
+    perceived : (n, D) ndarray
+        What it heard (NaN rows: silence).
+    classes : (n,) int ndarray
+        Its class (-1: an unknown sound, never absorbed).
+    shift : (2,) ndarray
+        The adaptation's estimate of the translation (dx, dy).
+    radius : float
+        Its 90 % credible radius, px.
+    """
+
+    aims: np.ndarray
+    felt: np.ndarray
+    perceived: np.ndarray
+    classes: np.ndarray
+    shift: np.ndarray
+    radius: float
+
+    @classmethod
+    def of_adapter(cls, adapter, aims: np.ndarray, perceived: np.ndarray) -> Adaptation:
+        """What an :class:`~kbcli.core.adapter.Adapter` with ``repair`` concluded (its touches in
+        observation order, with the ``aims`` and ``perceived`` features of the touches it
+        absorbed)."""
+        t = adapter.repair.touches
+        est = adapter.estimate()
+        return cls(np.asarray(aims, float).reshape(-1, 2), t.points, np.asarray(perceived, float),
+                   t.classes, np.asarray(est, float)[-2:], radius(adapter.posterior, est, LEVEL))
+
+
+def run_adaptation(adapter, run: Artifact | dict) -> Adaptation:
+    """The :class:`Adaptation` of ``kbcli adapt``: its adapter at the end and its ``run`` artifact
+    (or :func:`~kbcli.stages.adapt.experiment`'s records), whose touches of a known sound are the
+    ones the adapter absorbed."""
+    data = run.data if isinstance(run, Artifact) else run
+    known = np.asarray(data["classes"]) >= 0
+    return Adaptation.of_adapter(adapter, np.asarray(data["actions"], float)[known],
+                                 np.asarray(data["perceived"], float)[known])
+
+
+def session_adaptations(steps, model) -> list[Adaptation]:
+    """The adaptations of a closed-loop session (``kbcli run``: its
+    :class:`~kbcli.core.loop.LoopStep` records), each a run of consecutive adaptation touches
+    ending in its estimate (the correction in force after it) and its posterior's credible
+    radius; touches classified by ``model``."""
+    out, block = [], []
+    for s in [*steps, None]:
+        if s is not None and s.phase == ADAPT:
+            block.append(s)
+            continue
+        if block:
+            last = block[-1]
+            heard = np.array([b.perceived for b in block], float)
+            dx, dy, logp = last.marginal
+            shift = np.asarray(last.correction, float)[-2:]
+            out.append(Adaptation(np.array([b.action for b in block], float),
+                                  np.array([b.landed for b in block], float), heard,
+                                  np.asarray(model.classify(heard), np.int64), shift,
+                                  radius_of(dx, dy, np.exp(np.asarray(logp, float)), shift,
+                                            LEVEL)))
+            block = []
+    return out
+
+
+def repaired_model(parent: Artifact, model, adaptations: list[Adaptation], *,
+                   source: str, absorb_radius: float = ABSORB_RADIUS) -> tuple[Artifact, dict]:
+    """The repaired model artifact, and a summary (touches absorbed, adaptations skipped).
+
+    Parameters
+    ----------
+    parent : Artifact
+        The model artifact adapted with (kind ``model``, a learned model).
+    model : ModelBase
+        Its loaded model.
+    adaptations : list of Adaptation
+        In the order they happened.
+    source : str
+        The stage that adapted (``adapt`` or ``run``), recorded.
+
+    Raises
+    ------
+    ConfigError
+        The exact model (nothing to repair).
+    """
+    if not hasattr(model, "actions_"):
+        raise ConfigError("the exact model has nothing to repair: --model-out needs a learned "
+                          "model")
+    kept = [a for a in adaptations if a.radius <= absorb_radius]
+    parts = [(a, a.classes >= 0) for a in kept]
+    felt = np.vstack([np.empty((0, 2))] + [a.felt[k] - a.shift for a, k in parts])
+    aims = np.vstack([np.empty((0, 2))] + [a.aims[k] - a.shift for a, k in parts])
+    d = np.asarray(model.class_features_).shape[1]
+    heard = np.vstack([np.empty((0, d))] + [a.perceived[k] for a, k in parts])
+    classes = np.concatenate([np.empty(0, np.int64)] + [a.classes[k] for a, k in parts])
+    fitted = absorb(model, felt, classes, np.zeros(2))
+    rng = np.random.default_rng(np.random.SeedSequence(0, spawn_key=(REPAIR_KEY,)))
+    feats = np.asarray(fitted.class_features_, float)[fitted.labels_]
+    calibrated, rel = reliability.assess(fitted, fitted.actions_, feats, rng=rng)
+    kb = keyboard_stage.load(parent)
+    pred, true = scoring.key_maps(calibrated, kb, EVAL_STEP)
+    acc = scoring.accuracy_from_maps(pred, true)
+    berr = scoring.boundary_error(pred, true, EVAL_STEP)
+    generation = {"parent_sha256": parent.sha256, "parent_file": ref(parent)["file"],
+                  "source": source, "absorbed": int(len(classes)),
+                  "adaptations": len(adaptations), "skipped": len(adaptations) - len(kept),
+                  "shifts": [[float(v) for v in a.shift] for a in kept],
+                  "credible_radius_90": [float(a.radius) for a in adaptations],
+                  "absorb_radius": float(absorb_radius)}
+    lineage = [*list(parent.attrs.get("lineage") or []), generation]
+    data = copy.deepcopy(parent.data)
+    samples = data.get("samples", {})
+    for key, extra in (("actions", aims), ("landed", felt), ("perceived", heard)):
+        if key in samples:
+            samples[key] = np.vstack([np.asarray(samples[key], float), extra])
+    samples.pop("start_angles", None)  # an absorbed touch has no start pose of the learning arm
+    data["model"] = calibrated.to_arrays()
+    data["evaluation"] = {**data.get("evaluation", {}), "predicted_keys": pred.astype(np.int16)}
+    attrs = {**parent.attrs, "accuracy": acc, "boundary_error_px": berr,
+             "n_reaches": int(parent.attrs.get("n_reaches", 0)) + int(len(classes)),
+             "reliability": rel.to_dict(), "lineage": lineage,
+             "generation": len(lineage), "absorbed_touches": int(len(classes))}
+    inputs = {"keyboard": parent.inputs.get("keyboard"), "parent": ref(parent)}
+    art = Artifact(kind="model", config=copy.deepcopy(parent.config), seed=parent.seed, data=data,
+                   attrs=attrs, inputs={k: v for k, v in inputs.items() if v is not None})
+    summary = {"absorbed": int(len(classes)), "skipped": len(adaptations) - len(kept),
+               "accuracy": acc, "boundary_error_px": berr,
+               "parent_boundary_error_px": parent.attrs.get("boundary_error_px"),
+               "generation": len(lineage)}
+    return art, summary

@@ -1,0 +1,102 @@
+"""``kbcli adapt/run --repair --model-out`` (issue 42): the repaired model artifact, its lineage,
+and the inputs it must never overwrite."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import one_line_error
+
+from kbcli.cli import app
+from kbcli.core.keyboard import KeyboardConfig
+from kbcli.io.artifact import read_artifact, sha256_file, write_artifact
+from kbcli.stages import keyboard as keyboard_stage
+from kbcli.stages import learn as learn_stage
+from kbcli.stages.models import load_model
+from kbcli.stages.perturb import PerturbConfig
+from kbcli.stages.perturb import run as perturb_run
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """A weak learned model (120 random reaches, forest-xy) and a scene moved by (6, -4)."""
+    d = tmp_path_factory.mktemp("repair")
+    kb_art = keyboard_stage.run(KeyboardConfig())
+    cfg = learn_stage.LearnConfig(strategy="random", budget=120, model_class="forest-xy")
+    write_artifact(learn_stage.run(cfg, kb_art, rng=np.random.default_rng(1), seed=1),
+                   d / "model.h5")
+    write_artifact(perturb_run(PerturbConfig(params=(6.0, -4.0)), kb_art,
+                               rng=np.random.default_rng(0)), d / "scene.h5")
+    write_artifact(perturb_run(PerturbConfig(params=(22.0, 17.0)), kb_art,
+                               rng=np.random.default_rng(0)), d / "far.h5")
+    return d
+
+
+def _adapt(runner, d, *extra, model="model.h5", out="run.h5"):
+    return runner.invoke(app, ["adapt", "--model", str(d / model), "--scene", str(d / "scene.h5"),
+                               "-o", str(d / out), "--max-steps", "8", "--prior-halfwidth", "15",
+                               "--snapshots", "0", *extra])
+
+
+def test_model_out_writes_a_repaired_model_with_its_lineage(runner, files):
+    d = files
+    before = sha256_file(d / "model.h5")
+    r = _adapt(runner, d, "--repair", "--model-out", str(d / "gen1.h5"))
+    assert r.exit_code == 0, r.output
+    assert "generation 1" in r.output and "touches absorbed" in r.output
+    assert sha256_file(d / "model.h5") == before  # the input is left as it was
+    art = read_artifact(d / "gen1.h5", "model")  # validated against the model schema
+    (gen,) = art.attrs["lineage"]
+    assert gen["parent_sha256"] == before and gen["source"] == "adapt"
+    assert art.inputs["parent"]["sha256"] == before
+    assert art.attrs["absorbed_touches"] == gen["absorbed"] <= 8
+    parent = read_artifact(d / "model.h5", "model")
+    n0 = len(parent.data["samples"]["landed"])
+    assert len(art.data["samples"]["landed"]) == n0 + gen["absorbed"]
+    assert len(load_model(art).actions_) == len(load_model(parent).actions_) + gen["absorbed"]
+    # the repaired model loads where a model does, and carries on: generation 2
+    r = _adapt(runner, d, "--repair", "--model-out", str(d / "gen2.h5"), model="gen1.h5",
+               out="run2.h5")
+    assert r.exit_code == 0, r.output
+    art2 = read_artifact(d / "gen2.h5", "model")
+    assert [g["parent_sha256"] for g in art2.attrs["lineage"]] == [before,
+                                                                    sha256_file(d / "gen1.h5")]
+    r = runner.invoke(app, ["inspect", str(d / "gen2.h5")])
+    assert r.exit_code == 0 and "lineage" in r.output and "gen1.h5" in r.output
+
+
+def test_an_old_model_has_no_lineage_and_adapts_as_before(runner, files):
+    r = runner.invoke(app, ["inspect", str(files / "model.h5")])
+    assert r.exit_code == 0 and "lineage (" not in r.output
+    r = _adapt(runner, files, out="plain.h5")
+    assert r.exit_code == 0, r.output
+    assert "repair" not in read_artifact(files / "plain.h5", "run").config["adapt"]["robot"]
+
+
+def test_model_out_never_overwrites_its_input(runner, files):
+    before = sha256_file(files / "model.h5")
+    r = _adapt(runner, files, "--repair", "--model-out", str(files / "model.h5"), out="x.h5")
+    one_line_error(r, "refusing to overwrite an input")
+    assert sha256_file(files / "model.h5") == before and not (files / "x.h5").exists()
+
+
+def test_model_out_needs_repair(runner, files):
+    r = _adapt(runner, files, "--model-out", str(files / "m.h5"), out="y.h5")
+    one_line_error(r, "--model-out", "--repair")
+    assert not (files / "m.h5").exists() and not (files / "y.h5").exists()
+
+
+def test_repair_is_refused_for_the_rigid_family(runner, files):
+    r = _adapt(runner, files, "--repair", "--family", "rigid", out="z.h5")
+    one_line_error(r, "repair", "translation")
+
+
+def test_run_repair_writes_the_repaired_model(runner, files):
+    r = runner.invoke(app, ["run", "--model", str(files / "model.h5"), "--scene",
+                            str(files / "far.h5"), "-o", str(files / "loop.h5"), "--steps", "150",
+                            "--perturb-at", "70", "--n-lt", "50", "--n-st", "10", "--max-adapt-steps", "8", "--repair",
+                            "--model-out", str(files / "loop-model.h5")])
+    assert r.exit_code == 0, r.output
+    art = read_artifact(files / "loop-model.h5", "model")
+    assert art.attrs["lineage"][-1]["source"] == "run"
+    assert art.attrs["lineage"][-1]["adaptations"] >= 1
