@@ -31,6 +31,9 @@ from kbcli.stages import run as stage
 from kbcli.stages.adapt import AdaptConfig
 from kbcli.stages.config import MAX_ADAPT_STEPS
 
+#: The detector's defaults: its config's, the one source of them.
+DEFAULT = DetectorConfig()
+
 
 def _pct(v: float | None) -> str:
     return "n/a" if v is None else f"{100 * v:.1f}%"
@@ -56,12 +59,12 @@ def run_cmd(
     arm: opts.arm_option() = "ideal",
     max_adapt_steps: Annotated[int, typer.Option(
         help=f"Touches at most per adaptation (at most {MAX_ADAPT_STEPS}).")] = 40,
-    detector: opts.detector_option() = "binomial",
+    detector: opts.detector_option() = DEFAULT.detector,
     n_lt: Annotated[int, typer.Option(
-        help=f"Detector long-term window N_LT, at most {MAX_N_LT}.")] = 100,
+        help=f"Detector long-term window N_LT, at most {MAX_N_LT}.")] = DEFAULT.n_lt,
     n_st: Annotated[int, typer.Option(
-        help=f"Detector short-term window N_ST, at most {MAX_N_ST}.")] = 10,
-    threshold: Annotated[float, typer.Option(help="Detector threshold, in (0, 1).")] = 0.01,
+        help=f"Detector short-term window N_ST, at most {MAX_N_ST}.")] = DEFAULT.n_st,
+    threshold: Annotated[float, typer.Option(help="Detector threshold, in (0, 1).")] = DEFAULT.threshold,
     paper_flags: dict | None = None,
     seed: opts.Seed = 0,
 ) -> None:
