@@ -34,7 +34,7 @@ from kbcli import __version__
 from kbcli.errors import KbcliError
 from kbcli.io import lock, signals
 from kbcli.io.atomic import describe_os_error
-from kbcli.io.paths import Output, check_outputs, figure_format, probe_writable
+from kbcli.io.paths import Output, check_outputs, check_replaceable, figure_format, probe_writable
 
 app = typer.Typer(
     name="kbcli",
@@ -91,6 +91,7 @@ def _check_json(path: Path) -> None:
     try:
         if not folder.is_dir():
             raise KbcliError(f"{path}: {folder} is not a folder")
+        check_replaceable(path)
         probe_writable(folder, path)
     except KbcliError as exc:
         _refuse(exc)
@@ -344,6 +345,7 @@ def output_path(path: Path, force: bool = True) -> Path:
         raise KbcliError(f"{path}: output folder {folder} does not exist")
     if path.is_dir():
         raise KbcliError(f"{path}: is a folder, expected a file name")
+    check_replaceable(path)
     probe_writable(folder, path)
     return path
 
