@@ -104,7 +104,7 @@ def run_cmd(
         pass
     art = session.artifact()
     write_artifact(art, output)
-    if scene_family:  # (said once the inputs passed every check: a refusal stays one line)
+    if scene_family and family != "translation":  # (said once the inputs passed every check)
         note_default("family", family, "the scene's (--family to choose)")
     _report_loop(art.attrs, output)
 
