@@ -116,6 +116,10 @@ def learn_cmd(
         + (f"99 % accuracy after {to99} reaches" if to99 is not None
            else "99 % accuracy not reached")
     )
+    if to99 is None:
+        err.print("kbcli: note: below 99 % accuracy the robot misses some notes even where the "
+                  "keyboard is (kbcli run says how many): more reaches (--budget) learn it "
+                  "better", markup=False)
 
 
 def _note_selection(attrs: dict) -> None:

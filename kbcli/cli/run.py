@@ -13,6 +13,7 @@ from kbcli.cli.app import (
     busy,
     check_io,
     command,
+    err,
     figure_output,
     note_arm,
     note_default,
@@ -33,6 +34,10 @@ from kbcli.stages.config import MAX_ADAPT_STEPS
 
 #: The detector's defaults: its config's, the one source of them.
 DEFAULT = DetectorConfig()
+
+
+#: Success before the move below which ``run`` says the model is weak.
+WEAK_MODEL = 0.95
 
 
 def _pct(v: float | None) -> str:
@@ -116,14 +121,31 @@ def _report_loop(a: dict, output: Path) -> None:
     out.print(f"success before the move {_pct(a['success_before'])}, after it "
               f"{_pct(a['success_after_perturbation'])}, after adaptation "
               f"{_pct(a['success_after_adaptation'])}")
+    true = ", ".join(f"{k} {v:+.2f}" for k, v in a["truth"].items())
+    moved = a["perturbed_at"]
     if a["detected_at"] is None:
         out.print("the detector did not fire after the move")
-    else:
-        corr = ", ".join(f"{k} {v:+.2f}" for k, v in a["correction"].items())
-        true = ", ".join(f"{k} {v:+.2f}" for k, v in a["truth"].items())
-        out.print(f"detected {a['detection_delay']} touches after the move; adapted in "
-                  f"{a['adapt_touches']} touches: estimate {corr} (truth {true}, error "
-                  f"{a['correction_error_px']:.2f} px)")
+    end = None  # the last touch of the previous adaptation
+    for i, ad in enumerate(a.get("adaptation_list", []), 1):
+        corr = ", ".join(f"{k} {v:+.2f}" for k, v in ad["correction"].items())
+        if ad["fired_at"] < moved:
+            when = "before the move: a false alarm"
+        elif end is None or end < moved:
+            when = f"{ad['fired_at'] - moved + 1} touches after the move"
+        else:
+            when = f"again, {ad['fired_at'] - end} touches after adaptation {i - 1}"
+        end = ad["first"] + ad["touches"] - 1
+        out.print(f"adaptation {i}: the detector fired at touch {ad['fired_at']} ({when}); "
+                  f"{ad['touches']} touches: estimate {corr} (truth {true}, error "
+                  f"{ad['error_px']:.2f} px)")
+    before = a["success_before"]
+    if before is not None and before < WEAK_MODEL:
+        err.print(f"kbcli: note: the model plays only {_pct(before)} of its notes right before "
+                  "anything moved: a weak model (learn it with more reaches, kbcli learn "
+                  "--budget); its misses look like a move to the detector", markup=False)
+    if len(a.get("adaptation_list", [])) > 1:
+        out.print(f"{len(a['adaptation_list'])} adaptations, {a['adapt_touches']} touches in all; "
+                  "the last one's estimate is in force at the end")
 
 
 @command(plot_app, name="run")
