@@ -175,3 +175,29 @@ def test_plot_run_and_animate_show_every_adaptation(tmp_path, monkeypatch):
     anim = Animator(load_replay(art), dpi=40)
     curves = anim.ax_c1  # touches count from 1 there
     assert bands(curves) == [(a + 1, b + 1) for a, b in blocks]
+
+
+def test_run_says_when_the_model_is_weak(capsys):
+    """Issue 40: the tour's model played 89 % before anything moved, and nothing said why the
+    detector then fired twice."""
+    from pathlib import Path
+
+    from kbcli.cli.run import WEAK_MODEL, _report_loop
+
+    def attrs(before):
+        ad = {"fired_at": 214, "first": 215, "touches": 20, "correction": {"dx": 11.6, "dy": -7.0},
+              "error_px": 0.4}
+        again = {**ad, "fired_at": 387, "first": 388, "touches": 17}
+        return {"success_before": before, "success_after_perturbation": 0.7,
+                "success_after_adaptation": 0.9, "perturbed_at": 200, "detected_at": 214,
+                "truth": {"dx": 12.0, "dy": -7.0}, "adapt_touches": 37,
+                "adaptation_list": [ad, again]}
+
+    _report_loop(attrs(WEAK_MODEL - 0.06), Path("l.h5"))
+    cap = capsys.readouterr()
+    assert "a weak model" in cap.err and "--budget" in cap.err
+    assert "adaptation 1: the detector fired at touch 214 (15 touches after the move)" in cap.out
+    assert "adaptation 2: the detector fired at touch 387 (again, 153 touches after " \
+           "adaptation 1)" in cap.out
+    _report_loop(attrs(1.0), Path("l.h5"))
+    assert "weak" not in capsys.readouterr().err

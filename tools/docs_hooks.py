@@ -5,7 +5,9 @@
 - ``<!-- results: NAME -->`` becomes the tables of ``benchmarks/results/NAME.json`` (see
   :func:`results_markdown`), with the command, date, machine and kbcli version that produced them;
   ``<!-- results: NAME | TITLE | TITLE -->`` only the tables whose title starts with a TITLE;
-- ``<!-- serve-transcript -->`` becomes a real ``kbcli serve`` session with the default model.
+- ``<!-- serve-transcript -->`` becomes a real ``kbcli serve`` session with the default model;
+- ``<!-- tour -->`` becomes the README's tour (between its ``<!-- tour -->`` and ``<!-- /tour -->``
+  lines): one tour, kept in the README, shown in both places.
 """
 
 from __future__ import annotations
@@ -113,7 +115,18 @@ def _results_marker(m: re.Match) -> str:
     return results_markdown(m.group(1), only=only)
 
 
+def tour_markdown(readme: Path = ROOT / "README.md") -> str:
+    """The README's tour: the text between its ``<!-- tour -->`` and ``<!-- /tour -->`` lines."""
+    text = readme.read_text(encoding="utf-8")
+    m = re.search(r"^<!-- tour -->\n(.*?)^<!-- /tour -->$", text, re.S | re.M)
+    if m is None:
+        raise ValueError(f"{readme}: no <!-- tour --> ... <!-- /tour --> section")
+    return m.group(1).strip() + "\n"
+
+
 def on_page_markdown(markdown: str, **_) -> str:
+    if "<!-- tour -->" in markdown:
+        markdown = markdown.replace("<!-- tour -->", tour_markdown())
     if "<!-- cli-reference -->" in markdown:
         markdown = markdown.replace("<!-- cli-reference -->", cli_markdown())
     if "<!-- serve-transcript -->" in markdown:
