@@ -32,7 +32,7 @@ from kbcli.core.applies import refuse_unused
 from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.io.config import arm_file, load_arm, load_stage_table
+from kbcli.io.config import arm_file, load_arm, load_stage_table, with_file
 from kbcli.stages import adapt as stage
 from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_EXPERIMENTS
 
@@ -155,12 +155,13 @@ def _adapt_config(config: Path | None, flags: dict, arm: str | None,
     read is refused (:func:`kbcli.core.applies.refuse_unused`)."""
     table = load_stage_table(config, "adapt") if config is not None else {}
     snaps = table.pop("snapshot_steps", None)
-    values = {**table, **{k: v for k, v in flags.items() if v is not None}}
+    given = {k: v for k, v in flags.items() if v is not None}
     if arm is not None:
-        values["arm"] = load_arm(arm)
-    scene_family = "family" not in values  # estimate what the scene moved (rigid: an angle too)
-    values.setdefault("family", family)
-    cfg = stage.AdaptConfig.from_dict(values)
+        given["arm"] = load_arm(arm)
+    scene_family = "family" not in {**table, **given}  # what the scene moved (rigid: an angle)
+    if scene_family:
+        given["family"] = family
+    cfg = with_file(stage.AdaptConfig, table, given, config)
     refuse_unused(cfg.robot, opts.robot_given(flags, table, str(config)), "adapt")
     return cfg, scene_family, snaps
 

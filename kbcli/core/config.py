@@ -137,6 +137,14 @@ _PHRASES = (
 )
 
 
+def plain_words(msg: str) -> str:
+    """A pydantic message in kbcli's words ("Input should be a valid integer" -> "must be a
+    whole number")."""
+    for old, new in _PHRASES:
+        msg = msg.replace(old, new)
+    return msg
+
+
 def describe_error(exc: ValidationError, what: str, fields: tuple[str, ...] = ()) -> str:
     """One line for the first error of ``exc``: the table, the key, what is allowed, the value.
 
@@ -159,9 +167,7 @@ def describe_error(exc: ValidationError, what: str, fields: tuple[str, ...] = ()
         where = f"{what}.{inner}" if inner else what
         valid = f"; valid: {', '.join(fields)}" if fields and not inner else ""
         return f"unknown {where} option {key!r}{valid}"
-    msg = e["msg"]
-    for old, new in _PHRASES:
-        msg = msg.replace(old, new)
+    msg = plain_words(e["msg"])
     if e["type"] == "missing" and e["loc"] and isinstance(e["loc"][-1], int):
         return (f"{what}.{_location(e['loc'][:-1])} has too few values (no value "
                 f"[{e['loc'][-1]}]), got {_short(e.get('input'))}")

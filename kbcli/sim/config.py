@@ -14,6 +14,8 @@ from kbcli.sim.modes import MODES
 #: Largest landing scatter (px) of ``reach_noise``: twice a default key's side.
 MAX_REACH_NOISE = 100.0
 _Link = between(Number, 0, MAX_COORD, low_open=True)
+#: A landing scatter (px): a number in [0, MAX_REACH_NOISE], wherever a config takes one.
+ReachNoise = between(Number, 0, MAX_REACH_NOISE)
 
 #: A field naming a sim mode, checked against :data:`MODES` ("unknown sim mode 'x'; valid: ...").
 ModeName = Annotated[Name, AfterValidator(MODES.check)]
@@ -48,5 +50,5 @@ class SimConfig(Config):
     mode: ModeName = "ideal"
     base: tuple[Coordinate, Coordinate] = (400.0, 0.0)
     link_lengths: tuple[_Link, _Link] = (320.0, 280.0)
-    reach_noise: between(Number, 0, MAX_REACH_NOISE) = 0.0
+    reach_noise: ReachNoise = 0.0
     arm: Arm = PRESETS.get("ideal")
