@@ -212,7 +212,10 @@ CASES: list[Case] = [
          setup=_fifo("k.png")),
     Case("bench --json a FIFO", ["bench", "--json", "{d}/b.json", "arm", "--reaches", "5"],
          ["b.json", "FIFO"], setup=_fifo("b.json")),
-    Case("-o /dev/null", ["keyboard", "-o", "/dev/null"], ["/dev/null", "character device"]),
+    # (never -o /dev/null itself: run as root by a kbcli without the check, the case would replace
+    # the system's /dev/null with a regular file; the link shows the same refusal safely)
+    Case("-o a link to /dev/zero", ["keyboard", "-o", "{d}/kb.h5"], ["character device"],
+         setup=lambda d: (d / "kb.h5").symlink_to("/dev/zero")),
     Case("evaluate --resume without a checkpoint",
          ["evaluate", "--config", "{i}/golden.toml", "--model", M, "-o", "{d}/e.h5", "--resume"],
          ["no checkpoint", "starting from the first experiment"], code=0, keep=("e.h5",)),

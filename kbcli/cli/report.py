@@ -39,13 +39,17 @@ def _is_report(folder: Path) -> bool:
     return REPORT_MARK in head
 
 
-def check_report_folder(output: Path, force: bool) -> None:
-    """Refuse to write a report into a folder that holds other files and is not a previous kbcli
-    report (a user's own README.md would be replaced), unless ``force``."""
+def check_report_folder(output: Path, force: bool, inputs: dict[str, Path | None]) -> None:
+    """Refuse to write a report into a folder that holds other files than the command's own
+    inputs and is not a previous kbcli report (a user's own README.md would be replaced), unless
+    ``force``."""
     if force or not output.is_dir():
         return
+    from kbcli.io.paths import same_file
+
     try:
-        entries = [p for p in output.iterdir() if not p.name.startswith(".")]
+        entries = [p for p in output.iterdir() if not p.name.startswith(".")
+                   and not any(q is not None and same_file(p, q) for q in inputs.values())]
     except OSError:
         return  # (check_io reports an unreadable folder)
     if entries and not _is_report(output):
@@ -94,7 +98,8 @@ def report_cmd(
     beside it, the large-displacement ablation, tables of observations to each threshold,
     p-values with the smallest attainable one, RMSE and measured playing success); --format pdf or
     svg writes the figures in that format instead. OUTPUT must be new, empty or a previous kbcli
-    report (files of its own there are kept), else --force; --ablations ABL.h5 adds the section "What
+    report (files of its own there are kept; the command's inputs may lie there), else --force;
+    --ablations ABL.h5 adds the section "What
     explains each difference"; --own-model OWN.h5 judges the Sect. IV-C claims on that evaluation
     too. Prints each claim's verdict.
     """
@@ -103,7 +108,7 @@ def report_cmd(
     inputs = {"EVALUATION": evaluation, **_repeated("--ablations", ablations),
               "--own-model": own_model}
     check_io(inputs, Output(output, "report folder", folder=True))
-    check_report_folder(output, force)
+    check_report_folder(output, force, inputs)
     from kbcli.viz import report as viz  # (matplotlib: seconds)
     art = read_artifact(evaluation, ("evaluation", "model_quality"))
     if art.kind == "model_quality":
