@@ -282,3 +282,28 @@ def test_run_refuses_flags_the_method_does_not_read_and_records_those_it_reads(r
     robot = read_artifact(files / "loop.h5").config["loop"]["adapt"]["robot"]
     assert (robot["kde_floor"], robot["stop_ml"], robot["stop_mass"], robot["candidates"]) == (
         0.01, 0.1, 0.0, 32)
+
+
+def test_adapt_says_nothing_of_options_the_user_never_gave(runner, files):
+    """Issue 40: `adapt -T 3` warned about --snapshots steps nobody asked for, and every run said
+    "family: translation, the scene's"."""
+    r = _adapt(runner, files, "-T", "3")
+    assert r.exit_code == 0, r.output
+    assert r.stderr == "", r.stderr
+    assert read_artifact(files / "run.h5", "run").data["snapshot_steps"].tolist() == [0, 1, 2, 3]
+    r = _adapt(runner, files, "-T", "3", "--snapshots", "0,5", out="r5.h5")
+    assert r.exit_code == 0 and "--snapshots 5 beyond --max-steps 3" in r.stderr
+    r = _adapt(runner, files, "-T", "2", scene="rigid.h5", out="rigid_run.h5")
+    assert r.exit_code == 0 and "family: rigid, the scene's" in r.stderr  # not the usual one
+
+
+def test_adapt_reads_snapshot_steps_from_its_config(runner, files):
+    """`kbcli inspect` shows snapshot_steps as a run's key; [adapt] snapshot_steps is accepted."""
+    (files / "a.toml").write_text("[adapt]\nmax_steps = 4\nsnapshot_steps = [0, 2, 4]\n")
+    r = _adapt(runner, files, "--config", str(files / "a.toml"))
+    assert r.exit_code == 0, r.output
+    art = read_artifact(files / "run.h5", "run")
+    assert art.data["snapshot_steps"].tolist() == [0, 2, 4]
+    assert art.config["snapshot_steps"] == [0, 2, 4]
+    r = _adapt(runner, files, "--config", str(files / "a.toml"), "--snapshots", "1", out="r1.h5")
+    assert read_artifact(files / "r1.h5", "run").data["snapshot_steps"].tolist() == [1]

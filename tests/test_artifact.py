@@ -136,6 +136,15 @@ def test_newer_schema(tmp_path):
         read_artifact(tmp_path / "a.h5")
 
 
+@pytest.mark.parametrize("version", [0, -1])
+def test_schema_version_below_one_is_refused(tmp_path, version):
+    write_artifact(_art(), tmp_path / "a.h5")
+    with h5py.File(tmp_path / "a.h5", "a") as f:
+        f.attrs["schema_version"] = version
+    with pytest.raises(ArtifactError, match=f"a.h5: attribute 'schema_version' must be >= 1, got {version}"):
+        read_artifact(tmp_path / "a.h5")
+
+
 @pytest.mark.skipif(shutil.which("h5dump") is None, reason="h5dump (Debian hdf5-tools) is not installed; .ci/run installs it")
 def test_standard_tools_read_the_file(tmp_path):
     write_artifact(_art(), tmp_path / "a.h5")

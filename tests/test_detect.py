@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
+import typer
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -86,6 +88,21 @@ def test_binomial_fires_on_the_second_failure_after_a_perfect_history():
     d = Detector(DetectorConfig())  # the paper's defaults: N_LT 100, N_ST 10, threshold 0.01
     fired = [d.update(x) for x in [0] * 110 + [1, 1]]
     assert fired.index(True) == 111  # one failure: tail 0.094 > 0.01; two: 0.0042 < 0.01
+
+
+def test_the_detector_defaults_have_one_source():
+    """``kbcli detect`` and ``kbcli run`` default to the config's own defaults, which are those the
+    golden closed loop (``make data``: ``kbcli run`` with no detector option) was recorded with: a
+    changed default is a changed product, to be rebuilt (``make data``) on purpose."""
+    cfg = DetectorConfig()
+    golden = Path(__file__).resolve().parent.parent / "data" / "golden" / "closed_loop.h5"
+    assert read_artifact(golden).config["loop"]["detector"] == cfg.to_dict()
+    root = typer.main.get_command(app)
+    for name in ("detect", "run"):
+        params = {p.name: p.default for p in root.commands[name].params}
+        for field in ("detector", "n_lt", "n_st", "threshold", "shift", "hazard"):
+            if field in params:
+                assert params[field] == getattr(cfg, field), (name, field)
 
 
 def test_binomial_counts_windows_like_eq_4_and_5():
@@ -249,7 +266,8 @@ def test_bench_streams_and_tuning_meet_the_target():
         assert 0 < thr < 1 and r <= 20.0
 
 
-def test_bench_river_and_rates():
+def test_bench_river_detectors_find_a_jump():
+    pytest.importorskip("river", reason="river is in the bench extra (make test installs it)")
     rng = np.random.default_rng(1)
     x = bench.make_streams(0.01, np.full(4, 0.9), np.full(4, 150), 260, rng=rng)
     change = np.full(4, 150)
@@ -258,7 +276,10 @@ def test_bench_river_and_rates():
                                  stop_after=change)
         row = bench._summary("g", name, "", 0.0, alarms, change, horizon=100)
         assert row.missed == 0 and row.median < 40  # a jump to 0.9 is found by everyone
-    rates = bench.post_rates("large", 5, rng=rng)
+
+
+def test_bench_post_change_rates():
+    rates = bench.post_rates("large", 5, rng=np.random.default_rng(1))
     assert np.all((rates > 0.3) & (rates <= 1.0))
 
 

@@ -10,6 +10,7 @@ docs' own.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import shlex
@@ -22,6 +23,11 @@ import pytest
 from typer.testing import CliRunner
 
 from kbcli.cli import app
+
+_spec = importlib.util.spec_from_file_location(
+    "docs_hooks", Path(__file__).resolve().parent.parent / "tools" / "docs_hooks.py")
+hooks = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(hooks)
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGES = sorted([ROOT / "docs" / "getting-started.md", *(ROOT / "docs" / "tutorials").glob("*.md"),
@@ -70,16 +76,23 @@ STDIN = {"kbcli serve": '{"op": "end"}\n'}
 OUTPUTS = ("-o", "--output", "--wav", "--transcript", "--json")
 
 
+def page_text(page: Path) -> str:
+    """A page as the site shows it: ``<!-- tour -->`` is the README's tour (the README holds it)."""
+    text = page.read_text()
+    return text if page.name == "README.md" else text.replace("<!-- tour -->",
+                                                              hooks.tour_markdown())
+
+
 def examples(page: Path) -> list[str]:
     """The command lines of a page's ```sh blocks, in order (continuations joined, ``&&`` split,
-    comments dropped); only ``kbcli`` and ``python`` lines."""
+    comments dropped); only ``kbcli``, ``python`` and ``mkdir`` lines."""
     lines = []
-    for block in re.findall(r"```(?:sh|bash|console)\n(.*?)```", page.read_text(), re.S):
+    for block in re.findall(r"```(?:sh|bash|console)\n(.*?)```", page_text(page), re.S):
         for line in block.replace("\\\n", " ").splitlines():
             tokens = shlex.split(re.sub(r"^\$ ", "", line.strip()), comments=True)
             while tokens:
                 cut = tokens.index("&&") if "&&" in tokens else len(tokens)
-                if tokens[0] in ("kbcli", "python"):
+                if tokens[0] in ("kbcli", "python", "mkdir"):
                     lines.append(shlex.join(tokens[:cut]))
                 tokens = tokens[cut + 1:]
     return lines
@@ -112,6 +125,9 @@ def _outputs(argv: list[str]) -> list[str]:
 
 def _run(line: str, cwd: Path) -> None:
     argv = shlex.split(_small(line))
+    if argv[0] == "mkdir":
+        subprocess.run(argv, cwd=cwd, check=True)
+        return
     stdin = next((s for k, s in STDIN.items() if line.startswith(k)), None)
     if argv[0] == "python":
         env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
@@ -129,6 +145,21 @@ def _run(line: str, cwd: Path) -> None:
     assert code == 0, f"{line}\n{output[-3000:]}"
     for out in _outputs(argv):
         assert (cwd / out).exists(), f"{line}: wrote no {out}"
+
+
+def test_the_tour_is_the_readmes_and_writes_only_into_its_scratch_folder():
+    """Issue 40: README and getting-started showed two different tours, writing into the
+    repository's root. Now the page includes the README's, and every file it writes is under
+    out/tour/."""
+    page = ROOT / "docs" / "getting-started.md"
+    assert "<!-- tour -->" in page.read_text() and "kbcli learn" not in page.read_text()
+    tour = [line for line in examples(page) if "out/tour" in line]
+    readme = ROOT / "README.md"
+    assert tour == [line for line in examples(readme) if "out/tour" in line]
+    assert tour[0] == "mkdir -p out/tour" and len(tour) >= 10
+    for line in tour[1:]:
+        for out in _outputs(shlex.split(line)):
+            assert out.startswith("out/tour/"), line
 
 
 def test_the_pages_have_examples():

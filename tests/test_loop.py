@@ -92,7 +92,13 @@ def test_cli_run_and_plot(runner, tmp_path):
                             "--steps", "300", "-o", str(tmp_path / "loop.h5")])
     assert r.exit_code == 0, r.output
     assert "after adaptation" in r.output
-    assert r.stderr.count("family: translation, the scene's") == 1  # a default from the input
+    assert "family:" not in r.stderr  # the usual family goes without saying (issue 40)
+    art = read_artifact(tmp_path / "loop.h5", "closed_loop")
+    spans = art.attrs["adaptation_list"]
+    assert len(spans) == art.attrs["adaptations"] >= 1
+    assert sum(s["touches"] for s in spans) == art.attrs["adapt_touches"]
+    for i, s in enumerate(spans, 1):  # one line per adaptation
+        assert f"adaptation {i}: the detector fired at touch {s['fired_at']}" in r.output
     art = read_artifact(tmp_path / "loop.h5", "closed_loop")
     assert art.inputs["model"]["sha256"] and art.inputs["scene"]["sha256"]
     r = runner.invoke(app, ["plot", "run", str(tmp_path / "loop.h5"), "-o", str(tmp_path / "loop.png")])
@@ -112,3 +118,86 @@ def test_cli_run_bad_inputs(runner, tmp_path):
     r = runner.invoke(app, ["run", "--model", str(tmp_path / "m.h5"), "--scene", str(tmp_path / "s.h5"),
                             "--perturb-at", "20", "-o", str(out)])
     assert r.exit_code == 1 and "warm-up" in r.output and not out.exists()
+
+
+def _two_adaptations():
+    """The golden closed loop with its one adaptation split in two by play touches (as a session
+    looks when the detector fires again after the first adaptation)."""
+    from pathlib import Path
+
+    art = read_artifact(Path(__file__).resolve().parent.parent / "data" / "golden" /
+                        "closed_loop.h5")
+    phase = np.asarray(art.data["steps"]["phase"]).astype(int)
+    t = np.flatnonzero(phase == ADAPT)
+    assert len(t) >= 4
+    phase[t[len(t) // 2 - 1]] = PLAY  # one play touch inside the block: two adaptations
+    art.data["steps"]["phase"] = phase
+    return art, [(int(t[0]), int(t[len(t) // 2 - 2])), (int(t[len(t) // 2]), int(t[-1]))]
+
+
+def test_adaptation_blocks_finds_every_run_of_adaptation_touches():
+    from kbcli.core.loop import adaptation_blocks
+
+    phase = np.zeros(50, int)
+    phase[10:14] = ADAPT
+    phase[30:31] = ADAPT
+    phase[45:] = ADAPT
+    assert adaptation_blocks(phase) == [(10, 13), (30, 30), (45, 49)]
+    assert adaptation_blocks(np.zeros(5, int)) == []
+
+
+def test_plot_run_and_animate_show_every_adaptation(tmp_path, monkeypatch):
+    """Issue 40: a second adaptation had no detector line, and animate drew one band over the
+    play touches between two adaptations."""
+    import matplotlib.pyplot as plt
+
+    from kbcli.viz import loop as viz_loop
+    from kbcli.viz.animator import Animator
+    from kbcli.viz.replay import load_replay
+
+    art, blocks = _two_adaptations()
+    figs = []
+    monkeypatch.setattr(viz_loop, "save", lambda fig, path: figs.append(fig))
+    viz_loop.plot_loop(art.data["steps"], art.attrs, keyboard_stage.load(art),
+                       tmp_path / "r.png", config=art.config)
+    success = figs[0].axes[0]
+
+    def bands(ax):
+        return sorted((round(p.get_x() + 0.5), round(p.get_x() + p.get_width() - 0.5))
+                      for p in ax.patches if p.get_width() > 0)
+
+    assert bands(success) == blocks
+    fired = sorted(round(ln.get_xdata()[0]) for ln in success.lines
+                   if ln.get_color() == "crimson" and len(set(ln.get_xdata())) == 1)
+    assert fired == [a - 1 for a, _ in blocks]
+    assert "2 adaptations" in " ".join(t.get_text() for t in success.get_legend().get_texts())
+    plt.close(figs[0])
+    anim = Animator(load_replay(art), dpi=40)
+    curves = anim.ax_c1  # touches count from 1 there
+    assert bands(curves) == [(a + 1, b + 1) for a, b in blocks]
+
+
+def test_run_says_when_the_model_is_weak(capsys):
+    """Issue 40: the tour's model played 89 % before anything moved, and nothing said why the
+    detector then fired twice."""
+    from pathlib import Path
+
+    from kbcli.cli.run import WEAK_MODEL, _report_loop
+
+    def attrs(before):
+        ad = {"fired_at": 214, "first": 215, "touches": 20, "correction": {"dx": 11.6, "dy": -7.0},
+              "error_px": 0.4}
+        again = {**ad, "fired_at": 387, "first": 388, "touches": 17}
+        return {"success_before": before, "success_after_perturbation": 0.7,
+                "success_after_adaptation": 0.9, "perturbed_at": 200, "detected_at": 214,
+                "truth": {"dx": 12.0, "dy": -7.0}, "adapt_touches": 37,
+                "adaptation_list": [ad, again]}
+
+    _report_loop(attrs(WEAK_MODEL - 0.06), Path("l.h5"))
+    cap = capsys.readouterr()
+    assert "a weak model" in cap.err and "--budget" in cap.err
+    assert "adaptation 1: the detector fired at touch 214 (15 touches after the move)" in cap.out
+    assert "adaptation 2: the detector fired at touch 387 (again, 153 touches after " \
+           "adaptation 1)" in cap.out
+    _report_loop(attrs(1.0), Path("l.h5"))
+    assert "weak" not in capsys.readouterr().err

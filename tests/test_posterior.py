@@ -18,7 +18,7 @@ from kbcli.core.kde import ActionSamples, binned_kde, kde_term, scott_bandwidth
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.likelihood import cell_sigma, likelihood_term
 from kbcli.core.model import ExactModel
-from kbcli.core.posterior import Posterior
+from kbcli.core.posterior import Posterior, log_normalise
 from kbcli.core.table import LikelihoodTable
 from kbcli.errors import ConfigError
 
@@ -236,6 +236,19 @@ def test_kde_term_rigid_runs_every_angle():
 
 
 # -- the posterior -------------------------------------------------------------------------------
+@settings(max_examples=40, deadline=None)
+@given(shape=st.tuples(st.integers(1, 5), st.integers(1, 5)), axis=st.sampled_from([None, 0, 1]),
+       seed=st.integers(0, 2**32 - 1))
+def test_log_normalise_sums_to_one_along_its_axis(shape, axis, seed):
+    from scipy.special import logsumexp
+
+    logw = np.random.default_rng(seed).normal(0.0, 30.0, size=shape)
+    logp, p = log_normalise(logw, axis=axis)
+    np.testing.assert_allclose(p.sum(axis=axis), 1.0, rtol=1e-12)
+    np.testing.assert_allclose(logp, logw - logsumexp(logw, axis=axis, keepdims=True), atol=1e-9)
+    np.testing.assert_allclose(np.exp(logp), p, rtol=1e-9)
+
+
 def test_uniform_posterior():
     g = grid()
     p = Posterior.uniform(g)

@@ -84,7 +84,7 @@ def test_bad_quality_configs_are_refused(table):
     ({"budgets": [100, 150, 100]}, ["quality.budgets", "each budget once", "got 100"]),
     ({"seed": -1}, ["quality.seed", "greater than or equal to 0", "got -1"]),
     ({"experiments": 2.0}, ["quality.experiments", "whole number", "got 2.0"]),
-    ({"reach_noise": -0.5}, ["quality.reach_noise", "greater than or equal to 0"]),
+    ({"reach_noise": -0.5}, ["quality.reach_noise", "in [0, 100]", "got -0.5"]),
     ({"ideal": "yes"}, ["quality.ideal", "true or false"]),
     ({"mode": "teleport"}, ["quality.mode", "'teleport'", "ideal, dynamics"]),
     ({"explorations": ["psychic"]}, ["quality.explorations", "'psychic'", "active, random"]),

@@ -73,6 +73,19 @@ def test_dynamics_reacher_is_reproducible_and_scatters_by_reach_noise():
     assert np.all((sd > 1.6) & (sd < 2.4))
 
 
+def test_ideal_reacher_scatters_from_the_given_generator():
+    """Same generator state, same landings; another seed, other landings (reach noise on)."""
+    cfg = SimConfig(mode="ideal", reach_noise=2.0)
+    targets = np.random.default_rng(1).uniform(AREA[:2], AREA[2:], size=(200, 2))
+    a = make_reacher(cfg).reach(targets, np.random.default_rng(7))
+    b = make_reacher(cfg).reach(targets, np.random.default_rng(7))
+    c = make_reacher(cfg).reach(targets, np.random.default_rng(8))
+    np.testing.assert_array_equal(a, b)
+    assert not np.allclose(a, c)
+    sd = np.std(a - targets, axis=0)
+    assert np.all((sd > 1.6) & (sd < 2.4))
+
+
 def test_reset_puts_the_arm_in_a_pose():
     r = DynamicsReacher(CFG)
     q = np.array([1.1, 0.9])

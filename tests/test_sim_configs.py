@@ -72,13 +72,17 @@ def _line(make, *args, **kw) -> str:
 
 
 @pytest.mark.parametrize(("make", "kw", "line"), [
-    (SimConfig, {"reach_noise": -1.0}, "sim.reach_noise must be greater than or equal to 0"),
-    (SimConfig, {"link_lengths": (320.0, 0.0)}, "sim.link_lengths.1 must be greater than 0"),
+    (SimConfig, {"reach_noise": -1.0}, "sim.reach_noise must be a number in [0, 100], got -1.0"),
+    (SimConfig, {"link_lengths": (320.0, 0.0)}, "sim.link_lengths[1] must be a number in (0, 10000]"),
     (SimConfig, {"mode": "teleport"}, "valid: ideal, dynamics"),
-    (SimConfig, {"arm": {"kp": -1.0}}, "sim.arm.kp must be greater than 0, got -1.0"),
+    (SimConfig, {"arm": {"kp": -1.0}}, "sim.arm.kp must be a number in (0, 10000000000], got -1.0"),
+    (SimConfig, {"reach_noise": 1e308}, "sim.reach_noise must be a number in [0, 100], got 1e+308"),
+    (SimConfig, {"base": (400.0,)}, "sim.base has too few values (no value [1]), got [400.0]"),
+    (ArmConfig, {"finger_radius": 1e300}, "arm.finger_radius must be a number in [0, 50]"),
+    (ArmConfig, {"max_torque": 1e300}, "arm.max_torque must be a number in (0, 10000000000]"),
     (SimConfig, {"speed": 3}, "unknown sim option 'speed'"),
     (ArmConfig, {"settle_time": 1e9}, f"arm.settle_time must be a number <= {MAX_SETTLE_TIME:g}"),
-    (ArmConfig, {"proprio_bias": (0.5, 0.0)}, "arm.proprio_bias.0 must be a number in [-0.1, 0.1]"),
+    (ArmConfig, {"proprio_bias": (0.5, 0.0)}, "arm.proprio_bias[0] must be a number in [-0.1, 0.1]"),
     (DetectorConfig, {"n_lt": 10**9}, f"detector.n_lt must be a whole number in [1, {MAX_N_LT}]"),
     (DetectorConfig, {"n_st": 10**9}, f"detector.n_st must be a whole number in [1, {MAX_N_ST}]"),
     (DetectorConfig, {"hazard": 1.0}, "detector.hazard must be a number in (0, 1), got 1.0"),

@@ -254,3 +254,23 @@ def test_the_reports_posterior_figure_says_when_the_angle_is_marginalised(monkey
     assert "angle marginalised" in figs[-1]._suptitle.get_text()
     for fig in figs:
         plt.close(fig)
+
+
+def test_model_boundaries_are_drawn_only_where_they_separate_keys():
+    """Issue 40: a fitted line was drawn across the whole pad, outside the keyboard too."""
+    from kbcli.core.keyboard import Keyboard
+    from kbcli.core.model import grid_points
+
+    kb = Keyboard(KeyboardConfig())
+    _, pts = grid_points(kb.area, viz_model.MAP_STEP)
+    keys = kb.key_at(pts.reshape(-1, 2)).reshape(pts.shape[:2])
+    lines = np.array([[1.0, 0.0, 300.0],   # x = 300: between two columns of keys
+                      [1.0, 0.0, 625.0],   # x = 625: silence on both sides
+                      [0.0, 2.0, 700.0]])  # y = 350 (a normal of length 2): between two rows
+    seg = viz_model.boundary_segments(lines, keys, kb.area)
+    drawn = seg[np.isfinite(seg).all(axis=1)]
+    assert len(drawn) and np.all(np.isclose(drawn[:, 0], 300.0) | np.isclose(drawn[:, 1], 350.0))
+    on_x = drawn[np.isclose(drawn[:, 0], 300.0)]
+    assert 250 <= on_x[:, 1].min() < 255 and 445 < on_x[:, 1].max() <= 450  # the keys' rows only
+    on_y = drawn[np.isclose(drawn[:, 1], 350.0)]
+    assert 200 <= on_y[:, 0].min() < 205 and 595 < on_y[:, 0].max() <= 600

@@ -5,7 +5,9 @@
 - ``<!-- results: NAME -->`` becomes the tables of ``benchmarks/results/NAME.json`` (see
   :func:`results_markdown`), with the command, date, machine and kbcli version that produced them;
   ``<!-- results: NAME | TITLE | TITLE -->`` only the tables whose title starts with a TITLE;
-- ``<!-- serve-transcript -->`` becomes a real ``kbcli serve`` session with the default model.
+- ``<!-- serve-transcript -->`` becomes a real ``kbcli serve`` session with the default model;
+- ``<!-- tour -->`` becomes the README's tour (between its ``<!-- tour -->`` and ``<!-- /tour -->``
+  lines): one tour, kept in the README, shown in both places.
 """
 
 from __future__ import annotations
@@ -61,11 +63,57 @@ def cli_markdown() -> str:
     return "\n".join(_command_md(_command_tree(), "kbcli", 2))
 
 
+#: A cell longer than this (characters) is a detail: in a table of three or more columns its
+#: column leaves the table for a numbered list below it, one entry per row (a paragraph of
+#: p-values squeezed into a narrow column made rows hundreds of pixels tall).
+LONG_CELL = 60
+#: The first column (the row's name) and the first long one stay in the table, cut to this many
+#: characters.
+NAME_CELL = 48
+
+
 def _table(rows: list[dict], columns: list[str]) -> list[str]:
+    """A Markdown table; with long cells (see :data:`LONG_CELL`), one short line per row (``#``,
+    the row's name cut short, the short columns) and the details below it."""
+    long = [c for c in columns if any(len(_text(r.get(c, ""))) > LONG_CELL for r in rows)]
+    if len(columns) < 3 or not long:
+        return _plain_table(rows, columns)
+    # the row's name and the first long column, cut short, say which row it is
+    lead = list(dict.fromkeys([columns[0], long[0]]))
+    short = [c for c in columns if c not in long or c in lead]
+    head = ["#", *short]
+    out = ["| " + " | ".join(_cell(c) for c in head) + " |", "|" + "---|" * len(head)]
+    for i, r in enumerate(rows, 1):
+        cells = [str(i), *(_cell(_cut(_text(r.get(c, "")))) if c in lead else _cell(r.get(c, ""))
+                           for c in short)]
+        out.append("| " + " | ".join(cells) + " |")
+    name = columns[0]
+    out += ["", "Details:", ""]
+    for i, r in enumerate(rows, 1):
+        parts = [f"*{_escape(c)}:* {_escape(_text(r.get(c, '')))}" for c in long
+                 if c != name and _text(r.get(c, ""))]
+        label = f"**{_escape(_text(r.get(name, '')))}**"
+        out.append(f"{i}. {label}" + (": " + "; ".join(parts) if parts else ""))
+    return out
+
+
+def _plain_table(rows: list[dict], columns: list[str]) -> list[str]:
     out = ["| " + " | ".join(_cell(c) for c in columns) + " |", "|" + "---|" * len(columns)]
     for r in rows:
         out.append("| " + " | ".join(_cell(r.get(c, "")) for c in columns) + " |")
     return out
+
+
+def _text(v) -> str:
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
+def _cut(text: str, n: int = NAME_CELL) -> str:
+    """``text`` cut at a word to at most ``n`` characters, with an ellipsis when cut."""
+    if len(text) <= n:
+        return text
+    head = text[: n - 1].rsplit(" ", 1)[0].rstrip(",;:")
+    return head + "…"
 
 
 def _cell(v) -> str:
@@ -114,7 +162,18 @@ def _results_marker(m: re.Match) -> str:
     return results_markdown(m.group(1), only=only)
 
 
+def tour_markdown(readme: Path = ROOT / "README.md") -> str:
+    """The README's tour: the text between its ``<!-- tour -->`` and ``<!-- /tour -->`` lines."""
+    text = readme.read_text(encoding="utf-8")
+    m = re.search(r"^<!-- tour -->\n(.*?)^<!-- /tour -->$", text, re.S | re.M)
+    if m is None:
+        raise ValueError(f"{readme}: no <!-- tour --> ... <!-- /tour --> section")
+    return m.group(1).strip() + "\n"
+
+
 def on_page_markdown(markdown: str, **_) -> str:
+    if "<!-- tour -->" in markdown:
+        markdown = markdown.replace("<!-- tour -->", tour_markdown())
     if "<!-- cli-reference -->" in markdown:
         markdown = markdown.replace("<!-- cli-reference -->", cli_markdown())
     if "<!-- serve-transcript -->" in markdown:
@@ -143,14 +202,39 @@ def serve_transcript(steps: int = 2) -> str:
         log = Path(tmp) / "t.txt"
         subprocess.run([sys.executable, str(ROOT / "examples" / "external_robot.py"),
                         "--model", str(ROOT / "data" / "default-model.h5"), "--mode", "ideal",
-                        "--max-steps", str(steps), "-o", str(Path(tmp) / "s.h5"),
-                        "--transcript", str(log)], check=True, capture_output=True, cwd=tmp)
+                        "--max-steps", str(steps), "--transcript", str(log)],
+                       check=True, capture_output=True, cwd=tmp)  # writes session.h5 there
         lines = log.read_text().splitlines()
     out = []
     for line in lines:
         who, _, msg = line.partition(" ")
-        out.append(f"{who:5s} {json.dumps(_rounded(json.loads(msg)))}")
+        out += _wrapped(f"{who:5s} ", json.dumps(_rounded(json.loads(msg))))
     return "```\n" + "\n".join(out) + "\n```\n"
+
+
+#: Width of a transcript line: the page's code block shows it whole, without scrolling.
+TRANSCRIPT_WIDTH = 96
+
+
+def _wrapped(prefix: str, msg: str) -> list[str]:
+    """One message as lines of at most :data:`TRANSCRIPT_WIDTH` characters where the fields allow,
+    cut only between two fields (a line a robot sends is one line; the page wraps it for
+    reading)."""
+    fields, depth, start = [], 0, 0
+    for i, ch in enumerate(msg):  # cut after a comma at the object's own level
+        depth += (ch in "[{") - (ch in "]}")
+        if ch == "," and depth == 1:
+            fields.append(msg[start:i + 1])
+            start = i + 2
+    fields.append(msg[start:])
+    lines, line = [], prefix + fields[0]
+    for f in fields[1:]:
+        if len(line) + 1 + len(f) > TRANSCRIPT_WIDTH:
+            lines.append(line)
+            line = " " * (len(prefix) + 1) + f
+        else:
+            line += " " + f
+    return [*lines, line]
 
 
 #: The README's generated section: between these markers, the "What reproduces" table of

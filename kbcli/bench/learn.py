@@ -30,13 +30,14 @@ from pydantic import AfterValidator, Field, model_validator
 
 from kbcli import __version__
 from kbcli.core import accuracy as scoring
-from kbcli.core.config import Config, Count, Name, NonNegativeInt, Number, Positive, each, member_of
+from kbcli.core.config import Config, Count, Name, NonNegativeInt, Positive, each, member_of
 from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.layouts import LAYOUTS, example_config_fields
 from kbcli.core.model_classes import check_learned, fit_model
 from kbcli.io.atomic import atomic_path
 from kbcli.sim import MODES, SimConfig, World, check_keyboard_reachable, make_reacher
+from kbcli.sim.config import ReachNoise
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import learn as learn_stage
 
@@ -66,7 +67,7 @@ class BenchConfig(Config):
     model_classes: Annotated[tuple[Name, ...], Field(min_length=1),
                              AfterValidator(each(check_learned))] = ("lines",)
     mode: Name = "ideal"
-    reach_noise: Number = 0.0
+    reach_noise: ReachNoise = 0.0
     seed: NonNegativeInt = 0
     resolution: Count = 50
     boundary_budget: Count = 800

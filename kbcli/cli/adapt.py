@@ -33,13 +33,34 @@ from kbcli.core.applies import refuse_unused
 from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.io.config import arm_file, load_arm, load_stage_table
+from kbcli.io.config import arm_file, load_arm, load_stage_table, with_file
 from kbcli.stages import adapt as stage
 from kbcli.stages import repair as repair_stage
 from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_EXPERIMENTS
 
+#: The posterior snapshots ``adapt`` stores unless told (those past --max-steps are left out).
+DEFAULT_SNAPSHOTS = (0, 1, 2, 3, 5, 10, 20, 40)
 
-def _snapshots(text: str, max_steps: int) -> tuple[int, ...]:
+
+def _snapshots(text: str | None, table: object, max_steps: int) -> tuple[int, ...]:
+    """The steps to snapshot: ``--snapshots`` (a comma list or ``all``), else the config's
+    ``[adapt] snapshot_steps`` (the run's recorded key), else :data:`DEFAULT_SNAPSHOTS` up to
+    ``max_steps``. A step beyond ``max_steps`` that the user asked for gets a note."""
+    if text is None and table is None:
+        return tuple(s for s in DEFAULT_SNAPSHOTS if s <= max_steps)
+    if text is None:
+        if not (isinstance(table, list) and all(isinstance(v, int) and not isinstance(v, bool)
+                                                and v >= 0 for v in table)):
+            raise ConfigError(f"adapt.snapshot_steps must be a list of steps >= 0, got "
+                              f"{table!r:.60}")
+        steps, given = tuple(table), "snapshot_steps"
+    else:
+        steps, given = _parse_snapshots(text, max_steps), "--snapshots"
+    _note_beyond(steps, max_steps, given)
+    return steps
+
+
+def _parse_snapshots(text: str, max_steps: int) -> tuple[int, ...]:
     if text.strip().lower() == "all":
         return tuple(range(max_steps + 1))
     try:
@@ -84,10 +105,10 @@ def adapt_cmd(
         "and says when a rule fired (as evaluate does); serve and run, which drive a robot, stop "
         "at the rules.", show_default="--no-stop")] = None,
     paper_flags: dict | None = None,
-    snapshots: Annotated[str, typer.Option(
+    snapshots: Annotated[str | None, typer.Option(
         "--snapshots", help="Steps at which to store the posterior (0 = prior), or 'all' (every "
-        "step: kbcli animate then shows each one).")
-    ] = "0,1,2,3,5,10,20,40",
+        "step: kbcli animate then shows each one); in a config, [adapt] snapshot_steps = [...].",
+        show_default=",".join(map(str, DEFAULT_SNAPSHOTS)) + " (up to --max-steps)")] = None,
     seed: opts.seed_option("Seed of the robot's and world's draws.") = 0,
 ) -> None:
     """Recover the scene's displacement by touching and listening.
@@ -107,11 +128,10 @@ def adapt_cmd(
              "prior_halfwidth": prior_halfwidth, "stop": stop, **(paper_flags or {})}
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
-    cfg, scene_family = _adapt_config(config, flags, arm,
-                                      scene_art.config.get("family", "translation"))
+    cfg, scene_family, table_snaps = _adapt_config(config, flags, arm,
+                                                   scene_art.config.get("family", "translation"))
     check_model_out(model_out, cfg.repair)
-    steps = _snapshots(snapshots, cfg.max_steps)
-    _note_beyond(steps, cfg.max_steps)
+    steps = _snapshots(snapshots, table_snaps, cfg.max_steps)
     stage.check_inputs(model_art, scene_art)
     note_arm(cfg.arm, cfg.mode)
     what = f"adapting ({cfg.strategy}, {cfg.posterior} posterior), observations"
@@ -121,7 +141,7 @@ def adapt_cmd(
         art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
                         snapshot_steps=steps, on_step=tick, timings=timings, keep=keep)
     write_artifact(art, output)
-    if scene_family:  # (said once the inputs passed every check: a refusal stays one line)
+    if scene_family and cfg.family != "translation":  # (said once the inputs passed every check)
         note_default("family", cfg.family, "the scene's (--family to choose)")
     _report_run(art, cfg, output, timings.get("setup_ms"))
     if model_out is not None:
@@ -130,29 +150,32 @@ def adapt_cmd(
                        "adapt")
 
 
-def _note_beyond(steps: list[int], max_steps: int) -> None:
-    """A note on the ``--snapshots`` steps past ``--max-steps`` (they are not recorded)."""
+def _note_beyond(steps: tuple[int, ...], max_steps: int, given: str) -> None:
+    """A note on the asked-for snapshot steps past ``--max-steps`` (they are not recorded)."""
     if beyond := sorted({s for s in steps if s > max_steps}):
         shown = ", ".join(map(str, beyond[:8])) + (f", ... ({len(beyond)} steps)" if len(beyond) > 8
                                                    else "")
-        err.print(f"kbcli: note: --snapshots {shown} beyond --max-steps {max_steps}: not "
+        err.print(f"kbcli: note: {given} {shown} beyond --max-steps {max_steps}: not "
                   "recorded", markup=False)
 
 
 def _adapt_config(config: Path | None, flags: dict, arm: str | None,
-                  family: str) -> tuple[stage.AdaptConfig, bool]:
+                  family: str) -> tuple[stage.AdaptConfig, bool, object]:
     """The [adapt] table of ``config`` (if any) with the flags given on top, the arm, and
-    ``family`` (the scene's) unless set, and whether it was the scene's; a robot option set (in
-    either) that the method does not read is refused (:func:`kbcli.core.applies.refuse_unused`)."""
+    ``family`` (the scene's) unless set, whether it was the scene's, and the table's
+    ``snapshot_steps`` (None if absent); a robot option set (in either) that the method does not
+    read is refused (:func:`kbcli.core.applies.refuse_unused`)."""
     table = load_stage_table(config, "adapt") if config is not None else {}
-    values = {**table, **{k: v for k, v in flags.items() if v is not None}}
+    snaps = table.pop("snapshot_steps", None)
+    given = {k: v for k, v in flags.items() if v is not None}
     if arm is not None:
-        values["arm"] = load_arm(arm)
-    scene_family = "family" not in values  # estimate what the scene moved (rigid: an angle too)
-    values.setdefault("family", family)
-    cfg = stage.AdaptConfig.from_dict(values)
+        given["arm"] = load_arm(arm)
+    scene_family = "family" not in {**table, **given}  # what the scene moved (rigid: an angle)
+    if scene_family:
+        given["family"] = family
+    cfg = with_file(stage.AdaptConfig, table, given, config)
     refuse_unused(cfg.robot, opts.robot_given(flags, table, str(config)), "adapt")
-    return cfg, scene_family
+    return cfg, scene_family, snaps
 
 
 def _report_run(art, cfg, output: Path, setup_ms: float | None = None) -> None:

@@ -28,13 +28,15 @@ from rich.progress import (
     TimeElapsedColumn,
     TimeRemainingColumn,
 )
+from typer.core import TyperCommand
 
 import kbcli.cli.record as record
 from kbcli import __version__
+from kbcli.core.config import plain_words
 from kbcli.errors import KbcliError
 from kbcli.io import lock, signals
 from kbcli.io.atomic import describe_os_error
-from kbcli.io.paths import Output, check_outputs, figure_format, probe_writable
+from kbcli.io.paths import Output, check_outputs, check_replaceable, figure_format, probe_writable
 
 app = typer.Typer(
     name="kbcli",
@@ -91,6 +93,7 @@ def _check_json(path: Path) -> None:
     try:
         if not folder.is_dir():
             raise KbcliError(f"{path}: {folder} is not a folder")
+        check_replaceable(path)
         probe_writable(folder, path)
     except KbcliError as exc:
         _refuse(exc)
@@ -166,11 +169,24 @@ def first_sentence(doc: str | None) -> str:
     return para
 
 
+class Command(TyperCommand):
+    """A command whose usage errors speak kbcli's words: Typer checks an option's range with
+    pydantic, whose "Input should be greater than or equal to 2" becomes "must be ..."."""
+
+    def make_context(self, info_name, args, parent=None, **extra):
+        try:
+            return super().make_context(info_name, args, parent=parent, **extra)
+        except typer.BadParameter as exc:
+            exc.message = plain_words(str(exc.message))
+            raise
+
+
 def command(typer_app: typer.Typer = app, **kwargs: Any) -> Callable[[F], F]:
     """Register a command on ``typer_app`` behind the error boundary; its line in the command list
     (``short_help``) is the docstring's first sentence, whole, unless given."""
 
     def deco(fn: F) -> F:
+        kwargs.setdefault("cls", Command)
         kwargs.setdefault("short_help", first_sentence(kwargs.get("help") or fn.__doc__))
         return typer_app.command(**kwargs)(handle_errors(fn))
 
@@ -344,6 +360,7 @@ def output_path(path: Path, force: bool = True) -> Path:
         raise KbcliError(f"{path}: output folder {folder} does not exist")
     if path.is_dir():
         raise KbcliError(f"{path}: is a folder, expected a file name")
+    check_replaceable(path)
     probe_writable(folder, path)
     return path
 

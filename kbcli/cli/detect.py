@@ -20,21 +20,24 @@ from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import detect as stage
 
+#: The detector's defaults: its config's, the one source of them.
+DEFAULT = DetectorConfig()
+
 
 @command(name="detect")
 def detect_cmd(
     history: Annotated[Path, typer.Argument(help="History artifact (kbcli play).")],
     output: opts.output_option("Detection artifact to write (.h5)."),
-    detector: opts.detector_option() = "binomial",
+    detector: opts.detector_option() = DEFAULT.detector,
     n_lt: Annotated[int, typer.Option(
-        "--n-lt", help=f"Long-term window N_LT (Eq. 4), at most {MAX_N_LT}.")] = 100,
+        "--n-lt", help=f"Long-term window N_LT (Eq. 4), at most {MAX_N_LT}.")] = DEFAULT.n_lt,
     n_st: Annotated[int, typer.Option(
-        "--n-st", help=f"Short-term window N_ST (Eq. 5), < N_LT and at most {MAX_N_ST}.")] = 10,
+        "--n-st", help=f"Short-term window N_ST (Eq. 5), < N_LT and at most {MAX_N_ST}.")] = DEFAULT.n_st,
     threshold: Annotated[float, typer.Option(
-        "--threshold", help="Fire when the score (binomial: upper tail of Eq. 6) falls below it; in (0, 1).")] = 0.01,
+        "--threshold", help="Fire when the score (binomial: upper tail of Eq. 6) falls below it; in (0, 1).")] = DEFAULT.threshold,
     shift: Annotated[float, typer.Option(
-        "--shift", help="cusum: failure-rate increase it is tuned to (p1 = p0 + shift).")] = 0.15,
-    hazard: Annotated[float, typer.Option("--hazard", help="bocpd: prior change probability per step.")] = 1e-3,
+        "--shift", help="cusum: failure-rate increase it is tuned to (p1 = p0 + shift).")] = DEFAULT.shift,
+    hazard: Annotated[float, typer.Option("--hazard", help="bocpd: prior change probability per step.")] = DEFAULT.hazard,
 ) -> None:
     """Run a failure detector online over a play history, one result at a time.
 
@@ -88,9 +91,9 @@ def bench_detect_cmd(
     fa_target: Annotated[float, typer.Option(
         "--fa-target", help="False alarms allowed per 10,000 actions when tuning.")] = 1.0,
     n_lt: Annotated[int, typer.Option("--n-lt", help=opts.at_most(
-        "Long-term window of our detectors", MAX_N_LT))] = 100,
+        "Long-term window of our detectors", MAX_N_LT))] = DEFAULT.n_lt,
     n_st: Annotated[int, typer.Option("--n-st", help=opts.at_most(
-        "Short-term window of our detectors", MAX_N_ST))] = 10,
+        "Short-term window of our detectors", MAX_N_ST))] = DEFAULT.n_st,
     detectors: Annotated[str, typer.Option(
         "--detectors", help="Comma-separated subset of binomial,cusum,bocpd,fhddm,ddm,adwin.")] =
         "binomial,cusum,bocpd,fhddm,ddm,adwin",

@@ -149,6 +149,9 @@ def evaluate_cmd(
     fingerprint = {**stage.fingerprint(cfg, model_art, stage.EXPERIMENT),
                    "source_code": source_digest()}
     ckpt = Checkpoint(Checkpoint.beside(output), fingerprint, every=checkpoint_every)
+    if resume and not ckpt.exists():  # (make's targets always pass --resume: a note, not a refusal)
+        err.print(f"kbcli: note: --resume: no checkpoint {ckpt.folder}/ to continue; starting "
+                  f"from the first experiment", markup=False)
     done = ckpt.load(resume)
     if done:
         err.print(f"resuming: {len(done)} of {len(tasks)} experiments already done", markup=False)

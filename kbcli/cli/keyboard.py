@@ -12,7 +12,7 @@ from kbcli.cli.app import busy, check_io, command, figure_output, out, plot_app
 from kbcli.core.keyboard import KeyboardConfig
 from kbcli.core.layouts import MAX_KEYS
 from kbcli.io.artifact import read_artifact, write_artifact
-from kbcli.io.config import load_toml
+from kbcli.io.config import load_toml, with_file
 from kbcli.stages import keyboard as stage
 
 
@@ -72,19 +72,18 @@ def keyboard_cmd(
     from kbcli.sim import SimConfig, check_keyboard_reachable
 
     check_io({"--config": config}, ("--output", output))
-    values = dict(load_toml(config, "keyboard")) if config is not None else {}
+    table = dict(load_toml(config, "keyboard")) if config is not None else {}
     flags = {
         "layout": layout, "rows": rows, "cols": cols, "key_size": key_size,
         "key_height": key_height, "black_width": black_width, "black_height": black_height,
         "pad_radius": pad_radius, "margin": margin, "base_note": base_note, "scale": scale,
         "noise_std": noise, "match_threshold": threshold,
     }
-    values.update({k: v for k, v in flags.items() if v is not None})
     if origin_x is not None or origin_y is not None:
-        ox, oy = values.get("origin") or KeyboardConfig.from_dict(
-            {k: v for k, v in values.items() if k != "origin"}).origin
-        values["origin"] = (ox if origin_x is None else origin_x, oy if origin_y is None else origin_y)
-    cfg = KeyboardConfig.from_dict(values)
+        ox, oy = table.get("origin") or with_file(
+            KeyboardConfig, {k: v for k, v in table.items() if k != "origin"}, flags, config).origin
+        flags["origin"] = (ox if origin_x is None else origin_x, oy if origin_y is None else origin_y)
+    cfg = with_file(KeyboardConfig, table, flags, config)
     check_keyboard_reachable(SimConfig(), Keyboard(cfg))
     art = stage.run(cfg)
     write_artifact(art, output)

@@ -79,6 +79,9 @@ def quality_cmd(
     kb_art = read_artifact(keyboard, "keyboard")
     fp = {**stage.fingerprint(cfg, kb_art), "source_code": source_digest()}
     ckpt = Checkpoint(ckpt_dir, fp, every=20)
+    if resume and not ckpt.exists():  # (make's targets always pass --resume: a note, not a refusal)
+        err.print(f"kbcli: note: --resume: no checkpoint {ckpt.folder}/ to continue; starting "
+                  f"from the first model", markup=False)
     done = ckpt.load(resume)
     started = time.perf_counter()
     models = _learn_models(cfg, kb_art, ckpt, resume, jobs, scheduler)

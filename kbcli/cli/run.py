@@ -13,6 +13,7 @@ from kbcli.cli.app import (
     busy,
     check_io,
     command,
+    err,
     figure_output,
     note_arm,
     note_default,
@@ -32,6 +33,13 @@ from kbcli.stages import repair as repair_stage
 from kbcli.stages import run as stage
 from kbcli.stages.adapt import AdaptConfig
 from kbcli.stages.config import MAX_ADAPT_STEPS
+
+#: The detector's defaults: its config's, the one source of them.
+DEFAULT = DetectorConfig()
+
+
+#: Success before the move below which ``run`` says the model is weak.
+WEAK_MODEL = 0.95
 
 
 def _pct(v: float | None) -> str:
@@ -60,12 +68,12 @@ def run_cmd(
         help=f"Touches at most per adaptation (at most {MAX_ADAPT_STEPS}).")] = 40,
     repair: opts.Repair = None,
     model_out: opts.ModelOut = None,
-    detector: opts.detector_option() = "binomial",
+    detector: opts.detector_option() = DEFAULT.detector,
     n_lt: Annotated[int, typer.Option(
-        help=f"Detector long-term window N_LT, at most {MAX_N_LT}.")] = 100,
+        help=f"Detector long-term window N_LT, at most {MAX_N_LT}.")] = DEFAULT.n_lt,
     n_st: Annotated[int, typer.Option(
-        help=f"Detector short-term window N_ST, at most {MAX_N_ST}.")] = 10,
-    threshold: Annotated[float, typer.Option(help="Detector threshold, in (0, 1).")] = 0.01,
+        help=f"Detector short-term window N_ST, at most {MAX_N_ST}.")] = DEFAULT.n_st,
+    threshold: Annotated[float, typer.Option(help="Detector threshold, in (0, 1).")] = DEFAULT.threshold,
     paper_flags: dict | None = None,
     seed: opts.Seed = 0,
 ) -> None:
@@ -108,7 +116,7 @@ def run_cmd(
         pass
     art = session.artifact()
     write_artifact(art, output)
-    if scene_family:  # (said once the inputs passed every check: a refusal stays one line)
+    if scene_family and family != "translation":  # (said once the inputs passed every check)
         note_default("family", family, "the scene's (--family to choose)")
     _report_loop(art.attrs, output)
     if model_out is not None:
@@ -124,14 +132,31 @@ def _report_loop(a: dict, output: Path) -> None:
     out.print(f"success before the move {_pct(a['success_before'])}, after it "
               f"{_pct(a['success_after_perturbation'])}, after adaptation "
               f"{_pct(a['success_after_adaptation'])}")
+    true = ", ".join(f"{k} {v:+.2f}" for k, v in a["truth"].items())
+    moved = a["perturbed_at"]
     if a["detected_at"] is None:
         out.print("the detector did not fire after the move")
-    else:
-        corr = ", ".join(f"{k} {v:+.2f}" for k, v in a["correction"].items())
-        true = ", ".join(f"{k} {v:+.2f}" for k, v in a["truth"].items())
-        out.print(f"detected {a['detection_delay']} touches after the move; adapted in "
-                  f"{a['adapt_touches']} touches: estimate {corr} (truth {true}, error "
-                  f"{a['correction_error_px']:.2f} px)")
+    end = None  # the last touch of the previous adaptation
+    for i, ad in enumerate(a.get("adaptation_list", []), 1):
+        corr = ", ".join(f"{k} {v:+.2f}" for k, v in ad["correction"].items())
+        if ad["fired_at"] < moved:
+            when = "before the move: a false alarm"
+        elif end is None or end < moved:
+            when = f"{ad['fired_at'] - moved + 1} touches after the move"
+        else:
+            when = f"again, {ad['fired_at'] - end} touches after adaptation {i - 1}"
+        end = ad["first"] + ad["touches"] - 1
+        out.print(f"adaptation {i}: the detector fired at touch {ad['fired_at']} ({when}); "
+                  f"{ad['touches']} touches: estimate {corr} (truth {true}, error "
+                  f"{ad['error_px']:.2f} px)")
+    before = a["success_before"]
+    if before is not None and before < WEAK_MODEL:
+        err.print(f"kbcli: note: the model plays only {_pct(before)} of its notes right before "
+                  "anything moved: a weak model (learn it with more reaches, kbcli learn "
+                  "--budget); its misses look like a move to the detector", markup=False)
+    if len(a.get("adaptation_list", [])) > 1:
+        out.print(f"{len(a['adaptation_list'])} adaptations, {a['adapt_touches']} touches in all; "
+                  "the last one's estimate is in force at the end")
 
 
 @command(plot_app, name="run")

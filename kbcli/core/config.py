@@ -137,6 +137,14 @@ _PHRASES = (
 )
 
 
+def plain_words(msg: str) -> str:
+    """A pydantic message in kbcli's words ("Input should be a valid integer" -> "must be a
+    whole number")."""
+    for old, new in _PHRASES:
+        msg = msg.replace(old, new)
+    return msg
+
+
 def describe_error(exc: ValidationError, what: str, fields: tuple[str, ...] = ()) -> str:
     """One line for the first error of ``exc``: the table, the key, what is allowed, the value.
 
@@ -148,7 +156,7 @@ def describe_error(exc: ValidationError, what: str, fields: tuple[str, ...] = ()
         The valid keys, listed when a key is unknown.
     """
     e = exc.errors(include_url=False)[0]
-    loc = ".".join(str(p) for p in e["loc"] if p != "__root__")
+    loc = _location(e["loc"])
     inner = (e.get("ctx") or {}).get("error")
     if isinstance(getattr(inner, "validation", None), tuple):  # a nested config's own error
         nested_exc, nested_fields = inner.validation
@@ -159,19 +167,35 @@ def describe_error(exc: ValidationError, what: str, fields: tuple[str, ...] = ()
         where = f"{what}.{inner}" if inner else what
         valid = f"; valid: {', '.join(fields)}" if fields and not inner else ""
         return f"unknown {where} option {key!r}{valid}"
-    msg = e["msg"]
-    for old, new in _PHRASES:
-        msg = msg.replace(old, new)
+    msg = plain_words(e["msg"])
+    if e["type"] == "missing" and e["loc"] and isinstance(e["loc"][-1], int):
+        return (f"{what}.{_location(e['loc'][:-1])} has too few values (no value "
+                f"[{e['loc'][-1]}]), got {_short(e.get('input'))}")
     if e["type"] in ("missing",):
         return f"{what}.{loc} is required"
     name = f"{what}.{loc}" if loc else what
+    if e["type"] in ("too_long", "too_short"):
+        ctx = e.get("ctx") or {}
+        most = "most" if e["type"] == "too_long" else "least"
+        bound = ctx.get("max_length" if e["type"] == "too_long" else "min_length")
+        return f"{name} must have at {most} {bound} values, got {ctx.get('actual_length', '?')}"
     if e["type"] in ("value_error", "assertion_error"):  # a validator's own sentence
         return f"{name} {msg}" if msg.startswith("must ") else f"{name}: {msg}"
     return f"{name} {msg}, got {_short(e.get('input'))}"
 
 
+def _location(loc: tuple) -> str:
+    """A key path as a user writes it: ``origin[1]``, ``adapt.robot.prior_halfwidth``."""
+    out = ""
+    for p in loc:
+        if p == "__root__":
+            continue
+        out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))
+    return out
+
+
 def _short(v: Any) -> str:
-    text = repr(v)
+    text = repr(list(v) if isinstance(v, tuple) else v)
     return text if len(text) <= 60 else text[:57] + "..."
 
 

@@ -29,8 +29,8 @@ import numpy as np
 from pydantic import PrivateAttr, field_validator
 
 from kbcli.core import transforms
-from kbcli.core.config import Config, Count, Name, NonNegative, Positive
-from kbcli.core.geometry import Coordinate, check_in_pad, check_key_areas, check_overlaps
+from kbcli.core.config import Config, Count, Name, Number, between
+from kbcli.core.geometry import MAX_COORD, Coordinate, check_in_pad, check_key_areas, check_overlaps
 from kbcli.core.layouts import (
     DEFAULT_CENTRE,
     LAYOUT_FIELDS,
@@ -43,6 +43,15 @@ from kbcli.core.notes import DEFAULT_SCALE, SCALES, midi_to_name, name_to_midi, 
 from kbcli.errors import ConfigError
 
 FEATURE_NAMES = ("pitch", "tempo")
+
+#: Bounds of the physical parameters of a keyboard config (a value beyond them is refused, naming
+#: the bound): lengths in pad px; the tempo of key 0 and its steps per column and row in bpm; the
+#: perception noise and the match threshold in feature units (semitones of pitch, bpm of tempo).
+MAX_TEMPO = 10_000.0
+MAX_TEMPO_STEP = 1_000.0
+MAX_NOISE_STD = 100.0
+MAX_MATCH_THRESHOLD = 100.0
+_Length = between(Number, 0, MAX_COORD, low_open=True)
 
 __all__ = ["SCALES", "LAYOUTS", "KeyboardConfig", "Keyboard", "PolygonKey", "match",
            "midi_to_name", "name_to_midi", "sound_name"]
@@ -84,30 +93,35 @@ class KeyboardConfig(Config):
         Tempo of key (r, c) is ``tempo_base + c * tempo_col_step + r * tempo_row_step`` bpm (grid,
         hex, pads; piano and polygons: see :mod:`kbcli.core.layouts`).
     noise_std : float
-        Standard deviation of the Gaussian noise added to perceived features (pitch and tempo units).
+        Standard deviation of the Gaussian noise added to perceived features (pitch and tempo
+        units), at most :data:`MAX_NOISE_STD`.
     match_threshold : float
-        Manhattan distance below which a perceived sound matches a known one (Eq. 2).
+        Manhattan distance below which a perceived sound matches a known one (Eq. 2), at most
+        :data:`MAX_MATCH_THRESHOLD`.
+
+    Lengths (sizes, ``margin``) are at most :data:`~kbcli.core.geometry.MAX_COORD` px, the tempo
+    of key 0 at most :data:`MAX_TEMPO` bpm and each tempo step at most :data:`MAX_TEMPO_STEP`.
     """
 
     what: ClassVar[str] = "keyboard"
     layout: Name = "grid"
     rows: Count | None = None
     cols: Count | None = None
-    key_size: Positive | None = None
-    key_height: Positive | None = None
-    black_width: Positive | None = None
-    black_height: Positive | None = None
-    pad_radius: Positive | None = None
+    key_size: _Length | None = None
+    key_height: _Length | None = None
+    black_width: _Length | None = None
+    black_height: _Length | None = None
+    pad_radius: _Length | None = None
     keys: tuple[PolygonKey, ...] | None = None
     origin: tuple[Coordinate, Coordinate] | None = None
-    margin: NonNegative = 50.0
+    margin: between(Number, 0, MAX_COORD) = 50.0
     base_note: Name = "C3"
     scale: Name | None = None
-    tempo_base: Positive = 60.0
-    tempo_col_step: NonNegative = 4.0
-    tempo_row_step: NonNegative = 30.0
-    noise_std: NonNegative = 0.0
-    match_threshold: Positive = 1.5
+    tempo_base: between(Number, 0, MAX_TEMPO, low_open=True) = 60.0
+    tempo_col_step: between(Number, 0, MAX_TEMPO_STEP) = 4.0
+    tempo_row_step: between(Number, 0, MAX_TEMPO_STEP) = 30.0
+    noise_std: between(Number, 0, MAX_NOISE_STD) = 0.0
+    match_threshold: between(Number, 0, MAX_MATCH_THRESHOLD, low_open=True) = 1.5
     _geometry: LayoutGeometry = PrivateAttr()
 
     def __init__(self, /, **data: Any) -> None:

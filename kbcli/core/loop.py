@@ -36,6 +36,22 @@ ADAPT = 1
 Touch = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
+def adaptation_blocks(phase: np.ndarray) -> list[tuple[int, int]]:
+    """Every adaptation of a session: ``(first, last)`` touch of each run of consecutive
+    :data:`ADAPT` touches, in order (the detector fired on the play touch ``first - 1``).
+
+    Parameters
+    ----------
+    phase : (T,) int ndarray
+        :data:`PLAY` or :data:`ADAPT` per touch.
+    """
+    t = np.flatnonzero(np.asarray(phase) == ADAPT)
+    if not len(t):
+        return []
+    cut = np.flatnonzero(np.diff(t) > 1) + 1
+    return [(int(b[0]), int(b[-1])) for b in np.split(t, cut)]
+
+
 @dataclass(frozen=True)
 class LoopStep:
     """One touch of the closed loop.

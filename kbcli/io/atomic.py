@@ -26,6 +26,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 from kbcli.errors import ArtifactError, KbcliError
+from kbcli.io.paths import check_replaceable
 
 #: What every kbcli temporary file or folder has in its name.
 TMP_MARK = ".kbcli-tmp-"
@@ -151,6 +152,8 @@ def atomic_paths(paths: Sequence[str | os.PathLike], suffixes: Sequence[str] | N
     tmps: list[str] = []
     current = paths[0] if paths else Path(".")
     started = False
+    for path in paths:
+        check_replaceable(path)
     try:
         for path, suffix in zip(paths, suffixes, strict=True):
             current = path

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import re
 import stat
 import tomllib
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -35,6 +37,26 @@ def load_config(cls: type[C], path: str | Path, table: str | None = None) -> C:
         return cls.from_dict(values)
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
+
+
+def with_file(cls: type[C], table: Mapping[str, Any], flags: Mapping[str, Any],
+              path: str | Path | None) -> C:
+    """``cls`` from a config file's table with the flags given on top; a bad value that came from
+    the file (not overridden by a flag) is refused naming the file, as :func:`load_config` does.
+
+    Raises
+    ------
+    ConfigError
+        One line (table, key, what is allowed), prefixed with ``path`` when the key is the file's.
+    """
+    given = {k: v for k, v in flags.items() if v is not None}
+    try:
+        return cls.from_dict({**table, **given})
+    except ConfigError as exc:
+        words = set(re.findall(r"[A-Za-z_]\w*", str(exc).split(" must ")[0].split(" has ")[0]))
+        if path is not None and any(k in words and k not in given for k in table):
+            raise ConfigError(f"{path}: {exc}") from None
+        raise
 
 
 def load_arm(value: str | None):

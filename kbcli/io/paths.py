@@ -51,6 +51,38 @@ class Output:
     figure: bool = False
 
 
+def _file_type(mode: int) -> str | None:
+    """What a non-regular file is ("a FIFO", "a character device", ...), None for a regular one."""
+    import stat
+
+    for test, name in ((stat.S_ISREG, None), (stat.S_ISDIR, "a folder"),
+                       (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def check_replaceable(path: PathLike) -> None:
+    """Refuse an output path that exists and is not a regular file (a FIFO, a device such as
+    ``/dev/null``, a socket; a symlink to one): writing replaces the file, so an output is a
+    regular file or a new path.
+
+    Raises
+    ------
+    KbcliError
+        Naming the path and what it is.
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return  # a new path (or one the write itself will report on)
+    kind = _file_type(mode)
+    if kind is not None:
+        raise KbcliError(f"{path}: is {kind}; an output is a regular file or a new path "
+                         f"(kbcli replaces it): choose another output name")
+
+
 def _identity(path: Path) -> tuple[int, int] | None:
     try:
         st = os.stat(path)

@@ -47,7 +47,14 @@ MAX_SETTLE_TIME = 60.0
 #: Largest encoder error (rad) of ``proprio_noise`` and of each ``proprio_bias`` component.
 MAX_PROPRIO = 0.1
 
+#: Largest servo gain, damping, torque bound and joint friction (pymunk's torque units): 300 times
+#: the ``servo`` preset's gain, 30 times the default torque bound.
+MAX_TORQUE = 1e10
+#: Largest radius (px) of the finger's contact disc: a default key's side.
+MAX_FINGER_RADIUS = 50.0
+
 _Bias = between(Number, -MAX_PROPRIO, MAX_PROPRIO)
+_Torque = between(Number, 0, MAX_TORQUE)
 
 
 class ArmConfig(Config):
@@ -58,7 +65,8 @@ class ArmConfig(Config):
     preset : str
         The preset these values started from (``ideal``, ``servo``, ``realistic``) or ``custom``.
     kp : float or None
-        Stiffness of the torque servo (torque per rad); None: the ideal velocity servo.
+        Stiffness of the torque servo (torque per rad); None: the ideal velocity servo. It,
+        ``kd``, ``max_torque`` and ``friction`` are at most :data:`MAX_TORQUE`.
     kd : float
         Damping of the torque servo (torque per rad/s).
     max_torque : float
@@ -68,7 +76,7 @@ class ArmConfig(Config):
     settle_time : float
         A reach gives up after this many simulated seconds, at most :data:`MAX_SETTLE_TIME`.
     finger_radius : float
-        Radius (px) of the finger's contact disc on the pad.
+        Radius (px) of the finger's contact disc on the pad, at most :data:`MAX_FINGER_RADIUS`.
     proprio_noise : float
         Std (rad) of each joint encoder's reading at a touch, at most :data:`MAX_PROPRIO`.
     proprio_bias : tuple of float
@@ -79,12 +87,12 @@ class ArmConfig(Config):
     what = "arm"
 
     preset: Name = "ideal"
-    kp: Positive | None = None
-    kd: NonNegative = 0.0
-    max_torque: Positive = 5e8
-    friction: NonNegative = 0.0
+    kp: between(Number, 0, MAX_TORQUE, low_open=True) | None = None
+    kd: _Torque = 0.0
+    max_torque: between(Number, 0, MAX_TORQUE, low_open=True) = 5e8
+    friction: _Torque = 0.0
     settle_time: between(Positive, high=MAX_SETTLE_TIME) = 8.0
-    finger_radius: NonNegative = 0.0
+    finger_radius: between(Number, 0, MAX_FINGER_RADIUS) = 0.0
     proprio_noise: between(NonNegative, high=MAX_PROPRIO) = 0.0
     proprio_bias: tuple[_Bias, _Bias] = (0.0, 0.0)
 

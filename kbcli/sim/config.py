@@ -6,9 +6,16 @@ from typing import Annotated
 
 from pydantic import AfterValidator, BeforeValidator, InstanceOf
 
-from kbcli.core.config import Config, Name, NonNegative, Number, Positive
+from kbcli.core.config import Config, Name, Number, between
+from kbcli.core.geometry import MAX_COORD, Coordinate
 from kbcli.sim.arms import PRESETS, ArmConfig, arm_config
 from kbcli.sim.modes import MODES
+
+#: Largest landing scatter (px) of ``reach_noise``: twice a default key's side.
+MAX_REACH_NOISE = 100.0
+_Link = between(Number, 0, MAX_COORD, low_open=True)
+#: A landing scatter (px): a number in [0, MAX_REACH_NOISE], wherever a config takes one.
+ReachNoise = between(Number, 0, MAX_REACH_NOISE)
 
 #: A field naming a sim mode, checked against :data:`MODES` ("unknown sim mode 'x'; valid: ...").
 ModeName = Annotated[Name, AfterValidator(MODES.check)]
@@ -27,11 +34,11 @@ class SimConfig(Config):
         target (the paper's Sect. IV); ``dynamics``, a pymunk two-link arm driven by motors
         (Sect. IV-C).
     base : tuple of float
-        Pad coordinates of the shoulder joint.
+        Pad coordinates of the shoulder joint, within +-:data:`~kbcli.core.geometry.MAX_COORD`.
     link_lengths : tuple of float
-        Upper arm and forearm lengths, px.
+        Upper arm and forearm lengths, px, at most :data:`~kbcli.core.geometry.MAX_COORD`.
     reach_noise : float
-        Std (px) of the landing scatter: motor noise in ``dynamics`` mode, Gaussian scatter of the
+        Std (px) of the landing scatter, at most :data:`MAX_REACH_NOISE`: motor noise in ``dynamics`` mode, Gaussian scatter of the
         landing point in ``ideal`` mode.
     arm : ArmConfig
         How the arm errs beyond ``reach_noise``: servo, friction, finger, proprioception
@@ -41,7 +48,7 @@ class SimConfig(Config):
     what = "sim"
 
     mode: ModeName = "ideal"
-    base: tuple[Number, Number] = (400.0, 0.0)
-    link_lengths: tuple[Positive, Positive] = (320.0, 280.0)
-    reach_noise: NonNegative = 0.0
+    base: tuple[Coordinate, Coordinate] = (400.0, 0.0)
+    link_lengths: tuple[_Link, _Link] = (320.0, 280.0)
+    reach_noise: ReachNoise = 0.0
     arm: Arm = PRESETS.get("ideal")

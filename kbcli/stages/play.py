@@ -17,12 +17,12 @@ from collections.abc import Iterator
 import numpy as np
 from pydantic import field_validator, model_validator
 
-from kbcli.core.config import Config, Name, NonNegative, NonNegativeInt, Whole, between
+from kbcli.core.config import Config, Name, NonNegativeInt, Whole, between
 from kbcli.core.melody import DEFAULT_MELODY, MAX_NOTES, parse_melody
 from kbcli.core.play import NO_MATCH, PlayStep, play
 from kbcli.errors import ConfigError
 from kbcli.sim import PRESETS, SimConfig, World, make_reacher
-from kbcli.sim.config import Arm, ModeName
+from kbcli.sim.config import Arm, ModeName, ReachNoise
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import perturb as perturb_stage
 from kbcli.stages.artifact import Artifact, ref
@@ -74,7 +74,7 @@ class PlayConfig(Config):
     steps: between(Whole, 1, MAX_PLAY_STEPS) = 300
     perturb_at: NonNegativeInt | None = None
     mode: ModeName = "ideal"
-    reach_noise: NonNegative = 0.0
+    reach_noise: ReachNoise = 0.0
     arm: Arm = PRESETS.get("ideal")
 
     _melody = field_validator("melody")(check_melody_text)

@@ -25,7 +25,7 @@ from kbcli.core.adapt_setup import build_table
 from kbcli.core.adapter_config import learning_rate, redundancy_radius, robust_blurs
 from kbcli.core.config import Config, Name, NonNegativeInt, Whole, as_table, between
 from kbcli.core.detect import DetectorConfig
-from kbcli.core.loop import ADAPT, PLAY, LoopStep, closed_loop
+from kbcli.core.loop import ADAPT, PLAY, LoopStep, adaptation_blocks, closed_loop
 from kbcli.core.melody import DEFAULT_MELODY, parse_melody
 from kbcli.errors import ConfigError
 from kbcli.sim import World, make_reacher
@@ -182,6 +182,7 @@ class LoopSession:
             err_px = float(np.hypot(*(c[-2:] - self.truth[-2:])))
         false_alarms = [s.t for s in st if s.fired and s.t < moved]
         return {
+            "adaptation_list": self._adaptations(phase, names),
             "success_before": _rate(before),
             "success_after_perturbation": _rate(during),
             "success_after_adaptation": _rate(restored),
@@ -204,6 +205,17 @@ class LoopSession:
             "robust_eta": (learning_rate(self.model, self.cfg.adapt.adapter_config())
                            if self.cfg.adapt.adapter_config().is_robust else 1.0),
         }
+
+    def _adaptations(self, phase: np.ndarray, names: tuple[str, ...]) -> list[dict]:
+        """Each adaptation: the touch the detector fired on, the first adaptation touch, how many,
+        the correction it ended with and that correction's error against the truth (px)."""
+        out = []
+        for first, last in adaptation_blocks(phase):
+            c = np.asarray(self.steps[last].correction, float)
+            out.append({"fired_at": first - 1, "first": first, "touches": last - first + 1,
+                        "correction": {n: float(v) for n, v in zip(names, c, strict=True)},
+                        "error_px": float(np.hypot(*(c[-2:] - self.truth[-2:])))})
+        return out
 
     def artifact(self) -> Artifact:
         st = self.steps

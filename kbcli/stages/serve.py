@@ -43,7 +43,9 @@ observed). Other messages: ``{"op": "suggest"}`` (the pending action again), ``{
 (estimate, entropy, mass, done, action: a ``state`` reply), ``{"op": "end"}`` (kbcli writes the
 artifact, replies ``{"type": "bye", "steps": n, "file": ...}`` and exits).
 
-A message kbcli cannot use (not JSON, not an object, an unknown ``op`` or field, non-numeric or
+A message line is at most :data:`MAX_LINE` bytes (64 KiB) and a whole number in it at most
+:data:`MAX_DIGITS` digits (an ``id`` included). A message kbcli cannot use (a longer line or number,
+not JSON, not an object, an unknown ``op`` or field, non-numeric or
 non-finite numbers, an action outside the working area, a ``felt`` position far outside it, heard
 features that match no sound, an observation beyond ``max_steps``) gets
 ``{"type": "error", "error": "...", "id": ...}``; nothing is recorded for it and the session goes on.
@@ -137,15 +139,34 @@ class MessageError(KbcliError):
     """A message the session cannot use: answered with an error reply."""
 
 
-def _finite(v: object) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+#: Most digits of a whole number in a message (Python refuses to read more than 4300; an ``id`` of
+#: a 128-bit number has 39).
+MAX_DIGITS = 100
+
+
+def _parse_int(text: str) -> int:
+    digits = len(text.lstrip("-"))
+    if digits > MAX_DIGITS:
+        raise MessageError(f"a whole number of {digits} digits: at most {MAX_DIGITS} are read")
+    return int(text)
+
+
+def _is_number(v: object) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
 def _numbers(v: object, name: str, n: int | None) -> list[float]:
-    """A JSON list of ``n`` finite numbers (booleans and strings refused)."""
-    if not isinstance(v, list) or not all(_finite(x) for x in v):
-        want = f"{n} numbers" if n else "numbers"
+    """A JSON list of ``n`` finite numbers (booleans and strings refused), each refusal naming the
+    entry and what is wrong with it."""
+    want = f"{n} numbers" if n else "numbers"
+    if not isinstance(v, list):
         raise MessageError(f"{name} must be a list of {want}, got {json.dumps(v)[:80]}")
+    for i, x in enumerate(v):
+        if not _is_number(x):
+            raise MessageError(f"{name}[{i}] must be a number, got {json.dumps(x)[:40]}")
+        if not math.isfinite(float(x)):  # a literal beyond a double's range, 1e400, reads as inf
+            raise MessageError(f"{name}[{i}] is not a finite number (beyond the range of a "
+                               f"double, about 1.8e308)")
     if n is not None and len(v) != n:
         raise MessageError(f"{name} must be a list of {n} numbers, got {len(v)}")
     return [float(x) for x in v]
@@ -242,7 +263,7 @@ class Session:
             if not text.strip():
                 return None
             try:
-                msg = json.loads(text, parse_constant=_reject_constant)
+                msg = json.loads(text, parse_constant=_reject_constant, parse_int=_parse_int)
             except json.JSONDecodeError as exc:
                 raise MessageError(f"not JSON ({exc.msg} at column {exc.colno})") from None
             except RecursionError:  # "[[[[..." within MAX_LINE: json recurses per level
@@ -352,5 +373,5 @@ class Session:
         )
 
 
-__all__ = ["ServeConfig", "Session", "MessageError", "PROTOCOL", "MAX_LINE", "FIELDS",
+__all__ = ["ServeConfig", "Session", "MessageError", "PROTOCOL", "MAX_LINE", "MAX_DIGITS", "FIELDS",
            "FELT_MARGIN"]

@@ -14,6 +14,7 @@ from matplotlib.patches import Patch, Rectangle
 
 from kbcli.core import transforms
 from kbcli.core.keyboard import Keyboard
+from kbcli.core.loop import adaptation_blocks
 from kbcli.viz.common import angle_note, external
 from kbcli.viz.palette import BELIEF, TRUTH, key_colours
 from kbcli.viz.replay import Replay
@@ -380,9 +381,8 @@ class Animator:
             moved = rep.attrs.get("perturbed_at")
             if moved is not None:
                 ax.axvline(moved + 0.5, color="k", ls="--", lw=0.9)
-            adapt_t = t[phase == 1]
-            if len(adapt_t):
-                ax.axvspan(adapt_t.min() - 0.5, adapt_t.max() + 0.5, color="orange", alpha=0.3)
+            for a, b in adaptation_blocks(phase):  # every adaptation, each its own band
+                ax.axvspan(t[a] - 0.5, t[b] + 0.5, color="orange", alpha=0.3)
             ax.tick_params(labelsize=7.5)
             ax.grid(alpha=0.3)
         a1.tick_params(labelbottom=False)

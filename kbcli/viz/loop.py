@@ -22,6 +22,7 @@ from matplotlib.patches import Patch, Polygon
 
 from kbcli.core import transforms
 from kbcli.core.keyboard import Keyboard
+from kbcli.core.loop import adaptation_blocks
 from kbcli.viz.common import draw_keyboard, place_labels, save
 from kbcli.viz.palette import BELIEF, TRUTH
 
@@ -80,9 +81,23 @@ def _pose(d: dict) -> tuple[str, np.ndarray]:
     return fam.name, np.array([d.get(k, 0.0) for k in fam.params], float)
 
 
-def _blocks(adapt_t: np.ndarray) -> list[np.ndarray]:
-    """The runs of consecutive adaptation touches."""
-    return np.split(adapt_t, np.flatnonzero(np.diff(adapt_t) > 1) + 1) if len(adapt_t) else []
+#: Colours of the adaptations' touches on the keyboard, in order (then they repeat).
+ADAPT_COLOURS = ("black", "tab:orange", "tab:green", "tab:purple", "tab:brown")
+
+
+def _fired_lines(ax, phase: np.ndarray, attrs: dict, label: bool) -> None:
+    """A line at each touch the detector fired on and an adaptation followed."""
+    fired = [first - 1 for first, _ in adaptation_blocks(phase)]
+    if not fired and attrs.get("detected_at") is not None:  # (a session cut before adapting)
+        fired = [int(attrs["detected_at"])]
+    for i, f in enumerate(fired):
+        text = None
+        if label and i == 0:
+            moved = int(attrs["perturbed_at"])
+            text = ("detector fired (touch " if len(fired) == 1 else "detector fired (touches ")
+            text += ", ".join(map(str, fired[:6])) + (", ..." if len(fired) > 6 else "")
+            text += f"; {fired[0] - moved + 1} after the move)" if fired[0] >= moved else ")"
+        ax.axvline(f, color="crimson", lw=1, label=text)
 
 
 def _success_panel(ax, t: np.ndarray, phase: np.ndarray, result: np.ndarray, attrs: dict,
@@ -99,18 +114,17 @@ def _success_panel(ax, t: np.ndarray, phase: np.ndarray, result: np.ndarray, att
     miss = t[play][ok == 0]
     ax.plot(miss, np.full(len(miss), -0.05), ls="", marker="|", color="crimson", ms=9,
             label=f"NO_MATCH ({len(miss)})")
-    adapt_t = t[phase == ADAPT]
-    if len(adapt_t):
-        for blk in _blocks(adapt_t):
-            ax.axvspan(blk.min() - 0.5, blk.max() + 0.5, color="orange", alpha=0.3, lw=0)
-        ax.plot([], [], color="orange", alpha=0.5, lw=8,
-                label=f"adaptation ({len(adapt_t)} touches)")
+    blocks = adaptation_blocks(phase)
+    for a, b in blocks:
+        ax.axvspan(a - 0.5, b + 0.5, color="orange", alpha=0.3, lw=0)
+    if blocks:
+        sizes = [b - a + 1 for a, b in blocks]
+        what = (f"adaptation ({sizes[0]} touches)" if len(sizes) == 1 else
+                f"{len(sizes)} adaptations ({' + '.join(map(str, sizes))} touches)")
+        ax.plot([], [], color="orange", alpha=0.5, lw=8, label=what)
     moved = attrs["perturbed_at"]
     ax.axvline(moved, color="k", ls="--", lw=1, label=f"keyboard moved (touch {moved})")
-    fired = attrs.get("detected_at")
-    if fired is not None:
-        ax.axvline(fired, color="crimson", lw=1,
-                   label=f"detector fired ({attrs.get('detection_delay')} touches later)")
+    _fired_lines(ax, phase, attrs, label=True)
     ax.set_ylim(-0.12, 1.05)
     ax.set_ylabel("success")
     ax.tick_params(labelbottom=False)
@@ -129,10 +143,9 @@ def _score_panel(ax2, t: np.ndarray, phase: np.ndarray, score: np.ndarray, attrs
     if isinstance(thr, (int, float)) and thr > 0:
         ax2.axhline(thr, color="crimson", ls=":", lw=1.2, label=f"threshold {thr:g} (fires below)")
     ax2.axvline(attrs["perturbed_at"], color="k", ls="--", lw=1)
-    if attrs.get("detected_at") is not None:
-        ax2.axvline(attrs["detected_at"], color="crimson", lw=1)
-    for blk in _blocks(t[phase == ADAPT]):
-        ax2.axvspan(blk.min() - 0.5, blk.max() + 0.5, color="orange", alpha=0.3, lw=0)
+    _fired_lines(ax2, phase, attrs, label=False)
+    for a, b in adaptation_blocks(phase):
+        ax2.axvspan(a - 0.5, b + 0.5, color="orange", alpha=0.3, lw=0)
     ax2.set_ylabel("detector score (log)")
     ax2.set_xlabel("touch")
     ax2.legend(fontsize=8, loc="lower left")
@@ -143,19 +156,27 @@ def _named(d: dict) -> str:
     return ", ".join(f"{k} {v:+.2f}" for k, v in d.items())
 
 
-def _touches(ax3, pts: np.ndarray) -> tuple[Line2D, np.ndarray, list[str]]:
-    """The adaptation touches on the keyboard in order; their labels' points and texts (touches
-    within 3 px share one label), to place once the figure is laid out (:func:`place_labels`)."""
-    ax3.plot(pts[:, 0], pts[:, 1], "-", color="0.2", lw=0.6, alpha=0.6, zorder=4)
-    ax3.plot(pts[:, 0], pts[:, 1], "o", color="black", ms=4, zorder=4)
+def _touches(ax3, pts: np.ndarray, sizes: list[int]) -> tuple[list[Line2D], np.ndarray, list[str]]:
+    """The adaptation touches on the keyboard in order, numbered on through the session's
+    adaptations (``sizes`` touches each), each adaptation in its own colour; their labels'
+    points and texts (touches within 3 px share one label), to place once the figure is laid out
+    (:func:`place_labels`)."""
+    handles, start = [], 0
+    for i, n in enumerate(sizes):
+        p, colour = pts[start:start + n], ADAPT_COLOURS[i % len(ADAPT_COLOURS)]
+        ax3.plot(p[:, 0], p[:, 1], "-", color=colour, lw=0.6, alpha=0.6, zorder=4)
+        ax3.plot(p[:, 0], p[:, 1], "o", color=colour, ms=4, zorder=4)
+        span = f"{start + 1}-{start + n}" if n > 1 else f"{start + 1}"
+        handles.append(Line2D([], [], color=colour, marker="o", ms=4, lw=0.6,
+                              label=(f"adaptation touches, in order ({span})" if len(sizes) == 1
+                                     else f"adaptation {i + 1}: touches {span}")))
+        start += n
     groups: dict[tuple[int, int], list[int]] = {}
     for k, (x, y) in enumerate(pts, 1):
         if np.isfinite(x) and np.isfinite(y):
             groups.setdefault((int(round(x / 3)), int(round(y / 3))), []).append(k)
     at = np.array([pts[ks[0] - 1] for ks in groups.values()]).reshape(-1, 2)
-    handle = Line2D([], [], color="black", marker="o", ms=4, lw=0.6,
-                    label=f"adaptation touches, in order (1-{len(pts)})")
-    return handle, at, [",".join(map(str, ks)) for ks in groups.values()]
+    return handles, at, [",".join(map(str, ks)) for ks in groups.values()]
 
 
 def _keyboard_panel(ax3, kb: Keyboard, steps: dict, phase: np.ndarray, attrs: dict
@@ -181,8 +202,9 @@ def _keyboard_panel(ax3, kb: Keyboard, steps: dict, phase: np.ndarray, attrs: di
     if (phase == ADAPT).any():
         pts = np.asarray(steps["landed"], float)[phase == ADAPT]
         shown.append(pts[np.isfinite(pts).all(axis=1)])
-        handle, at, texts = _touches(ax3, pts)
-        handles.append(handle)
+        sizes = [b - a + 1 for a, b in adaptation_blocks(phase)]
+        more, at, texts = _touches(ax3, pts, sizes)
+        handles += more
     x0, y0, x1, y1 = kb.area
     box = np.vstack(shown)
     lo = np.maximum(box.min(axis=0) - 12, (x0, y0))

@@ -54,26 +54,63 @@ def _map(model, kb: Keyboard) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return keys, confusion, wrong
 
 
-def _samples_and_lines(ax, art: Artifact, handles: list) -> str:
-    """A learned model's reaches and fitted boundary lines on its map; the map's title."""
+def boundary_segments(lines: np.ndarray, keys: np.ndarray, area, step: float = MAP_STEP
+                      ) -> np.ndarray:
+    """Where each fitted boundary line ``n . x = c`` separates two different predicted keys on
+    the map (``keys``: the key per ``step`` px cell of ``area``): points of the lines 1 px apart,
+    NaN where the cells 2 px either side agree (there the line is no boundary of the model's) or
+    fall off the map, one row of NaN between lines (to plot as one broken line).
+
+    Returns
+    -------
+    (n, 2) ndarray
+    """
+    x0, y0, x1, y1 = (float(v) for v in area)
+    half = np.hypot(x1 - x0, y1 - y0)
+    t = np.arange(-half, half, 1.0)
+    centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
+    out = []
+    for nx, ny, c in np.asarray(lines, float).reshape(-1, 3):
+        n = np.array([nx, ny]) / max(np.hypot(nx, ny), 1e-12)
+        foot = centre + (c / max(np.hypot(nx, ny), 1e-12) - centre @ n) * n
+        pts = foot + np.outer(t, (-n[1], n[0]))
+        sides = [_cell_keys(pts + d * n, keys, (x0, y0), step) for d in (2.0, -2.0)]
+        differ = (sides[0] != sides[1]) & (sides[0] != _OFF) & (sides[1] != _OFF)
+        pts[~differ] = np.nan
+        out += [pts, np.full((1, 2), np.nan)]
+    return np.vstack(out) if out else np.empty((0, 2))
+
+
+_OFF = -99  # a point off the map
+
+
+def _cell_keys(pts: np.ndarray, keys: np.ndarray, origin, step: float) -> np.ndarray:
+    col = np.floor((pts[:, 0] - origin[0]) / step).astype(int)
+    row = np.floor((pts[:, 1] - origin[1]) / step).astype(int)
+    inside = (row >= 0) & (row < keys.shape[0]) & (col >= 0) & (col < keys.shape[1])
+    out = np.full(len(pts), _OFF)
+    out[inside] = keys[row[inside], col[inside]]
+    return out
+
+
+def _samples_and_lines(ax, art: Artifact, handles: list, keys: np.ndarray, area) -> str:
+    """A learned model's reaches and fitted boundary lines (where they separate two keys of its
+    map) on the map; the map's title."""
     d = art.data
     landed = np.asarray(d["samples"]["landed"], float)
     ax.plot(landed[:, 0], landed[:, 1], ".", color="black", ms=1.6, alpha=0.7)
     handles.append(Line2D([], [], ls="", marker=".", color="black",
                           label=f"reaches ({len(landed)})"))
     lines = np.asarray(d["model"].get("lines", np.empty((0, 3))), float)
-    t = np.linspace(-1e3, 1e3, 2)
-    for nx, ny, c in lines:
-        xy = np.outer(t, (-ny, nx)) + c * np.array([nx, ny])
-        ax.plot(xy[:, 0], xy[:, 1], color="0.25", lw=0.3, alpha=0.6)
     if len(lines):
+        seg = boundary_segments(lines, keys, area)
+        ax.plot(seg[:, 0], seg[:, 1], color="0.25", lw=0.5, alpha=0.7)
         handles.append(Line2D([], [], color="0.25", lw=0.6,
-                              label=f"fitted boundaries ({len(lines)})"))
+                              label=f"fitted boundaries ({len(lines)} lines)"))
     a = art.attrs
     sel = a.get("model_selection")
-    chosen = (f" (auto: chosen by cross-validation, held-out mislabel rate "
-              f"{100 * _num(sel['cv_error'][sel['chosen']]):.1f} %)" if sel else "")
-    return (f"learned {model_class_of(art)} model{chosen}: {a.get('strategy')} "
+    chosen = " (auto: chosen by cross-validation)" if sel else ""
+    return (f"learned {model_class_of(art)} model{chosen}\n{a.get('strategy')} "
             f"exploration, {a.get('mode')} mode, "
             f"{a.get('n_reaches')} reaches\naccuracy {100 * _num(a.get('accuracy')):.2f} %, "
             f"boundary error {_num(a.get('boundary_error_px')):.2f} px")
@@ -98,21 +135,21 @@ def _map_panel(fig, ax, art: Artifact, model, kb: Keyboard) -> None:
         handles.append(Patch(facecolor=(0.9, 0, 0), label=f"wrong key ({100 * wrong.mean():.2f} % "
                                                            f"of cells)"))
     if learned(art):
-        title = _samples_and_lines(ax, art, handles)
+        title = _samples_and_lines(ax, art, handles, keys, kb.area)
     else:
         title = "exact model: the keyboard's own geometry\n(no learning; predicted key per 2 px cell)"
-    ax.set_title(title, fontsize=9)
+    ax.set_title(title, fontsize=11)
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
     ax.set_xlabel("pad x (px)")
     ax.set_ylabel("pad y (px)")
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2,
-              fontsize=7.5, frameon=False)
+              fontsize=9, frameon=False)
     if np.nanmax(confusion) > 0:  # an exact model is never unsure
         cb = fig.colorbar(shade, cax=ax.inset_axes([1.03, 0.0, 0.035, 1.0]))
-        cb.set_label("uncertainty: 1 - (p1 - p2)", fontsize=8)
-        cb.ax.tick_params(labelsize=7)
+        cb.set_label("uncertainty: 1 - (p1 - p2)", fontsize=9)
+        cb.ax.tick_params(labelsize=8)
 
 
 def _layout_panel(ax, kb: Keyboard) -> None:
@@ -122,7 +159,7 @@ def _layout_panel(ax, kb: Keyboard) -> None:
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
     draw_keyboard(ax, kb)
-    ax.set_title(f"true layout ({kb.layout}): {kb.n_keys} keys (note, tempo)", fontsize=9)
+    ax.set_title(f"true layout ({kb.layout}): {kb.n_keys} keys (note, tempo)", fontsize=11)
     ax.set_xlabel("pad x (px)")
 
 
@@ -131,10 +168,10 @@ def _reliability_text(rel: dict, a: dict) -> str:
     measured."""
     cal = ", ".join(f"{k} {v:g}" for k, v in sorted(rel.get("calibration", {}).items()))
     wrong = 100 * (1 - _num(a.get("accuracy")))
-    expects = (f"mislabel rate it expects on the pad {100 * rel['expected_error']:.1f} % "
+    expects = (f"mislabel rate expected on the pad {100 * rel['expected_error']:.1f} % "
                f"(measured {wrong:.1f} %)\n" if rel.get("expected_error") is not None
                else "")  # (models learned before it was estimated)
-    return (f"the model's own estimate, from its samples "
+    return (f"the model's own estimate, from its samples\n"
             f"({rel.get('folds', 'k')}-fold cross-validation, calibrated p):\n"
             f"boundary error ~{rel['boundary_error']:.2f} px "
             f"(measured {_num(a.get('boundary_error_px')):.2f})\n"
@@ -152,7 +189,7 @@ def _curve_panel(ax, art: Artifact) -> None:
     ax.axhline(99.0, ls="--", color="grey", lw=1, label="99 % (the target)")
     # below the line, inside the axes (above it, the label sat on the frame at 100.5 %)
     ax.text(0.02, 99.0, "99 %", transform=ax.get_yaxis_transform(), ha="left", va="top",
-            fontsize=8, color="0.35", gid="target-label",
+            fontsize=9, color="0.35", gid="target-label",
             bbox={"boxstyle": "square,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8})
     ax.set_xlabel("reaches")
     ax.set_ylabel("accuracy (%, 2 px grid)")
@@ -160,21 +197,21 @@ def _curve_panel(ax, art: Artifact) -> None:
     ax.set_ylim(max(0.0, min(lo, 99.0) - 5), 100.5)
     to99 = art.attrs.get("reaches_to_99")
     ax.set_title("learning curve: " + (f"99 % after {to99} reaches" if to99 is not None
-                                       else "99 % not reached"), fontsize=9)
-    ax.legend(fontsize=7.5, loc="lower right")
+                                       else "99 % not reached"), fontsize=11)
+    ax.legend(fontsize=9, loc="lower right")
     ax.grid(alpha=0.3)
     rel = art.attrs.get("reliability")
     if rel:
         ax.text(0.5, -0.13,  # below the axes: inside, it hid a weak model's curve
                 _reliability_text(rel, art.attrs),
-                transform=ax.transAxes, ha="center", va="top", fontsize=7,
+                transform=ax.transAxes, ha="center", va="top", fontsize=9,
                 bbox={"boxstyle": "round", "fc": "white", "ec": "0.7", "alpha": 0.9})
 
 
 def plot_model(art: Artifact, model, kb: Keyboard, path: str | os.PathLike) -> None:
     """Draw a ``model`` artifact (with its loaded model and keyboard) to a figure file."""
     ncols = 3 if learned(art) else 2
-    fig, axes = plt.subplots(1, ncols, figsize=(6.0 * ncols, 5.2),
+    fig, axes = plt.subplots(1, ncols, figsize=(5.6 * ncols, 5.8),
                              gridspec_kw={"width_ratios": [1.3, 1.2, 1.0][:ncols]})
     _map_panel(fig, axes[0], art, model, kb)
     _layout_panel(axes[1], kb)

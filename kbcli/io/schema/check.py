@@ -174,7 +174,13 @@ def _datasets(art, schema: Schema, dims: dict, found: list[_Found]) -> str | Non
 # -- dataset values --------------------------------------------------------------------------------
 
 def _finite(f: _Found, art, dims: dict) -> str | None:
-    if f.ds.finite and f.arr.size and not np.all(np.isfinite(f.arr)):
+    """Float values are finite, or NaN where the dataset says NaN marks a missing value."""
+    if not (f.ds.finite and f.arr.size and f.arr.dtype.kind == "f"):
+        return None
+    if f.ds.nan:
+        if np.any(np.isinf(f.arr)):
+            return f"dataset {f.path!r} holds infinite values"
+    elif not np.all(np.isfinite(f.arr)):
         return f"dataset {f.path!r} holds NaN or infinite values"
     return None
 

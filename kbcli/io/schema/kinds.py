@@ -24,10 +24,10 @@ _KEYBOARD_DATA = (
 _MODEL_COMMON = (
     ("samples/actions", FLOAT, ("N", 2), None),
     ("samples/landed", FLOAT, ("N", 2), None),
-    ("samples/perceived", FLOAT, ("N", "F"), None),
+    ("samples/perceived", FLOAT, ("N", "F"), None, True),
     ("curve/reaches", INT, ("C",), None),
     ("curve/accuracy", FLOAT, ("C",), None),
-    ("model/class_features", FLOAT, ("M", "F"), None),
+    ("model/class_features", FLOAT, ("M", "F"), None, True),
     ("model/actions", FLOAT, ("A", 2), None),
     ("model/labels", INT, ("A",), "M"),
 )
@@ -60,7 +60,9 @@ MODEL_ARRAYS: dict[str, tuple[tuple, ...]] = {
 
 
 def _learned_data(rows, when) -> tuple[Dataset, ...]:
-    return tuple(Dataset(p, k, s, when=when, index=ix) for p, k, s, ix in rows)
+    """Rows ``(path, kinds, shape, index[, nan])``: ``nan`` when NaN marks silence."""
+    return tuple(Dataset(p, k, s, when=when, index=ix, nan=bool(nan))
+                 for p, k, s, ix, *nan in rows)
 
 
 _MODEL_1 = Schema(
@@ -119,7 +121,11 @@ _KEYBOARD_2 = Schema(
 )
 _SCENE_1 = Schema(
     config={"family": "str", "params": "nums", **_KEYBOARD_CFG},
-    checks=(rules.keyboard, rules.scene_params),
+    checks=(rules.keyboard, rules.scene_params, rules.scene_agrees),
+    datasets=(
+        Dataset("params", FLOAT, ("P",)),
+        Dataset("key_centres", FLOAT, ("K", 2)),
+    ),
 )
 _HISTORY_1 = Schema(
     config=_KEYBOARD_CFG,
@@ -128,7 +134,7 @@ _HISTORY_1 = Schema(
     datasets=(
         Dataset("action", FLOAT, ("T", 2)),
         Dataset("landed", FLOAT, ("T", 2)),
-        Dataset("perceived", FLOAT, ("T", "F")),
+        Dataset("perceived", FLOAT, ("T", "F"), nan=True),
         Dataset("target", INT, ("T",), index="M"),
         Dataset("cls", INT, ("T",)),
         Dataset("heard", INT, ("T",)),
@@ -142,7 +148,7 @@ _HISTORY_1 = Schema(
 _DETECTION_1 = Schema(
     config={"detector": "str", "threshold": "num"},
     datasets=(
-        Dataset("score", FLOAT, ("T",)),
+        Dataset("score", FLOAT, ("T",), nan=True),
         Dataset("fired", FLAG, ("T",)),
         Dataset("firings", INT, ("F",), index="T"),
     ),
@@ -155,20 +161,20 @@ _RUN_1 = Schema(
            "final_error_px?": "num?", "estimate?": "numdict?"},
     datasets=(
         Dataset("actions", FLOAT, ("T", 2)),
-        Dataset("landed", FLOAT, ("T", 2)),
+        Dataset("landed", FLOAT, ("T", 2), nan=True),  # NaN: the robot felt nothing (serve)
         Dataset("classes", INT, ("T",)),
-        Dataset("errors", FLOAT, ("T",)),
-        Dataset("angle_errors", FLOAT, ("T",), optional=True),
+        Dataset("errors", FLOAT, ("T",), nan=True),
+        Dataset("angle_errors", FLOAT, ("T",), optional=True, nan=True),
         Dataset("entropy", FLOAT, ("T",)),
         Dataset("means", FLOAT, ("T", "P")),
         Dataset("estimates", FLOAT, ("T", "P")),
         Dataset("dx", FLOAT, ("X",), finite=True),
         Dataset("dy", FLOAT, ("Y",), finite=True),
         Dataset("snapshot_steps", INT, ("S",), optional=True, upto="T"),
-        Dataset("snapshots", NUM, ("S", "Y", "X"), optional=True),
+        Dataset("snapshots", NUM, ("S", "Y", "X"), optional=True, finite=False),
         Dataset("snapshot_angles", FLOAT, ("S", "A"), optional=True),
         Dataset("timing/step_ms", FLOAT, ("T",), optional=True),
-        Dataset("perceived", FLOAT, ("T", "F"), optional=True),
+        Dataset("perceived", FLOAT, ("T", "F"), optional=True, nan=True),
         Dataset("mass", FLOAT, ("T",), optional=True),
     ),
     config={"adapt?": "dict", "keyboard?": "dict"},
@@ -183,10 +189,10 @@ _CLOSED_LOOP_1 = Schema(
     datasets=(
         Dataset("steps/phase", INT, ("T",)),
         Dataset("steps/result", FLAG, ("T",)),
-        Dataset("steps/score", FLOAT, ("T",)),
+        Dataset("steps/score", FLOAT, ("T",), nan=True),
         Dataset("steps/landed", FLOAT, ("T", 2)),
         Dataset("steps/action", FLOAT, ("T", 2), optional=True),
-        Dataset("steps/perceived", FLOAT, ("T", "F")),
+        Dataset("steps/perceived", FLOAT, ("T", "F"), nan=True),
         Dataset("steps/correction", FLOAT, ("T", "E")),
     ),
 )
@@ -197,7 +203,7 @@ _RUN_2 = extend(_RUN_1, Dataset("joint_angles", FLOAT, ("T", 2), optional=True),
 _CLOSED_LOOP_2 = extend(
     _CLOSED_LOOP_1,
     Dataset("steps/joint_angles", FLOAT, ("T", 2), optional=True),
-    Dataset("steps/estimate", FLOAT, ("T", "E"), optional=True),
+    Dataset("steps/estimate", FLOAT, ("T", "E"), optional=True, nan=True),
     *(Dataset(p, k, s, when=rules.has_posterior, index=ix, finite=f) for p, k, s, ix, f in (
         ("posterior/dx", FLOAT, ("PX",), None, True),
         ("posterior/dy", FLOAT, ("PY",), None, True),
@@ -214,20 +220,27 @@ def _curves(prefix: str, optional_counts: bool) -> tuple[Dataset, ...]:
                f"entropy/{{modes}}/{prefix}{{strategies}}",
                f"pvalues/{{modes}}/{prefix}{{categories}}/{{others}}")
     return (
-        *(Dataset(f"{c}/{k}", FLOAT, s)
+        *(Dataset(f"{c}/{k}", FLOAT, s, nan=True)
           for k, s in (("rmse", ("T",)), ("q25", ("T",)), ("q75", ("T",)),
                        ("median_samples", ("H",)), ("reached", ("H",)))),
         Dataset(f"{c}/samples_to_threshold", NUM, ("*", "H"), optional=optional_counts),
-        *(Dataset(f"{e}/{k}", FLOAT, ("T",)) for k in ("mean", "q25", "q75")),
-        Dataset(f"{p}/pvalue", FLOAT, ("H",)),
-        Dataset(f"{p}/statistic", FLOAT, ("H",)),
+        # the report draws these too: when present, of the curves' length (T) or thresholds' (H)
+        *(Dataset(f"{c}/{k}", FLOAT, ("T",), optional=True, nan=True)
+          for k in ("mean", "median", "std", "rmse_ml", "rmse_mean", "entropy_mean",
+                    "entropy_q25", "entropy_median", "entropy_q75")),
+        Dataset(f"{c}/rmse_by_param", FLOAT, ("*", "T"), optional=True, nan=True),
+        *(Dataset(f"{c}/{k}{sfx}", FLOAT, ("H",), optional=True, nan=True)
+          for k in ("median_samples", "reached") for sfx in ("_ml", "_mean")),
+        *(Dataset(f"{e}/{k}", FLOAT, ("T",), nan=True) for k in ("mean", "q25", "q75")),
+        Dataset(f"{p}/pvalue", FLOAT, ("H",), nan=True),
+        Dataset(f"{p}/statistic", FLOAT, ("H",), nan=True),
     )
 
 
 def _examples(prefix: str) -> tuple[Dataset, ...]:
     x = f"examples/{{modes}}/{prefix}{{strategies}}"
     return (Dataset(f"{x}/row", INT, (), optional=True, index="N"),
-            Dataset(f"{x}/snapshots", NUM, ("*", "*", "*"), optional=True))
+            Dataset(f"{x}/snapshots", NUM, ("*", "*", "*"), optional=True, finite=False))
 
 
 _EVAL_FLAT = (
@@ -236,9 +249,8 @@ _EVAL_FLAT = (
     Dataset("experiments/mode", TEXT, ("N",)),
     Dataset("experiments/category", TEXT, ("N",)),
     Dataset("experiments/strategy", TEXT, ("N",)),
-    Dataset("experiments/play_adapted", FLOAT, ("N",), optional=True),
-    Dataset("experiments/play_unadapted", FLOAT, ("N",), optional=True),
-    Dataset("experiments/play_before", FLOAT, ("N",), optional=True),
+    *(Dataset(f"experiments/play_{k}", FLOAT, ("N",), optional=True, nan=True)
+      for k in ("adapted", "unadapted", "before")),
 )
 _EVALUATION_1 = Schema(
     attrs={"modes": "strs", "categories": "strs", "strategies": "strs", "baseline": "str",
@@ -257,7 +269,7 @@ _EVALUATION_2 = Schema(
         Dataset("experiments/method", TEXT, ("N",)),
         *_curves("{method}/", True),
         Dataset("pvalues/{modes}/{method}/{categories}/{others}/min_pvalue", FLOAT, (),
-                optional=True),
+                optional=True, nan=True),
         *_examples("{method}/"),
     ),
     checks=(rules.eval_lists, rules.eval_methods),
@@ -270,7 +282,7 @@ _MODEL_QUALITY_1 = Schema(
         Dataset("experiments/row", TEXT, ("N",)),
         Dataset("experiments/param_index", INT, ("N",)),
         Dataset("experiments/rep", INT, ("N",)),
-        Dataset("experiments/errors", FLOAT, ("N", "T")),
+        Dataset("experiments/errors", FLOAT, ("N", "T"), nan=True),
     ),
     attrs={"models": "dict", "summary": "dict", "rows": "strs", "baseline": "str",
            "max_steps": "int", "categories": "strs", "n_experiments": "int"},

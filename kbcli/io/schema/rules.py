@@ -145,6 +145,24 @@ def scene_params(art) -> str | None:
     return None
 
 
+def scene_agrees(art) -> str | None:
+    """A scene's stored ``params`` dataset and its ``pose`` are the config's parameters (the world
+    reads the config; a file where they disagree was edited by hand)."""
+    want = np.asarray(art.config["params"], float)
+    got = np.asarray(art.data.get("params", want), float).reshape(-1)
+    if got.shape != want.shape or not np.array_equal(got, want):
+        return (f"dataset 'params' {_short(got)} disagrees with config params {_short(want)}")
+    pose = art.attrs.get("pose")
+    if isinstance(pose, dict) and TYPES["numdict"](pose) and not np.array_equal(
+            np.asarray(list(pose.values()), float), want):
+        return f"summary attribute 'pose' {pose} disagrees with config params {_short(want)}"
+    return None
+
+
+def _short(v: np.ndarray) -> str:
+    return "[" + ", ".join(f"{x:g}" for x in np.asarray(v, float).reshape(-1)[:6]) + "]"
+
+
 def truth_keys(art) -> str | None:
     """A ground truth names every parameter of the world's transform family."""
     from kbcli.core.transforms import FAMILIES, family_for

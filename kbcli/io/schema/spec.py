@@ -40,7 +40,10 @@ class Dataset:
     index, upto : str, optional
         The values are indices into an axis of that symbol (``[0, n)``) or steps (``[0, n]``).
     finite : bool
-        No NaN or infinite value allowed (float datasets).
+        Float values must be finite (the default); False for log densities (``-inf``).
+    nan : bool
+        NaN marks a missing value (silence's features, a score before its warm-up, a count never
+        reached); infinite values are still refused.
     """
 
     path: str
@@ -50,7 +53,8 @@ class Dataset:
     when: Callable[[Any], bool] | None = None
     index: str | None = None
     upto: str | None = None
-    finite: bool = False
+    finite: bool = True
+    nan: bool = False
 
 
 def _is_num(v: Any) -> bool:

@@ -9,12 +9,12 @@ from typing import Any, ClassVar
 from pydantic import Field, InstanceOf, field_validator, model_validator
 
 from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.config import Flag, Name, Number, Whole, between
+from kbcli.core.config import Flag, Name, Whole, between
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig
 from kbcli.sim.arms import PRESETS
-from kbcli.sim.config import Arm, ModeName
+from kbcli.sim.config import Arm, ModeName, ReachNoise
 from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_REPLAY_NOTES, StageConfig
 
 #: What the robot observes: where its finger landed, or only where it aimed.
@@ -78,7 +78,7 @@ class AdaptConfig(StageConfig):
 
     robot: InstanceOf[AdapterConfig] = Field(default_factory=AdapterConfig)
     mode: ModeName = "ideal"
-    reach_noise: Number = 0.0
+    reach_noise: ReachNoise = 0.0
     arm: Arm = PRESETS.get("ideal")
     feedback: Name = "landed"
     max_steps: between(Whole, 1, MAX_ADAPT_STEPS) = 40

@@ -16,7 +16,6 @@ from kbcli.core.applies import refuse_unused
 from kbcli.core.config import (
     Name,
     Names,
-    NonNegative,
     NonNegativeInt,
     Number,
     Positive,
@@ -26,6 +25,7 @@ from kbcli.core.config import (
 from kbcli.core.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
 from kbcli.sim import MODES
+from kbcli.sim.config import ReachNoise
 from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_EXPERIMENTS, StageConfig
 from kbcli.stages.evaluate.methods import (
     DEFAULT_STRATEGIES,
@@ -233,7 +233,7 @@ class EvaluateConfig(StageConfig):
                                              min_length=1)
     example: Name = "small"
     snapshot_steps: tuple[NonNegativeInt, ...] = (1, 2, 3, 5, 10, 20)
-    reach_noise: Mapping[str, NonNegative] = Field(
+    reach_noise: Mapping[str, ReachNoise] = Field(
         default_factory=lambda: {"ideal": 0.0, "dynamics": 2.0})
     arm: Mapping[str, Any] = Field(default_factory=lambda: {"ideal": "ideal", "dynamics": "ideal"})
     categories: tuple[InstanceOf[Category], ...] = Field(default_factory=_paper_categories,

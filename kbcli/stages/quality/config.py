@@ -14,7 +14,6 @@ from kbcli.core.config import (
     Flag,
     Name,
     Names,
-    NonNegative,
     NonNegativeInt,
     Whole,
     between,
@@ -22,7 +21,7 @@ from kbcli.core.config import (
 from kbcli.core.model_classes import EXACT  # the reference row's model: the exact class
 from kbcli.errors import ConfigError
 from kbcli.sim.arms import arm_config
-from kbcli.sim.config import ModeName
+from kbcli.sim.config import ModeName, ReachNoise
 from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_BUDGET, MAX_EXPERIMENTS, check_total
 from kbcli.stages.evaluate import Category, _paper_categories
 
@@ -107,7 +106,7 @@ class QualityConfig(Config):
     explorations: Names = ("active", "random")
     mode: ModeName = "dynamics"
     arm: Any = "realistic"
-    reach_noise: NonNegative = 0.0
+    reach_noise: ReachNoise = 0.0
     experiments: between(Whole, 1, MAX_EXPERIMENTS) = 8
     max_steps: between(Whole, 1, MAX_ADAPT_STEPS) = 30
     categories: Any = Field(default_factory=_paper_categories)
