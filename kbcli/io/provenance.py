@@ -43,16 +43,22 @@ def git_state(root: Path = ROOT) -> dict | None:
     return {"commit": commit.strip(), "clean": not changed, "changed": changed[:50]}
 
 
+#: Options whose value is a file the command writes, not one it reads.
+OUTPUT_FLAGS = ("--json", "-o", "--output", "--plot", "--model-out")
+
+
 def inputs(argv: list[str]) -> dict[str, dict]:
-    """The files named on a command line (its arguments that are existing files), each with its
+    """The files named on a command line (its arguments that are existing files, but the values
+    of :data:`OUTPUT_FLAGS`), each with its
     sha256 and, for an HDF5 artifact, the kind and the inputs it records (role -> file and
     sha256)."""
     from kbcli.io.artifact import read_artifact, sha256_file
 
     out: dict[str, dict] = {}
+    outputs = {b for a, b in zip(argv, argv[1:], strict=False) if a in OUTPUT_FLAGS}
     for a in argv:
         p = Path(a)
-        if a.startswith("-") or not p.is_file():
+        if a.startswith("-") or a in outputs or not p.is_file():
             continue
         entry: dict = {"sha256": sha256_file(p)}
         if p.suffix in (".h5", ".hdf5"):
