@@ -90,3 +90,21 @@ def test_provenance_hashes_the_inputs_not_the_outputs(tmp_path):
     if state is not None:  # a git checkout: the commit and the tree's state
         assert re.fullmatch(r"[0-9a-f]{40}", state["commit"]) and isinstance(state["clean"], bool)
     assert git_state(tmp_path) is None  # not a checkout
+
+
+def test_a_result_file_written_before_another_leaves_the_code_clean(tmp_path):
+    import subprocess
+
+    from kbcli.io.provenance import git_state
+
+    def git(*args):
+        subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True)
+
+    git("init", "-q")
+    git("-c", "user.email=a@b", "-c", "user.name=a", "commit", "-q", "--allow-empty", "-m", "x")
+    (tmp_path / "benchmarks" / "results").mkdir(parents=True)
+    (tmp_path / "benchmarks" / "results" / "arm.json").write_text("{}")
+    state = git_state(tmp_path)
+    assert state["clean"] is True and state["changed"] == ["benchmarks/results/arm.json"]
+    (tmp_path / "code.py").write_text("x = 1\n")
+    assert git_state(tmp_path)["clean"] is False

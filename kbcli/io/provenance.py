@@ -29,10 +29,16 @@ def _git(*args: str, cwd: Path) -> str | None:
     return res.stdout if res.returncode == 0 else None
 
 
+#: The result files themselves (``make results`` writes them one after another: one made before
+#: another is not a change to the code that makes the next).
+RESULT_FILES = "benchmarks/results/"
+
+
 def git_state(root: Path = ROOT) -> dict | None:
-    """``{"commit": sha, "clean": bool, "changed": [paths]}`` of the checkout at ``root`` (the
-    files that differ from the commit, untracked ones included, git-ignored ones not); None
-    when ``root`` is not a git checkout."""
+    """``{"commit": sha, "clean": bool, "changed": [paths]}`` of the checkout at ``root``: the
+    files that differ from the commit (untracked ones included, git-ignored ones not), and
+    whether the code is the commit's (clean: no change outside :data:`RESULT_FILES`); None when
+    ``root`` is not a git checkout."""
     if not (root / ".git").exists():
         return None
     commit = _git("rev-parse", "HEAD", cwd=root)
@@ -40,7 +46,8 @@ def git_state(root: Path = ROOT) -> dict | None:
     if commit is None or status is None:
         return None
     changed = sorted(line[3:] for line in status.splitlines() if line.strip())
-    return {"commit": commit.strip(), "clean": not changed, "changed": changed[:50]}
+    code = [p for p in changed if not p.startswith(RESULT_FILES)]
+    return {"commit": commit.strip(), "clean": not code, "changed": changed[:50]}
 
 
 #: Options whose value is a file the command writes, not one it reads.
