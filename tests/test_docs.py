@@ -56,6 +56,10 @@ def test_results_page_renders_a_result_file(tmp_path):
     assert "| detector | \\|delay\\| |" in page  # a header's bars escaped too
     assert hooks.results_markdown("detect", tmp_path) == page     # regenerates identically
     assert "not there yet" in hooks.results_markdown("missing", tmp_path)
+    d["load"] = {"start": [6.83, 6.5, 6.1], "end": [4.25, 5.0, 6.0], "cores": 2}
+    (tmp_path / "detect.json").write_text(json.dumps(d))
+    assert ("2 cores, load average 6.8 (1 min) at the start and 4.2 at the end."
+            in hooks.results_markdown("detect", tmp_path))
 
 
 def test_markers_are_replaced(monkeypatch):

@@ -108,3 +108,14 @@ def test_a_result_file_written_before_another_leaves_the_code_clean(tmp_path):
     assert state["clean"] is True and state["changed"] == ["benchmarks/results/arm.json"]
     (tmp_path / "code.py").write_text("x = 1\n")
     assert git_state(tmp_path)["clean"] is False
+
+
+def test_a_result_file_records_the_load_it_ran_under(tmp_path, monkeypatch):
+    from kbcli.cli import record
+
+    loads = iter([(6.0, 5.0, 4.0), (2.0, 3.0, 4.0)])
+    monkeypatch.setattr(record.os, "getloadavg", lambda: next(loads))
+    record.start(tmp_path / "r.json")
+    record.write(tmp_path / "r.json", ["bench", "arm"])
+    d = json.loads((tmp_path / "r.json").read_text())
+    assert d["load"]["start"] == [6.0, 5.0, 4.0] and d["load"]["end"] == [2.0, 3.0, 4.0]

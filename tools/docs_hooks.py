@@ -148,10 +148,18 @@ def results_markdown(name: str, root: Path = RESULTS, only: tuple[str, ...] = ()
     if not tables:
         raise ValueError(f"benchmarks/results/{name}.json has no table titled {' or '.join(only)}")
     out = [f"Measured with `{d['command']}` on {d['date']}, kbcli {d['kbcli_version']}, "
-           f"{d['machine']}.", ""]
+           f"{d['machine']}{_load_note(d.get('load'))}.", ""]
     for t in tables:
         out += [f"**{_escape(t['title'])}**", ""] + _table(t["rows"], t["columns"]) + [""]
     return "\n".join(out)
+
+
+def _load_note(load: dict | None) -> str:
+    """", load average 6.8 (1 min) at the start, 6.5 at the end": wall times read beside it."""
+    if not load or not load.get("start") or not load.get("end"):
+        return ""
+    return (f", load average {load['start'][0]:.1f} (1 min) at the start and "
+            f"{load['end'][0]:.1f} at the end")
 
 
 _RESULTS = re.compile(r"<!--\s*results:\s*([\w.-]+)((?:\s*\|[^|>]+)*)\s*-->")

@@ -4,7 +4,7 @@ Every table a bench command shows goes through :func:`show_table`; with ``--json
 also written, when the command ends, to one JSON file with the command line, the date, the machine
 and the kbcli version, the git commit of the code and whether its tree was clean, and the sha256 of
 every input file the command named: ``{"command", "date", "machine", "kbcli_version",
-"platform", "git", "inputs", "tables": [{"title", "columns", "rows": [{column: cell}]}]}``
+"platform", "load", "git", "inputs", "tables": [{"title", "columns", "rows": [{column: cell}]}]}``
 (:mod:`kbcli.io.provenance`). The documentation's results pages are
 generated from such files (``benchmarks/results/*.json``, ``tools/docs_hooks.py``), so no measured
 number in the docs is typed by hand.
@@ -30,6 +30,7 @@ from kbcli.io.platform import fingerprint
 from kbcli.io.provenance import git_state, inputs
 
 _recorded: list[Table] | None = None
+_load_at_start: list[float] | None = None
 _path: Path | None = None
 
 
@@ -52,8 +53,8 @@ def load_average() -> str | None:
 
 def start(path: Path | None = None) -> None:
     """Keep every table shown from now on (for :func:`finish` to write to ``path``)."""
-    global _recorded, _path
-    _recorded, _path = [], path
+    global _recorded, _path, _load_at_start
+    _recorded, _path, _load_at_start = [], path, load_average()
 
 
 def finish() -> None:
@@ -90,6 +91,15 @@ def machine() -> str:
     return f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}"
 
 
+def load_average() -> list[float] | None:
+    """The 1, 5 and 15 minute load averages (None where the OS does not say): timings made on a
+    busy machine are read beside the load they ran under."""
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except (AttributeError, OSError):
+        return None
+
+
 def write(path: Path, argv: list[str] | None = None) -> None:
     """Write the tables kept so far to ``path`` (atomically) and stop keeping them."""
     global _recorded
@@ -98,6 +108,7 @@ def write(path: Path, argv: list[str] | None = None) -> None:
     d = {"command": shlex.join(["kbcli", *args]),
          "date": datetime.date.today().isoformat(), "machine": machine(),
          "kbcli_version": __version__, "platform": fingerprint(),
+         "load": {"start": _load_at_start, "end": load_average(), "cores": os.cpu_count()},
          "git": git_state(), "inputs": inputs(args),
          "tables": [table_dict(t) for t in tables]}
     path.parent.mkdir(parents=True, exist_ok=True)
