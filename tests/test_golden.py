@@ -215,7 +215,6 @@ def _stored_platform() -> dict | None:
     return json.loads(path.read_text()) if path.is_file() else None
 
 
-@pytest.mark.xdist_group("make-data")  # one worker: `make data` runs once
 def test_make_data_rebuilds_the_same_kinds_of_artifact_on_any_platform(rebuilt):
     """Wherever it runs, `make data` writes the stored files: the same artifacts, kinds, schemas,
     configs and datasets, and a default model as good as the stored one. (On another platform
@@ -239,7 +238,6 @@ def test_make_data_rebuilds_the_same_kinds_of_artifact_on_any_platform(rebuilt):
     assert abs(new["boundary_error_px"] - old["boundary_error_px"]) <= 0.5
 
 
-@pytest.mark.xdist_group("make-data")  # one worker: `make data` runs once
 def test_make_data_rebuilds_the_stored_bytes_on_the_platform_that_built_them(rebuilt):
     """On the platform of data/platform.json, `make data` gives the stored artifacts, byte for
     byte (or numerically equal where the wall-clock time of a step is recorded)."""
