@@ -35,9 +35,11 @@ PAGES = sorted([ROOT / "docs" / "getting-started.md", *(ROOT / "docs" / "tutoria
 
 #: Small settings, as substitutions on a command line: a 200-reach model knows every sound of the
 #: default keyboard (the melody's notes among them) and learns in seconds; one local process; a
+#: coarser hypothesis grid for adapt (2 px, not 0.5: its likelihood tables take 1 s, not 11); a
 #: shorter closed loop and animation; a robot that touches three times.
 SMALL = [
     (r"--budget \d+", "--budget 200"),
+    (r"^kbcli adapt .*", r"\g<0> --resolution 2"),
     (r"--jobs \d+", "--jobs 1"),
     (r"^kbcli run .*", r"\g<0> --steps 300 --perturb-at 150"),
     (r"^kbcli animate .*", r"\g<0> --max-frames 20"),

@@ -311,7 +311,8 @@ def test_cli_report_failure_leaves_no_folder(runner, tmp_path, monkeypatch):
         raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr(matplotlib.figure.Figure, "savefig", fail)
-    r = runner.invoke(app, ["report", EVALUATION, "-o", str(tmp_path / "rep")])
+    r = runner.invoke(app, ["report", EVALUATION, "-o", str(tmp_path / "rep"),
+                            "--replicates", "2"])  # bootstrap replicates: 2, not 100 (faster)
     one_line_error(r, "No space left on device")
     assert _listing(tmp_path) == []
 
@@ -326,7 +327,7 @@ def test_cli_report_failure_keeps_the_old_report(runner, tmp_path, monkeypatch):
         raise OSError(errno.EIO, "Input/output error")
 
     monkeypatch.setattr(matplotlib.figure.Figure, "savefig", fail)
-    r = runner.invoke(app, ["report", EVALUATION, "-o", str(rep)])
+    r = runner.invoke(app, ["report", EVALUATION, "-o", str(rep), "--replicates", "2"])
     one_line_error(r, "Input/output error")
     assert _listing(rep) == ["README.md"] and (rep / "README.md").read_text().startswith(
         "# old report")

@@ -131,18 +131,19 @@ def test_output_that_is_an_input_is_refused(runner, tmp_path, cmd, out_role, in_
 def test_report_files_inside_the_folder_are_checked(runner, tmp_path):
     """The report writes README.md and figures in its folder: an input of that name is refused,
     an input elsewhere in the folder is fine."""
+    FEW = ["--replicates", "2"]  # bootstrap replicates of a differing claim: 2, not 100 (faster)
     folder = tmp_path / "rep"
     folder.mkdir()
     for name in ("README.md", "fig6_entropy.png"):
         src = folder / name
         shutil.copy(GOLDEN / "evaluation.h5", src)
         before = src.read_bytes()
-        r = runner.invoke(app, ["report", str(src), "-o", str(folder)])
+        r = runner.invoke(app, ["report", str(src), "-o", str(folder), *FEW])
         _one_line_refusal(r, "input", name)
         assert src.read_bytes() == before and sorted(os.listdir(folder)) == [name]
         src.unlink()
     shutil.copy(GOLDEN / "evaluation.h5", folder / "eval.h5")
-    r = runner.invoke(app, ["report", str(folder / "eval.h5"), "-o", str(folder)])
+    r = runner.invoke(app, ["report", str(folder / "eval.h5"), "-o", str(folder), *FEW])
     assert r.exit_code == 0, r.output
     assert (folder / "README.md").is_file() and (folder / "eval.h5").read_bytes() == (
         GOLDEN / "evaluation.h5").read_bytes()
