@@ -138,7 +138,7 @@ def test_bench_verdicts_on_a_model_quality_sweep(tmp_path, runner):
     assert "infogain advantage" in models["columns"] and "nan" not in json.dumps(d["tables"])
 
 
-def test_bench_verdicts_refuses_bad_input_in_one_line(tmp_path, runner):
+def test_bench_verdicts_refuses_bad_input_in_one_line(tmp_path, runner, monkeypatch):
     r = runner.invoke(app, ["bench", "verdicts", str(GOLDEN / "model_quality.h5"),
                             "--own-model", str(GOLDEN / "evaluation.h5")])
     one_line_error(r, "--own-model")
@@ -147,6 +147,12 @@ def test_bench_verdicts_refuses_bad_input_in_one_line(tmp_path, runner):
     one_line_error(r, "--ablations")
     r = runner.invoke(app, ["bench", "verdicts", str(GOLDEN / "model.h5")])
     one_line_error(r, "model.h5")
+    from kbcli.bench import verdicts
+
+    def judged(*_, **__):  # a missing --timings file is refused before any judging
+        raise AssertionError("judged the claims before reading --timings")
+
+    monkeypatch.setattr(verdicts, "evaluation_tables", judged)
     r = runner.invoke(app, ["bench", "verdicts", str(GOLDEN / "evaluation.h5"), "--timings",
                             str(tmp_path / "missing.txt"), *FEW_REPLICATES])
     one_line_error(r, "missing.txt")

@@ -191,6 +191,7 @@ def bench_verdicts_cmd(
     inputs = {"EVALUATION": evaluation, "--timings": timings, "--own-model": own_model,
               **_repeated("--ablations", ablations)}
     check_io(inputs)
+    timing_text = timings.read_text(encoding="utf-8") if timings is not None else None  # first
     art = read_artifact(evaluation, ("evaluation", "model_quality"))
     if art.kind == "model_quality":
         for flag, given in (("--own-model", own_model), ("--ablations", ablations)):
@@ -204,8 +205,8 @@ def bench_verdicts_cmd(
         ladders = [read_artifact(p, ("evaluation",)) for p in ablations or ()]
         with busy("judging the paper's claims (and replicating those that differ)"):
             tables = bench.evaluation_tables(art, own, ladders, replicates=replicates)
-    if timings is not None:
-        tables += [t for t in bench.timings_table(timings.read_text(encoding="utf-8")) if t.rows]
+    if timing_text is not None:
+        tables += [t for t in bench.timings_table(timing_text) if t.rows]
     con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
     for t in tables:
         _show(con, t)
