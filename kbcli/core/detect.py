@@ -60,6 +60,7 @@ from typing import Any
 import numpy as np
 from pydantic import field_validator, model_validator
 from scipy import stats
+from scipy.special import logsumexp
 
 from kbcli.core.config import Config, Name, Number, Positive, Whole, between
 from kbcli.core.registry import Registry
@@ -292,10 +293,10 @@ class _Bocpd(Bank):
         lik = np.where(x[:, None] > 0, p1, 1.0 - p1)
         log_joint = self.log_post + np.log(lik)
         new = np.empty_like(log_joint)
-        new[:, 0] = _logsumexp_rows(log_joint) + self._log_h
+        new[:, 0] = logsumexp(log_joint, axis=1) + self._log_h
         new[:, 1:] = log_joint[:, :-1] + self._log_1mh
         new[:, -1] = np.logaddexp(new[:, -1], log_joint[:, -1] + self._log_1mh)
-        new -= _logsumexp_rows(new)[:, None]
+        new -= logsumexp(new, axis=1)[:, None]
         self.log_post = new
         c = self.counts
         c[:, 1:] = c[:, :-1] + x[:, None]  # the right side is a new array: no overlap
@@ -311,12 +312,6 @@ class _Bocpd(Bank):
         p_short = (post[:, :n_lt] * p_now).sum(axis=1) / np.maximum(w_short, 1e-300)
         up = p_short > (a + c[:, -1]) / den[:, -1]
         return np.where(up, np.minimum(score, 1.0), 1.0)
-
-
-def _logsumexp_rows(v: np.ndarray) -> np.ndarray:
-    """log(sum(exp(v), axis=1)) for (S, R) with finite row maxima (a lean ``logsumexp``)."""
-    m = v.max(axis=1)
-    return np.log(np.exp(v - m[:, None]).sum(axis=1)) + m
 
 
 @DETECTORS.register("bocpd")
