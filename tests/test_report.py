@@ -504,6 +504,6 @@ def test_methods_table_of_kde_methods_lists_no_likelihood_only_option():
 def test_the_floor_departure_reads_a_recorded_none_as_the_outlier_rate(robot, expected):
     """A method recorded with kde_floor = None (the paper-v1 reading) names the floor it used;
     the row is there whatever the options (issue 39: every rule listed)."""
-    from kbcli.stages.report.departures import _floor
+    from kbcli.stages.report.departures import _no_kde, by_parts
 
-    assert expected in _floor(robot, None)
+    assert expected in by_parts("floor", _no_kde)(robot, None)

@@ -43,6 +43,8 @@ from kbcli.stages import learn as learn_stage
 
 DEFAULT_BUDGETS = (200, 400, 800, 1600)
 STRATEGY_ORDER = ("active", "random")
+#: The strategy the benchmark measures against the baseline (the exploration registered as one).
+COMPARED = "active"
 LEVELS = (0.97, 0.99)
 
 
@@ -219,8 +221,8 @@ def ratios(rows: list[dict], level: float = 0.97) -> list[dict]:
     out = []
     by = {(r["layout"], r["model_class"], r["strategy"]): r for r in rows}
     for (layout, model_class, strategy), r in by.items():
-        other = by.get((layout, model_class, "random"))
-        if strategy != "active" or other is None:
+        other = by.get((layout, model_class, STRATEGIES.having("baseline")[0]))
+        if strategy != COMPARED or other is None:
             continue
         a, b = r["to"][level], other["to"][level]
         out.append({"layout": layout, "model_class": model_class, "active": a, "random": b,

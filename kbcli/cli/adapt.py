@@ -30,7 +30,7 @@ from kbcli.cli.app import (
 from kbcli.cli.record import load_average, show_table
 from kbcli.cli.repair import check_model_out, write_repaired
 from kbcli.core.applies import refuse_unused
-from kbcli.core.transforms import FAMILIES
+from kbcli.core.transforms import DEFAULT_FAMILY, FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm, load_stage_table, with_file
@@ -141,7 +141,7 @@ def adapt_cmd(
         art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
                         snapshot_steps=steps, on_step=tick, timings=timings, keep=keep)
     write_artifact(art, output)
-    if scene_family and cfg.family != "translation":  # (said once the inputs passed every check)
+    if scene_family and cfg.family != DEFAULT_FAMILY:  # (said once the inputs passed every check)
         note_default("family", cfg.family, "the scene's (--family to choose)")
     _report_run(art, cfg, output, timings.get("setup_ms"))
     if model_out is not None:
@@ -313,7 +313,7 @@ def bench_adapt_cmd(
         layout=layout or "grid")
     # tables are wide: never wrap them at a narrow default width when the output is not a terminal
     con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
-    if "kde" in sections:
+    if any(bench.SECTIONS.get(s).timed for s in sections):
         _kde_speed_table(bench, model, learned, kde_steps, seed, con)
     cells = bench.plan(cfg, learned, kb)
     total = sum(len(c.truths) for c in cells)

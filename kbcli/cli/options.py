@@ -207,18 +207,14 @@ def mode_option(default: str | None = None, help: str = "Reaching", note: str = 
         show_default=_shown(default))]
 
 
-ARM_HELP = ("Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains and "
-            "joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
-            "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields)")
-
-
 def arm_option(default: str | None = None, optional: bool = False, files: bool = True) -> Any:
     """``--arm``: an arm preset (or, with ``files``, a TOML file with an ``[arm]`` table)."""
     names = names_of("arm")
-    if files and set(names) == {"ideal", "servo", "realistic"}:
-        text = ARM_HELP  # (the presets described)
-    elif files:
-        text = f"Arm preset: {one_of('arm')}; or a TOML file with an [arm] table (preset = NAME plus fields)"
+    if files:
+        described = ", ".join(f"{n} ({s})" if (s := _REGISTRIES["arm"].summary(n)) else n
+                              for n in names)
+        text = (f"Arm preset: {described}; or a TOML file with an [arm] table (preset = NAME plus "
+                "fields)")
     else:
         text = f"Arm preset ({', '.join(names)})"
     return Annotated[str | None if optional else str, _opt("--arm", help=text + ".",

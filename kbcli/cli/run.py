@@ -26,6 +26,7 @@ from kbcli.core.applies import refuse_unused
 from kbcli.core.detect import MAX_N_LT, MAX_N_ST, DetectorConfig
 from kbcli.core.loop import PLAY
 from kbcli.core.melody import DEFAULT_MELODY
+from kbcli.core.transforms import DEFAULT_FAMILY
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm
 from kbcli.stages import keyboard as keyboard_stage
@@ -116,7 +117,7 @@ def run_cmd(
         pass
     art = session.artifact()
     write_artifact(art, output)
-    if scene_family and family != "translation":  # (said once the inputs passed every check)
+    if scene_family and family != DEFAULT_FAMILY:  # (said once the inputs passed every check)
         note_default("family", family, "the scene's (--family to choose)")
     _report_loop(art.attrs, output)
     if model_out is not None:

@@ -12,7 +12,7 @@ import numpy as np
 from kbcli.core.action_sampler import SilentBeyond, beyond_margin
 from kbcli.core.adapter_config import LEARNED_BLUR, AdapterConfig, _size
 from kbcli.core.grid import HypothesisGrid
-from kbcli.core.kde import ActionSamples
+from kbcli.core.kde import KERNEL_REACH, MAX_BANDWIDTH, ActionSamples
 from kbcli.core.table import LikelihoodTable, exact_map
 from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError
@@ -60,11 +60,6 @@ def build_table(model, cfg: AdapterConfig,
         raise ConfigError(f"model raster of {cells:,} cells at {step:g} px would need {_size(need)}, "
                           f"above max_memory_mb = {cfg.max_memory_mb:g} MB: raise raster_step")
     return LikelihoodTable.from_model(model, step, eps=cfg.outlier, blur=blur, area=area)
-
-
-#: The widest kernel of the KDE's bandwidth rule (px) and its reach in kernel widths: how far
-#: beyond a sample a KDE term is non-zero (:mod:`kbcli.core.kde`).
-MAX_BANDWIDTH, KERNEL_REACH = 4.0, 4.0
 
 
 def hypothesis_grid(cfg: AdapterConfig, area: tuple[float, float, float, float],

@@ -374,7 +374,7 @@ def robust_blurs(model, cfg: AdapterConfig) -> tuple[float, ...]:
         return (float(cfg.model_blur),)
     if cfg.robust_blurs is not None:
         return tuple(cfg.robust_blurs)
-    if cfg.family == "rigid":
+    if FAMILIES.get(cfg.family).rotates:
         return RIGID_BLURS
     return blur_grid(_boundary_error(model))
 

@@ -42,5 +42,16 @@ class Estimator:
 ESTIMATORS: Registry[Estimator] = Registry("estimator")
 ESTIMATORS.register("mean", Estimator("mean", "means", lambda post: post.mean()),
                     summary="the posterior mean (RMSE-optimal; ours)")
+def _ml_departure(r: dict) -> str:
+    """How the ML cell departs from the paper's text (its tie rule, which the paper leaves open)."""
+    if r.get("ml_ties") == "random":
+        return ("the maximum-likelihood cell; ties broken uniformly at random (seeded), so no "
+                "corner of the prior box is favoured")
+    return ("the maximum-likelihood cell; ties go to the lowest grid index (the corner and "
+            "edges of the prior box), so every ML verdict is also read with the posterior mean "
+            "of the same runs")
+
+
 ESTIMATORS.register("ml", Estimator("ml", "estimates", lambda post: post.ml()),
-                    summary="the maximum-likelihood cell (the paper's)", uses=("ml_ties",))
+                    summary="the maximum-likelihood cell (the paper's)", uses=("ml_ties",),
+                    traits={"ties": True, "departures": {"ml": _ml_departure}})

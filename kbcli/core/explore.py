@@ -184,7 +184,7 @@ def _cover_candidates(area: tuple, spacing: float, rng: np.random.Generator) -> 
     return np.clip(g, (x0, y0), (x1, y1))
 
 
-@STRATEGIES.register("active")
+@STRATEGIES.register("active", traits={"covers": True})
 def active_strategy(exploration: Exploration, n: int, rng: np.random.Generator) -> np.ndarray:
     """Cover the area to ``explore_radius``, then the widest places of the boundary bands."""
     taken, area, cfg = exploration.landed, exploration.area, exploration.cfg
@@ -217,7 +217,7 @@ def active_strategy(exploration: Exploration, n: int, rng: np.random.Generator) 
     return np.array(picks)
 
 
-@STRATEGIES.register("balanced")
+@STRATEGIES.register("balanced", traits={"covers": True})
 def balanced_strategy(exploration: Exploration, n: int, rng: np.random.Generator) -> np.ndarray:
     """Boundary seeking and coverage weighed in one rule (issue 27), instead of ``active``'s
     cover-then-bisect.
@@ -265,7 +265,7 @@ def balanced_strategy(exploration: Exploration, n: int, rng: np.random.Generator
     return np.array(picks)
 
 
-@STRATEGIES.register("random")
+@STRATEGIES.register("random", traits={"baseline": True})
 def random_strategy(exploration: Exploration, n: int, rng: np.random.Generator) -> np.ndarray:
     """Uniform targets over the working area (the baseline)."""
     return _uniform(exploration.area, n, rng)
@@ -344,7 +344,7 @@ class Exploration:
         rng: np.random.Generator,
     ) -> None:
         self.area = tuple(float(v) for v in area)
-        if cfg.strategy in ("active", "balanced"):
+        if STRATEGIES.trait(cfg.strategy, "covers", False):  # it reaches around its samples
             check_cover(self.area, cfg.explore_radius)
         self.cfg = cfg
         self.touch = touch

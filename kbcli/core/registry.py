@@ -83,17 +83,20 @@ class Registry(Generic[T]):
         self._entries: dict[str, T] = {}
         self._summaries: dict[str, str] = {}
         self._uses: dict[str, tuple[Uses, ...]] = {}
+        self._traits: dict[str, dict[str, Any]] = {}
 
     @overload
     def register(self, name: str, obj: None = None, *, summary: str = "",
-                 replace: bool = False, uses: Iterable[str | Uses] = ()) -> Callable[[T], T]: ...
+                 replace: bool = False, uses: Iterable[str | Uses] = (),
+                 traits: dict[str, Any] | None = None) -> Callable[[T], T]: ...
 
     @overload
     def register(self, name: str, obj: T, *, summary: str = "", replace: bool = False,
-                 uses: Iterable[str | Uses] = ()) -> T: ...
+                 uses: Iterable[str | Uses] = (), traits: dict[str, Any] | None = None) -> T: ...
 
     def register(self, name: str, obj: T | None = None, *, summary: str = "",
-                 replace: bool = False, uses: Iterable[str | Uses] = ()) -> Any:
+                 replace: bool = False, uses: Iterable[str | Uses] = (),
+                 traits: dict[str, Any] | None = None) -> Any:
         """Register ``obj`` as ``name``; without ``obj``, a decorator that registers what it wraps.
 
         Parameters
@@ -108,6 +111,9 @@ class Registry(Generic[T]):
             The options of the config that only this part (and others that list them too) reads:
             an option listed by some entry applies to a config only when its chosen entry lists it
             (:mod:`kbcli.core.applies`). Options no entry lists apply to every choice.
+        traits : dict, optional
+            What the part declares of itself for the code that uses it (a capability such as
+            ``{"covers": True}``, a label): read with :meth:`trait`, never inferred from the name.
         """
         if not isinstance(name, str) or not name:
             raise ValueError(f"a {self.kind} needs a non-empty name, got {name!r}")
@@ -119,6 +125,7 @@ class Registry(Generic[T]):
             doc = (getattr(entry, "__doc__", None) or "").strip().splitlines()
             self._summaries[name] = summary or (doc[0] if doc else "")
             self._uses[name] = tuple(u if isinstance(u, Uses) else Uses(u) for u in uses)
+            self._traits[name] = dict(traits or {})
             return entry
 
         return add if obj is None else add(obj)
@@ -128,6 +135,7 @@ class Registry(Generic[T]):
         self._entries.pop(name, None)
         self._summaries.pop(name, None)
         self._uses.pop(name, None)
+        self._traits.pop(name, None)
 
     @contextlib.contextmanager
     def temporarily(self, name: str, obj: T, *, summary: str = "") -> Iterator[T]:
@@ -161,6 +169,15 @@ class Registry(Generic[T]):
         """The options ``name`` reads that not every part of this kind does (``register(uses=)``)."""
         self.get(name)
         return self._uses[name]
+
+    def trait(self, name: str, key: str, default: Any = None) -> Any:
+        """What ``name`` declared as ``key`` when registered (``traits=``), else ``default``."""
+        self.get(name)
+        return self._traits[name].get(key, default)
+
+    def having(self, key: str, value: Any = True) -> tuple[str, ...]:
+        """The names whose trait ``key`` is ``value``, in registration order."""
+        return tuple(n for n in self._entries if self._traits[n].get(key) == value)
 
     def names(self) -> tuple[str, ...]:
         """The registered names, in registration order."""

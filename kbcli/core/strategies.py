@@ -49,8 +49,10 @@ import numpy as np
 
 from kbcli.core import transforms
 from kbcli.core.posterior import Posterior, log_normalise
+from kbcli.core.posteriors import POSTERIORS
 from kbcli.core.registry import Registry, Uses
 from kbcli.core.table import LikelihoodTable
+from kbcli.core.transforms import FAMILIES
 
 StrategyFn = Callable[["Context", np.random.Generator], np.ndarray]
 
@@ -129,7 +131,7 @@ def uniform_actions(area: tuple[float, float, float, float], n: int,
 def inverse_points(family: str, hyp: np.ndarray, actions: np.ndarray,
                    centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Coordinates of ``T_h^-1(a)`` for hypotheses (K, P) x actions (M, 2): two (K, M) arrays."""
-    if family == "translation":
+    if not FAMILIES.get(family).rotates:  # a shift: T_h^-1(a) = a - h
         return actions[None, :, 0] - hyp[:, 0, None], actions[None, :, 1] - hyp[:, 1, None]
     p = transforms.inverse_many(family, hyp, actions, centre)
     return p[..., 0], p[..., 1]
@@ -215,7 +217,7 @@ def boundary_candidates(ctx: Context, n_edges: int, n_corners: int, hyp: np.ndar
     # cleanly on one side and the cell nearest the truth always agrees with the outcome
     h = h.copy()
     h[:, -2:] += rng.choice([-0.5, 0.5], size=(len(h), 2)) * ctx.posterior.grid.resolution
-    if ctx.family == "translation":
+    if not FAMILIES.get(ctx.family).rotates:
         out = pts + h
     else:
         out = transforms.apply_many(ctx.family, h, pts[:, None, :], ctx.centre)[:, 0, :]
@@ -253,7 +255,23 @@ def random_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     return uniform_actions(ctx.area, 1, rng)[0]
 
 
-@STRATEGIES.register("active", uses=("candidates", "active_keep", "active_hypotheses", "ml_ties"))
+def _active_candidates(r: dict) -> str:
+    return (f"`active` draws {r.get('candidates', '(default)')} candidates uniformly over the "
+            "working area and ranks them by the entropy of the posterior predictive over "
+            f"{r.get('active_hypotheses', '(default)')} hypotheses, keeping the "
+            f"{r.get('active_keep', '(default)')} most confusing; the model's own confusion factor "
+            "is not used")
+
+
+def _active_simulation(r: dict) -> str:
+    return ("each kept candidate is simulated with the model's likelihood table, not a KDE "
+            "term of Algorithm 2; at the first step the best hypothesis of a flat posterior "
+            "is the grid's first cell")
+
+
+@STRATEGIES.register("active", uses=("candidates", "active_keep", "active_hypotheses", "ml_ties"),
+                     traits={"paper": True, "departures": {"candidates": _active_candidates,
+                                                           "simulation": _active_simulation}})
 def active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """The paper's: most confusing candidates, then the largest simulated entropy reduction under
     the best hypothesis."""
@@ -279,12 +297,32 @@ def active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
 
 
 def _kde(cfg) -> bool:
-    return getattr(cfg, "posterior", None) == "kde"
+    """Whether the config's posterior draws samples of p(action | sound) (the KDE's); ``cfg``: a
+    config or a recorded config's dict."""
+    name = cfg.get("posterior", "likelihood") if isinstance(cfg, dict) else \
+        getattr(cfg, "posterior", "likelihood")
+    return POSTERIORS.get(name).uses_samples
+
+
+def _paper_candidates(r: dict) -> str:
+    return (f"`paper-active`: {r.get('candidates', '(default)')} candidates sampled from the model "
+            "(a sound uniform over the model's sounds, then an action from p(a | s)), ranked by "
+            f"the model's confusion factor 1 - (p1 - p2), the {r.get('active_keep', '(default)')} "
+            "most confusing kept (the counts and the sounds' distribution are open)")
+
+
+def _paper_simulation(r: dict) -> str:
+    sim = r.get("simulate_draw") or r.get("kde_draw", "shared")
+    return ("each kept candidate's sound simulated at the maximum-likelihood hypothesis and "
+            "the whole posterior updated with the method's own term"
+            + (f" (KDE samples of the simulated touches: {sim})" if _kde(r) else ""))
 
 
 @STRATEGIES.register("paper-active", uses=(
     "candidates", "active_keep", "kde_sampler", "ml_ties",
-    Uses("simulate_draw", _kde, 'posterior = "kde"', 'posterior is not "kde"')))
+    Uses("simulate_draw", _kde, 'posterior = "kde"', 'posterior is not "kde"')),
+    traits={"paper": True, "departures": {"candidates": _paper_candidates,
+                                          "simulation": _paper_simulation}})
 def paper_active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """Sect. III-E as the paper writes it.
 

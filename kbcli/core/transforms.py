@@ -86,6 +86,8 @@ FAMILIES.register("rigid", Family("rigid", ("angle", "dx", "dy"), rotates=True),
                   uses=("max_angle", "angle_resolution",
                         Uses("stop_angle", lambda cfg: bool(cfg.stop_mass), "stop_mass > 0",
                              "stop_mass = 0")))
+#: The family a config chooses when it names none (the paper's).
+DEFAULT_FAMILY = "translation"
 
 
 def family_for(params: dict[str, float]) -> Family:

@@ -12,6 +12,7 @@ import numpy as np
 
 from kbcli.core import stats
 from kbcli.errors import ArtifactError
+from kbcli.sim.modes import MODES
 from kbcli.stages.artifact import Artifact
 
 #: Steps at which the RMSE table is read (those beyond max_steps are dropped).
@@ -60,6 +61,17 @@ class Report:
     readme: str
     claims: list[Claim]
     figures: list[Figure] = field(default_factory=list)
+
+
+def exact_mode(modes) -> str | None:
+    """The first of ``modes`` whose arm simulates no physics (the paper's Sect. IV-A and IV-B:
+    the finger lands where it aims), None when none of them is such a mode."""
+    return next((m for m in modes if m in MODES and not MODES.get(m).physics), None)
+
+
+def physical_mode(modes) -> str | None:
+    """The first of ``modes`` whose arm simulates its dynamics (the paper's Sect. IV-C), or None."""
+    return next((m for m in modes if m in MODES and MODES.get(m).physics), None)
 
 
 def fmt_p(p: float) -> str:
