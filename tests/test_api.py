@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 import kbcli
-from kbcli.core.adapter import Adapter as CoreAdapter
-from kbcli.core.detect import Detector as CoreDetector
-from kbcli.core.keyboard import KeyboardConfig
-from kbcli.core.model import ExactModel
+from kbcli.core.adaptation.adapter import Adapter as CoreAdapter
+from kbcli.core.detection.detectors import Detector as CoreDetector
+from kbcli.core.instrument.keyboard import KeyboardConfig
+from kbcli.core.model.base import ExactModel
 from kbcli.errors import ArtifactError, ConfigError, ObservationError
 from kbcli.io.artifact import write_artifact
 from kbcli.sim import IdealReacher, SimConfig, World

@@ -17,8 +17,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from kbcli.cli import app
-from kbcli.core import stats
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.adaptation import stats
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, sha256_file, write_artifact
 from kbcli.io.runner import Checkpoint, Job, execute, source_digest
@@ -222,7 +222,7 @@ def test_curve_invariants(n, steps, seed):
 def test_playing_success_is_measured_by_replaying_the_melody(truth):
     """Algorithm 1 replayed on displacements that are not multiples of any grid spacing (0.5 px
     grid, 50 px keys): exact before and with the true correction; the analytic share otherwise."""
-    from kbcli.core.model import ExactModel
+    from kbcli.core.model.base import ExactModel
     from kbcli.sim import SimConfig
     from kbcli.stages.adapt import PlayCheck, play_success
 
@@ -246,9 +246,9 @@ def test_playing_success_is_measured_by_replaying_the_melody(truth):
 def test_replay_follows_algorithm_1():
     """MATCH moves on to the next note, NO_MATCH restarts from note 0: with note D always missed,
     the melody A D E D A plays A, D(miss), A, D(miss), ... so every second touch fails."""
-    from kbcli.core.melody import parse_melody
-    from kbcli.core.model import ExactModel
-    from kbcli.core.play import MATCH, NO_MATCH, note_classes, replay
+    from kbcli.core.instrument.melody import parse_melody
+    from kbcli.core.model.base import ExactModel
+    from kbcli.core.playing.play import MATCH, NO_MATCH, note_classes, replay
 
     kb = Keyboard(KeyboardConfig())
     model = ExactModel(kb)
@@ -281,7 +281,7 @@ def test_paper_config_parses_and_plans():
     v1 = stage.adapt_config(cfg, "paper-v1", "active", "ideal")
     assert (v1.robot.kde_draw, v1.robot.kde_eps, v1.robot.ml_ties) == ("shared", 1e-3, "first")
     ours = stage.adapt_config(cfg, "kbcli", "infogain", "dynamics")
-    from kbcli.core.adapter_config import AdapterConfig
+    from kbcli.core.adaptation.config import AdapterConfig
 
     # kbcli is the adapter's defaults: what they are, it is
     assert ours.robot == AdapterConfig(strategy="infogain")
@@ -297,7 +297,7 @@ def test_paper_config_parses_and_plans():
     assert resolved["paper-likelihood"]["modes"] == ["ideal"]
     # options left to the model are resolved with it: a model that rates its boundaries 4 px off
     # gets a 16 px spot radius and a blur grid up to 8 px on the robust posterior, none on the KDE
-    from kbcli.core.model import ExactModel
+    from kbcli.core.model.base import ExactModel
 
     weak = ExactModel(Keyboard(KeyboardConfig()))
     weak.reliability_ = {"boundary_error": 4.0}

@@ -12,7 +12,7 @@ import pytest
 from helpers import one_line_error
 
 from kbcli.cli import app
-from kbcli.core.geometry import (
+from kbcli.core.instrument.geometry import (
     MAX_COORD,
     OVERLAP_AREA,
     KeyShapes,
@@ -22,8 +22,8 @@ from kbcli.core.geometry import (
     points_in_polygon,
     segment_distance,
 )
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import LAYOUTS, PolygonKey, example_config_fields
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.layouts import LAYOUTS, PolygonKey, example_config_fields
 from kbcli.errors import ConfigError
 from kbcli.io.config import load_toml
 

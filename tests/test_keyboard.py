@@ -9,8 +9,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kbcli.core import transforms
-from kbcli.core.keyboard import Keyboard, KeyboardConfig, match, midi_to_name, name_to_midi
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.keyboard import (
+    Keyboard,
+    KeyboardConfig,
+    match,
+    midi_to_name,
+    name_to_midi,
+)
 from kbcli.errors import ConfigError
 
 KB = Keyboard(KeyboardConfig())

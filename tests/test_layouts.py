@@ -9,17 +9,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from kbcli.cli import app
-from kbcli.core import transforms
-from kbcli.core.geometry import (
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.geometry import (
     KeyShapes,
     check_overlaps,
     check_polygon,
     points_in_polygon,
     polygon_area,
 )
-from kbcli.core.keyboard import Keyboard, KeyboardConfig, PolygonKey
-from kbcli.core.layouts import LAYOUTS, example_config_fields, example_polygon_keys
-from kbcli.core.model import ExactModel
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig, PolygonKey
+from kbcli.core.instrument.layouts import LAYOUTS, example_config_fields, example_polygon_keys
+from kbcli.core.model.base import ExactModel
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml

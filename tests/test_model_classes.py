@@ -10,21 +10,21 @@ from scipy.spatial import cKDTree
 from sklearn.exceptions import NotFittedError
 
 from kbcli.cli import app
-from kbcli.core import accuracy as scoring
-from kbcli.core.adapt import adapt
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.explore import Exploration, ExploreConfig
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import example_config_fields
-from kbcli.core.model_classes import (
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.loop import adapt
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.layouts import example_config_fields
+from kbcli.core.model import accuracy as scoring
+from kbcli.core.model.classes import (
     MODEL_CLASSES,
     fit_model,
     learned_classes,
     make_model,
     model_from_arrays,
 )
-from kbcli.core.svc_model import SVCModel
+from kbcli.core.model.explore import Exploration, ExploreConfig
+from kbcli.core.model.svc import SVCModel
 from kbcli.errors import ArtifactError, ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.sim import SimConfig, World, make_reacher

@@ -7,16 +7,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kbcli.core.action_sampler import FreshSamples, RasterSampler
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.applies import applies
-from kbcli.core.grid import HypothesisGrid
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.model import ExactModel
-from kbcli.core.posterior import Posterior, fair_argmax
-from kbcli.core.strategies import STRATEGIES, Context
-from kbcli.core.table import LikelihoodTable
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.applies import applies
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.grid import HypothesisGrid
+from kbcli.core.adaptation.posteriors.kde.samples import FreshSamples
+from kbcli.core.adaptation.posteriors.posterior import Posterior, fair_argmax
+from kbcli.core.adaptation.strategies import STRATEGIES, Context
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model.base import ExactModel
+from kbcli.core.model.sampling import RasterSampler
+from kbcli.core.model.table import LikelihoodTable
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.runner import Job, execute

@@ -10,16 +10,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kbcli.core import accuracy as scoring
-from kbcli.core import credible
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.applies import unused
-from kbcli.core.grid import HypothesisGrid
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.model import ExactModel
-from kbcli.core.model_classes import fit_model
-from kbcli.core.repair import (
+from kbcli.core.adaptation import credible
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.applies import unused
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.grid import HypothesisGrid
+from kbcli.core.adaptation.posteriors.likelihood.robust import Nuisance
+from kbcli.core.adaptation.repair import (
     RepairBelief,
     RepairMap,
     Touches,
@@ -28,8 +25,11 @@ from kbcli.core.repair import (
     repair_terms,
     repaired_map,
 )
-from kbcli.core.robust import Nuisance
-from kbcli.core.table import LikelihoodTable
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model import accuracy as scoring
+from kbcli.core.model.base import ExactModel
+from kbcli.core.model.classes import fit_model
+from kbcli.core.model.table import LikelihoodTable
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig, World, make_reacher
 

@@ -9,7 +9,7 @@ import pytest
 from test_evaluate import FAKE, small_config
 
 from kbcli.cli import app
-from kbcli.core.adapter_config import AdapterConfig
+from kbcli.core.adaptation.config import AdapterConfig
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import evaluate as evaluate_stage
 from kbcli.stages import report as stage
@@ -217,7 +217,7 @@ def test_schema_1_artifacts_are_still_read():
 
 
 def test_report_cli_from_an_evaluation(runner, tmp_path, monkeypatch):
-    from kbcli.core.keyboard import KeyboardConfig
+    from kbcli.core.instrument.keyboard import KeyboardConfig
     from kbcli.stages import keyboard as keyboard_stage
 
     cfg = small_config(modes=["ideal", "dynamics"])

@@ -15,7 +15,7 @@ from __future__ import annotations
 import pytest
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
-from kbcli.core.model_classes import MODEL_CLASSES, learned_classes
+from kbcli.core.model.classes import MODEL_CLASSES, learned_classes
 
 #: A model of the pad is fitted on (n, 2) pad positions and (n, D) heard features: sklearn's
 #: generated data (X of 3 or more columns, y of 1-D labels or strings) is not such a sample.

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from kbcli.core.adapter_config import AdapterConfig
+from kbcli.core.adaptation.config import AdapterConfig
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact
 from kbcli.stages.adapt import AdaptConfig, PlayCheck

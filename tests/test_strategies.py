@@ -7,19 +7,19 @@ import math
 import numpy as np
 import pytest
 
-from kbcli.core.adapt import adapt
-from kbcli.core.adapt_setup import build_table
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.model import ExactModel
-from kbcli.core.posterior import Posterior
-from kbcli.core.strategies import (
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.loop import adapt
+from kbcli.core.adaptation.posteriors.posterior import Posterior
+from kbcli.core.adaptation.setup import build_table
+from kbcli.core.adaptation.strategies import (
     STRATEGIES,
     entropy_rows,
     outcome_distribution,
 )
-from kbcli.core.table import LikelihoodTable
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model.base import ExactModel
+from kbcli.core.model.table import LikelihoodTable
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig, World, make_reacher
 
@@ -187,9 +187,9 @@ class _SoftWrapper:
 
 
 def test_the_plain_posterior_softens_learned_models_and_the_robust_one_learns_the_blur():
-    from kbcli.core.adapt_setup import total_blur
-    from kbcli.core.adapter_config import LEARNED_BLUR
-    from kbcli.core.robust import DEFAULT_BLURS
+    from kbcli.core.adaptation.config import LEARNED_BLUR
+    from kbcli.core.adaptation.posteriors.likelihood.robust import DEFAULT_BLURS
+    from kbcli.core.adaptation.setup import total_blur
 
     soft = _SoftWrapper(MODEL)
     plain = AdapterConfig(prior_halfwidth=10.0, raster_step=1.0, robust=False)
@@ -253,7 +253,7 @@ def test_active_keeps_the_most_confusing_then_simulates_the_best_hypothesis(monk
     (H(0.5) = 0.69) but, simulated under the best hypothesis h1, settles the posterior on h1
     (entropy ~0) where S2 leaves h1 and h4 (0.67 nats). W tells nothing. Active keeps the
     ``active_keep`` most confusing candidates, then picks the lowest simulated entropy."""
-    import kbcli.core.strategies as strategies
+    import kbcli.core.adaptation.strategies as strategies
 
     ad, hyp, w = _four_hypotheses()
     s1, s2, wasted = _find(hyp, "abbb"), _find(hyp, "aabb"), _find(hyp, "aaaa")
@@ -303,7 +303,7 @@ def test_information_gain_is_the_mutual_information_not_the_predictive_entropy()
     entropy is log 2 but nothing is learnt (I = 0): an infogain that ranked actions by predictive
     entropy would seek the coin flip.
     """
-    from kbcli.core.strategies import information_gain
+    from kbcli.core.adaptation.strategies import information_gain
 
     probs = np.array([[[0.0, 0.5, 0.5], [0.0, 1.0, 0.0]]], np.float32)  # (H=1, W=2, C=3)
     table = LikelihoodTable(np.zeros(2), 1.0, 3, 1e-9, probs=probs)

@@ -10,7 +10,7 @@ Euclidean norm of the translation in (0, 10], (10, 20] or (20, 40] px. Per strat
 reports the median observations until the error is below 4, 2, 1, 0.5 px (first step below; runs
 that never get there within T count as T + 1, and how many never do), the RMSE at steps 1, 2, 3, 5,
 10, 20, 40, the p-value of the Wilcoxon signed-rank test of those counts against ``random`` on the
-paired runs (:func:`kbcli.core.stats.signed_rank_pvalues`; the smallest p-value ``n`` pairs can
+paired runs (:func:`kbcli.core.adaptation.stats.signed_rank_pvalues`; the smallest p-value ``n`` pairs can
 give is ``2 / 2^n``) and the median milliseconds per step (decision plus update).
 
 For the rigid family a threshold of ``t`` px also asks the angle to be within ``t / 2`` degrees
@@ -54,17 +54,17 @@ from typing import Annotated, ClassVar
 import numpy as np
 from pydantic import AfterValidator, Field, Strict
 
-from kbcli.core import stats
-from kbcli.core.adapt_setup import build_samples, build_table
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
+from kbcli.core.adaptation import stats
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.posteriors import POSTERIORS
+from kbcli.core.adaptation.setup import build_samples, build_table
 from kbcli.core.config import Config, Count, Name, NonNegative, NonNegativeInt, each, member_of
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import LAYOUTS, example_config_fields
-from kbcli.core.model import ExactModel
-from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.layouts import LAYOUTS, example_config_fields
+from kbcli.core.instrument.transforms import FAMILIES
+from kbcli.core.model.base import ExactModel
 from kbcli.core.registry import Registry
-from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.stages.adapt import AdaptConfig, experiment
 from kbcli.stages.perturb import CATEGORIES, draw

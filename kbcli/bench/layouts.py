@@ -34,9 +34,9 @@ from kbcli import __version__
 from kbcli.bench import adapt as adapt_bench
 from kbcli.bench import learn as learn_bench
 from kbcli.core.config import Config, Count, Name, Names, NonNegativeInt, Whole, each
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import LAYOUTS
-from kbcli.core.model_classes import check_learned
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.layouts import LAYOUTS
+from kbcli.core.model.classes import check_learned
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.atomic import atomic_path
@@ -317,7 +317,7 @@ def _pooled_median(rows: list[dict], cells: list, label: str, section: str,
                    threshold: float, ) -> tuple[float, int]:
     """Median touches to ``threshold`` px over every category's runs of one strategy (runs that
     never get there count as T + 1), and how many never did."""
-    from kbcli.core import stats
+    from kbcli.core.adaptation import stats
 
     counts = []
     T = 0

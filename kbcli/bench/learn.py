@@ -1,11 +1,11 @@
 """Benchmark of learning the instrument model: sample efficiency and speed, per layout and class.
 
 For each layout (its default keyboard, :func:`bench_keyboard`; or a given keyboard), model class
-(:mod:`kbcli.core.model_classes`) and exploration strategy, the model is learned from ``seeds``
+(:mod:`kbcli.core.model.classes`) and exploration strategy, the model is learned from ``seeds``
 seeds (``SeedSequence(seed).spawn(seeds)``; run ``i`` uses the same seed for every layout, class and
 strategy) up to the largest budget. Every ``resolution`` reaches and at each budget the model is
 scored on a grid of ``eval_step`` px (1 px: the grid of ``kbcli learn``'s final accuracy) over the
-working area (accuracy, :mod:`kbcli.core.accuracy`). Reported per row: the median accuracy at each
+working area (accuracy, :mod:`kbcli.core.model.accuracy`). Reported per row: the median accuracy at each
 budget, the median reaches until the accuracy first reaches 97 % and 99 % (runs that never do count
 as more than the largest budget), the median boundary error (px, on a 1 px grid) at
 ``boundary_budget`` reaches and the median time of one fit on all the samples of the largest budget.
@@ -29,12 +29,12 @@ import numpy as np
 from pydantic import AfterValidator, Field, model_validator
 
 from kbcli import __version__
-from kbcli.core import accuracy as scoring
 from kbcli.core.config import Config, Count, Name, NonNegativeInt, Positive, each, member_of
-from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import LAYOUTS, example_config_fields
-from kbcli.core.model_classes import check_learned, fit_model
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.layouts import LAYOUTS, example_config_fields
+from kbcli.core.model import accuracy as scoring
+from kbcli.core.model.classes import check_learned, fit_model
+from kbcli.core.model.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.io.atomic import atomic_path
 from kbcli.sim import MODES, SimConfig, World, check_keyboard_reachable, make_reacher
 from kbcli.sim.config import ReachNoise

@@ -29,8 +29,8 @@ from kbcli.cli.app import (
 )
 from kbcli.cli.record import load_average, show_table
 from kbcli.cli.repair import check_model_out, write_repaired
-from kbcli.core.applies import refuse_unused
-from kbcli.core.transforms import DEFAULT_FAMILY, FAMILIES
+from kbcli.core.adaptation.applies import refuse_unused
+from kbcli.core.instrument.transforms import DEFAULT_FAMILY, FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm, load_stage_table, with_file
@@ -164,7 +164,7 @@ def _adapt_config(config: Path | None, flags: dict, arm: str | None,
     """The [adapt] table of ``config`` (if any) with the flags given on top, the arm, and
     ``family`` (the scene's) unless set, whether it was the scene's, and the table's
     ``snapshot_steps`` (None if absent); a robot option set (in either) that the method does not
-    read is refused (:func:`kbcli.core.applies.refuse_unused`)."""
+    read is refused (:func:`kbcli.core.adaptation.applies.refuse_unused`)."""
     table = load_stage_table(config, "adapt") if config is not None else {}
     snaps = table.pop("snapshot_steps", None)
     given = {k: v for k, v in flags.items() if v is not None}

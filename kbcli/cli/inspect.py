@@ -10,7 +10,7 @@ import typer
 from rich.table import Table
 
 from kbcli.cli.app import command, out
-from kbcli.core.applies import applies, shown, view
+from kbcli.core.adaptation.applies import applies, shown, view
 from kbcli.errors import ArtifactError
 from kbcli.io.artifact import describe, provenance_chain
 
@@ -131,7 +131,7 @@ def _unread_resolved(config: dict, attrs: dict, hidden: list) -> dict:
 
 def _flatten(d: dict, prefix: str = "", hidden: list | None = None):
     """``(dotted key, value)`` of a nested dict; a robot config (``...robot``) gives only the options
-    its method reads (:func:`kbcli.core.applies.shown`), the others' keys added to ``hidden``."""
+    its method reads (:func:`kbcli.core.adaptation.applies.shown`), the others' keys added to ``hidden``."""
     for k in sorted(d):
         v = d[k]
         if k == "robot" and isinstance(v, dict) and "posterior" in v:

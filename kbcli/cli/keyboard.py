@@ -9,8 +9,8 @@ import typer
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import busy, check_io, command, figure_output, out, plot_app
-from kbcli.core.keyboard import KeyboardConfig
-from kbcli.core.layouts import MAX_KEYS
+from kbcli.core.instrument.keyboard import KeyboardConfig
+from kbcli.core.instrument.layouts import MAX_KEYS
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml, with_file
 from kbcli.stages import keyboard as stage
@@ -68,7 +68,7 @@ def keyboard_cmd(
     sound alike (Eq. 2) and keys out of the (default) arm's reach. Writes OUTPUT (kind 'keyboard')
     and prints a one-line summary.
     """
-    from kbcli.core.keyboard import Keyboard
+    from kbcli.core.instrument.keyboard import Keyboard
     from kbcli.sim import SimConfig, check_keyboard_reachable
 
     check_io({"--config": config}, ("--output", output))

@@ -19,15 +19,15 @@ from typing import Annotated, Any
 
 import typer
 
-from kbcli.core.adapter_config import MAX_CANDIDATES, MAX_KDE_SAMPLES, AdapterConfig
-from kbcli.core.detect import DETECTORS
-from kbcli.core.estimators import ESTIMATORS
-from kbcli.core.explore import STRATEGIES as EXPLORATIONS
-from kbcli.core.layouts import LAYOUTS
-from kbcli.core.model_classes import MODEL_CLASSES, learned_classes
-from kbcli.core.posteriors import POSTERIORS
-from kbcli.core.strategies import STRATEGIES
-from kbcli.core.transforms import FAMILIES
+from kbcli.core.adaptation.config import MAX_CANDIDATES, MAX_KDE_SAMPLES, AdapterConfig
+from kbcli.core.adaptation.estimators import ESTIMATORS
+from kbcli.core.adaptation.posteriors import POSTERIORS
+from kbcli.core.adaptation.strategies import STRATEGIES
+from kbcli.core.detection.detectors import DETECTORS
+from kbcli.core.instrument.layouts import LAYOUTS
+from kbcli.core.instrument.transforms import FAMILIES
+from kbcli.core.model.classes import MODEL_CLASSES, learned_classes
+from kbcli.core.model.explore import STRATEGIES as EXPLORATIONS
 from kbcli.sim import MODES
 from kbcli.sim.arms import PRESETS
 
@@ -285,7 +285,7 @@ def robot_given(flags: Mapping[str, Any], table: Mapping[str, Any] | None = None
                 source: str = "") -> dict[str, str]:
     """The robot options a user set, each with how the message names it: the flags given (not
     None) as ``--flag``, the keys of a TOML ``[adapt]`` table (and of its ``robot`` table) as
-    ``key`` (of ``source``) (:func:`kbcli.core.applies.refuse_unused`)."""
+    ``key`` (of ``source``) (:func:`kbcli.core.adaptation.applies.refuse_unused`)."""
     robot = set(AdapterConfig.model_fields)
     table = dict(table or {})
     inner = table.pop("robot", None)

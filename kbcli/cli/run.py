@@ -22,11 +22,11 @@ from kbcli.cli.app import (
     progress,
 )
 from kbcli.cli.repair import check_model_out, write_repaired
-from kbcli.core.applies import refuse_unused
-from kbcli.core.detect import MAX_N_LT, MAX_N_ST, DetectorConfig
-from kbcli.core.loop import PLAY
-from kbcli.core.melody import DEFAULT_MELODY
-from kbcli.core.transforms import DEFAULT_FAMILY
+from kbcli.core.adaptation.applies import refuse_unused
+from kbcli.core.detection.detectors import MAX_N_LT, MAX_N_ST, DetectorConfig
+from kbcli.core.instrument.melody import DEFAULT_MELODY
+from kbcli.core.instrument.transforms import DEFAULT_FAMILY
+from kbcli.core.playing.loop import PLAY
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm
 from kbcli.stages import keyboard as keyboard_stage

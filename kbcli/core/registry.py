@@ -110,7 +110,7 @@ class Registry(Generic[T]):
         uses : iterable of str or Uses
             The options of the config that only this part (and others that list them too) reads:
             an option listed by some entry applies to a config only when its chosen entry lists it
-            (:mod:`kbcli.core.applies`). Options no entry lists apply to every choice.
+            (:mod:`kbcli.core.adaptation.applies`). Options no entry lists apply to every choice.
         traits : dict, optional
             What the part declares of itself for the code that uses it (a capability such as
             ``{"covers": True}``, a label): read with :meth:`trait`, never inferred from the name.

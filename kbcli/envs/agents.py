@@ -21,7 +21,7 @@ from typing import Any
 import gymnasium
 import numpy as np
 
-from kbcli.core.strategies import STRATEGIES
+from kbcli.core.adaptation.strategies import STRATEGIES
 from kbcli.envs.env import KeyboardAdaptEnv
 from kbcli.errors import ConfigError
 
@@ -40,7 +40,7 @@ class StrategyAgent:
     Parameters
     ----------
     strategy : str
-        A name in :data:`kbcli.core.strategies.STRATEGIES`.
+        A name in :data:`kbcli.core.adaptation.strategies.STRATEGIES`.
     env : gymnasium.Env
         The kbcli environment it acts in (wrapped or not; one environment, not a vector of them:
         it reads that environment's posterior).

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
 from kbcli.stages.artifact import Artifact
 
 

@@ -8,7 +8,7 @@ import os
 import matplotlib.pyplot as plt
 from matplotlib.patches import Rectangle
 
-from kbcli.core.keyboard import Keyboard
+from kbcli.core.instrument.keyboard import Keyboard
 from kbcli.viz.common import draw_keyboard, fit_title, save
 
 

@@ -7,9 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kbcli.core import transforms
-from kbcli.core.estimators import ESTIMATORS
-from kbcli.core.keyboard import Keyboard, sound_name
+from kbcli.core.adaptation.estimators import ESTIMATORS
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.keyboard import Keyboard, sound_name
 from kbcli.errors import KbcliError
 from kbcli.sim.modes import MODES
 from kbcli.stages.artifact import Artifact

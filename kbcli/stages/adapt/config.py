@@ -8,9 +8,9 @@ from typing import Any, ClassVar
 
 from pydantic import Field, InstanceOf, field_validator, model_validator
 
-from kbcli.core.adapter_config import AdapterConfig
+from kbcli.core.adaptation.config import AdapterConfig
 from kbcli.core.config import Flag, Name, Whole, between
-from kbcli.core.melody import DEFAULT_MELODY
+from kbcli.core.instrument.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig
 from kbcli.sim.arms import PRESETS
@@ -26,7 +26,7 @@ LOOP_FIELDS = ("mode", "reach_noise", "arm", "feedback", "max_steps", "stop")
 
 
 def robot_fields() -> tuple[str, ...]:
-    """The robot's option names (:class:`kbcli.core.adapt.AdapterConfig`)."""
+    """The robot's option names (:class:`kbcli.core.adaptation.loop.AdapterConfig`)."""
     return tuple(AdapterConfig.model_fields)
 
 
@@ -43,7 +43,7 @@ def _robot(robot: Any, flat: dict[str, Any]) -> AdapterConfig:
 
 
 class AdaptConfig(StageConfig):
-    """One adaptation: the robot's settings (``robot``, a :class:`kbcli.core.adapt.AdapterConfig`)
+    """One adaptation: the robot's settings (``robot``, a :class:`kbcli.core.adaptation.loop.AdapterConfig`)
     plus the simulated arm's and the loop's.
 
     Parameters
@@ -151,7 +151,7 @@ class PlayCheck(StageConfig):
     Parameters
     ----------
     melody : str
-        Notes ``NOTE:BEATS`` (:mod:`kbcli.core.melody`).
+        Notes ``NOTE:BEATS`` (:mod:`kbcli.core.instrument.melody`).
     notes : int
         Touches per replay.
     reference : bool

@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core import transforms
-from kbcli.core.adapt import Step
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.estimators import ESTIMATORS
-from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.estimators import ESTIMATORS
+from kbcli.core.adaptation.loop import Step
+from kbcli.core.adaptation.posteriors import POSTERIORS
+from kbcli.core.instrument import transforms
 
 #: Per-step records of a ``run`` artifact, in the order :meth:`Recorder.add` takes them.
 RECORDS = ("actions", "landed", "perceived", "classes", "estimates", "means", "errors", "ml_errors",

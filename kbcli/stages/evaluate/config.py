@@ -11,8 +11,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import Field, InstanceOf, field_validator, model_validator
 
-from kbcli.core import transforms
-from kbcli.core.applies import refuse_unused
+from kbcli.core.adaptation.applies import refuse_unused
 from kbcli.core.config import (
     Name,
     Names,
@@ -22,7 +21,8 @@ from kbcli.core.config import (
     Whole,
     between,
 )
-from kbcli.core.melody import DEFAULT_MELODY
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
 from kbcli.sim import MODES
 from kbcli.sim.config import ReachNoise
@@ -189,7 +189,7 @@ class EvaluateConfig(StageConfig):
     modes : tuple of str
         Reaching modes (:data:`kbcli.sim.MODES`).
     family : str
-        Transform family (:data:`kbcli.core.transforms.FAMILIES`).
+        Transform family (:data:`kbcli.core.instrument.transforms.FAMILIES`).
     max_steps : int
         Observations per experiment (T).
     thresholds : tuple of float
@@ -414,7 +414,7 @@ def resolved_methods(cfg: EvaluateConfig, model=None) -> dict:
     ``model``: the robust posterior's ``redundancy_radius`` (px), ``robust_blurs`` (px) and
     ``robust_eta`` (its learning rate); 0, [] and 1 with the plain or KDE posterior. Empty without a model.
     """
-    from kbcli.core.adapter_config import learning_rate, redundancy_radius, robust_blurs
+    from kbcli.core.adaptation.config import learning_rate, redundancy_radius, robust_blurs
 
     out = {}
     for m in cfg.methods:

@@ -55,8 +55,8 @@ def adapt_stage():
 
 
 def known_strategies() -> tuple[str, ...]:
-    """Strategy names the adapter offers (:data:`kbcli.core.strategies.STRATEGIES`)."""
-    from kbcli.core.strategies import STRATEGIES
+    """Strategy names the adapter offers (:data:`kbcli.core.adaptation.strategies.STRATEGIES`)."""
+    from kbcli.core.adaptation.strategies import STRATEGIES
 
     return tuple(STRATEGIES)
 

@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from kbcli.core.estimators import ESTIMATORS
-from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.adaptation.estimators import ESTIMATORS
+from kbcli.core.adaptation.posteriors import POSTERIORS
 from kbcli.errors import ConfigError
 from kbcli.stages.evaluate.config import EvaluateConfig, adapt_config
 from kbcli.stages.evaluate.methods import adapt_stage
@@ -82,7 +82,7 @@ def run_experiment(state: dict, task: Task) -> dict[str, np.ndarray]:
         if task.play_reference:  # a seed of their own: the same whichever task runs them
             kw["reference_rng"] = np.random.default_rng(task.reference_seed)
         if "play_pool" not in state:  # Algorithm 1's actions: a pool per class, resampled
-            from kbcli.core.kde import ActionSamples
+            from kbcli.core.adaptation.posteriors.kde.samples import ActionSamples
 
             state["play_pool"] = ActionSamples(state["model"], PLAY_POOL, [cfg.seed, _key("play")])
         kw["play_pool"] = state["play_pool"]

@@ -8,7 +8,7 @@ from typing import Any
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from kbcli.core.applies import refuse_unused, unused, why
+from kbcli.core.adaptation.applies import refuse_unused, unused, why
 from kbcli.core.config import (
     Config,
     Flag,
@@ -18,7 +18,7 @@ from kbcli.core.config import (
     Whole,
     between,
 )
-from kbcli.core.model_classes import EXACT  # the reference row's model: the exact class
+from kbcli.core.model.classes import EXACT  # the reference row's model: the exact class
 from kbcli.errors import ConfigError
 from kbcli.sim.arms import arm_config
 from kbcli.sim.config import ModeName, ReachNoise
@@ -192,7 +192,7 @@ class QualityConfig(Config):
     @model_validator(mode="after")
     def _rows_adapt(self) -> QualityConfig:
         """Let the adapt stage check every row's options (the shared ones and the row's); a row's
-        own option its method does not read is refused (:func:`kbcli.core.applies.refuse_unused`)."""
+        own option its method does not read is refused (:func:`kbcli.core.adaptation.applies.refuse_unused`)."""
         configs = {}
         for name in self.rows:
             try:

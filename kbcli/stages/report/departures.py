@@ -12,10 +12,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from kbcli.core.estimators import ESTIMATORS
-from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.adaptation.estimators import ESTIMATORS
+from kbcli.core.adaptation.posteriors import POSTERIORS
+from kbcli.core.adaptation.strategies import STRATEGIES
 from kbcli.core.registry import Registry
-from kbcli.core.strategies import STRATEGIES
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.report.runs import PAPER_STOP_ML
 from kbcli.stages.report.source import compared, physical_mode, robot

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core import stats
-from kbcli.core.strategies import STRATEGIES
+from kbcli.core.adaptation import stats
+from kbcli.core.adaptation.strategies import STRATEGIES
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.report.source import (
     ENTROPY_STEPS,

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 from functools import partial
 
-from kbcli.core.estimators import ESTIMATORS
+from kbcli.core.adaptation.estimators import ESTIMATORS
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.report.effects import falls, shrinks
 from kbcli.stages.report.judge import (

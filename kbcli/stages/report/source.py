@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kbcli.core import stats
+from kbcli.core.adaptation import stats
 from kbcli.errors import ArtifactError
 from kbcli.sim.modes import MODES
 from kbcli.stages.artifact import Artifact
@@ -253,7 +253,7 @@ def played(art: Artifact, sel: np.ndarray, key: str) -> np.ndarray:
 def prior_entropy(art: Artifact, method: str) -> float | None:
     """Entropy (nats) of a method's uniform prior over its hypothesis grid: the posterior entropy
     at t = 0, before any observation (None when its options do not say the grid)."""
-    from kbcli.core.grid import grid_bytes
+    from kbcli.core.adaptation.grid import grid_bytes
 
     r = robot(art, method)
     try:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core.applies import applies, view
+from kbcli.core.adaptation.applies import applies, view
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.report.source import (
     KEY_OPTIONS,
@@ -33,13 +33,13 @@ def methods_table(art: Artifact) -> list[str]:
             *_loop_rows(_loop_options(info, meths), meths)]
 
 
-#: What the methods table prints for an option a method does not read (:mod:`kbcli.core.applies`).
+#: What the methods table prints for an option a method does not read (:mod:`kbcli.core.adaptation.applies`).
 NOT_APPLICABLE = "n/a"
 
 
 def applicable(art: Artifact, method: str) -> dict:
     """A method's robot options, :data:`NOT_APPLICABLE` for those it does not read (its parts
-    name what they read: :func:`kbcli.core.applies.applies`)."""
+    name what they read: :func:`kbcli.core.adaptation.applies.applies`)."""
     r, strategies = robot(art, method), methods_of(art)[method]["strategies"]
     cfg = view(r)
     return {k: v if applies(k, cfg, strategies) else NOT_APPLICABLE for k, v in r.items()}

@@ -1,0 +1,48 @@
+"""The ``hex`` layout: a hexagonal isomorphic keyboard (Wicki-Hayden tuning).
+
+``rows`` rows of ``cols`` pointy-top hexagons, ``key_size`` across the flats, odd rows shifted right
+by half a key. One key right is a whole tone up, up-right a fifth, up-left a fourth (``pitch = base +
+2 (c - r // 2) + 7 r``); the same note can sit on several keys, told apart by their tempo (as the
+grid's).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from kbcli.core.instrument.geometry import KeyShapes
+from kbcli.core.instrument.layouts.base import (
+    KeyboardConfig,
+    LayoutGeometry,
+    base_midi,
+    layout,
+    rowcol_geometry,
+    rows_cols,
+)
+
+
+def _describe(cfg: KeyboardConfig, n_keys: int) -> str:
+    return f"{cfg.rows} x {cfg.cols} hexagonal keys {cfg.key_size:g} px across"
+
+
+@layout("hex", "hexagonal isomorphic keys (Wicki-Hayden)", {"rows": 4, "cols": 8, "key_size": 50.0},
+        uses_scale=False, describe=_describe)
+def build(cfg: KeyboardConfig) -> LayoutGeometry:
+    """The hexagons, their Wicki-Hayden pitches and their tempi."""
+    rows, cols = rows_cols(cfg)
+    w = cfg.key_size
+    rad = w / math.sqrt(3)  # circumradius of a hexagon w across the flats
+    k = np.arange(rows * cols)
+    r, c = k // cols, k % cols
+    # Vertices on an exact lattice of (w / 2, rad / 2) steps, counterclockwise from 30 degrees: a
+    # vertex two keys share is the same float in both (the half-open rule on shared edges).
+    ix = 1 + 2 * c + r % 2  # centre in half-widths
+    iy = 2 + 3 * r  # centre in half-radii
+    dx, dy = np.array([1, 0, -1, -1, 0, 1]), np.array([1, 2, 1, -1, -2, -1])
+    polys = [np.column_stack([(x + dx) * (w / 2), (y + dy) * (rad / 2)])
+             for x, y in zip(ix, iy, strict=True)]
+    pitches = base_midi(cfg) + 2 * (c - r // 2) + 7 * r
+    shapes = KeyShapes(polygons=polys)
+    return rowcol_geometry(cfg, shapes, shapes.bounds, pitches.astype(np.int64))
