@@ -57,7 +57,6 @@ from pydantic import AfterValidator, Field, Strict
 from kbcli.core.adaptation import stats
 from kbcli.core.adaptation.adapter import Adapter
 from kbcli.core.adaptation.config import AdapterConfig
-from kbcli.core.adaptation.posteriors import POSTERIORS
 from kbcli.core.adaptation.setup import build_samples, build_table
 from kbcli.core.config import Config, Count, Name, NonNegative, NonNegativeInt, each, member_of
 from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
@@ -263,7 +262,7 @@ def plan(cfg: BenchConfig, learned_model=None, keyboard: Keyboard | None = None)
         if section.learned and learned_model is None:
             raise ConfigError(f"section {name} needs a learned model: pass --model model.h5")
         for label, acfg, model in section.variants(cfg, base, exact, learned_model):
-            cells.extend(Cell(name, label, acfg.strategy, cat, acfg, model,
+            cells.extend(Cell(name, label, acfg.robot.strategy.name, cat, acfg, model,
                               _truths(cfg, section.family, cat), seeds, keyboard=kb)
                          for cat in cfg.categories)
     return cells
@@ -283,8 +282,9 @@ def run_cells(cells: list[Cell]) -> Iterator[tuple[Cell, int]]:
                acfg.model_blur, acfg.outlier)
         if key not in tables:
             tables[key] = build_table(cell.model, acfg)
-        skey = key + (acfg.kde_samples, acfg.kde_bandwidth)
-        if POSTERIORS.get(acfg.posterior).uses_samples and skey not in samples:  # once per class
+        shared = acfg.kind.sample_key(acfg)
+        skey = None if shared is None else key + shared
+        if skey is not None and skey not in samples:  # once per class
             samples[skey] = build_samples(cell.model, acfg, [0])
         for i, truth in enumerate(cell.truths):
             # a fresh copy: spawning from a shared SeedSequence would advance it for later cells

@@ -29,7 +29,7 @@ from kbcli.cli.app import (
 )
 from kbcli.cli.record import load_average, show_table
 from kbcli.cli.repair import check_model_out, write_repaired
-from kbcli.core.adaptation.applies import refuse_unused
+from kbcli.core.adaptation.config import refuse_inactive
 from kbcli.core.instrument.transforms import DEFAULT_FAMILY, FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -130,11 +130,11 @@ def adapt_cmd(
     scene_art = read_artifact(scene, "scene")
     cfg, scene_family, table_snaps = _adapt_config(config, flags, arm,
                                                    scene_art.config.get("family", "translation"))
-    check_model_out(model_out, cfg.repair)
+    check_model_out(model_out, cfg.robot.repairs)
     steps = _snapshots(snapshots, table_snaps, cfg.max_steps)
     stage.check_inputs(model_art, scene_art)
     note_arm(cfg.arm, cfg.mode)
-    what = f"adapting ({cfg.strategy}, {cfg.posterior} posterior), observations"
+    what = f"adapting ({cfg.robot.strategy.name}, {cfg.robot.posterior.name} posterior), observations"
     timings: dict[str, float] = {}
     keep: dict = {}
     with ticker(cfg.max_steps, what) as tick:
@@ -164,7 +164,8 @@ def _adapt_config(config: Path | None, flags: dict, arm: str | None,
     """The [adapt] table of ``config`` (if any) with the flags given on top, the arm, and
     ``family`` (the scene's) unless set, whether it was the scene's, and the table's
     ``snapshot_steps`` (None if absent); a robot option set (in either) that the method does not
-    read is refused (:func:`kbcli.core.adaptation.applies.refuse_unused`)."""
+    read is refused (the part refuses an option it does not take; one it takes but does not read
+    under the others: :func:`kbcli.core.adaptation.config.refuse_inactive`)."""
     table = load_stage_table(config, "adapt") if config is not None else {}
     snaps = table.pop("snapshot_steps", None)
     given = {k: v for k, v in flags.items() if v is not None}
@@ -174,7 +175,7 @@ def _adapt_config(config: Path | None, flags: dict, arm: str | None,
     if scene_family:
         given["family"] = family
     cfg = with_file(stage.AdaptConfig, table, given, config)
-    refuse_unused(cfg.robot, opts.robot_given(flags, table, str(config)), "adapt")
+    refuse_inactive(cfg.robot, opts.robot_given(flags, table, str(config)), "adapt")
     return cfg, scene_family, snaps
 
 
@@ -189,7 +190,7 @@ def _report_run(art, cfg, output: Path, setup_ms: float | None = None) -> None:
     angle = (f", angle error {a['final_angle_error_deg']:.2f} deg"
              if FAMILIES.get(cfg.family).rotates or FAMILIES.get(a["world_family"]).rotates
              else "")
-    out.print(f"wrote {output}: {cfg.strategy}/{cfg.posterior}, {a['steps']} steps; estimate "
+    out.print(f"wrote {output}: {cfg.robot.strategy.name}/{cfg.robot.posterior.name}, {a['steps']} steps; estimate "
               f"{est} (truth {truth}); final error {a['final_error_px']:.2f} px{angle}; "
               f"below 1 px {'from step ' + str(reach) if reach else 'never'}{stop_txt}; "
               + (f"set-up {setup_ms:.0f} ms, " if setup_ms is not None else "")

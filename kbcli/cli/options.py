@@ -19,8 +19,9 @@ from typing import Annotated, Any
 
 import typer
 
-from kbcli.core.adaptation.config import MAX_CANDIDATES, MAX_KDE_SAMPLES, AdapterConfig
+from kbcli.core.adaptation.config import option_default, option_names
 from kbcli.core.adaptation.estimators import ESTIMATORS
+from kbcli.core.adaptation.fields import MAX_CANDIDATES, MAX_KDE_SAMPLES
 from kbcli.core.adaptation.posteriors import POSTERIORS
 from kbcli.core.adaptation.strategies import STRATEGIES
 from kbcli.core.detection.detectors import DETECTORS
@@ -265,7 +266,7 @@ PriorHalfwidth = Annotated[float | None, _opt(
 # -- the paper's method's parts (issue 26); each refused where the method does not read it --------
 def _robot_default(name: str) -> str:
     """The adapter's default of option ``name``, for a help text."""
-    return str(AdapterConfig.model_fields[name].default)
+    return str(option_default(name))
 
 
 def _robot_option(name: str, kind: Any, help: str, default: str | None = None) -> Any:
@@ -285,8 +286,8 @@ def robot_given(flags: Mapping[str, Any], table: Mapping[str, Any] | None = None
                 source: str = "") -> dict[str, str]:
     """The robot options a user set, each with how the message names it: the flags given (not
     None) as ``--flag``, the keys of a TOML ``[adapt]`` table (and of its ``robot`` table) as
-    ``key`` (of ``source``) (:func:`kbcli.core.adaptation.applies.refuse_unused`)."""
-    robot = set(AdapterConfig.model_fields)
+    ``key`` (of ``source``) (:func:`kbcli.core.adaptation.config.refuse_inactive`)."""
+    robot = set(option_names())
     table = dict(table or {})
     inner = table.pop("robot", None)
     keys = [*table, *(inner if isinstance(inner, Mapping) else ())]

@@ -22,7 +22,7 @@ from kbcli.cli.app import (
     progress,
 )
 from kbcli.cli.repair import check_model_out, write_repaired
-from kbcli.core.adaptation.applies import refuse_unused
+from kbcli.core.adaptation.config import refuse_inactive
 from kbcli.core.detection.detectors import MAX_N_LT, MAX_N_ST, DetectorConfig
 from kbcli.core.instrument.melody import DEFAULT_MELODY
 from kbcli.core.instrument.transforms import DEFAULT_FAMILY
@@ -97,7 +97,7 @@ def run_cmd(
     adapt = AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
                              reach_noise=reach_noise, arm=load_arm(arm), stop=True,
                              **{k: v for k, v in given.items() if v is not None})
-    refuse_unused(adapt.robot, opts.robot_given(given), "run")
+    refuse_inactive(adapt.robot, opts.robot_given(given), "run")
     cfg = stage.LoopConfig(
         melody=melody, steps=steps, perturb_at=perturb_at, max_adapt_steps=max_adapt_steps,
         detector=DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold),

@@ -38,8 +38,8 @@ import numpy as np
 
 from kbcli.core.adaptation.config import AdapterConfig, learning_rate, redundancy_radius
 from kbcli.core.adaptation.estimators import ESTIMATORS
-from kbcli.core.adaptation.posteriors import POSTERIORS, Observation
-from kbcli.core.adaptation.posteriors.kde.samples import ActionSamples, FreshSamples
+from kbcli.core.adaptation.posteriors import Observation
+from kbcli.core.adaptation.posteriors.kde.samples import ActionSamples
 from kbcli.core.adaptation.posteriors.likelihood.robust import (
     RobustPosterior,
     blurred_map,
@@ -47,13 +47,7 @@ from kbcli.core.adaptation.posteriors.likelihood.robust import (
 )
 from kbcli.core.adaptation.posteriors.posterior import Posterior
 from kbcli.core.adaptation.repair import RepairBelief, absorb
-from kbcli.core.adaptation.setup import (
-    build_samples,
-    build_table,
-    hypothesis_grid,
-    kde_source,
-    spot_count,
-)
+from kbcli.core.adaptation.setup import build_table, hypothesis_grid, spot_count
 from kbcli.core.adaptation.strategies import STRATEGIES, Context
 from kbcli.core.model.sounds import UNKNOWN
 from kbcli.core.model.table import LikelihoodTable
@@ -127,20 +121,21 @@ class Adapter:
         self.table = build_table(model, cfg, self.area) if table is None else table
         # the adapter's own generators, by name (spawning does not move ``rng``'s stream, so the
         # historical options draw exactly as before): ties of the ML cell, and fresh KDE samples
+        self.kind = cfg.kind  #: the kind of posterior (:data:`~.posteriors.POSTERIORS`)
         own = dict(zip(("ties", "kde"), rng.spawn(2), strict=True)) \
-            if cfg.ml_ties == "random" or cfg.kde_draw == "fresh" else {}
+            if cfg.ml_ties == "random" or self.kind.draws_fresh(cfg) else {}
         #: seed of the ML cell's tie-breaking (None: the lowest index wins, ``ml_ties = "first"``)
         self.tie_seed = int(own["ties"].integers(2**63)) if cfg.ml_ties == "random" else None
         self.posterior = Posterior.uniform(self.grid, tie_seed=self.tie_seed)
         #: the robust posterior (None with the plain one); ``posterior`` is then its marginal
         self.robust: RobustPosterior | None = (
             RobustPosterior(self.grid, cfg.nuisance(model), eta=learning_rate(model, cfg))
-            if cfg.is_robust and not cfg.repair else None)
-        #: the joint belief over the shift and the repaired map (``cfg.repair``; None otherwise):
+            if cfg.is_robust and not cfg.repairs else None)
+        #: the joint belief over the shift and the repaired map (``repair``; None otherwise):
         #: ``posterior`` is then its marginal over the shift (:mod:`kbcli.core.adaptation.repair`)
         self.repair: RepairBelief | None = (
-            RepairBelief.for_model(self.grid, self.table, model, cfg) if cfg.repair else None)
-        self._strategy = STRATEGIES.get(cfg.strategy)
+            RepairBelief.for_model(self.grid, self.table, model, cfg) if cfg.repairs else None)
+        self._strategy = STRATEGIES.get(cfg.strategy.name)
         #: px: touches this close count as one spot (robust posterior; see AdapterConfig)
         self.redundancy_radius = redundancy_radius(model, cfg) if self.robust is not None else 0.0
         #: where each observed touch was read (felt position, or the aim)
@@ -148,19 +143,10 @@ class Adapter:
         self._edges: np.ndarray | None = None
         self._corners: np.ndarray | None = None
         self.bandwidths: list[float] = []
-        #: the kind of posterior (:data:`kbcli.core.adaptation.posteriors.POSTERIORS`)
-        self.kind = POSTERIORS.get(cfg.posterior)
-        if self.kind.uses_samples and cfg.kde_draw == "fresh":  # Algorithm 2: new every touch
-            samples = FreshSamples(self.kde_source(), cfg.kde_samples, own["kde"],
-                                   bandwidth=cfg.kde_bandwidth, resolution=cfg.resolution)
-        elif self.kind.uses_samples and samples is None:
-            samples = build_samples(model, cfg, [int(v) for v in rng.integers(2**32, size=2)],
-                                    source=kde_source(model, cfg, self.table, self.grid,
-                                                      self.area))
-        self.samples = samples
-        #: the samples of the simulated touches (``paper-active``): ``samples`` unless
-        #: ``simulate_draw`` says otherwise (:meth:`_simulation_samples`)
-        self.simulation_samples = self._simulation_samples(rng)
+        #: what the kind's terms read besides the model (the KDE's samples of p(action | sound)),
+        #: and what the simulated touches of ``paper-active`` read (the kind's ``sources``)
+        self.samples, self.simulation_samples = self.kind.sources(self, own.get("kde"), rng,
+                                                                   samples)
 
     @classmethod
     def from_model(cls, model, *, strategy: str = "infogain", family: str = "translation",
@@ -211,22 +197,6 @@ class Adapter:
                               f"model file with kbcli.Adapter.from_model (kbcli.api)")
         return model
 
-    def _simulation_samples(self, rng: np.random.Generator):
-        """The KDE samples of the simulated touches: ``self.samples``, or with ``simulate_draw``
-        set apart from ``kde_draw``, a source of their own drawn by ``kde_sampler`` from a further
-        child of ``rng`` (spawned only then: the other options draw exactly as without it)."""
-        cfg = self.cfg
-        draw = cfg.simulate_draw
-        if not self.kind.uses_samples or draw is None or draw == cfg.kde_draw:
-            return self.samples
-        own = rng.spawn(1)[0]
-        if draw == "fresh":
-            return FreshSamples(self.kde_source(), cfg.kde_samples, own,
-                                bandwidth=cfg.kde_bandwidth, resolution=cfg.resolution)
-        return ActionSamples(self.kde_source(), cfg.kde_samples,
-                             [int(v) for v in own.integers(2**32, size=2)],
-                             bandwidth=cfg.kde_bandwidth, resolution=cfg.resolution)
-
     # -- deciding ----------------------------------------------------------------------------------
     def planning_table(self) -> LikelihoodTable:
         """The map the strategies plan with: the model's, or with the robust posterior, blurred by
@@ -246,16 +216,9 @@ class Adapter:
         sampler, or the model's raster (:class:`~kbcli.core.model.sampling.RasterSampler`)."""
         return self.table.sampler() if self.cfg.kde_sampler == "raster" else self.model
 
-    def kde_source(self):
-        """What the KDE posterior's terms draw p(action | sound) from: :meth:`action_source`,
-        with silence extended beyond the working area as ``cfg.kde_beyond`` says
-        (:func:`kbcli.core.adaptation.setup.kde_source`). The strategies' own draws stay inside it."""
-        return kde_source(self.action_source(), self.cfg, self.table, self.grid, self.area)
-
     def simulate(self, action: np.ndarray, cls: int) -> np.ndarray:
         """The log term a touch read at ``action`` that gave ``cls`` would multiply the posterior
-        by (this adapter's kind of posterior, plain: a KDE term drawn as ``simulate_draw``, by
-        default ``kde_draw``, says)."""
+        by (this adapter's kind of posterior, plain, reading :attr:`simulation_samples`)."""
         obs = Observation(self.grid, self.table, self.model, self.cfg, self.simulation_samples,
                           np.asarray(action, float).reshape(2), int(cls))
         return self.kind.term(obs)[0]
@@ -412,7 +375,7 @@ class Adapter:
     def repaired_model(self):
         """The model refitted with this adaptation's touches, mapped back into its reference
         frame by the estimate (:func:`kbcli.core.adaptation.repair.absorb`): what the robot keeps of what
-        it learned (``cfg.repair``; the model itself is left as it is).
+        it learned (``repair``; the model itself is left as it is).
 
         Raises
         ------

@@ -6,12 +6,14 @@ See :class:`AdapterConfig` for every option; :mod:`kbcli.core.adaptation.adapter
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from typing import Annotated, Any, ClassVar
 
 import numpy as np
 from pydantic import AfterValidator, Field, Strict, model_validator
 
 from kbcli.core.adaptation.estimators import ESTIMATORS
+from kbcli.core.adaptation.fields import MAX_BLUR, Blur, choice
 from kbcli.core.adaptation.grid import grid_bytes
 from kbcli.core.adaptation.posteriors import POSTERIORS
 from kbcli.core.adaptation.posteriors.likelihood.robust import (
@@ -23,42 +25,20 @@ from kbcli.core.adaptation.posteriors.likelihood.robust import (
     Nuisance,
 )
 from kbcli.core.adaptation.strategies import STRATEGIES
-from kbcli.core.config import (
-    Config,
-    Flag,
-    Name,
-    NonNegative,
-    Positive,
-    Rate,
-    Whole,
-    between,
-)
-from kbcli.core.instrument.transforms import FAMILIES
-
-#: Upper bounds of the counts a user can type (a cost the run would pay at every touch).
-MAX_CANDIDATES = 100_000
-MAX_HYPOTHESES = 1_000_000
-MAX_KDE_SAMPLES = 1_000_000
+from kbcli.core.config import Config, Name, NonNegative, Positive, Rate
+from kbcli.core.instrument.transforms import DEFAULT_FAMILY, FAMILIES
+from kbcli.core.options import declared, flat_view, options_of, part_field, route
+from kbcli.errors import ConfigError
 
 #: Default softening (px) of a learned model's map (``AdapterConfig.model_blur``).
 LEARNED_BLUR = 1.0
 #: Radius (px) within which touches count as one spot, as a multiple of the model's own
-#: cross-validated boundary error (``AdapterConfig.redundancy_radius`` None).
+#: cross-validated boundary error (``redundancy_radius`` None).
 REDUNDANCY_FACTOR = 4.0
 #: A weak model's boundaries can sit further off than the default blur grid reaches: the robust
 #: posterior then also weighs a blur of this many times the model's own cross-validated boundary
-#: error (``AdapterConfig.robust_blurs`` None, translation family), when that exceeds the grid.
+#: error (``robust_blurs`` None, translation family), when that exceeds the grid.
 WIDE_BLUR_FACTOR = 2.0
-#: Largest blur (px) any blur option accepts: a key's width. A map blurred further says nothing,
-#: and its Gaussian kernel would outgrow memory (a 1000 px blur asked for 35 GiB).
-MAX_BLUR = 50.0
-
-
-def _blur(v: float) -> float:
-    if v > MAX_BLUR:
-        raise ValueError(f"must be a blur in [0, {MAX_BLUR:g}] px (<= {MAX_BLUR:g}: a key's width), "
-                         f"got {v!r}")
-    return v
 
 
 def _angle(v: float) -> float:
@@ -67,49 +47,32 @@ def _angle(v: float) -> float:
     return v
 
 
-def _registered(registry) -> AfterValidator:
-    """A field validator: the name must be registered in ``registry`` (ConfigError lists them)."""
-    return AfterValidator(registry.check)
-
-
-#: A blur, px: a finite number in [0, MAX_BLUR].
-Blur = Annotated[float, Strict(), Field(ge=0, allow_inf_nan=False), AfterValidator(_blur)]
-#: A probability in (0, 1].
-Fraction = Annotated[float, Strict(), Field(gt=0, le=1, allow_inf_nan=False)]
-#: A mixing weight in [0, 1).
-Floor = Annotated[float, Strict(), Field(ge=0, lt=1, allow_inf_nan=False)]
-
-
-def _choice(*names: str) -> AfterValidator:
-    """A field validator: the value must be one of ``names``."""
-    def check(v: str) -> str:
-        if v not in names:
-            raise ValueError(f"must be one of {', '.join(names)}, got {v!r}")
-        return v
-    return AfterValidator(check)
-
-
-#: How the KDE posterior gets its samples of p(action | sound) (``AdapterConfig.kde_draw``).
-KDE_DRAWS = ("shared", "fresh")
-#: What draws those samples (``AdapterConfig.kde_sampler``).
+#: What draws the samples of p(action | sound) (``AdapterConfig.kde_sampler``).
 KDE_SAMPLERS = ("model", "raster")
-#: What silence's samples of p(action | silence) cover (``AdapterConfig.kde_beyond``).
-KDE_BEYOND = ("silent", "unknown")
 #: How ties of the maximum-likelihood cell are broken (``AdapterConfig.ml_ties``).
 ML_TIES = ("first", "random")
-#: Where the ``random`` strategy's actions come from (``AdapterConfig.random_actions``).
-RANDOM_ACTIONS = ("area", "model")
+
+#: The fields of :class:`AdapterConfig` that choose a part and carry its options: slot ->
+#: (registry, default part).
+SLOTS = {"strategy": (STRATEGIES, "infogain"), "posterior": (POSTERIORS, "likelihood")}
 
 
 class AdapterConfig(Config):
     """How the robot adapts (robot side only: nothing about the simulated world).
 
+    The strategy and the posterior are parts with options of their own: each field holds the
+    part's options (``cfg.posterior.kde_samples``; a name, a table ``{name, options...}``, or the
+    part's options given flat beside it, ``AdapterConfig(posterior="kde", kde_samples=1000)``,
+    are read). An option the chosen part does not take is refused by the part.
+
     Parameters
     ----------
-    strategy : str
-        A name in :data:`kbcli.core.adaptation.strategies.STRATEGIES` (random, active, infogain).
-    posterior : str
-        ``likelihood`` (the model's classifier) or ``kde`` (the paper's Eq. 7 from samples).
+    strategy : Options
+        Where to touch next: a part of :data:`kbcli.core.adaptation.strategies.STRATEGIES`
+        (random, active, paper-active, infogain) with its options (``candidates``, ...).
+    posterior : Options
+        The kind of posterior: a part of :data:`kbcli.core.adaptation.posteriors.POSTERIORS`
+        (``likelihood``, robust or not, ours; ``kde``, the paper's Eq. 7) with its options.
     family : str
         Transform family (translation or rigid).
     resolution : float
@@ -117,201 +80,84 @@ class AdapterConfig(Config):
     prior_halfwidth : float
         The prior box of dx and dy, +-px.
     max_angle, angle_resolution : float
-        Prior range (+-deg) and grid step (deg) of the angle (rigid family).
+        Prior range (+-deg) and grid step (deg) of the angle (a rotating family).
     outlier : float
         eps of the outlier floor (``p_eps = (1 - eps) p + eps / C``; the KDE mixes eps of the prior).
     blur : float
         Std (px) of the landing scatter the robot cannot see (0 when it knows where it landed).
-    robust : bool
-        Marginalise the model's error (boundary blur ``robust_blurs`` and outlier rate
-        ``robust_outliers``, uniform prior) online (:mod:`kbcli.core.adaptation.posteriors.likelihood.robust`); likelihood posterior
-        only. False: the plain posterior, which reads the map as the truth.
-    robust_blurs : tuple of float or None
-        Boundary blurs (px) the robust posterior weighs; None: 0, 1, 2.5 and 5 px (translation),
-        and ``WIDE_BLUR_FACTOR`` (2) times the model's own cross-validated boundary error when that
-        is wider (a weak model: its edges can sit further off than 5 px; :func:`robust_blurs`);
-        0 px only (rigid, whose grid is 41 times larger: outliers only).
-    robust_outliers : tuple of float or None
-        Outlier rates the robust posterior weighs; None: 0.001, 0.02 and 0.1 (translation),
-        0.001 and 0.05 (rigid).
-    robust_eta : float or None
-        Learning rate in (0, 1] the robust posterior tempers the log-likelihood with after 30
-        touches (a coarsened posterior: after ``n`` touches the rate is ``alpha / (alpha + n)``,
-        ``alpha = 30 eta / (1 - eta)``, so the first touches count almost in full;
-        :mod:`kbcli.core.adaptation.posteriors.likelihood.robust`). None: resolved with the model,
-        ``min(1, (TEMPER_PX / b)^2)`` for its own cross-validated boundary error ``b`` px
-        (capped at 25 px: :func:`own_boundary_error`; ``TEMPER_PX`` 1.5; 1 for the exact model or
-        a model without an estimate;
-        :func:`learning_rate`). 1: untempered.
-    redundancy_radius : float or None
-        A learned model's errors are not independent from touch to touch: where its boundary is
-        wrong, every touch there is wrong the same way. With ``robust``, touches within this
-        radius (px) of earlier ones count as one spot: the ``k``-th touch at a spot enters the
-        posterior with weight ``1 / k`` (a coarsened likelihood), and infogain divides a
-        candidate's expected gain by the same ``k``, so it seeks new evidence instead of asking one
-        doubtful spot again. None: ``REDUNDANCY_FACTOR`` (4) times the model's own cross-validated
-        boundary error (its ``reliability``, capped at 25 px: :func:`own_boundary_error`; 0, no
-        discount, for the exact model or a model that has no estimate). 0: off.
     model_blur : float or None
-        Override: softening (px, a Gaussian) of the model's map. With ``robust``, the blur is fixed
-        to it instead of being learned. Without, None means ``LEARNED_BLUR`` (1 px) for a learned
-        model and 0 for the exact one. A learned model's probabilities are read as calibrated, but its edges
-        can sit a pixel or two off: touches that contradict them then pull the posterior off the
-        truth, and the estimate drifts as evidence piles up (benchmarked: a model with 1.1 px
-        boundary error drifted to 2.1 px RMSE at step 40 unsoftened, 0.28 px with 1 px).
-    cell_average : bool
-        Read the likelihood of a grid cell averaged over the cell (a Gaussian of the cell's spread,
-        :func:`kbcli.core.adaptation.posteriors.likelihood.term.cell_sigma`) rather than at its centre; matters for the rigid
-        family, where an angle step moves far keys by more than a raster cell.
+        Override: softening (px, a Gaussian) of the model's map. With the robust posterior, the
+        blur is fixed to it instead of being learned. Without, None means ``LEARNED_BLUR`` (1 px)
+        for a learned model and 0 for the exact one.
     raster_step : float or None
         Cell of the model raster, px (None: the grid resolution; half of it for the exact model
-        with the rigid family, whose cell-averaged likelihood needs a finer map).
-    candidates : int
-        Candidate actions per decision (active, paper-active, infogain).
-    hypotheses : int
-        Posterior cells on which infogain evaluates its candidates.
-    active_keep, active_hypotheses : int
-        Most confusing candidates kept by ``active`` and ``paper-active``, and the cells
-        ``active``'s simulated updates use (``paper-active`` updates the whole posterior).
-    random_actions : str
-        Where the ``random`` strategy touches: ``area`` (uniform over the working area, the
-        historical baseline) or ``model`` (a sound uniform over the model's sounds, then an action
-        from p(action | sound), drawn as ``kde_sampler`` says: the paper's "random selection of
-        samples", the samples the paper's other strategy draws its candidates from).
-    kde_samples : int
-        N, actions drawn from p(action | sound) per KDE term (kde posterior; Algorithm 2, line 3).
-    kde_draw : str
-        ``shared``: each class's N actions are drawn once and reused by every touch (and, in the
-        evaluation, by every experiment of a process; :class:`kbcli.core.adaptation.posteriors.kde.samples.ActionSamples`).
-        ``fresh``: Algorithm 2 as written, N new actions for every observation, from the
-        adapter's own generator (so from the experiment's seed;
-        :class:`kbcli.core.adaptation.posteriors.kde.samples.FreshSamples`).
-    simulate_draw : str or None
-        How ``paper-active``'s simulated touches get their KDE samples (kde posterior). None: as
-        ``kde_draw`` says (the paper's text: with ``fresh``, Algorithm 2 on every simulated sound,
-        N new samples and a bandwidth for each). ``shared``: each sound's N samples (and
-        bandwidth) drawn once per adaptation, from the adapter's own generator by
-        ``kde_sampler``, and reused by every simulated touch, while the real touches still draw as
-        ``kde_draw`` says: the same planner without its sampling, about a third of a touch's time
-        (``kbcli bench speed``). ``fresh``: new samples for every simulated touch. Recorded in
-        an artifact's config only when set.
+        with a rotating family, whose cell-averaged likelihood needs a finer map).
     kde_sampler : str
-        What draws fresh samples of p(action | sound), and the ``model`` actions of ``random``
-        and ``paper-active``: ``model`` (``model.sample_actions``, the model's own rejection
-        sampler: exact, ~250 ms per 10,000 draws of the default learned model) or ``raster`` (the
-        model rasterised at ``resolution``: a cell drawn with weight p(sound | cell), then a point
-        uniform in it; ~1 ms; :class:`kbcli.core.model.sampling.RasterSampler`). Silence is drawn
-        like any sound over the working area the model was learned on; beyond it as
-        ``kde_beyond`` says.
-    kde_beyond : str
-        What the KDE posterior knows of the pad beyond the working area (where the paper is
-        silent): ``silent`` (it is silent, as the likelihood table reads it: silence's samples
-        cover a ring beyond the working area as wide as the hypotheses can move a touch back,
-        :class:`kbcli.core.adaptation.posteriors.kde.samples.SilentBeyond`, so a silent touch never rules out a
-        hypothesis because the samples stop at the area's edge) or ``unknown`` (no samples there:
-        without a floor such a hypothesis is ruled out; before issue 39 the only behaviour).
-    kde_floor : float or None
-        Weight of the uniform floor mixed into each KDE term (``(1 - w) KDE + w / |prior|``);
-        0: none (Eq. 7 as written: a hypothesis that no sample supports is ruled out by that
-        touch); None: ``outlier`` (the historical 1e-3).
-    kde_bandwidth : float or None
-        Kernel std, px; None: Scott's rule (see :mod:`kbcli.core.adaptation.posteriors.posterior`).
+        What draws fresh samples of p(action | sound) (the KDE posterior's fresh draws, the
+        ``model`` actions of ``random`` and ``paper-active``): ``model`` (the model's own rejection
+        sampler: exact) or ``raster`` (the model rasterised at ``resolution``:
+        :class:`kbcli.core.model.sampling.RasterSampler`).
     estimator : str
         ``mean`` or ``ml``: which estimate :meth:`Adapter.estimate` returns.
     ml_ties : str
         Which of several equally probable cells is the maximum-likelihood one: ``first`` (the
-        lowest grid index: the corner of the prior box on a flat posterior, historical) or
-        ``random`` (uniformly among the tied cells, seeded from the adapter's generator: no
-        positional bias).
+        lowest grid index) or ``random`` (uniformly among the tied cells, seeded from the
+        adapter's generator: no positional bias).
     stop_ml : float or None
         The paper's rule: stop when the most probable cell holds at least this probability.
     stop_mass, stop_radius, stop_angle : float
         Ours: stop when ``stop_mass`` of the posterior lies within ``stop_radius`` px (and
-        ``stop_angle`` deg) of the estimate; ``stop_mass`` 0 (or None): ours is off (the paper's alone).
+        ``stop_angle`` deg) of the estimate; ``stop_mass`` 0 (or None): ours is off.
     max_memory_mb : float
         Refuse hypothesis grids (and model rasters) that would need more working memory.
-    repair : bool
-        Adapt with the model repaired by the touches (:mod:`kbcli.core.adaptation.repair`): a joint belief
-        over the shift and the model's map, each hypothesis scored by the map its own touches
-        repaired, the model's local uncertainty in place of one global blur, and infogain planning
-        under the same belief (the translation family and the likelihood posterior, robust). Off
-        by default; recorded in an artifact's config only when on.
-    repair_kernel : float or None
-        Width (px) of the kernel a touch's (and a training sample's) sound is counted with on the
-        repaired map (None: ``kbcli.core.adaptation.repair.DEFAULT_KERNEL``, 10 px).
-    repair_scale : float or None
-        Scale ``s`` of the model's local blur ``s d(x)``, ``d`` the distance to its nearest
-        training sample (None: ``DEFAULT_SCALE``, 0.6, about ``1 / sqrt(3)``).
-    repair_blur : float or None
-        Blur (px) under the local one everywhere (None: the model's own landing scatter,
-        ``reach_sd_``).
     """
 
     what: ClassVar[str] = "adapt"
 
-    strategy: Annotated[Name, _registered(STRATEGIES)] = "infogain"
-    posterior: Annotated[Name, _registered(POSTERIORS)] = "likelihood"
-    family: Annotated[Name, _registered(FAMILIES)] = "translation"
+    strategy: part_field(STRATEGIES, "infogain") = "infogain"
+    posterior: part_field(POSTERIORS, "likelihood") = "likelihood"
+    family: Annotated[Name, AfterValidator(FAMILIES.check)] = DEFAULT_FAMILY
     resolution: Positive = 0.5
     prior_halfwidth: Positive = 45.0
     max_angle: Annotated[NonNegative, AfterValidator(_angle)] = 5.0
     angle_resolution: Positive = 0.25
     outlier: Rate = 1e-3
     blur: Blur = 0.0
-    robust: Flag = True
-    robust_blurs: Annotated[tuple[Blur, ...], Field(min_length=1)] | None = None
-    robust_outliers: Annotated[tuple[Rate, ...], Field(min_length=1)] | None = None
-    robust_eta: Fraction | None = None
-    redundancy_radius: NonNegative | None = None
     model_blur: Blur | None = None
-    cell_average: Flag = True
     raster_step: Positive | None = None
-    candidates: between(Whole, 1, MAX_CANDIDATES) = 256
-    hypotheses: between(Whole, 1, MAX_HYPOTHESES) = 512
-    active_keep: between(Whole, 1, MAX_CANDIDATES) = 8
-    active_hypotheses: between(Whole, 1, MAX_HYPOTHESES) = 2048
-    random_actions: Annotated[Name, _choice(*RANDOM_ACTIONS)] = "area"
-    kde_samples: between(Whole, 10, MAX_KDE_SAMPLES) = 10000
-    kde_draw: Annotated[Name, _choice(*KDE_DRAWS)] = "shared"
-    # written to artifacts only when set (None is the behaviour of every artifact stored before
-    # the option existed: their configs read back to the same dict)
-    simulate_draw: Annotated[Annotated[Name, _choice(*KDE_DRAWS)] | None,
-                             Field(exclude_if=lambda v: v is None)] = None
-    kde_sampler: Annotated[Name, _choice(*KDE_SAMPLERS)] = "model"
-    kde_beyond: Annotated[Name, _choice(*KDE_BEYOND)] = "silent"
-    kde_floor: Floor | None = None
-    kde_bandwidth: Positive | None = None
-    estimator: Annotated[Name, _registered(ESTIMATORS)] = "mean"
-    ml_ties: Annotated[Name, _choice(*ML_TIES)] = "first"
+    kde_sampler: Annotated[Name, choice(*KDE_SAMPLERS)] = "model"
+    estimator: Annotated[Name, AfterValidator(ESTIMATORS.check)] = "mean"
+    ml_ties: Annotated[Name, choice(*ML_TIES)] = "first"
     stop_ml: Positive | None = None
     stop_mass: Annotated[float, Strict(), Field(ge=0, le=1, allow_inf_nan=False)] | None = 0.95
     stop_radius: Positive = 1.0
     stop_angle: Positive = 0.5
     max_memory_mb: Positive = 2048.0
-    # the repair's options are written to artifacts only when set: configs stored before they
-    # existed read back to the same dict
-    repair: Annotated[Flag, Field(exclude_if=lambda v: not v)] = False
-    repair_kernel: Annotated[Positive | None, Field(exclude_if=lambda v: v is None)] = None
-    repair_scale: Annotated[NonNegative | None, Field(exclude_if=lambda v: v is None)] = None
-    repair_blur: Annotated[Blur | None, Field(exclude_if=lambda v: v is None)] = None
 
     @model_validator(mode="before")
     @classmethod
-    def _family_outliers(cls, data: Any) -> Any:
-        """``robust_outliers`` None: the family's default (fewer for a rotating, larger grid)."""
-        if isinstance(data, dict) and data.get("robust_outliers") is None:
-            fam = data.get("family", "translation")
+    def _parts(cls, data: Any) -> Any:
+        """The parts' options given flat go to the parts (:func:`kbcli.core.options.route`); a
+        likelihood posterior's ``robust_outliers`` None is the family's (fewer for a rotating,
+        larger grid)."""
+        if not isinstance(data, dict):
+            return data
+        data = route(data, SLOTS, cls.model_fields)
+        post = data["posterior"]
+        if "robust_outliers" in _declared(POSTERIORS, post["name"]) and \
+                post.get("robust_outliers") is None:
+            fam = data.get("family", DEFAULT_FAMILY)
             rotates = fam in FAMILIES and FAMILIES.get(fam).rotates
-            data = {**data, "robust_outliers": RIGID_OUTLIERS if rotates else DEFAULT_OUTLIERS}
+            data["posterior"] = {**post, "robust_outliers": RIGID_OUTLIERS if rotates
+                                 else DEFAULT_OUTLIERS}
         return data
 
     @model_validator(mode="after")
     def _repairable(self) -> AdapterConfig:
-        """``repair`` needs a translation grid and the robust likelihood posterior."""
-        if self.repair and (FAMILIES.get(self.family).rotates or not self.is_robust):
-            raise ValueError("repair works with the translation family and the robust likelihood "
-                             f"posterior (got family {self.family!r}, posterior "
-                             f"{self.posterior!r}, robust = {str(self.robust).lower()})")
+        """``repair`` needs a translation grid."""
+        if self.repairs and FAMILIES.get(self.family).rotates:
+            raise ValueError(f"repair works with the translation family (got family "
+                             f"{self.family!r})")
         return self
 
     @model_validator(mode="after")
@@ -329,6 +175,46 @@ class AdapterConfig(Config):
             )
         return self
 
+    def replace(self, **changes: Any) -> AdapterConfig:
+        """A copy with ``changes`` (own options, a part's name, its options given flat) applied; a
+        new part keeps the options of the old one that it takes too."""
+        base = self.to_dict()
+        for slot in SLOTS:
+            if isinstance(changes.get(slot), str):  # a new part: carry over what it takes
+                registry = SLOTS[slot][0]
+                kept = {k: v for k, v in base[slot].items()
+                        if k in _declared(registry, changes[slot])}
+                changes = {**changes, slot: {**kept, "name": changes[slot]}}
+        return type(self)(**{**base, **changes})
+
+    def flat(self) -> dict[str, Any]:
+        """Every option in the flat layout (each part by its name, its options beside it)."""
+        return flat_view(self.to_dict(), SLOTS)
+
+    def inactive(self) -> dict[str, str]:
+        """Options that are set but not read under the others, each with why: the parts' own
+        (:meth:`kbcli.core.options.Options.inactive`) and the adapter's (the angle's without a
+        rotating family, the radius of ours without it, the ML ties where no ML cell is read)."""
+        rotates = FAMILIES.get(self.family).rotates
+        out = {**self.posterior.inactive(), **self.strategy.inactive()}
+        if not rotates:
+            out.update({o: "the family does not rotate" for o in ("max_angle",
+                                                                   "angle_resolution")})
+        if not self.stop_mass:
+            out.update({o: "stop_mass = 0" for o in ("stop_radius", "stop_angle")})
+        elif not rotates:
+            out["stop_angle"] = "the family does not rotate"
+        reads_ml = ESTIMATORS.trait(self.estimator, "ties", False) or self.stop_ml is not None \
+            or STRATEGIES.trait(self.strategy.name, "paper", False)
+        if not reads_ml:
+            out["ml_ties"] = "no maximum-likelihood cell is read (estimator, stop_ml, strategy)"
+        if self.is_robust and not rotates and "cell_average" in type(self.posterior).model_fields:
+            out["cell_average"] = "the robust posterior cell-averages a rotating grid only"
+        if not (self.posterior.samples_actions() or self.strategy.samples_actions()):
+            out["kde_sampler"] = "nothing draws from p(action | sound) with the sampler"
+        if not STRATEGIES.trait(self.strategy.name, "simulates", False):
+            out["simulate_draw"] = f"strategy {self.strategy.name} simulates no touch"
+        return out
 
     @property
     def grid_cells(self) -> int:
@@ -336,19 +222,89 @@ class AdapterConfig(Config):
                           self.angle_resolution)[0]
 
     @property
-    def kde_eps(self) -> float:
-        """The KDE term's floor weight: ``kde_floor``, or ``outlier`` when it is None."""
-        return float(self.outlier if self.kde_floor is None else self.kde_floor)
+    def kind(self):
+        """The kind of posterior (:class:`kbcli.core.adaptation.posteriors.PosteriorKind`)."""
+        return POSTERIORS.get(self.posterior.name)
 
     @property
     def is_robust(self) -> bool:
-        """Whether the robust posterior is used (asked for, with the likelihood posterior)."""
-        return self.robust and POSTERIORS.get(self.posterior).robust
+        """Whether the robust posterior is used (a kind it applies to, asked for)."""
+        return self.kind.robust and bool(getattr(self.posterior, "robust", False))
+
+    @property
+    def repairs(self) -> bool:
+        """Whether the adaptation repairs the model (the likelihood posterior's ``repair``)."""
+        return bool(getattr(self.posterior, "repair", False))
 
     def nuisance(self, model=None) -> Nuisance:
         """The blurs (:func:`robust_blurs` for ``model``) and outlier rates the robust posterior
         marginalises."""
-        return Nuisance.build(robust_blurs(model, self), self.robust_outliers)
+        return Nuisance.build(robust_blurs(model, self), self.posterior.robust_outliers)
+
+
+def recorded(robot: Mapping[str, Any]) -> AdapterConfig:
+    """A recorded robot config as a config: the nested layout, or the flat one of an older kbcli
+    (which recorded every option, the chosen parts' and the others'; the others are dropped)."""
+    return AdapterConfig.from_dict(route(dict(robot), SLOTS, AdapterConfig.model_fields,
+                                         strict=False))
+
+
+def shown(robot: Mapping[str, Any], strategies: Iterable[str] | None = None) -> dict[str, Any]:
+    """The options of a recorded robot config its method reads, in the flat layout (with
+    ``strategies``, a method comparing several: those any of them reads)."""
+    cfg = recorded(robot)
+    out: dict[str, Any] = {}
+    skip: set[str] | None = None
+    for s in strategies or (cfg.strategy.name,):
+        one = cfg.replace(strategy=s)
+        out.update(one.flat())
+        inactive = set(one.inactive())
+        skip = inactive if skip is None else skip & inactive
+    if strategies:
+        out.pop("strategy", None)
+    return {k: v for k, v in out.items() if k not in (skip or set())}
+
+
+def refuse_inactive(cfg: AdapterConfig, given: Mapping[str, str] | Iterable[str], where: str,
+                    strategies: Iterable[str] | None = None) -> None:
+    """ConfigError naming the first option a user set (``given``: names, or a mapping to the
+    label the message uses, ``{"robust_eta": "--robust-eta"}``) that the method does not read
+    (:meth:`AdapterConfig.inactive`; with ``strategies``, under none of them)."""
+    labels = dict(given) if isinstance(given, Mapping) else {o: o for o in given}
+    why: dict[str, str] | None = None
+    for s in strategies or (cfg.strategy.name,):
+        inactive = cfg.replace(strategy=s).inactive()
+        why = inactive if why is None else {k: v for k, v in why.items() if k in inactive}
+    for option, label in labels.items():
+        if option in (why or {}):
+            raise ConfigError(f"{where}: {label} does not apply to this method: {why[option]}")
+
+
+def option_names() -> tuple[str, ...]:
+    """Every option an adapter config reads in the flat layout: its own, then each registered
+    part's (a plug-in's included), each once."""
+    out = dict.fromkeys(AdapterConfig.model_fields)
+    for registry, _ in SLOTS.values():
+        for name in registry.names():
+            out.update(dict.fromkeys(declared(registry, name)))
+    return tuple(out)
+
+
+def option_default(option: str) -> Any:
+    """The default of ``option``: the adapter's own, or that of the first part declaring it."""
+    if option in AdapterConfig.model_fields:
+        return AdapterConfig.model_fields[option].default
+    for registry, _ in SLOTS.values():
+        for name in registry.names():
+            fields = options_of(registry, name).model_fields
+            if option in fields:
+                return fields[option].default
+    raise KeyError(option)
+
+
+def _declared(registry, name: str) -> tuple[str, ...]:
+    return declared(registry, name) if name in registry else ()
+
 
 def own_boundary_error(reliability: dict | None) -> float | None:
     """The boundary error (px) a model's own estimate (its ``reliability`` table) gives the robust
@@ -372,8 +328,8 @@ def robust_blurs(model, cfg: AdapterConfig) -> tuple[float, ...]:
     own boundary error when that lies beyond it."""
     if cfg.model_blur is not None:
         return (float(cfg.model_blur),)
-    if cfg.robust_blurs is not None:
-        return tuple(cfg.robust_blurs)
+    if cfg.posterior.robust_blurs is not None:
+        return tuple(cfg.posterior.robust_blurs)
     if FAMILIES.get(cfg.family).rotates:
         return RIGID_BLURS
     return blur_grid(_boundary_error(model))
@@ -393,8 +349,8 @@ def blur_grid(boundary_error: float | None) -> tuple[float, ...]:
 def learning_rate(model, cfg: AdapterConfig) -> float:
     """The resolved ``cfg.robust_eta`` for ``model``: ``min(1, (TEMPER_PX / b)^2)`` for its own
     cross-validated boundary error ``b`` px, 1 without an estimate (see :class:`AdapterConfig`)."""
-    if cfg.robust_eta is not None:
-        return float(cfg.robust_eta)
+    if cfg.posterior.robust_eta is not None:
+        return float(cfg.posterior.robust_eta)
     return temper(_boundary_error(model))
 
 
@@ -407,8 +363,8 @@ def temper(boundary_error: float | None) -> float:
 
 def redundancy_radius(model, cfg: AdapterConfig) -> float:
     """The resolved ``cfg.redundancy_radius`` (px) for ``model`` (see :class:`AdapterConfig`)."""
-    if cfg.redundancy_radius is not None:
-        return float(cfg.redundancy_radius)
+    if cfg.posterior.redundancy_radius is not None:
+        return float(cfg.posterior.redundancy_radius)
     berr = _boundary_error(model)
     return 0.0 if berr is None else REDUNDANCY_FACTOR * berr
 

@@ -53,5 +53,5 @@ def _ml_departure(r: dict) -> str:
 
 
 ESTIMATORS.register("ml", Estimator("ml", "estimates", lambda post: post.ml()),
-                    summary="the maximum-likelihood cell (the paper's)", uses=("ml_ties",),
+                    summary="the maximum-likelihood cell (the paper's)",
                     traits={"ties": True, "departures": {"ml": _ml_departure}})

@@ -315,8 +315,10 @@ class RepairBelief:
     @classmethod
     def for_model(cls, grid: HypothesisGrid, table: LikelihoodTable, model, cfg) -> RepairBelief:
         """The flat prior for ``model`` (rasterised as ``table``) and an adapter config ``cfg``
-        (``repair_kernel``, ``repair_scale``, ``repair_blur``, ``robust_outliers``: None reads
-        the defaults, and the model's own landing scatter for the blur)."""
+        (its likelihood posterior's ``repair_kernel``, ``repair_scale``, ``repair_blur``,
+        ``robust_outliers``: None reads the defaults, and the model's own landing scatter for the
+        blur)."""
+        cfg = cfg.posterior
         width = DEFAULT_KERNEL if cfg.repair_kernel is None else float(cfg.repair_kernel)
         blur = (float(getattr(model, "reach_sd_", 0.0)) if cfg.repair_blur is None
                 else float(cfg.repair_blur))

@@ -11,8 +11,7 @@ import numpy as np
 
 from kbcli.core.adaptation.config import LEARNED_BLUR, AdapterConfig, _size
 from kbcli.core.adaptation.grid import HypothesisGrid
-from kbcli.core.adaptation.posteriors.kde.density import KERNEL_REACH, MAX_BANDWIDTH
-from kbcli.core.adaptation.posteriors.kde.samples import ActionSamples, SilentBeyond, beyond_margin
+from kbcli.core.adaptation.posteriors.kde.samples import ActionSamples, beyond_source
 from kbcli.core.instrument.transforms import FAMILIES
 from kbcli.core.model.table import LikelihoodTable, exact_map
 from kbcli.errors import ConfigError
@@ -73,31 +72,21 @@ def hypothesis_grid(cfg: AdapterConfig, area: tuple[float, float, float, float],
                                 angle_resolution=cfg.angle_resolution)
 
 
-def kde_source(source, cfg: AdapterConfig, table: LikelihoodTable, grid: HypothesisGrid,
-               area: tuple[float, float, float, float]):
-    """What the KDE posterior draws p(action | sound) from: ``source`` (the model or its raster
-    sampler), with ``cfg.kde_beyond = "silent"`` wrapped so that silence covers the pad beyond
-    the working area as far as the hypotheses of ``grid`` and a kernel reach
-    (:class:`~kbcli.core.adaptation.posteriors.kde.samples.SilentBeyond`)."""
-    if cfg.kde_beyond != "silent":
-        return source
-    reach = KERNEL_REACH * (MAX_BANDWIDTH if cfg.kde_bandwidth is None else cfg.kde_bandwidth)
-    return SilentBeyond(source, table, beyond_margin(grid, area, reach))
-
-
 def build_samples(model, cfg: AdapterConfig, seed, *, table: LikelihoodTable | None = None,
                   source=None) -> ActionSamples:
     """The ``kde`` posterior's per-class samples of p(action | sound) for ``cfg`` (drawn lazily,
     once per class, from ``SeedSequence([*seed, cls])``; share it across adaptations), drawn
-    from ``source`` (default: the model, as :func:`kde_source` wraps it for ``cfg``; ``table``,
-    the model's raster for ``cfg``, is built when not given and needed)."""
+    from ``source`` (default: the model, as
+    :func:`~kbcli.core.adaptation.posteriors.kde.samples.beyond_source` wraps it for ``cfg``;
+    ``table``, the model's raster for ``cfg``, is built when not given and needed)."""
+    opts = cfg.posterior
     if source is None:
         source = model
-        if cfg.kde_beyond == "silent":
+        if opts.kde_beyond == "silent":
             area = tuple(float(v) for v in model.area)
             table = build_table(model, cfg, area) if table is None else table
-            source = kde_source(model, cfg, table, hypothesis_grid(cfg, area), area)
-    return ActionSamples(source, cfg.kde_samples, seed, bandwidth=cfg.kde_bandwidth,
+            source = beyond_source(model, opts, table, hypothesis_grid(cfg, area), area)
+    return ActionSamples(source, opts.kde_samples, seed, bandwidth=opts.kde_bandwidth,
                          resolution=cfg.resolution)
 
 

@@ -43,16 +43,19 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Annotated, Any, ClassVar
 
 import numpy as np
 
+from kbcli.core.adaptation.fields import MAX_CANDIDATES, MAX_HYPOTHESES, choice
 from kbcli.core.adaptation.posteriors import POSTERIORS
 from kbcli.core.adaptation.posteriors.posterior import Posterior, log_normalise
+from kbcli.core.config import Name, Whole, between
 from kbcli.core.instrument import transforms
 from kbcli.core.instrument.transforms import FAMILIES
 from kbcli.core.model.table import LikelihoodTable
-from kbcli.core.registry import Registry, Uses
+from kbcli.core.options import Options
+from kbcli.core.registry import Registry
 
 StrategyFn = Callable[["Context", np.random.Generator], np.ndarray]
 
@@ -76,8 +79,8 @@ class Context:
         (xmin, ymin, xmax, ymax) where actions may go.
     edges, corners : (n, 2) ndarrays
         The model's class boundaries in the reference frame (:meth:`LikelihoodTable.boundary_points`).
-    cfg : Any
-        The adapter config (``candidates``, ``hypotheses``, ``active_keep``, ``active_hypotheses``).
+    cfg : AdapterConfig
+        The adapter config; the strategy's own options are ``cfg.strategy`` (:attr:`options`).
     touched : (k, 2) ndarray
         Where the touches so far were read (felt positions).
     redundancy_radius : float
@@ -108,6 +111,11 @@ class Context:
     #: the adapter's own predictive of a touch's outcome when it is not the table's (the
     #: repaired belief, :func:`kbcli.core.adaptation.repair.repair_outcome`); None: ``outcome_distribution``
     outcome: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None
+
+    @property
+    def options(self) -> Any:
+        """The strategy's own options (``cfg.strategy``: ``candidates``, ...)."""
+        return self.cfg.strategy
 
     @property
     def family(self) -> str:
@@ -242,15 +250,77 @@ def model_actions(ctx: Context, n: int, rng: np.random.Generator) -> np.ndarray:
     return _clip(ctx.area, out)
 
 
-@STRATEGIES.register("random", uses=(
-    "random_actions",
-    Uses("kde_sampler", lambda cfg: cfg.random_actions == "model", 'random_actions = "model"',
-         'random_actions = "area"')))
+#: Where the ``random`` strategy's actions come from (``random_actions``).
+RANDOM_ACTIONS = ("area", "model")
+
+
+class RandomOptions(Options):
+    """``random``'s options.
+
+    Parameters
+    ----------
+    random_actions : str
+        ``area`` (uniform over the working area, the historical baseline) or ``model`` (a sound
+        uniform over the model's sounds, then an action from p(action | sound), drawn as the
+        adapter's ``kde_sampler`` says: the paper's "random selection of samples").
+    """
+
+    what: ClassVar[str] = "strategy random"
+    random_actions: Annotated[Name, choice(*RANDOM_ACTIONS)] = "area"
+
+    def samples_actions(self) -> bool:
+        return self.random_actions == "model"
+
+
+class Candidates(Options):
+    """Options of a strategy that ranks sampled candidate actions.
+
+    Parameters
+    ----------
+    candidates : int
+        Candidate actions per decision.
+    """
+
+    candidates: between(Whole, 1, MAX_CANDIDATES) = 256
+
+
+class Kept(Candidates):
+    """Options of a strategy that keeps the most confusing candidates: ``active_keep`` of them."""
+
+    active_keep: between(Whole, 1, MAX_CANDIDATES) = 8
+
+
+class PaperActiveOptions(Kept):
+    """``paper-active``'s options: ``candidates`` (sampled from the model) and ``active_keep``."""
+
+    what: ClassVar[str] = "strategy paper-active"
+
+    def samples_actions(self) -> bool:
+        return True
+
+
+class ActiveOptions(Kept):
+    """``active``'s options: ``candidates``, ``active_keep``, and ``active_hypotheses``, the
+    posterior cells its simulated updates use."""
+
+    what: ClassVar[str] = "strategy active"
+    active_hypotheses: between(Whole, 1, MAX_HYPOTHESES) = 2048
+
+
+class InfogainOptions(Candidates):
+    """``infogain``'s options: ``candidates``, and ``hypotheses``, the posterior cells on which
+    it evaluates them."""
+
+    what: ClassVar[str] = "strategy infogain"
+    hypotheses: between(Whole, 1, MAX_HYPOTHESES) = 512
+
+
+@STRATEGIES.register("random", traits={"options": RandomOptions})
 def random_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """The paper's baseline, "random selection of samples": uniform over the working area
     (``random_actions = "area"``) or an action sampled from the model (``"model"``:
     :func:`model_actions`)."""
-    if getattr(ctx.cfg, "random_actions", "area") == "model":
+    if ctx.options.random_actions == "model":
         return model_actions(ctx, 1, rng)[0]
     return uniform_actions(ctx.area, 1, rng)[0]
 
@@ -269,13 +339,13 @@ def _active_simulation(r: dict) -> str:
             "is the grid's first cell")
 
 
-@STRATEGIES.register("active", uses=("candidates", "active_keep", "active_hypotheses", "ml_ties"),
-                     traits={"paper": True, "departures": {"candidates": _active_candidates,
-                                                           "simulation": _active_simulation}})
+@STRATEGIES.register("active", traits={
+    "paper": True, "options": ActiveOptions,
+    "departures": {"candidates": _active_candidates, "simulation": _active_simulation}})
 def active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """The paper's: most confusing candidates, then the largest simulated entropy reduction under
     the best hypothesis."""
-    cfg, post, table = ctx.cfg, ctx.posterior, ctx.table
+    cfg, post, table = ctx.options, ctx.posterior, ctx.table
     cands = uniform_actions(ctx.area, cfg.candidates, rng)
     grid = post.grid
     idx, w = post.sample_hypotheses(CONFUSION_HYPOTHESES, rng)
@@ -318,11 +388,9 @@ def _paper_simulation(r: dict) -> str:
             + (f" (KDE samples of the simulated touches: {sim})" if _kde(r) else ""))
 
 
-@STRATEGIES.register("paper-active", uses=(
-    "candidates", "active_keep", "kde_sampler", "ml_ties",
-    Uses("simulate_draw", _kde, 'posterior = "kde"', 'posterior is not "kde"')),
-    traits={"paper": True, "departures": {"candidates": _paper_candidates,
-                                          "simulation": _paper_simulation}})
+@STRATEGIES.register("paper-active", traits={
+    "paper": True, "simulates": True, "options": PaperActiveOptions,
+    "departures": {"candidates": _paper_candidates, "simulation": _paper_simulation}})
 def paper_active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """Sect. III-E as the paper writes it.
 
@@ -346,7 +414,7 @@ def paper_active_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     sound for the whole adaptation instead of new ones per simulated touch (faster; the real
     touches keep ``kde_draw``).
     """
-    cfg, post, table = ctx.cfg, ctx.posterior, ctx.table
+    cfg, post, table = ctx.options, ctx.posterior, ctx.table
     cands = model_actions(ctx, cfg.candidates, rng)
     confusion = table.confusion_at(cands[:, 0], cands[:, 1])
     kept = cands[np.argsort(-confusion, kind="stable")[: cfg.active_keep]]
@@ -377,10 +445,10 @@ def _simulated_terms(ctx: Context, actions: np.ndarray, classes: np.ndarray) -> 
     return np.stack([ctx.simulate(a, int(c)) for a, c in zip(actions, classes, strict=True)])
 
 
-@STRATEGIES.register("infogain", uses=("candidates", "hypotheses"))
+@STRATEGIES.register("infogain", traits={"options": InfogainOptions})
 def infogain_strategy(ctx: Context, rng: np.random.Generator) -> np.ndarray:
     """Largest expected information gain over the whole posterior predictive."""
-    cfg, post = ctx.cfg, ctx.posterior
+    cfg, post = ctx.options, ctx.posterior
     idx, w = post.sample_hypotheses(cfg.hypotheses, rng)
     hyp = post.grid.params(idx)
     m = cfg.candidates

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kbcli.core.registry import Registry, Uses
+from kbcli.core.registry import Registry
 from kbcli.errors import ConfigError
 
 
@@ -82,10 +82,7 @@ FAMILIES: Registry[Family] = Registry("transform family")
 FAMILIES.register("translation", Family("translation", ("dx", "dy"), rotates=False),
                   summary="a shift (dx, dy) in px: the paper's")
 FAMILIES.register("rigid", Family("rigid", ("angle", "dx", "dy"), rotates=True),
-                  summary="a rotation (deg) about the keyboard centre and a shift (dx, dy)",
-                  uses=("max_angle", "angle_resolution",
-                        Uses("stop_angle", lambda cfg: bool(cfg.stop_mass), "stop_mass > 0",
-                             "stop_mass = 0")))
+                  summary="a rotation (deg) about the keyboard centre and a shift (dx, dy)")
 #: The family a config chooses when it names none (the paper's).
 DEFAULT_FAMILY = "translation"
 

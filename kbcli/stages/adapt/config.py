@@ -8,7 +8,7 @@ from typing import Any, ClassVar
 
 from pydantic import Field, InstanceOf, field_validator, model_validator
 
-from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.config import AdapterConfig, option_names
 from kbcli.core.config import Flag, Name, Whole, between
 from kbcli.core.instrument.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
@@ -26,8 +26,9 @@ LOOP_FIELDS = ("mode", "reach_noise", "arm", "feedback", "max_steps", "stop")
 
 
 def robot_fields() -> tuple[str, ...]:
-    """The robot's option names (:class:`kbcli.core.adaptation.loop.AdapterConfig`)."""
-    return tuple(AdapterConfig.model_fields)
+    """The robot's option names in the flat layout (:func:`~kbcli.core.adaptation.config.option_names`:
+    the adapter's own and its parts')."""
+    return option_names()
 
 
 def _robot(robot: Any, flat: dict[str, Any]) -> AdapterConfig:
@@ -68,7 +69,8 @@ class AdaptConfig(StageConfig):
 
     Notes
     -----
-    The robot's options read through as attributes (``cfg.strategy`` is ``cfg.robot.strategy``).
+    The robot's own options read through as attributes (``cfg.family`` is ``cfg.robot.family``;
+    ``cfg.strategy`` the strategy's options, ``cfg.strategy.name`` its name).
     They may also be given at the top level, beside ``mode`` (``AdaptConfig(strategy="random")``,
     the flat layout of schema-1 artifacts and older TOML files): there they override the same
     option of ``robot`` (as a command-line flag overrides a TOML file).
@@ -116,7 +118,7 @@ class AdaptConfig(StageConfig):
 
     def __getattr__(self, name: str) -> Any:
         # the robot's options read through (``cfg.strategy``); only called for missing attributes
-        if not name.startswith("_") and name in robot_fields():
+        if not name.startswith("_") and name in AdapterConfig.model_fields:
             return getattr(self.robot, name)
         return super().__getattr__(name)
 

@@ -12,7 +12,6 @@ import numpy as np
 from kbcli.core.adaptation.adapter import Adapter
 from kbcli.core.adaptation.estimators import ESTIMATORS
 from kbcli.core.adaptation.loop import adapt
-from kbcli.core.adaptation.posteriors import POSTERIORS
 from kbcli.core.adaptation.posteriors.kde.samples import ActionSamples
 from kbcli.core.adaptation.setup import build_samples, build_table
 from kbcli.core.instrument import transforms
@@ -243,6 +242,6 @@ def build_shared_samples(cfg: AdaptConfig, model, seed,
     """The ``kde`` posterior's per-class samples for ``cfg`` (None for other posteriors), drawn
     from ``seed`` once per class, to share across many :func:`experiment` calls (``table``: the
     model raster for ``cfg``, built when needed and not given)."""
-    if not POSTERIORS.get(cfg.robot.posterior).uses_samples:
+    if not cfg.robot.kind.uses_samples:
         return None
     return build_samples(model, cfg.adapter_config(), seed, table=table)

@@ -11,7 +11,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import Field, InstanceOf, field_validator, model_validator
 
-from kbcli.core.adaptation.applies import refuse_unused
+from kbcli.core.adaptation.config import refuse_inactive
 from kbcli.core.config import (
     Name,
     Names,
@@ -317,7 +317,7 @@ class EvaluateConfig(StageConfig):
                 for m in self.modes:
                     acfg = adapt_config(self, meth.name, s, m)
             if acfg is not None:  # options the method's parts do not read are refused
-                refuse_unused(acfg.robot, meth.given(), f"methods.{meth.name}", meth.strategies)
+                refuse_inactive(acfg.robot, meth.given(), f"methods.{meth.name}", meth.strategies)
         return self
 
     def _check_names(self) -> None:
@@ -397,7 +397,7 @@ def adapt_config(cfg: EvaluateConfig, method: str, strategy: str, mode: str):
     adapt = adapt_stage()
     if adapt is None:
         return None
-    values = {**cfg.method(method).options, "strategy": strategy, "mode": mode,
+    values = {**cfg.method(method).options_for(strategy), "strategy": strategy, "mode": mode,
               "max_steps": cfg.max_steps, "family": cfg.family,
               "reach_noise": cfg.reach_noise[mode], "arm": dict(cfg.arm[mode])}
     if isinstance(values.get("robot"), Mapping):

@@ -8,7 +8,6 @@ from typing import Any
 import numpy as np
 
 from kbcli.core.adaptation.estimators import ESTIMATORS
-from kbcli.core.adaptation.posteriors import POSTERIORS
 from kbcli.errors import ConfigError
 from kbcli.stages.evaluate.config import EvaluateConfig, adapt_config
 from kbcli.stages.evaluate.methods import adapt_stage
@@ -116,13 +115,12 @@ def _samples(state: dict, acfg, seed: int):
     same sampling settings; drawn from ``SeedSequence([seed, cls])`` once per class, so every
     process draws the same ones (None for other posteriors)."""
     adapt = adapt_stage()
-    if acfg is None or adapt is None or not POSTERIORS.get(getattr(acfg, "posterior", "likelihood")).uses_samples:
+    if acfg is None or adapt is None:
         return None
     r = acfg.adapter_config()
-    if r.kde_draw != "shared":  # drawn anew for every observation, by the adapter itself
+    key = r.kind.sample_key(r)  # None: no samples shared (or drawn anew at every touch)
+    if key is None:
         return None
-    key = (r.kde_samples, r.kde_bandwidth, r.resolution, r.kde_beyond, r.family,
-           r.prior_halfwidth, r.max_angle, r.angle_resolution)
     if key not in state["samples"]:
         state["samples"][key] = adapt.build_shared_samples(acfg, state["model"], [seed],
                                                            table=_table(state, acfg))

@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kbcli.core.adaptation import stats
+from kbcli.core.adaptation.config import SLOTS
+from kbcli.core.options import flat_view
 from kbcli.errors import ArtifactError
 from kbcli.sim.modes import MODES
 from kbcli.stages.artifact import Artifact
@@ -195,14 +197,15 @@ def methods_of(art: Artifact) -> dict:
 
 
 def robot(art: Artifact, method: str) -> dict:
-    """The robot options a method resolved to (those of its first mode and strategy, with the
-    per-experiment strategy dropped)."""
+    """The robot options a method resolved to, in the flat layout (those of its first mode, each
+    strategy's own options beside the shared ones; the per-experiment strategy dropped)."""
     opts = methods_of(art)[method]["options"]
     for by_s in opts.values():
+        r: dict = {}
         for d in by_s.values():
-            r = dict(d.get("robot", {}))
-            r.pop("strategy", None)
-            return r
+            r.update(flat_view(d.get("robot", {}), SLOTS))
+        r.pop("strategy", None)
+        return r
     return {}
 
 

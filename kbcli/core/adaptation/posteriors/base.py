@@ -86,6 +86,22 @@ class KindBase:
     uses_samples: ClassVar[bool] = False
     robust: ClassVar[bool] = False
 
+    def draws_fresh(self, cfg: Any) -> bool:
+        """Whether the kind draws from the adapter's own generator at every touch (then the
+        adapter spawns it one)."""
+        return False
+
+    def sample_key(self, cfg: Any) -> tuple | None:
+        """What decides the samples the kind's terms share between adaptations of one model
+        (two configs with one key share them); None: the kind shares none."""
+        return None
+
+    def sources(self, adapter: Any, fresh: Any, rng: Any, samples: Any) -> tuple[Any, Any]:
+        """``(samples, simulation samples)`` the kind's terms read for ``adapter`` (given
+        ``samples``, shared between adaptations, or None; ``fresh``, the adapter's own generator
+        when :meth:`draws_fresh`; ``rng``, the adapter's): here ``samples`` for both."""
+        return samples, samples
+
 
 class RobustKind(PosteriorKind, Protocol):
     """A kind the robust posterior applies to (``robust`` True)."""

@@ -7,18 +7,72 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Annotated, ClassVar
 
 import numpy as np
 
+from kbcli.core.adaptation.fields import MAX_KDE_SAMPLES, Floor, choice
 from kbcli.core.adaptation.posteriors.base import POSTERIORS, KindBase, Observation
-from kbcli.core.adaptation.posteriors.kde.density import (
+from kbcli.core.adaptation.posteriors.kde.density import ZERO_RTOL, kde_term, kde_terms
+from kbcli.core.adaptation.posteriors.kde.samples import (
     KERNEL_REACH,
     MAX_BANDWIDTH,
-    ZERO_RTOL,
-    kde_term,
-    kde_terms,
+    ActionSamples,
+    FreshSamples,
+    beyond_source,
 )
-from kbcli.core.registry import Uses
+from kbcli.core.config import Name, Positive, Whole, between
+from kbcli.core.options import Options
+
+#: How the KDE posterior gets its samples of p(action | sound) (``kde_draw``).
+KDE_DRAWS = ("shared", "fresh")
+#: What silence's samples of p(action | silence) cover (``kde_beyond``).
+KDE_BEYOND = ("silent", "unknown")
+
+
+class KdeOptions(Options):
+    """The KDE posterior's options.
+
+    Parameters
+    ----------
+    kde_samples : int
+        N, actions drawn from p(action | sound) per KDE term (Algorithm 2, line 3).
+    kde_draw : str
+        ``shared``: each class's N actions are drawn once and reused by every touch (and, in the
+        evaluation, by every experiment of a process; :class:`.samples.ActionSamples`).
+        ``fresh``: Algorithm 2 as written, N new actions for every observation, from the
+        adapter's own generator (:class:`.samples.FreshSamples`).
+    simulate_draw : str or None
+        How ``paper-active``'s simulated touches get their samples. None: as ``kde_draw`` says
+        (the paper's text); ``shared``: each sound's N samples drawn once per adaptation and
+        reused by every simulated touch (the real touches still draw as ``kde_draw`` says);
+        ``fresh``: new samples for every simulated touch.
+    kde_beyond : str
+        What the KDE knows of the pad beyond the working area (where the paper is silent):
+        ``silent`` (silence's samples cover a ring beyond it as wide as the hypotheses can move a
+        touch back, :class:`.samples.SilentBeyond`) or ``unknown`` (no samples there).
+    kde_floor : float or None
+        Weight of the uniform floor mixed into each term (``(1 - w) KDE + w / |prior|``); 0: none
+        (Eq. 7 as written); None: the adapter's ``outlier``.
+    kde_bandwidth : float or None
+        Kernel std, px; None: Scott's rule (:func:`.samples.scott_bandwidth`).
+    """
+
+    what: ClassVar[str] = "posterior kde"
+
+    kde_samples: between(Whole, 10, MAX_KDE_SAMPLES) = 10000
+    kde_draw: Annotated[Name, choice(*KDE_DRAWS)] = "shared"
+    simulate_draw: Annotated[Name, choice(*KDE_DRAWS)] | None = None
+    kde_beyond: Annotated[Name, choice(*KDE_BEYOND)] = "silent"
+    kde_floor: Floor | None = None
+    kde_bandwidth: Positive | None = None
+
+    def samples_actions(self) -> bool:
+        return self.kde_draw == "fresh"
+
+    def eps(self, outlier: float) -> float:
+        """The term's floor weight: ``kde_floor``, or ``outlier`` when it is None."""
+        return float(outlier if self.kde_floor is None else self.kde_floor)
 
 
 @dataclass(frozen=True)
@@ -29,10 +83,57 @@ class KdePosterior(KindBase):
     uses_samples = True
 
     def term(self, obs: Observation) -> tuple[np.ndarray, float]:
-        """``log KDE_t(h)`` with the floor ``cfg.kde_eps`` (``kde_floor``, or ``outlier`` when
-        that is None), and the kernel bandwidth (px) it used."""
-        return kde_term(obs.grid, obs.model, obs.action, obs.cls, n_samples=obs.cfg.kde_samples,
-                        eps=obs.cfg.kde_eps, samples=obs.samples)
+        """``log KDE_t(h)`` with the floor (``kde_floor``, or the adapter's ``outlier`` when that
+        is None), and the kernel bandwidth (px) it used."""
+        opts = obs.cfg.posterior
+        return kde_term(obs.grid, obs.model, obs.action, obs.cls, n_samples=opts.kde_samples,
+                        eps=opts.eps(obs.cfg.outlier), samples=obs.samples)
+
+    def draws_fresh(self, cfg) -> bool:
+        """Algorithm 2 as written (``kde_draw = "fresh"``): new samples at every touch."""
+        return cfg.posterior.kde_draw == "fresh"
+
+    def sample_key(self, cfg) -> tuple | None:
+        """The options the shared samples depend on (None when drawn anew at every touch)."""
+        o = cfg.posterior
+        if o.kde_draw != "shared":
+            return None
+        return (o.kde_samples, o.kde_bandwidth, cfg.resolution, o.kde_beyond, cfg.family,
+                cfg.prior_halfwidth, cfg.max_angle, cfg.angle_resolution)
+
+    def sources(self, adapter, fresh, rng, samples):
+        """The touches' samples: fresh ones from ``fresh`` (``kde_draw = "fresh"``), the given
+        shared ones, or shared ones drawn from the model with a seed from ``rng``; and the
+        simulated touches' (``simulate_draw``): the same, unless set apart from ``kde_draw`` (then
+        drawn by the adapter's ``kde_sampler`` from a further child of ``rng``)."""
+        opts, cfg = adapter.cfg.posterior, adapter.cfg
+
+        def drawn():  # what fresh draws come from: the adapter's sampler, silent beyond
+            return self._source(adapter, adapter.action_source())
+
+        if opts.kde_draw == "fresh":  # Algorithm 2: new every touch
+            samples = FreshSamples(drawn(), opts.kde_samples, fresh, bandwidth=opts.kde_bandwidth,
+                                   resolution=cfg.resolution)
+        elif samples is None:
+            samples = ActionSamples(self._source(adapter, adapter.model), opts.kde_samples,
+                                    [int(v) for v in rng.integers(2**32, size=2)],
+                                    bandwidth=opts.kde_bandwidth, resolution=cfg.resolution)
+        draw = opts.simulate_draw
+        if draw is None or draw == opts.kde_draw:
+            return samples, samples
+        own = rng.spawn(1)[0]
+        if draw == "fresh":
+            return samples, FreshSamples(drawn(), opts.kde_samples, own,
+                                         bandwidth=opts.kde_bandwidth, resolution=cfg.resolution)
+        return samples, ActionSamples(drawn(), opts.kde_samples,
+                                      [int(v) for v in own.integers(2**32, size=2)],
+                                      bandwidth=opts.kde_bandwidth, resolution=cfg.resolution)
+
+    @staticmethod
+    def _source(adapter, source):
+        """``source`` with silence beyond the working area as ``kde_beyond`` says."""
+        return beyond_source(source, adapter.cfg.posterior, adapter.table, adapter.grid,
+                             adapter.area)
 
     def terms(self, observations: Sequence[Observation]) -> np.ndarray:
         """``(k, *grid.shape)`` log terms of ``k`` observations of one adaptation (the same grid,
@@ -42,11 +143,7 @@ class KdePosterior(KindBase):
         draws = [first.samples.get(int(o.cls)) for o in observations]
         actions = np.array([o.action for o in observations], float).reshape(-1, 2)
         return kde_terms(first.grid, actions, np.stack([d for d, _ in draws]),
-                         [bw for _, bw in draws], first.cfg.kde_eps)
-
-
-def _fresh(cfg) -> bool:
-    return cfg.kde_draw == "fresh"
+                         [bw for _, bw in draws], first.cfg.posterior.eps(first.cfg.outlier))
 
 
 # -- how it departs from the paper's text (the report's rows; ``r``: the recorded options) --------
@@ -95,6 +192,5 @@ def _bandwidth(r: dict) -> str:
 POSTERIORS.register("kde", KdePosterior(),
                     summary="the paper's product of KDEs of p(action | sound) (Eq. 7)",
                     traits={"departures": {"samples": _samples, "floor": _floor,
-                                           "beyond": _beyond, "bandwidth": _bandwidth}},
-                    uses=("kde_samples", "kde_draw", "kde_beyond", "kde_floor", "kde_bandwidth",
-                          Uses("kde_sampler", _fresh, 'kde_draw = "fresh"', 'kde_draw = "shared"')))
+                                           "beyond": _beyond, "bandwidth": _bandwidth},
+                            "options": KdeOptions})

@@ -33,7 +33,10 @@ import numpy as np
 from scipy import fft as sfft
 
 from kbcli.core.adaptation.grid import HypothesisGrid
-from kbcli.core.adaptation.posteriors.kde.samples import ActionSamples, scott_bandwidth
+from kbcli.core.adaptation.posteriors.kde.samples import (
+    ActionSamples,
+    scott_bandwidth,
+)
 from kbcli.core.instrument import transforms
 
 
@@ -237,9 +240,6 @@ def kde_terms(grid: HypothesisGrid, actions: np.ndarray, drawn: np.ndarray,
     return floored_log(dens, grid, eps, batch=True, overwrite=True).reshape((k,) + grid.shape)
 
 
-#: The widest kernel of the bandwidth rule (px) and its reach in kernel widths: how far beyond a
-#: sample a KDE term is non-zero.
-MAX_BANDWIDTH, KERNEL_REACH = 4.0, 4.0
 #: Without a floor, densities below this fraction of a term's peak are read as zero: the
 #: single-precision FFT's rounding (:func:`binned_kde`) is about 1e-7 of the peak.
 ZERO_RTOL = 1e-6

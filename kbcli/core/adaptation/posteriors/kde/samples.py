@@ -20,6 +20,10 @@ import numpy as np
 
 from kbcli.core.model.sounds import SILENCE
 
+#: The widest kernel of the bandwidth rule (px) and its reach in kernel widths: how far beyond a
+#: sample a KDE term is non-zero.
+MAX_BANDWIDTH, KERNEL_REACH = 4.0, 4.0
+
 
 def scott_bandwidth(samples: np.ndarray) -> float:
     """Scott's rule for a 2-D sample, ``sigma_hat * n^(-1/6)``, with Silverman's robust spread.
@@ -282,3 +286,15 @@ def beyond_margin(grid, area: tuple[float, float, float, float], reach: float) -
     return shift + float(turn) + float(reach)
 
 
+
+
+def beyond_source(source, options, table, grid, area: tuple[float, float, float, float]):
+    """What the KDE posterior draws p(action | sound) from: ``source`` (the model or its raster
+    sampler), with ``kde_beyond = "silent"`` (of the KDE's ``options``) wrapped so that silence
+    covers the pad beyond the working area as far as the hypotheses of ``grid`` and a kernel reach
+    (:class:`SilentBeyond`)."""
+    if options.kde_beyond != "silent":
+        return source
+    bw = options.kde_bandwidth
+    reach = KERNEL_REACH * (MAX_BANDWIDTH if bw is None else bw)
+    return SilentBeyond(source, table, beyond_margin(grid, area, reach))
