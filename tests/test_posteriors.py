@@ -48,7 +48,7 @@ def test_an_unknown_posterior_lists_the_registered_ones():
     with pytest.raises(ConfigError, match="unknown posterior 'deaf'; valid: likelihood, kde"):
         AdapterConfig(posterior="deaf")
     with POSTERIORS.temporarily("deaf", DeafPosterior()):
-        assert AdapterConfig(posterior="deaf").posterior == "deaf"
+        assert AdapterConfig(posterior="deaf").posterior.name == "deaf"
     assert "deaf" not in POSTERIORS
 
 
@@ -78,7 +78,7 @@ def test_a_toy_posterior_runs_through_kbcli_adapt(runner, tmp_path):
         assert r.exit_code == 0, r.output
         assert "infogain/deaf" in r.output and "final error" in r.output
         art = read_artifact(tmp_path / "run.h5", "run")
-    assert art.config["adapt"]["robot"]["posterior"] == "deaf"
+    assert art.config["adapt"]["robot"]["posterior"] == {"name": "deaf"}
     # the deaf posterior never moves: the entropy stays that of the flat prior
     n = 2 * 10 + 1  # +-5 px at 0.5 px
     assert np.allclose(art.data["entropy"], math.log(n * n))

@@ -12,7 +12,6 @@ from hypothesis import strategies as st
 
 from kbcli.core.adaptation import credible
 from kbcli.core.adaptation.adapter import Adapter
-from kbcli.core.adaptation.applies import unused
 from kbcli.core.adaptation.config import AdapterConfig
 from kbcli.core.adaptation.grid import HypothesisGrid
 from kbcli.core.adaptation.posteriors.likelihood.robust import Nuisance
@@ -201,16 +200,18 @@ def test_credible_radius_of_known_posteriors():
 
 
 def test_repair_config_is_opt_in_and_checked():
-    assert AdapterConfig().repair is False
-    assert "repair" not in AdapterConfig().to_dict()  # stored configs read back unchanged
-    assert AdapterConfig(repair=True).to_dict()["repair"] is True
+    assert AdapterConfig().posterior.repair is False
+    assert AdapterConfig(repair=True).to_dict()["posterior"]["repair"] is True
     with pytest.raises(ConfigError, match="translation"):
         AdapterConfig.from_dict({"repair": True, "family": "rigid"})
     with pytest.raises(ConfigError, match="robust"):
+        AdapterConfig.from_dict({"repair": True, "robust": False})
+    with pytest.raises(ConfigError, match="posterior kde takes no option 'repair'"):
         AdapterConfig.from_dict({"repair": True, "posterior": "kde"})
     # the repair's own options are read only with it; the robust posterior's own ones not with it
-    assert unused(AdapterConfig(), ["repair_kernel"]) == ["repair_kernel"]
-    assert unused(AdapterConfig(repair=True), ["repair_kernel", "robust_eta"]) == ["robust_eta"]
+    assert "repair_kernel" in AdapterConfig().inactive()
+    inactive = AdapterConfig(repair=True).inactive()
+    assert "robust_eta" in inactive and "repair_kernel" not in inactive
 
 
 def test_adapter_with_repair_on_the_exact_model_finds_the_shift(exact_model, world_of):

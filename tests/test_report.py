@@ -476,13 +476,13 @@ def test_methods_table_marks_options_that_do_not_apply():
 
 def test_methods_table_of_kde_methods_lists_no_likelihood_only_option():
     art = _evaluation(PAPER_LIKE)
-    robot = {**AdapterConfig(posterior="kde", estimator="ml").to_dict(), "kde_floor": 0.0}
     for x in ("paper", "kbcli"):  # both read with the KDE: no method reads the robust options
         art.attrs["methods"][x]["from_model"] = {"redundancy_radius": 0.0, "robust_blurs": [],
                                                  "robust_eta": 1.0}
         for by_s in art.attrs["methods"][x]["options"].values():
-            for d in by_s.values():
-                d["robot"] = {**robot, "strategy": d["robot"]["strategy"]}
+            for s, d in by_s.items():
+                d["robot"] = AdapterConfig(posterior="kde", estimator="ml", kde_floor=0.0,
+                                           strategy=s).to_dict()
     table = "\n".join(stage.tables.methods_table(art))
     for k in ("robust", "robust_blurs", "robust_outliers", "robust_eta", "redundancy_radius",
               "cell_average", "hypotheses", "stop_angle", "max_angle"):
@@ -490,8 +490,9 @@ def test_methods_table_of_kde_methods_lists_no_likelihood_only_option():
     for k in ("kde_samples", "kde_floor", "kde_draw", "ml_ties", "candidates", "active_keep"):
         assert f"| {k} |" in table, k
     assert "n/a" not in table  # every row applies to both
-    # all of them stay recorded in the artifact
-    assert "robust_eta" in art.attrs["methods"]["paper"]["options"]["ideal"]["active"]["robot"]
+    # every option of the chosen parts stays recorded in the artifact
+    assert "kde_bandwidth" in art.attrs["methods"]["paper"]["options"]["ideal"]["active"]["robot"][
+        "posterior"]
 
 
 @pytest.mark.parametrize("robot,expected", [

@@ -9,6 +9,7 @@ import pytest
 
 from kbcli.core.adaptation.adapter import Adapter
 from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.options import for_part
 from kbcli.core.adaptation.loop import adapt
 from kbcli.core.adaptation.posteriors.posterior import Posterior
 from kbcli.core.adaptation.setup import build_table
@@ -53,8 +54,10 @@ def test_registry_and_unknown_name():
 @pytest.mark.parametrize("family", ["translation", "rigid"])
 @pytest.mark.parametrize("soft", [False, True])
 def test_every_strategy_proposes_an_action_in_the_area(name, family, soft):
+    own = for_part(STRATEGIES, name, {"candidates": 64, "hypotheses": 64,
+                                      "active_hypotheses": 256})  # those the strategy takes
     cfg = AdapterConfig(strategy=name, family=family, prior_halfwidth=10.0, max_angle=2.0,
-                        angle_resolution=0.5, candidates=64, hypotheses=64, active_hypotheses=256)
+                        angle_resolution=0.5, **own)
     ad = Adapter(MODEL, cfg, rng=np.random.default_rng(0), table=SOFT if soft else TABLE)
     touch = make_touch([3.0, -2.0] if family == "translation" else [1.0, 3.0, -2.0], family)
     x0, y0, x1, y1 = KB.area
@@ -199,7 +202,7 @@ def test_the_plain_posterior_softens_learned_models_and_the_robust_one_learns_th
     # aim-only feedback's blur, and model_blur, when given, fixes the blur it weighs
     robust = AdapterConfig(prior_halfwidth=10.0, raster_step=1.0, blur=1.5)
     assert total_blur(soft, robust) == 1.5
-    assert robust.robust_blurs is None  # resolved with the model (robust_blurs())
+    assert robust.posterior.robust_blurs is None  # resolved with the model (robust_blurs())
     assert list(robust.nuisance().blurs) == sorted(DEFAULT_BLURS)
     assert list(AdapterConfig(robust_blurs=(2.0, 0.0)).nuisance().blurs) == [0.0, 2.0]
     assert list(AdapterConfig(model_blur=3.0).nuisance().blurs) == [3.0]

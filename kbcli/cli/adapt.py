@@ -30,6 +30,7 @@ from kbcli.cli.app import (
 from kbcli.cli.record import load_average, show_table
 from kbcli.cli.repair import check_model_out, write_repaired
 from kbcli.core.adaptation.config import refuse_inactive
+from kbcli.core.config import refused_option
 from kbcli.core.instrument.transforms import DEFAULT_FAMILY, FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -174,8 +175,12 @@ def _adapt_config(config: Path | None, flags: dict, arm: str | None,
     scene_family = "family" not in {**table, **given}  # what the scene moved (rigid: an angle)
     if scene_family:
         given["family"] = family
-    cfg = with_file(stage.AdaptConfig, table, given, config)
-    refuse_inactive(cfg.robot, opts.robot_given(flags, table, str(config)), "adapt")
+    labels = opts.robot_given(flags, table, str(config))
+    try:
+        cfg = with_file(stage.AdaptConfig, table, given, config)
+    except ConfigError as exc:
+        raise refused_option(exc, labels, "adapt") from None
+    refuse_inactive(cfg.robot, labels, "adapt")
     return cfg, scene_family, snaps
 
 

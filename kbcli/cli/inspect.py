@@ -10,7 +10,7 @@ import typer
 from rich.table import Table
 
 from kbcli.cli.app import command, out
-from kbcli.core.adaptation.config import SLOTS, shown
+from kbcli.core.adaptation.config import SLOTS, option_names, shown
 from kbcli.core.options import flat_view
 from kbcli.errors import ArtifactError
 from kbcli.io.artifact import describe, provenance_chain
@@ -114,8 +114,8 @@ def _unread_resolved(config: dict, attrs: dict, hidden: list) -> dict:
     def drop(d: dict, robot: dict | None, strategies, prefix: str) -> dict:
         if robot is None:
             return d
-        flat, read = flat_view(robot, SLOTS), shown(robot, strategies)
-        out = {k: v for k, v in d.items() if k not in flat or k in read}
+        read, options = shown(robot, strategies), option_names()
+        out = {k: v for k, v in d.items() if k not in options or k in read}
         hidden.extend(f"{prefix}{k}" for k in d if k not in out)
         return out
 

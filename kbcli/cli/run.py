@@ -23,10 +23,12 @@ from kbcli.cli.app import (
 )
 from kbcli.cli.repair import check_model_out, write_repaired
 from kbcli.core.adaptation.config import refuse_inactive
+from kbcli.core.config import refused_option
 from kbcli.core.detection.detectors import MAX_N_LT, MAX_N_ST, DetectorConfig
 from kbcli.core.instrument.melody import DEFAULT_MELODY
 from kbcli.core.instrument.transforms import DEFAULT_FAMILY
 from kbcli.core.playing.loop import PLAY
+from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm
 from kbcli.stages import keyboard as keyboard_stage
@@ -94,9 +96,12 @@ def run_cmd(
     if scene_family:
         family = scene_art.config.get("family", "translation")
     given = {"estimator": estimator, "repair": repair, **(paper_flags or {})}
-    adapt = AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
-                             reach_noise=reach_noise, arm=load_arm(arm), stop=True,
-                             **{k: v for k, v in given.items() if v is not None})
+    try:
+        adapt = AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
+                                 reach_noise=reach_noise, arm=load_arm(arm), stop=True,
+                                 **{k: v for k, v in given.items() if v is not None})
+    except ConfigError as exc:
+        raise refused_option(exc, opts.robot_given(given), "run") from None
     refuse_inactive(adapt.robot, opts.robot_given(given), "run")
     cfg = stage.LoopConfig(
         melody=melody, steps=steps, perturb_at=perturb_at, max_adapt_steps=max_adapt_steps,

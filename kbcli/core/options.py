@@ -101,16 +101,21 @@ def parse_part(registry: Registry, value: Any, default: str | None = None) -> Op
     mine = declared(registry, name)
     for key in table:
         if key != "name" and key not in mine:
-            raise ConfigError(_foreign(registry, name, key))
+            raise refusal(registry, name, key)
     return options_of(registry, name).from_dict(table)
 
 
-def _foreign(registry: Registry, name: str, key: str) -> str:
+def refusal(registry: Registry, name: str, key: str) -> ConfigError:
+    """The part ``name`` refusing option ``key``: a ConfigError naming the part, who takes the
+    option and the part's own options; ``option`` and ``reason`` are kept on it (a command names
+    the flag the option came from: :func:`kbcli.core.config.refused_option`)."""
     who = owners(registry, key)
     names = who[0] if len(who) == 1 else f"{', '.join(who[:-1])} and {who[-1]}" if who else ""
     whose = f" ({registry.kind} {names} {'does' if len(who) == 1 else 'do'})" if who else ""
-    return (f"{registry.kind} {name} takes no option {key!r}{whose}; its options: "
-            f"{', '.join(declared(registry, name)) or 'none'}")
+    reason = f"{registry.kind} {name} takes no option {key!r}{whose}"
+    err = ConfigError(f"{reason}; its options: {', '.join(declared(registry, name)) or 'none'}")
+    err.option, err.reason = key, reason
+    return err
 
 
 def part_field(registry: Registry, default: str) -> Any:
@@ -168,7 +173,7 @@ def route(data: Mapping[str, Any], slots: Mapping[str, tuple[Registry, str]],
             if key in accepted:
                 table[key] = value
             elif strict:
-                raise ConfigError(_foreign(registry, name, key))
+                raise refusal(registry, name, key)
         if not strict:
             table = {k: v for k, v in table.items() if k == "name" or k in accepted}
         out[slot] = table

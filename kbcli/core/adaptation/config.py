@@ -27,7 +27,7 @@ from kbcli.core.adaptation.posteriors.likelihood.robust import (
 from kbcli.core.adaptation.strategies import STRATEGIES
 from kbcli.core.config import Config, Name, NonNegative, Positive, Rate
 from kbcli.core.instrument.transforms import DEFAULT_FAMILY, FAMILIES
-from kbcli.core.options import declared, flat_view, options_of, part_field, route
+from kbcli.core.options import declared, flat_view, for_part, options_of, part_field, route
 from kbcli.errors import ConfigError
 
 #: Default softening (px) of a learned model's map (``AdapterConfig.model_blur``).
@@ -187,6 +187,14 @@ class AdapterConfig(Config):
                 changes = {**changes, slot: {**kept, "name": changes[slot]}}
         return type(self)(**{**base, **changes})
 
+    @classmethod
+    def shared(cls, options: Mapping[str, Any]) -> AdapterConfig:
+        """A config from options a method shares between its strategies (``options["strategy"]``
+        the one to build): the options of strategies that this one does not take left out."""
+        strategy = options.get("strategy", SLOTS["strategy"][1])
+        name = strategy if isinstance(strategy, str) else dict(strategy)["name"]
+        return cls.from_dict(for_part(STRATEGIES, name, options))
+
     def flat(self) -> dict[str, Any]:
         """Every option in the flat layout (each part by its name, its options beside it)."""
         return flat_view(self.to_dict(), SLOTS)
@@ -207,11 +215,14 @@ class AdapterConfig(Config):
         reads_ml = ESTIMATORS.trait(self.estimator, "ties", False) or self.stop_ml is not None \
             or STRATEGIES.trait(self.strategy.name, "paper", False)
         if not reads_ml:
-            out["ml_ties"] = "no maximum-likelihood cell is read (estimator, stop_ml, strategy)"
+            out["ml_ties"] = (f"no maximum-likelihood cell is read (the estimator is "
+                              f"{self.estimator}, stop_ml is not set, strategy "
+                              f"{self.strategy.name} simulates at none)")
         if self.is_robust and not rotates and "cell_average" in type(self.posterior).model_fields:
             out["cell_average"] = "the robust posterior cell-averages a rotating grid only"
         if not (self.posterior.samples_actions() or self.strategy.samples_actions()):
-            out["kde_sampler"] = "nothing draws from p(action | sound) with the sampler"
+            out["kde_sampler"] = ('nothing here draws from p(action | sound) (kde_draw = "fresh", '
+                                  'random_actions = "model" or paper-active would)')
         if not STRATEGIES.trait(self.strategy.name, "simulates", False):
             out["simulate_draw"] = f"strategy {self.strategy.name} simulates no touch"
         return out

@@ -20,6 +20,7 @@ from kbcli.core.config import (
     Positive,
     Whole,
     between,
+    refused_option,
 )
 from kbcli.core.instrument import transforms
 from kbcli.core.instrument.melody import DEFAULT_MELODY
@@ -315,7 +316,11 @@ class EvaluateConfig(StageConfig):
         for meth in self.methods:
             for s in meth.strategies:
                 for m in self.modes:
-                    acfg = adapt_config(self, meth.name, s, m)
+                    try:
+                        acfg = adapt_config(self, meth.name, s, m)
+                    except ConfigError as exc:  # a part refused an option: name the method's
+                        raise refused_option(exc, {k: k for k in meth.given()},
+                                             f"methods.{meth.name}") from None
             if acfg is not None:  # options the method's parts do not read are refused
                 refuse_inactive(acfg.robot, meth.given(), f"methods.{meth.name}", meth.strategies)
         return self

@@ -9,7 +9,6 @@ from typing import Any
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from kbcli.core.adaptation.config import SLOTS, option_names, refuse_inactive
-from kbcli.core.adaptation.strategies import STRATEGIES
 from kbcli.core.config import (
     Config,
     Flag,
@@ -18,6 +17,7 @@ from kbcli.core.config import (
     NonNegativeInt,
     Whole,
     between,
+    refused_option,
 )
 from kbcli.core.model.classes import EXACT  # the reference row's model: the exact class
 from kbcli.core.options import for_part, owners
@@ -201,6 +201,10 @@ class QualityConfig(Config):
             try:
                 configs[name] = acfg = adapt_config(self, name)
             except ConfigError as exc:
+                labels = {**{k: f"adapt.{k}" for k in self.adapt}, **{k: k for k in self.rows[name]}}
+                refused = refused_option(exc, labels, f"rows.{name}")
+                if refused is not exc:
+                    raise refused from None
                 raise ValueError(f"the adapt options of row {name!r}: {exc}") from None
             refuse_inactive(acfg.robot, [k for k in self.rows[name] if k != "strategy"],
                             f"rows.{name}")
@@ -293,8 +297,10 @@ def adapt_config(cfg: QualityConfig, row: str):
     from kbcli.stages.adapt import AdaptConfig
 
     opts = {"strategy": "infogain"} if row == IDEAL_ROW else dict(cfg.rows[row])
-    strategy = opts.get("strategy", SLOTS["strategy"][1])
-    shared = for_part(STRATEGIES, strategy, dict(cfg.adapt))  # the strategy options it takes
+    shared = dict(cfg.adapt)
+    for slot, (registry, default) in SLOTS.items():  # the shared options the row's parts take
+        part = opts.get(slot, shared.get(slot, default))
+        shared = for_part(registry, part if isinstance(part, str) else part["name"], shared)
     values = {**shared, **opts, "mode": cfg.mode, "arm": dict(cfg.arm),
               "reach_noise": float(cfg.reach_noise), "max_steps": cfg.max_steps,
               "family": "translation", "stop": False}

@@ -87,7 +87,7 @@ def _model_rows(art: Artifact, info: dict, meths: list[str]) -> list[str]:
     lines = []
     robots = {x: applicable(art, x) for x in meths}
     for k in ("redundancy_radius", "robust_blurs", "robust_eta"):  # as the model resolved them
-        reads = [robots[x].get(k) != NOT_APPLICABLE for x in meths]
+        reads = [robots[x].get(k, NOT_APPLICABLE) != NOT_APPLICABLE for x in meths]
         if any(k in info[x].get("from_model", {}) for x in meths) and any(reads):
             vals = [info[x].get("from_model", {}).get(k, "") for x in meths]
             vals = [NOT_APPLICABLE if not ok else
