@@ -88,7 +88,7 @@ def test_displaced_keyboard_plays_reference_sound_at_moved_point(dx, dy, angle, 
 
 
 def _near_edge(p):
-    u = (p[0] - np.array(KB.config.origin)) / KB.config.key_size
+    u = (p[0] - np.array(KB.config.origin)) / KB.config.layout.key_size
     return np.min(np.abs(u - np.round(u))) < 1e-6
 
 

@@ -69,9 +69,9 @@ def test_boundary_points_find_every_key_corner():
     edges, corners = TABLE.boundary_points()
     c = KB.config
     # vertices where 3 or 4 sounds meet: all inner vertices of the key lattice and the outline's
-    expected = (c.rows + 1) * (c.cols + 1) - 4
+    expected = (c.layout.rows + 1) * (c.layout.cols + 1) - 4
     assert len(corners) == expected
-    assert np.allclose(np.mod(corners - np.asarray(c.origin), c.key_size), 0)
+    assert np.allclose(np.mod(corners - np.asarray(c.origin), c.layout.key_size), 0)
     assert np.array_equal(TABLE.classes_at(edges[:, 0] + 0.3, edges[:, 1] + 0.3),
                           MODEL.predict_class(edges + 0.3))
 

@@ -172,8 +172,8 @@ class Pipeline:
         for name in self.cfg.layouts:
             toml = Path(self.cfg.keyboards) / f"{name}.toml"
             kcfg = KeyboardConfig.from_dict(load_toml(toml, "keyboard"))
-            if kcfg.layout != name:
-                raise ConfigError(f"{toml}: a {kcfg.layout} keyboard, expected {name}")
+            if kcfg.layout.name != name:
+                raise ConfigError(f"{toml}: a {kcfg.layout.name} keyboard, expected {name}")
             path = self.out / "keyboards" / f"{name}.h5"
             write_artifact(keyboard_stage.run(kcfg), path)
             self.results[name] = LayoutResult(name, Keyboard(kcfg))

@@ -241,13 +241,14 @@ class Config(BaseModel):
         return type(self)(**{**self.to_dict(), **changes})
 
 
-def refused_option(exc: ConfigError, labels: Mapping[str, str], where: str) -> ConfigError:
+def refused_option(exc: ConfigError, labels: Mapping[str, str], where: str,
+                   to: str = "this method") -> ConfigError:
     """``exc`` naming the flag or file key (``labels``: option -> how the user gave it) of the
     option a part refused (:func:`kbcli.core.options.refusal`); ``exc`` itself otherwise."""
     option = getattr(exc, "option", None)
     if option not in labels:
         return exc
-    err = ConfigError(f"{where}: {labels[option]} does not apply to this method: {exc.reason}")
+    err = ConfigError(f"{where}: {labels[option]} does not apply to {to}: {exc.reason}")
     err.option, err.reason = option, exc.reason
     return err
 

@@ -28,7 +28,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import PrivateAttr, field_validator
 
-from kbcli.core.config import Config, Count, Name, Number, between
+from kbcli.core.config import Config, Name, Number, between
 from kbcli.core.instrument import transforms
 from kbcli.core.instrument.geometry import (
     MAX_COORD,
@@ -37,14 +37,7 @@ from kbcli.core.instrument.geometry import (
     check_key_areas,
     check_overlaps,
 )
-from kbcli.core.instrument.layouts import (
-    DEFAULT_CENTRE,
-    LAYOUT_FIELDS,
-    LAYOUTS,
-    LayoutGeometry,
-    PolygonKey,
-    polygon_keys,
-)
+from kbcli.core.instrument.layouts import DEFAULT_CENTRE, LAYOUTS, LayoutGeometry, PolygonKey
 from kbcli.core.instrument.notes import (
     DEFAULT_SCALE,
     SCALES,
@@ -52,6 +45,7 @@ from kbcli.core.instrument.notes import (
     name_to_midi,
     sound_name,
 )
+from kbcli.core.options import flat_view, part_field, route
 from kbcli.errors import ConfigError
 
 FEATURE_NAMES = ("pitch", "tempo")
@@ -63,7 +57,6 @@ MAX_TEMPO = 10_000.0
 MAX_TEMPO_STEP = 1_000.0
 MAX_NOISE_STD = 100.0
 MAX_MATCH_THRESHOLD = 100.0
-_Length = between(Number, 0, MAX_COORD, low_open=True)
 
 __all__ = ["SCALES", "LAYOUTS", "KeyboardConfig", "Keyboard", "PolygonKey", "match",
            "midi_to_name", "name_to_midi", "sound_name"]
@@ -72,24 +65,19 @@ __all__ = ["SCALES", "LAYOUTS", "KeyboardConfig", "Keyboard", "PolygonKey", "mat
 class KeyboardConfig(Config):
     """Layout, geometry and sounds of a keyboard. All lengths in pad pixels.
 
-    Fields left ``None`` take the layout's default (see :mod:`kbcli.core.instrument.layouts`); a field the
-    layout does not use must be left out.
+    The layout is a part with options of its own (:mod:`kbcli.core.instrument.layouts`): the
+    ``layout`` field holds them (``cfg.layout.rows``); a name, a table ``{name, options...}`` or the
+    layout's options given flat beside its name (``KeyboardConfig(layout="pads", pad_radius=15)``,
+    as a TOML table writes them) are read, and an option the layout does not take is refused by
+    the layout, naming it. ``to_dict`` writes the flat form.
 
     Parameters
     ----------
-    layout : str
-        A name in :data:`~kbcli.core.instrument.layouts.LAYOUTS`: grid, hex, piano, pads or polygons.
-    rows, cols : int
-        Rows and columns of keys (grid, hex, pads); ``cols`` is the number of white keys (piano).
-    key_size : float
-        Side of a square key (grid), width across a hexagon's flats (hex), width of a white key
-        (piano), distance between pad centres (pads).
-    key_height, black_width, black_height : float
-        piano: height of the white keys, width and height of the black keys.
-    pad_radius : float
-        pads: radius of a pad.
-    keys : tuple of PolygonKey
-        polygons: the keys (vertices, and optional note and tempo).
+    layout : Options
+        A layout of :data:`~kbcli.core.instrument.layouts.LAYOUTS` (grid, hex, piano, pads or
+        polygons) with its options: ``rows``, ``cols``, ``key_size`` (grid, hex, pads),
+        ``pad_radius`` (pads), ``cols``, ``key_size``, ``key_height``, ``black_width``,
+        ``black_height`` (piano), ``keys`` (polygons).
     origin : tuple of float
         Lower-left corner of the keyboard at its reference pose (default: the keyboard centred on
         (400, 350), the grid's (200, 250); polygons: (0, 0), so their vertices are pad coordinates).
@@ -116,15 +104,7 @@ class KeyboardConfig(Config):
     """
 
     what: ClassVar[str] = "keyboard"
-    layout: Name = "grid"
-    rows: Count | None = None
-    cols: Count | None = None
-    key_size: _Length | None = None
-    key_height: _Length | None = None
-    black_width: _Length | None = None
-    black_height: _Length | None = None
-    pad_radius: _Length | None = None
-    keys: tuple[PolygonKey, ...] | None = None
+    layout: part_field(LAYOUTS, "grid") = "grid"
     origin: tuple[Coordinate, Coordinate] | None = None
     margin: between(Number, 0, MAX_COORD) = 50.0
     base_note: Name = "C3"
@@ -138,7 +118,7 @@ class KeyboardConfig(Config):
 
     def __init__(self, /, **data: Any) -> None:
         super().__init__(**_with_layout_defaults(data))
-        lay = LAYOUTS.get(self.layout)
+        lay = LAYOUTS.get(self.layout.name)
         local = lay.build(self)  # the keys in the keyboard's frame; raises on bad geometry
         if self.origin is None:  # the default origin is filled in once, at construction
             self.__dict__["origin"] = _default_origin(lay.default_origin, local.bounds)
@@ -166,15 +146,12 @@ class KeyboardConfig(Config):
         return self.geometry.pitches.copy()
 
     def to_dict(self) -> dict[str, Any]:
-        """The config as a plain mapping: the layout's own fields and the common ones (``scale``
-        only where the layout uses it)."""
-        lay = LAYOUTS.get(self.layout)
-        d: dict[str, Any] = {}
-        for name in type(self).model_fields:
-            v = getattr(self, name)
-            if (name in LAYOUT_FIELDS and name not in lay.fields) or (name == "scale" and v is None):
-                continue
-            d[name] = [k.to_dict() for k in v] if name == "keys" else v
+        """The config as a plain mapping in the flat form: the layout's name and its own options,
+        and the keyboard's (``scale`` only where the layout uses it)."""
+        d = {k: getattr(self, k) for k in type(self).model_fields if k != "layout"}
+        if d["scale"] is None:
+            del d["scale"]
+        d = {**flat_view({"layout": self.layout.to_dict()}, ("layout",)), **d}
         return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
 
     @classmethod
@@ -187,20 +164,11 @@ class KeyboardConfig(Config):
 
 
 def _with_layout_defaults(data: dict[str, Any]) -> dict[str, Any]:
-    """``data`` with the layout's defaults filled in, its polygon keys parsed and its scale set;
-    ConfigError naming a field the layout does not use."""
-    lay = LAYOUTS.get(data.get("layout", "grid"))
-    out = dict(data)
-    for name in LAYOUT_FIELDS:
-        given = out.get(name) is not None
-        if given and name not in lay.fields:
-            users = [n for n, v in LAYOUTS.items() if name in v.fields]
-            raise ConfigError(f"{name} does not apply to the {lay.name} layout (it applies "
-                              f"to: {', '.join(users)})")
-        if not given and name in lay.fields:
-            out[name] = lay.defaults[name]
-    if out.get("keys") is not None:
-        out["keys"] = polygon_keys(out["keys"])
+    """``data`` with the layout's options given flat moved into the layout (which refuses one it
+    does not take, naming it; :func:`kbcli.core.options.route`) and its scale set."""
+    out = route({k: v for k, v in data.items() if v is not None or k == "scale"},
+                {"layout": (LAYOUTS, "grid")}, KeyboardConfig.model_fields)
+    lay = LAYOUTS.get(out["layout"]["name"])
     if not lay.uses_scale and out.get("scale") is not None:
         raise ConfigError(f"scale does not apply to the {lay.name} layout (its notes follow "
                           f"its own lattice)")
@@ -274,7 +242,7 @@ class Keyboard:
     # -- geometry -------------------------------------------------------------------------------
     @property
     def layout(self) -> str:
-        return self.config.layout
+        return self.config.layout.name
 
     @property
     def shapes(self):
@@ -403,7 +371,7 @@ class Keyboard:
         """One line: the layout, its keys and their range."""
         c = self.config
         lo, hi = midi_to_name(self.pitches.min()), midi_to_name(self.pitches.max())
-        what = LAYOUTS.get(c.layout).describe(c, self.n_keys)
+        what = LAYOUTS.get(c.layout.name).describe(c, self.n_keys)
         return f"{what}, {lo} to {hi}"
 
 

@@ -30,7 +30,6 @@ from kbcli.core.instrument.layouts import polygons  # noqa: F401
 # isort: on
 from kbcli.core.instrument.layouts.base import (
     DEFAULT_CENTRE,
-    LAYOUT_FIELDS,
     LAYOUTS,
     MAX_KEYS,
     Layout,
@@ -40,7 +39,7 @@ from kbcli.core.instrument.layouts.base import (
 from kbcli.core.instrument.layouts.grid import GridShapes
 from kbcli.core.instrument.layouts.polygons import PolygonKey, example_polygon_keys, polygon_keys
 
-__all__ = ["DEFAULT_CENTRE", "LAYOUT_FIELDS", "LAYOUTS", "MAX_KEYS", "GridShapes", "Layout",
+__all__ = ["DEFAULT_CENTRE", "LAYOUTS", "MAX_KEYS", "GridShapes", "Layout",
            "LayoutGeometry", "PolygonKey", "example_config_fields", "example_polygon_keys",
            "layout", "polygon_keys"]
 

@@ -9,8 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from kbcli.core.instrument.geometry import KeyShapes
+from kbcli.core.config import Count, Number, between
+from kbcli.core.instrument.geometry import MAX_COORD, KeyShapes
 from kbcli.core.instrument.notes import name_to_midi, scale_pitches
+from kbcli.core.options import Options
 from kbcli.core.registry import Registry
 from kbcli.errors import ConfigError
 
@@ -20,9 +22,16 @@ KeyboardConfig = Any
 MAX_KEYS = 256
 #: Where every layout's default origin puts the keyboard's centre (the default grid's centre).
 DEFAULT_CENTRE = (400.0, 350.0)
-#: Config fields that belong to some layouts only (the rest apply to every layout).
-LAYOUT_FIELDS = ("rows", "cols", "key_size", "key_height", "black_width", "black_height",
-                 "pad_radius", "keys")
+#: A length of a layout's options, px: finite, in (0, MAX_COORD].
+Length = between(Number, 0, MAX_COORD, low_open=True)
+
+
+class RowsCols(Options):
+    """Options of a layout of ``rows`` x ``cols`` keys of ``key_size`` px."""
+
+    rows: Count = 4
+    cols: Count = 8
+    key_size: Length = 50.0
 
 
 @dataclass(frozen=True)
@@ -55,23 +64,25 @@ class LayoutGeometry:
 
 @dataclass(frozen=True)
 class Layout:
-    """A registered layout: the config fields it uses (with defaults) and its builder.
+    """A registered layout: its own options (an :class:`~kbcli.core.options.Options` model, the
+    config's ``layout`` field) and its builder.
 
-    The builder gets a validated config (whole ``rows``/``cols`` >= 1, positive sizes: the
-    :class:`~kbcli.core.instrument.keyboard.KeyboardConfig` field constraints) and checks how its own fields
-    relate (a pad's radius against the distance between pads, ...).
+    The builder gets a validated config (its options checked by their model: whole ``rows`` and
+    ``cols`` >= 1, positive sizes) and checks how its own options relate (a pad's radius against
+    the distance between pads, ...).
 
     ``build(config) -> LayoutGeometry`` places the keys in the keyboard's own frame (lower-left at
-    (0, 0)) and raises :class:`~kbcli.errors.ConfigError` naming the key or option at fault.
+    (0, 0)) and raises :class:`~kbcli.errors.ConfigError` naming the key or option at fault; it
+    reads its options as ``config.layout.NAME`` and the keyboard's own (``base_note``, the tempi)
+    as ``config.NAME``.
     """
 
     name: str
     summary: str
-    defaults: dict[str, Any]
     build: Callable[[KeyboardConfig], LayoutGeometry]
+    options: type[Options] = Options
     uses_scale: bool = True
     default_origin: tuple[float, float] | None = None  # None: centre on DEFAULT_CENTRE
-    fields: tuple[str, ...] = field(default=())
     #: ``(config, n_keys) -> str``: the keys in words, for :meth:`Keyboard.describe`.
     describe: Callable[[KeyboardConfig, int], str] = field(default=lambda cfg, n: f"{n} keys")
     #: ``() -> dict``: config fields of the layout's example keyboard (its polygons' keys).
@@ -82,12 +93,13 @@ class Layout:
 LAYOUTS: Registry[Layout] = Registry("layout")
 
 
-def layout(name: str, summary: str, defaults: dict[str, Any], **kw: Any):
-    """Decorator registering a builder as layout ``name`` in :data:`LAYOUTS`."""
+def layout(name: str, summary: str, options: type[Options] = Options, **kw: Any):
+    """Decorator registering a builder as layout ``name`` in :data:`LAYOUTS`, with its options
+    model (``traits={"options": options}``)."""
 
     def deco(fn: Callable[[KeyboardConfig], LayoutGeometry]):
-        LAYOUTS.register(name, Layout(name, summary, defaults, fn, fields=tuple(defaults), **kw),
-                         summary=summary)
+        LAYOUTS.register(name, Layout(name, summary, fn, options, **kw), summary=summary,
+                         traits={"options": options})
         return fn
 
     return deco
@@ -96,7 +108,7 @@ def layout(name: str, summary: str, defaults: dict[str, Any], **kw: Any):
 def rows_cols(cfg: KeyboardConfig) -> tuple[int, int]:
     """The config's ``rows`` and ``cols`` (ConfigError when ``rows * cols`` exceeds
     :data:`MAX_KEYS`)."""
-    rows, cols = cfg.rows, cfg.cols
+    rows, cols = cfg.layout.rows, cfg.layout.cols
     if rows * cols > MAX_KEYS:
         raise ConfigError(f"rows x cols must be at most {MAX_KEYS} keys, got {rows * cols}")
     return rows, cols
@@ -108,7 +120,7 @@ def rowcol_geometry(cfg: KeyboardConfig, shapes: KeyShapes,
     """The geometry of ``rows`` x ``cols`` keys numbered row by row: their tempi by row and column
     (:func:`rowcol_tempo`) and, unless given, pitches climbing the config's ``scale`` from its
     ``base_note``."""
-    rows, cols = cfg.rows, cfg.cols
+    rows, cols = cfg.layout.rows, cfg.layout.cols
     if pitches is None:
         pitches = scale_pitches(base_midi(cfg), cfg.scale, rows * cols)
     return LayoutGeometry(shapes, pitches, rowcol_tempo(cfg, rows, cols), bounds)

@@ -6,12 +6,15 @@ tempo_col_step + r * tempo_row_step``. Point location is arithmetic (:class:`Gri
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 
 from kbcli.core.instrument.geometry import KeyShapes
 from kbcli.core.instrument.layouts.base import (
     KeyboardConfig,
     LayoutGeometry,
+    RowsCols,
     layout,
     rowcol_geometry,
     rows_cols,
@@ -58,14 +61,20 @@ class GridShapes(KeyShapes):
 
 
 def _describe(cfg: KeyboardConfig, n_keys: int) -> str:
-    return f"{cfg.rows} x {cfg.cols} keys of {cfg.key_size:g} px"
+    o = cfg.layout
+    return f"{o.rows} x {o.cols} keys of {o.key_size:g} px"
 
 
-@layout("grid", "rows x cols square keys (the paper's keyboard)",
-        {"rows": 4, "cols": 8, "key_size": 50.0}, default_origin=(200.0, 250.0),
-        describe=_describe)
+class GridOptions(RowsCols):
+    """The grid's options: ``rows`` x ``cols`` square keys of side ``key_size`` px."""
+
+    what: ClassVar[str] = "layout grid"
+
+
+@layout("grid", "rows x cols square keys (the paper's keyboard)", GridOptions,
+        default_origin=(200.0, 250.0), describe=_describe)
 def build(cfg: KeyboardConfig) -> LayoutGeometry:
     """The grid's keys, pitches and tempi."""
     rows, cols = rows_cols(cfg)
-    shapes = GridShapes(rows, cols, cfg.key_size)
+    shapes = GridShapes(rows, cols, cfg.layout.key_size)
     return rowcol_geometry(cfg, shapes, shapes.bounds)

@@ -9,6 +9,7 @@ grid's).
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import numpy as np
 
@@ -16,6 +17,7 @@ from kbcli.core.instrument.geometry import KeyShapes
 from kbcli.core.instrument.layouts.base import (
     KeyboardConfig,
     LayoutGeometry,
+    RowsCols,
     base_midi,
     layout,
     rowcol_geometry,
@@ -24,15 +26,22 @@ from kbcli.core.instrument.layouts.base import (
 
 
 def _describe(cfg: KeyboardConfig, n_keys: int) -> str:
-    return f"{cfg.rows} x {cfg.cols} hexagonal keys {cfg.key_size:g} px across"
+    o = cfg.layout
+    return f"{o.rows} x {o.cols} hexagonal keys {o.key_size:g} px across"
 
 
-@layout("hex", "hexagonal isomorphic keys (Wicki-Hayden)", {"rows": 4, "cols": 8, "key_size": 50.0},
-        uses_scale=False, describe=_describe)
+class HexOptions(RowsCols):
+    """The hex layout's options: ``rows`` rows of ``cols`` hexagons ``key_size`` px across."""
+
+    what: ClassVar[str] = "layout hex"
+
+
+@layout("hex", "hexagonal isomorphic keys (Wicki-Hayden)", HexOptions, uses_scale=False,
+        describe=_describe)
 def build(cfg: KeyboardConfig) -> LayoutGeometry:
     """The hexagons, their Wicki-Hayden pitches and their tempi."""
     rows, cols = rows_cols(cfg)
-    w = cfg.key_size
+    w = cfg.layout.key_size
     rad = w / math.sqrt(3)  # circumradius of a hexagon w across the flats
     k = np.arange(rows * cols)
     r, c = k // cols, k % cols

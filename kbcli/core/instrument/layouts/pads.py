@@ -6,12 +6,16 @@ tempi as the grid's. The keyboard's bounds are its cells (as the grid's).
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 
 from kbcli.core.instrument.geometry import MIN_AREA, KeyShapes
 from kbcli.core.instrument.layouts.base import (
     KeyboardConfig,
     LayoutGeometry,
+    Length,
+    RowsCols,
     layout,
     rowcol_geometry,
     rows_cols,
@@ -20,15 +24,23 @@ from kbcli.errors import ConfigError
 
 
 def _describe(cfg: KeyboardConfig, n_keys: int) -> str:
-    return f"{cfg.rows} x {cfg.cols} round pads of radius {cfg.pad_radius:g} px"
+    o = cfg.layout
+    return f"{o.rows} x {o.cols} round pads of radius {o.pad_radius:g} px"
 
 
-@layout("pads", "round pads with silence between them",
-        {"rows": 4, "cols": 8, "key_size": 50.0, "pad_radius": 20.0}, describe=_describe)
+class PadsOptions(RowsCols):
+    """The pads' options: ``rows`` x ``cols`` discs of radius ``pad_radius`` px in cells of
+    ``key_size`` px."""
+
+    what: ClassVar[str] = "layout pads"
+    pad_radius: Length = 20.0
+
+
+@layout("pads", "round pads with silence between them", PadsOptions, describe=_describe)
 def build(cfg: KeyboardConfig) -> LayoutGeometry:
     """The pads (discs), their pitches and tempi, and their cells' bounds."""
     rows, cols = rows_cols(cfg)
-    s, r = cfg.key_size, cfg.pad_radius
+    s, r = cfg.layout.key_size, cfg.layout.pad_radius
     if np.pi * r * r < MIN_AREA:
         raise ConfigError(f"pad_radius ({r:g}) must be at least {np.ceil(100 * np.sqrt(MIN_AREA / np.pi)) / 100:g} px: "
                           f"a pad needs an area of at least {MIN_AREA:g} px^2")

@@ -9,23 +9,41 @@ i) plus ``tempo_row_step`` for black keys.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 
+from kbcli.core.config import Count
 from kbcli.core.instrument.geometry import KeyShapes
 from kbcli.core.instrument.layouts.base import (
     MAX_KEYS,
     KeyboardConfig,
     LayoutGeometry,
+    Length,
     base_midi,
     layout,
 )
 from kbcli.core.instrument.notes import BLACK, NATURAL, midi_to_name
+from kbcli.core.options import Options
 from kbcli.errors import ConfigError
 
 
+class PianoOptions(Options):
+    """The piano's options: ``cols`` white keys of ``key_size`` x ``key_height`` px, black keys
+    of ``black_width`` x ``black_height`` px."""
+
+    what: ClassVar[str] = "layout piano"
+    cols: Count = 12
+    key_size: Length = 36.0
+    key_height: Length = 160.0
+    black_width: Length = 20.0
+    black_height: Length = 100.0
+
+
 def _describe(cfg: KeyboardConfig, n_keys: int) -> str:
-    return (f"{cfg.cols} white keys ({cfg.key_size:g} x {cfg.key_height:g} px) and "
-            f"{n_keys - cfg.cols} black keys ({cfg.black_width:g} x {cfg.black_height:g} px)")
+    o = cfg.layout
+    return (f"{o.cols} white keys ({o.key_size:g} x {o.key_height:g} px) and "
+            f"{n_keys - o.cols} black keys ({o.black_width:g} x {o.black_height:g} px)")
 
 
 def _white_pitches(cfg: KeyboardConfig, n: int) -> list[int]:
@@ -51,14 +69,14 @@ def _white_outline(i: int, w: float, h: float, bw: float, bh: float, left: bool,
     return np.array(v)
 
 
-@layout("piano", "white keys and narrower black keys in the upper row",
-        {"cols": 12, "key_size": 36.0, "key_height": 160.0, "black_width": 20.0,
-         "black_height": 100.0}, uses_scale=False, describe=_describe)
+@layout("piano", "white keys and narrower black keys in the upper row", PianoOptions,
+        uses_scale=False, describe=_describe)
 def build(cfg: KeyboardConfig) -> LayoutGeometry:
     """The white and black keys, numbered by pitch, and their tempi."""
-    n = cfg.cols
-    w, h = cfg.key_size, cfg.key_height
-    bw, bh = cfg.black_width, cfg.black_height
+    o = cfg.layout
+    n = o.cols
+    w, h = o.key_size, o.key_height
+    bw, bh = o.black_width, o.black_height
     if bw >= w:
         raise ConfigError(f"black_width ({bw:g}) must be below key_size ({w:g}), the white keys' "
                           "width: black keys would overlap")

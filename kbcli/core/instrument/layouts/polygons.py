@@ -25,6 +25,7 @@ from kbcli.core.instrument.layouts.base import (
     layout,
 )
 from kbcli.core.instrument.notes import name_to_midi, scale_pitches
+from kbcli.core.options import Options
 from kbcli.errors import ConfigError
 
 
@@ -124,21 +125,39 @@ def example_polygon_keys() -> tuple[PolygonKey, ...]:
     return tuple(keys)
 
 
+class PolygonsOptions(Options):
+    """The polygons' options: ``keys``, one :class:`PolygonKey` per key (required)."""
+
+    what: ClassVar[str] = "layout polygons"
+    keys: tuple[PolygonKey, ...] | None = None
+
+    @field_validator("keys", mode="before")
+    @classmethod
+    def _keys(cls, v: Any) -> Any:
+        return None if v is None else polygon_keys(v)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The keys' tables (each its vertices, and its note and tempo when given)."""
+        return {"name": self.name,
+                "keys": None if self.keys is None else [k.to_dict() for k in self.keys]}
+
+
 @layout("polygons", "explicit key polygons (rotated or irregular) from the TOML",
-        {"keys": None}, default_origin=(0.0, 0.0),
+        PolygonsOptions, default_origin=(0.0, 0.0),
         example_fields=lambda: {"keys": example_polygon_keys()})
 def build(cfg: KeyboardConfig) -> LayoutGeometry:
     """The keys' checked outlines, their notes (given or climbing ``scale``) and tempi."""
-    if not cfg.keys:
+    keys = cfg.layout.keys
+    if not keys:
         raise ConfigError("the polygons layout needs its keys: a [[keyboard.keys]] table per key "
                           "with vertices = [[x, y], ...] (see pipelines/layouts/polygons.toml)")
-    if len(cfg.keys) > MAX_KEYS:
-        raise ConfigError(f"at most {MAX_KEYS} keys, got {len(cfg.keys)}")
-    climb = scale_pitches(base_midi(cfg), cfg.scale, len(cfg.keys))
-    polys = [check_polygon(key.vertices, f"key {i}") for i, key in enumerate(cfg.keys)]
-    pitches = [_pitch(key, int(climb[i]), i) for i, key in enumerate(cfg.keys)]
+    if len(keys) > MAX_KEYS:
+        raise ConfigError(f"at most {MAX_KEYS} keys, got {len(keys)}")
+    climb = scale_pitches(base_midi(cfg), cfg.scale, len(keys))
+    polys = [check_polygon(key.vertices, f"key {i}") for i, key in enumerate(keys)]
+    pitches = [_pitch(key, int(climb[i]), i) for i, key in enumerate(keys)]
     tempos = [cfg.tempo_base + i * cfg.tempo_col_step if key.tempo is None else key.tempo
-              for i, key in enumerate(cfg.keys)]
+              for i, key in enumerate(keys)]
     shapes = KeyShapes(polygons=polys)
     return LayoutGeometry(shapes, np.array(pitches, np.int64), np.array(tempos, float),
                           shapes.bounds)
