@@ -113,10 +113,10 @@ def test_bench_verdicts_writes_a_result_file_that_regenerates_identically(tmp_pa
                       "The paper's claims, judged", "Judging rules the paper does not state",
                       "Departures from the paper (the judged method `kbcli`)",
                       *titles[6:-2], "Wall time of each stage", "How it ran"]
-    # the golden evaluation records the stopping rules' readings and the truth's place: their
-    # tables follow (kbcli's own runs: 0 ruled out)
-    assert all(t.startswith(("Runs that ruled out the truth", "Stopping rules"))
-               for t in titles[6:-2])
+    # the golden evaluation records its runs' errors, the stopping rules' readings and the
+    # truth's place: their tables follow
+    assert all(t.startswith(("Final error of every cell", "Runs that ruled out the truth",
+                             "Stopping rules")) for t in titles[6:-2]) and titles[6:-2]
     assert "| evaluate | 612.0 |" in pages[0] and "| method | agrees |" in pages[0]
     assert "The evaluation" not in pages[0]
 

@@ -311,3 +311,23 @@ def test_the_default_keyboard_is_found_from_any_folder(runner, tmp_path, monkeyp
     kb = read_artifact(tmp_path / "q.h5").inputs["keyboard"]
     assert kb["sha256"] == read_artifact(stage.__file__.rsplit("/kbcli/", 1)[0]
                                          + "/data/keyboard.h5").sha256
+
+
+def test_a_row_may_be_compared_with_its_own_baseline():
+    """The paper's strategies on the paper's posterior: paper-active against paper-random (issue
+    39), every other row against `baseline`; a baseline row is not compared itself."""
+    rows = {"random": {"strategy": "random"}, "infogain": {"strategy": "infogain"},
+            "paper-random": {"strategy": "random", "posterior": "kde"},
+            "paper-active": {"strategy": "paper-active", "posterior": "kde"}}
+    cfg = stage.QualityConfig.from_dict({"rows": rows, "baselines": {"paper-active":
+                                                                      "paper-random"}})
+    assert cfg.baseline_of("paper-active") == "paper-random"
+    assert cfg.baseline_of("infogain") == "random"
+    assert stage.compared_rows(cfg.to_dict()) == ["infogain", "paper-active"]
+    assert stage.QualityConfig.from_dict(cfg.to_dict()) == cfg
+    assert "baselines" not in stage.QualityConfig.from_dict({"rows": rows}).to_dict()
+    for bad, says in (({"paper-active": "nope"}, "must name a row"),
+                      ({"ghost": "random"}, "must name a row"),
+                      ({"random": "random"}, "its own baseline")):
+        with pytest.raises(ConfigError, match=says):
+            stage.QualityConfig.from_dict({"rows": rows, "baselines": bad})

@@ -75,3 +75,36 @@ def test_the_stored_reproduction_is_the_current_codes(runner, tmp_path):
     assert sha256_file(model) == want, (
         "the model make reproduce learns today is not the one benchmarks/results/reproduce.json "
         f"was computed on: the learning code changed since; {REGENERATE}")
+
+
+def test_provenance_hashes_the_inputs_not_the_outputs(tmp_path):
+    from kbcli.io.provenance import git_state, inputs
+
+    a, out = tmp_path / "a.txt", tmp_path / "out.json"
+    a.write_text("x")
+    out.write_text("{}")  # an older result file the command will replace
+    got = inputs(["bench", "--json", str(out), "verdicts", str(a), "--missing", "nope.h5"])
+    assert list(got) == [str(a)]
+    assert got[str(a)]["sha256"] == sha256_file(a)
+    state = git_state(ROOT)
+    if state is not None:  # a git checkout: the commit and the tree's state
+        assert re.fullmatch(r"[0-9a-f]{40}", state["commit"]) and isinstance(state["clean"], bool)
+    assert git_state(tmp_path) is None  # not a checkout
+
+
+def test_a_result_file_written_before_another_leaves_the_code_clean(tmp_path):
+    import subprocess
+
+    from kbcli.io.provenance import git_state
+
+    def git(*args):
+        subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True)
+
+    git("init", "-q")
+    git("-c", "user.email=a@b", "-c", "user.name=a", "commit", "-q", "--allow-empty", "-m", "x")
+    (tmp_path / "benchmarks" / "results").mkdir(parents=True)
+    (tmp_path / "benchmarks" / "results" / "arm.json").write_text("{}")
+    state = git_state(tmp_path)
+    assert state["clean"] is True and state["changed"] == ["benchmarks/results/arm.json"]
+    (tmp_path / "code.py").write_text("x = 1\n")
+    assert git_state(tmp_path)["clean"] is False

@@ -272,7 +272,7 @@ def hypothesis_table(art: Artifact) -> ResultTable:
         if r not in quality.compared_rows(a):
             continue
         h = quality.hypothesis(art, r)
-        rows.append({"row": r, "Spearman rho": "-" if h["rho"] != h["rho"] else f"{h['rho']:.2f}",
+        rows.append({"row": _vs(a, r, ""), "Spearman rho": "-" if h["rho"] != h["rho"] else f"{h['rho']:.2f}",
                      "p": _p(h["p"]),
                      "significant advantage, better half": f"{h['significant_good']} of {h['good']}",
                      "worse half": f"{h['significant_bad']} of {h['bad']}",
@@ -296,11 +296,19 @@ def models_table(art: Artifact) -> ResultTable:
                "boundary error px": f"{mi['boundary_error']:.2f}", "tau px": f"{mi['threshold']:.2f}"}
         for r in others:
             s = a["summary"][m]["all"][r]
-            row[f"{r} advantage"] = f"{s['advantage']:+g} (p {_p(s['pvalue'])})"
+            row[_vs(a, r, "advantage")] = f"{s['advantage']:+g} (p {_p(s['pvalue'])})"
         rows.append(row)
-    cols = ("model", "accuracy", "boundary error px", "tau px", *(f"{r} advantage" for r in others))
+    cols = ("model", "accuracy", "boundary error px", "tau px",
+            *(_vs(a, r, "advantage") for r in others))
     return ResultTable("Models and each row's advantage over " + a["baseline"]
-                       + " (median touches saved to tau)", cols, tuple(rows))
+                       + " (median touches saved to tau; a row with its own baseline names it)",
+                       cols, tuple(rows))
+
+
+def _vs(a: dict, row: str, what: str) -> str:
+    """A row's column: ``"ROW WHAT"``, with ``vs BASE`` when the row has its own baseline."""
+    base = quality.baseline_of(a, row)
+    return " ".join(p for p in (row, what, f"vs {base}" if base != a["baseline"] else "") if p)
 
 
 #: A model's boundary error "levels off" within this fraction above the largest budget's.
@@ -337,10 +345,10 @@ def plateau_table(art: Artifact, within: float = PLATEAU) -> ResultTable:
                "boundary error px": f"{mi['boundary_error']:.2f}",
                "at the largest budget": f"{top[2]['boundary_error']:.2f} px ({top[0]})"}
         for r in others:
-            row[f"{r} touches saved"] = f"{a['summary'][m]['all'][r]['advantage']:+g}"
+            row[_vs(a, r, "touches saved")] = f"{a['summary'][m]['all'][r]['advantage']:+g}"
         rows.append(row)
     cols = ("exploration", "budget", "model", "accuracy", "boundary error px", "at the largest budget",
-            *(f"{r} touches saved" for r in others))
+            *(_vs(a, r, "touches saved") for r in others))
     return ResultTable(f"Where learning levels off: the smallest budget whose boundary error is "
                        f"within {100 * within:.0f} % of the largest budget's (touches saved: "
                        f"median, to tau, over {a['baseline']})", cols, tuple(rows))

@@ -155,10 +155,9 @@ def _quality_report(art, source: Path, output: Path, fmt: str) -> None:
         _write_text(tmp / "README.md",
                     quality.report(art).replace("](advantage.png)", f"]({fig})"))
     out.print(f"wrote {output}/: README.md and {fig}")
-    for r in art.attrs["rows"]:
-        if r != art.attrs["baseline"]:
-            out.print(f"  {r}: the paper's explanation "
-                      f"{quality.verdict(quality.hypothesis(art, r))}", soft_wrap=True)
+    for r in quality.compared_rows(art.attrs):
+        out.print(f"  {r}: the paper's explanation "
+                  f"{quality.verdict(quality.hypothesis(art, r))}", soft_wrap=True)
 
 
 @command(bench_app, name="verdicts")

@@ -228,11 +228,13 @@ def eval_methods(art) -> str | None:
     return None
 
 
-def _quality_cell(m: str, r: str, cell: Any, baseline: str) -> str | None:
+def _quality_cell(m: str, r: str, cell: Any, bases: set[str]) -> str | None:
+    """One summary cell: its numbers, and (a row compared with a baseline, not itself a
+    baseline row) its advantage and p-value."""
     if not isinstance(cell, dict) or not TYPES["num"](cell.get("final_median")):
         return f"summary attribute summary.{m}.all.{r} is missing its numbers"
-    if r != baseline and not (TYPES["num"](cell.get("advantage"))
-                              and TYPES["num"](cell.get("pvalue"))):
+    if r not in bases and not (TYPES["num"](cell.get("advantage"))
+                               and TYPES["num"](cell.get("pvalue"))):
         return f"summary attribute summary.{m}.all.{r} lacks advantage or pvalue"
     return None
 
@@ -242,6 +244,11 @@ def quality_lists(art) -> str | None:
     a = art.attrs
     if not a["rows"] or a["baseline"] not in a["rows"]:
         return f"baseline {a['baseline']!r} is not among the rows {a['rows']}"
+    baselines = a.get("baselines") or {}
+    if not isinstance(baselines, dict) or any(
+            k not in a["rows"] or v not in a["rows"] for k, v in baselines.items()):
+        return f"summary attribute baselines must map rows to rows {a['rows']}"
+    bases = {a["baseline"], *baselines.values()}
     for m, info in a["models"].items():
         if not isinstance(info, dict) or not TYPES["num"](info.get("boundary_error")):
             return f"summary attribute models.{m}.boundary_error must be a number"
@@ -249,7 +256,7 @@ def quality_lists(art) -> str | None:
         if not isinstance(per, dict) or not isinstance(per.get("all"), dict):
             return f"summary attribute summary.{m} is missing or has no 'all' table"
         for r in a["rows"]:
-            msg = _quality_cell(m, r, per["all"].get(r), a["baseline"])
+            msg = _quality_cell(m, r, per["all"].get(r), bases)
             if msg:
                 return msg
     return None
