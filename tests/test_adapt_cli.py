@@ -8,9 +8,9 @@ from helpers import one_line_error as _one_line_error
 
 from kbcli.cli import app
 from kbcli.core.adaptation.config import SLOTS
-from kbcli.core.options import flat_view
 from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.model.base import ExactModel
+from kbcli.core.options import flat_view
 from kbcli.errors import ArtifactError, ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import adapt as stage

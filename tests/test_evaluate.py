@@ -21,7 +21,8 @@ from kbcli.core.adaptation import stats
 from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, sha256_file, write_artifact
-from kbcli.io.runner import Checkpoint, Job, execute, source_digest
+from kbcli.io.checkpoint import Checkpoint, source_digest
+from kbcli.io.runner import Job, execute
 from kbcli.stages import evaluate as stage
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages.models import exact_artifact

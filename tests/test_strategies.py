@@ -9,7 +9,6 @@ import pytest
 
 from kbcli.core.adaptation.adapter import Adapter
 from kbcli.core.adaptation.config import AdapterConfig
-from kbcli.core.options import for_part
 from kbcli.core.adaptation.loop import adapt
 from kbcli.core.adaptation.posteriors.posterior import Posterior
 from kbcli.core.adaptation.setup import build_table
@@ -21,6 +20,7 @@ from kbcli.core.adaptation.strategies import (
 from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.model.base import ExactModel
 from kbcli.core.model.table import LikelihoodTable
+from kbcli.core.options import for_part
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig, World, make_reacher
 

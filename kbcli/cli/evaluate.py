@@ -16,9 +16,10 @@ from kbcli.cli.record import show_table
 from kbcli.core.instrument.transforms import FAMILIES
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.io.checkpoint import Checkpoint, source_digest
 from kbcli.io.config import arm_file, load_arm, load_toml
 from kbcli.io.paths import Output, checkout_file
-from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
+from kbcli.io.runner import Job, check_scheduler_address, execute
 from kbcli.stages import evaluate as stage
 from kbcli.stages.config import MAX_EXPERIMENTS
 
