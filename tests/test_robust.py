@@ -148,8 +148,8 @@ class _Shrunk(ExactModel):
     def predict_class(self, points):
         p = np.asarray(points, float).reshape(-1, 2)
         c = self.keyboard.config
-        f = (p - np.asarray(c.origin)) % c.key_size
-        inner = ((f >= 3.0) & (f < c.key_size - 3.0)).all(axis=1)
+        f = (p - np.asarray(c.origin)) % c.layout.key_size
+        inner = ((f >= 3.0) & (f < c.layout.key_size - 3.0)).all(axis=1)
         return np.where(inner, self.keyboard.key_at(p), -1) + 1
 
 
@@ -430,7 +430,7 @@ class _OneEdgeOff(ExactModel):
     def predict_class(self, points):
         p = np.asarray(points, float).reshape(-1, 2)
         c = self.keyboard.config
-        edge = c.origin[0] + c.key_size
+        edge = c.origin[0] + c.layout.key_size
         q = p.copy()
         near = (p[:, 0] >= edge) & (p[:, 0] < edge + 12.0)
         q[near, 0] = edge - 1e-6  # the first column reaches 12 px further
