@@ -1,4 +1,4 @@
-"""Credible regions of the posterior over the translation (issue 42: honest uncertainty).
+"""Credible regions of the posterior over the translation.
 
 The region reported is the disc around the estimate holding ``level`` of the posterior mass: its
 radius ``r_level`` is the smallest distance (px) from the estimate within which the translation

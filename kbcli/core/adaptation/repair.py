@@ -1,4 +1,4 @@
-"""Adaptation that repairs the model (issue 42): a joint belief over the shift and the model's map.
+"""Adaptation that repairs the model: a joint belief over the shift and the model's map.
 
 Every touch the robot makes while adapting is a labelled sample of the instrument: under a
 hypothesis ``h`` of the displacement, the touch at ``a`` that sounded ``c`` says that the reference

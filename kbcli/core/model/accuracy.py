@@ -1,4 +1,4 @@
-"""How good a model of the instrument is, against the simulator's ground truth (issue 3).
+"""How good a model of the instrument is, against the simulator's ground truth.
 
 Two scores, both on a dense grid of cell centres over the keyboard's working area:
 

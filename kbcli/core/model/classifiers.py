@@ -3,7 +3,7 @@ k-NN (``knn``).
 
 M_INST = p(sound | action) from a general-purpose classifier fitted to the exploration samples
 (where the finger landed, what was heard), behind the same interface as the bespoke classes
-(:mod:`kbcli.core.model.lines`, :mod:`kbcli.core.model.svc`; issue 27):
+(:mod:`kbcli.core.model.lines`, :mod:`kbcli.core.model.svc`):
 
 1. **the sound classes** are found as every class finds them (:func:`~kbcli.core.model.sounds.
    prepare_samples`: leader clustering with the Eq. 2 threshold; class 0 is silence);
@@ -59,31 +59,12 @@ SITE_GRID = 2.0  # px, grid on which boundary sites are looked for
 _CHUNK = 65536  # query points per block of a prediction
 #: Candidate values of the calibration's uniform floor (:meth:`SklearnModel.calibration_grid`).
 FLOOR_GRID = (0.0, 0.002, 0.01, 0.03)
-#: The forests' candidate floors: the held-out Brier score overrates the floor (a held-out touch
-#: is harder than a point of the pad), and 0.03 spread over 33 sounds takes 3 % off every
-#: certain prediction: measured against the simulator, the floor 0.03 it kept (with ``sharpen``
-#: 2) gave 0.024-0.026 at 800 realistic-arm reaches where 0.01 gives 0.008-0.010 (seeds 0-2).
+#: The forests' candidate floors (0.03 left out: the held-out Brier score overrates the floor;
+#: ``docs/design-notes.md``, Model classes).
 FOREST_FLOOR_GRID = (0.0, 0.002, 0.01)
 #: Candidate values of the calibration's exponent ``sharpen`` of the forests, whose own is 2 (the
-#: first value: kept unless another beats it on the held-out touches by a standard error).
-#: ``kbcli bench reliability --seeds 3`` (medians over seeds 0-2, calibration error against the
-#: simulator at 150 / 300 / 800 / 1600 reaches, active exploration; the ``lines`` class measures
-#: 0.016 / 0.012 / 0.009 / 0.006 on the ideal arm, 0.016 / 0.016 / 0.011 / 0.028 on the realistic
-#: one, ``--mode dynamics --arm realistic``):
-#:
-#: - own ``sharpen`` 1, 1 among the candidates, floors up to 0.03: ideal arm 0.154 / 0.053 / 0.010
-#:   / 0.000 (the votes' own spread kept where it was too flat: the models expected a 27 %
-#:   mislabel rate at 150 reaches for a measured 13 %), realistic arm 0.022 / 0.011 / 0.056 /
-#:   0.045 (an expected 9.8 % mislabel rate at 800 for 2.6 %);
-#: - own 2, this grid, floors up to 0.03: ideal 0.014 / 0.035 / 0.007 / 0.000, realistic 0.022 /
-#:   0.011 / 0.026 / 0.027;
-#: - own 2, this grid, :data:`FOREST_FLOOR_GRID`: ideal 0.014 / 0.037 / 0.007 / 0.000, realistic
-#:   0.013 / 0.011 / 0.010 / 0.010.
-#:
-#: At 300 ideal reaches ``sharpen`` 4 would measure 0.003 / 0.010 / 0.010, but the held-out touches
-#: do not show it by a standard error; an own 4 wherever the arm lands where it aims made 150
-#: reaches worse (0.052: the models expected 6.7 % mislabels for 13 %), and 4 on the realistic arm
-#: measures 0.045-0.058 at 300.
+#: first value: kept unless another beats it on the held-out touches by a standard error; how
+#: they were chosen: ``docs/design-notes.md``, Model classes).
 FOREST_SHARPEN_GRID = (2.0, 4.0, 8.0)
 #: Candidate values of ``sharpen`` for k-NN, whose own is 1 (its distance-weighted votes).
 SHARPEN_GRID = (1.0, 2.0, 4.0, 8.0)
@@ -256,9 +237,7 @@ class ForestModel(SklearnModel):
     match_threshold, area
         As every class (:class:`~kbcli.core.model.base.ModelBase`).
     n_estimators : int
-        Trees (120: on the samples of seeds 1 and 2 of ``kbcli bench learn --peer``'s at 800
-        reaches, piano 99.59 / 99.57 % against 99.52 / 99.51 % with 60 trees, 99.59 / 99.61 %
-        with 200, grid up by 0.03 %; exploration refits a 60-tree forest every batch,
+        Trees (exploration refits a 60-tree forest every batch,
         :data:`kbcli.core.model.select.EXPLORE_PARAMS`).
     n_directions : int
         Directions the trees split along: x, y and ``n_directions - 2`` oblique projections
@@ -325,9 +304,7 @@ class ForestXYModel(ForestModel):
     Axis-aligned splits are exact for keys whose edges are horizontal and vertical (the piano,
     the grid): with oblique projections among the features, a tree spends some of its splits on
     directions the keys do not have, and a boundary between sparse samples can come out slanted.
-    On the samples of seeds 0-2 of ``kbcli bench learn --peer``'s piano at 800 reaches: 99.89 /
-    99.83 / 99.77 % accurate (boundary error 0.039 / 0.058 / 0.171 px) against the 6-direction
-    forest's 99.52 / 99.59 / 99.57 %. On slanted edges (hex, polygons) it staircases, and
+    On slanted edges (hex, polygons) it staircases, and
     ``auto``'s cross-validation keeps the oblique forest there (:mod:`kbcli.core.model.select`).
     """
 

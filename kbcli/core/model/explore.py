@@ -64,7 +64,7 @@ from kbcli.errors import ConfigError
 
 #: Most candidate points the cover of the working area may take (``active`` and ``balanced`` grid
 #: it every ``explore_radius / 5`` px): a radius so small that it needs more is refused before any
-#: reach (issue 29: ``--explore-radius 1e-6`` would allocate without bound).
+#: reach (``--explore-radius 1e-6`` would allocate without bound).
 MAX_COVER_POINTS = 1_000_000
 
 
@@ -219,7 +219,7 @@ def active_strategy(exploration: Exploration, n: int, rng: np.random.Generator) 
 
 @STRATEGIES.register("balanced", traits={"covers": True})
 def balanced_strategy(exploration: Exploration, n: int, rng: np.random.Generator) -> np.ndarray:
-    """Boundary seeking and coverage weighed in one rule (issue 27), instead of ``active``'s
+    """Boundary seeking and coverage weighed in one rule, instead of ``active``'s
     cover-then-bisect.
 
     First a coarse hexagonal lattice (covering radius ``2 explore_radius``, about a quarter of
@@ -231,10 +231,7 @@ def balanced_strategy(exploration: Exploration, n: int, rng: np.random.Generator
     holes are wide and coverage wins; as the pad fills, the widest bands take over, and a band
     found late still competes with the holes left (no phase waits for another to finish).
 
-    Measured (grid, forest, seed 0 of ``kbcli bench learn``'s, accuracy on a 2 px grid): 85.39 %
-    at 150 reaches and 93.56 % at 300, against ``active``'s 84.95 % and 94.00 %; sounds heard
-    after 30 reaches 17 (``active`` 13), after 60 21 (25). Band widths stay below the holes'
-    ``2 d`` for the first ~150 reaches, so in practice it still covers first: not the default.
+    Not the default (why: ``docs/design-notes.md``, Model classes).
     """
     taken, area, cfg = exploration.landed, exploration.area, exploration.cfg
     if len(taken) == 0:

@@ -1,4 +1,4 @@
-"""How good a learned model is, estimated from its own samples; and its calibration (issue 9).
+"""How good a learned model is, estimated from its own samples; and its calibration.
 
 The robot cannot compare its model with the instrument (it never sees the keys), but it can ask
 how well the model predicts touches it has not been fitted on. With ``K``-fold cross-validation

@@ -1,4 +1,4 @@
-"""``--model-class auto``: the model class chosen by its own cross-validated score (issue 27).
+"""``--model-class auto``: the model class chosen by its own cross-validated score.
 
 No class is best on every layout: straight lines shared across keys (``lines``) are exact on the
 grid; a random forest on oblique projections (``forest``) wins on the piano's axis-aligned keys and
@@ -11,27 +11,19 @@ touches near boundaries, and the weights make them describe the working area as 
 would).
 
 The held-out rates of two classes differ by a few touches out of hundreds, so the lowest rate is a
-noisy choice: on hex (seeds 1 and 2 of ``kbcli bench learn --peer``'s, 800 reaches) the forest and
-the SVMs score within 0.5 % of each other, one way or the other with the fold assignment, while the
-forest's map is 1.1 % more accurate. The choice is therefore a sequence of paired tests
+noisy choice. The choice is therefore a sequence of paired tests
 (:func:`prefer`): the classes are taken in :data:`CANDIDATES` order, and a class replaces the one
 kept so far only when its held-out mislabel rate is lower by more than :data:`SWITCH_Z` standard
-errors of the paired, area-weighted difference (the same touches held out for both). On those hex
-runs the SVMs' z is -0.6 to 0.6 (the forest stays); on pads and polygons it is 3.7 to 4.5 (the
-SVMs replace the forest), and ``lines`` never beats the SVMs there by more than noise. The forest
-on the coordinates alone (``forest-xy``) is tested right after the oblique forest: on the piano's
-axis-aligned keys at 800 reaches (seeds 0-2) its z over the forest is 3.6 to 5.5 (it replaces it:
-99.77-99.89 % accurate against 99.52-99.59 %), on hex -2.9 and on polygons -6 to -7 (the forest
-stays, and the SVMs then replace it on polygons).
+errors of the paired, area-weighted difference (the same touches held out for both). The forest
+on the coordinates alone (``forest-xy``) is tested right after the oblique forest (what these tests
+chose on each layout: ``docs/design-notes.md``, Model classes).
 
 Exploration needs a model while it explores, before the choice can be made: under ``auto`` it
 starts with :data:`EXPLORE_CLASS` (``forest``: fast to refit, any key shape), and every
 :data:`RESELECT` reaches (but at the end) it re-chooses the class it explores with among
 :data:`EXPLORE_CANDIDATES` by the same cross-validation on the samples so far
 (:func:`explore_choice`): the class that predicts the samples best also places the boundary bands
-best, so its bisections are worth more (seed 0 of ``kbcli bench learn --peer``'s, 800 reaches:
-explored with ``svc`` instead of ``forest``, polygons 99.32 % instead of 98.62 %, pads 97.44 %
-instead of 96.15 %; on hex and piano the forest stays). The final model is refitted with the
+best, so its bisections are worth more. The final model is refitted with the
 chosen class on every sample (:func:`choose`).
 """
 

@@ -44,21 +44,8 @@ sign along its straddling edges, and where the predicted class changes on a 2 px
 the width of the band the boundary is known to lie in there (the distance to the nearest sample of
 either sound, summed): a reach at the widest site bisects the widest band.
 
-Defaults (``length_scale`` 25 px, ``C`` 1000) were chosen with ``kbcli bench learn`` on the five
-layouts (a length scale of 8-12 px bends too easily between sparse samples; 30-45 px rounds the
-corners of the keys; a softer margin, ``C`` 10-100, lets the boundary drift between close samples).
-Linear pairs (``linear_pairs``, on by default): with RBF machines only, most wrong pixels on
-hex and piano lay in wedges where the RBF rounded a corner (two thirds of hex's within 8 px of a
-vertex where three keys meet) and no length scale or ``C`` fixed both layouts.
-``kbcli bench learn --layout hex --layout piano --model-class svc --strategy active --seeds 5``
-(medians, % at 800 / 1600 reaches): hex 97.31 / 98.87 with RBF only, 97.36 / 99.18 with linear
-pairs; piano 96.76 / 99.02, 97.33 / 99.35; pads (no pair a line separates once the pads are
-surrounded by samples) 97.30 / 99.18 and 97.18 / 99.25.
-Circle pairs (``circle_pairs``, on by default): an RBF machine of 25 px around a pad of radius 20 px
-leaves a crescent where it misplaces the circle by a pixel or two; refitted with circles on the
-samples ``kbcli bench learn --peer`` (seeds 0-2, ``auto``) gathered on pads by 800 reaches, the
-svc model's accuracy is 98.63 / 98.23 / 98.47 % instead of 97.37 / 96.94 / 97.26 %; explored with
-circles (``auto`` explores with svc from 400 reaches), 99.05 / 99.20 / 98.99 %.
+Defaults: ``length_scale`` 25 px, ``C`` 1000, linear and circle pairs on (how they were chosen:
+``docs/design-notes.md``, Model classes).
 
 Storage without pickle: :meth:`SVCModel.to_arrays` keeps the samples, the classes and the
 hyper-parameters; :meth:`SVCModel.from_arrays` refits the machines, which is deterministic (libsvm's
@@ -85,8 +72,7 @@ _EDGE_STEPS = 17  # points along a straddling edge where the boundary site is lo
 SITE_GRID = 2.0  # px, grid on which boundary sites between straddling edges are looked for
 #: a sound whose straddling edges are at least this share with one other sound is an island in
 #: it (a pad in silence; early on a few edges cross the gap to the next pad): their pair may get a
-#: circle machine. Pads, ``kbcli bench learn --peer``'s kbcli side, seeds 0-2 at 800 reaches:
-#: 99.05 / 99.20 / 98.99 % with 0.75, 98.55 / 98.81 / 98.56 % with 0.9
+#: circle machine (0.75 rather than 0.9: ``docs/design-notes.md``, Model classes)
 ISLAND = 0.75
 _HARD_C = 1e6  # margin penalty of a pair's linear machine: a hard margin (its samples separate)
 

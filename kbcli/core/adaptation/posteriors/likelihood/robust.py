@@ -1,4 +1,4 @@
-"""A posterior that learns how far to trust the model (issue 9): Eq. 8 with model error marginalised.
+"""A posterior that learns how far to trust the model: Eq. 8 with model error marginalised.
 
 The plain likelihood posterior (:mod:`kbcli.core.adaptation.posteriors.posterior`) reads ``p(s_t | T_h^-1(a_t))`` from
 the model as if the model were the instrument. A learned model is not: its boundaries can sit a few
