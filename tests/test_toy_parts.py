@@ -189,3 +189,7 @@ def test_a_toy_part_refuses_a_foreign_option_in_python():
         with pytest.raises(ConfigError, match="layout row takes no option 'pad_radius'"):
             KeyboardConfig(layout="row", pad_radius=10.0)
         assert KeyboardConfig(layout="row", n_keys=3).layout == RowOptions(name="row", n_keys=3)
+        # a typo lists the keys a user may type: the keyboard's and the layout's own
+        with pytest.raises(ConfigError, match="unknown keyboard option 'n_key'; valid: layout, "
+                                              "n_keys, key_width, origin"):
+            KeyboardConfig(layout="row", n_key=3)

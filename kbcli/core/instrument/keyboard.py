@@ -45,7 +45,7 @@ from kbcli.core.instrument.notes import (
     name_to_midi,
     sound_name,
 )
-from kbcli.core.options import flat_view, part_field, route
+from kbcli.core.options import declared, flat_view, part_field, route
 from kbcli.errors import ConfigError
 
 FEATURE_NAMES = ("pitch", "tempo")
@@ -169,6 +169,12 @@ def _with_layout_defaults(data: dict[str, Any]) -> dict[str, Any]:
     out = route({k: v for k, v in data.items() if v is not None or k == "scale"},
                 {"layout": (LAYOUTS, "grid")}, KeyboardConfig.model_fields)
     lay = LAYOUTS.get(out["layout"]["name"])
+    unknown = [k for k in out if k not in KeyboardConfig.model_fields]
+    if unknown:  # the valid keys a user may type: the keyboard's and its layout's own
+        valid = ["layout", *declared(LAYOUTS, lay.name),
+                 *(k for k in KeyboardConfig.model_fields
+                   if k != "layout" and (k != "scale" or lay.uses_scale))]
+        raise ConfigError(f"unknown keyboard option {unknown[0]!r}; valid: {', '.join(valid)}")
     if not lay.uses_scale and out.get("scale") is not None:
         raise ConfigError(f"scale does not apply to the {lay.name} layout (its notes follow "
                           f"its own lattice)")
