@@ -120,8 +120,9 @@ demo: $(STAMP)
 # data/ holds only what the demo and the tests need; this rebuilds it from scratch: the default
 # keyboard and model, and the golden set (one small artifact of every kind, pipelines/golden.toml)
 # that the smoke tests read. DATA=folder builds it elsewhere (tests/test_golden.py checks that a
-# rebuild gives the same numbers). data/schema/vN/ keeps a file of every schema version ever written:
-# never rebuilt, copy a golden file there when you bump a kind's schema version.
+# rebuild gives the same numbers). data/schema/vN/ keeps a file of every older schema version ever
+# written: never rebuilt, copy a golden file there before you bump a kind's schema version
+# (data/schema/flat/: the golden files as stored before the robot's parts held their options).
 # The default model stays a lines model, though kbcli learn's default (auto) now maps the grid
 # better: on 2026-12-05, auto (forest-xy) in dynamics mode, seed 0, 800 reaches: 99.92 % accurate,
 # boundary error 0.03 px, against the stored lines model's 99.46 % and 1.04 px; but infogain adapts

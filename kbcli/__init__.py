@@ -30,9 +30,9 @@ __version__ = "0.1.0"
 #: public name -> module that defines it (imported lazily by :func:`__getattr__`)
 _EXPORTS = {
     "Adapter": "kbcli.api",
-    "AdapterConfig": "kbcli.core.adapter_config",
-    "Detector": "kbcli.core.detect",
-    "DetectorConfig": "kbcli.core.detect",
+    "AdapterConfig": "kbcli.core.adaptation.config",
+    "Detector": "kbcli.core.detection.detectors",
+    "DetectorConfig": "kbcli.core.detection.detectors",
     "load_model": "kbcli.api",
     "load_keyboard": "kbcli.api",
 }
@@ -42,8 +42,8 @@ __all__ = ["__version__", "Adapter", "AdapterConfig", "Detector", "DetectorConfi
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from kbcli.api import Adapter, load_keyboard, load_model
-    from kbcli.core.adapter_config import AdapterConfig
-    from kbcli.core.detect import Detector, DetectorConfig
+    from kbcli.core.adaptation.config import AdapterConfig
+    from kbcli.core.detection.detectors import Detector, DetectorConfig
 
 
 def __getattr__(name: str) -> object:

@@ -3,7 +3,7 @@
 The objects a robot drives live in the numeric core and are exported lazily by :mod:`kbcli`
 (``from kbcli import Adapter, Detector``); this module holds what needs the I/O layer (h5py), so
 that the core stays free of it. :class:`Adapter` (``kbcli.Adapter``) is the core's
-:class:`kbcli.core.adapter.Adapter` whose :meth:`~Adapter.from_model` also takes a model file or
+:class:`kbcli.core.adaptation.adapter.Adapter` whose :meth:`~Adapter.from_model` also takes a model file or
 artifact (read with :func:`load_model`).
 """
 
@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import os
 
-from kbcli.core.adapter import Adapter as CoreAdapter
-from kbcli.core.keyboard import Keyboard
+from kbcli.core.adaptation.adapter import Adapter as CoreAdapter
+from kbcli.core.instrument.keyboard import Keyboard
 from kbcli.stages.artifact import Artifact
 
 
@@ -52,7 +52,7 @@ def load_keyboard(source: str | os.PathLike | Artifact) -> Keyboard:
 
 
 class Adapter(CoreAdapter):
-    """The core's :class:`~kbcli.core.adapter.Adapter`; :meth:`from_model` also reads a model
+    """The core's :class:`~kbcli.core.adaptation.adapter.Adapter`; :meth:`from_model` also reads a model
     artifact file (``.h5``, kind ``model``) or a loaded
     :class:`~kbcli.stages.artifact.Artifact`.
 

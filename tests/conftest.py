@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from typer.testing import CliRunner
 
-from kbcli.core.keyboard import KeyboardConfig
+from kbcli.core.instrument.keyboard import KeyboardConfig
 from kbcli.io.artifact import write_artifact
 from kbcli.stages import keyboard as keyboard_stage
 

@@ -7,8 +7,10 @@ import pytest
 from helpers import one_line_error as _one_line_error
 
 from kbcli.cli import app
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.model import ExactModel
+from kbcli.core.adaptation.config import SLOTS
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model.base import ExactModel
+from kbcli.core.options import flat_view
 from kbcli.errors import ArtifactError, ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import adapt as stage
@@ -105,7 +107,7 @@ def test_stage_experiment_api():
     assert stage.AdaptConfig.from_dict(flat) == cfg
     # a robot option at the top level overrides the robot table (as a flag overrides a TOML file)
     both = stage.AdaptConfig.from_dict({"robot": {"strategy": "active"}, "strategy": "infogain"})
-    assert both.robot.strategy == "infogain"
+    assert both.robot.strategy.name == "infogain"
     aim = stage.AdaptConfig.flat(feedback="aim", reach_noise=2.0)
     assert aim.adapter_config().blur == 2.0 and aim.robot.blur == 0.0
     with pytest.raises(ConfigError, match="unknown adapt option"):
@@ -213,7 +215,7 @@ def test_paper_method_flags_reach_the_run(runner, files):
                "--kde-samples", "500", "--ml-ties", "random", "--stop-ml", "0.02", "--stop-mass",
                "0", "--candidates", "16", "--active-keep", "3", "--max-steps", "3")
     assert r.exit_code == 0, r.output
-    robot = read_artifact(files / "run.h5", "run").config["adapt"]["robot"]
+    robot = flat_view(read_artifact(files / "run.h5", "run").config["adapt"]["robot"], SLOTS)
     assert {k: robot[k] for k in ("posterior", "strategy", "kde_floor", "kde_draw", "kde_sampler",
                                   "kde_samples", "ml_ties", "stop_ml", "stop_mass", "candidates",
                                   "active_keep")} == {
@@ -223,28 +225,32 @@ def test_paper_method_flags_reach_the_run(runner, files):
     r = _adapt(runner, files, "--strategy", "random", "--random-actions", "model", "--max-steps",
                "2", out="random.h5")
     assert r.exit_code == 0, r.output
-    assert read_artifact(files / "random.h5", "run").config["adapt"]["robot"][
+    assert read_artifact(files / "random.h5", "run").config["adapt"]["robot"]["strategy"][
         "random_actions"] == "model"
     table = runner.invoke(app, ["inspect", str(files / "run.h5")]).output
     assert "adapt.robot.kde_floor" in table and "adapt.robot.active_keep" in table
     assert "robust_eta" not in table and "hypotheses" not in table and "not shown" in table
+    assert "max_angle" not in table  # recorded, not read (the family does not rotate)
     full = runner.invoke(app, ["inspect", "--json", str(files / "run.h5")]).output
-    assert '"robust_eta"' in full and '"hypotheses"' in full
+    assert '"max_angle"' in full and '"robust_eta": 1.0' in full  # every option, every summary
 
 
 @pytest.mark.parametrize(
     "args, fragments",
     [
-        (("--kde-floor", "0"), ["adapt: --kde-floor does not apply", "posterior kde",
-                                "the posterior is likelihood"]),
+        (("--kde-floor", "0"), ["adapt: --kde-floor does not apply",
+                                "posterior likelihood takes no option 'kde_floor'",
+                                "posterior kde does"]),
         (("--posterior", "kde", "--kde-sampler", "raster"),
-         ["--kde-sampler does not apply", 'kde_draw = "shared"']),
-        (("--ml-ties", "random"), ["--ml-ties does not apply", "estimator ml",
-                                   "the strategy is infogain"]),
-        (("--strategy", "random", "--candidates", "8"), ["--candidates does not apply",
-                                                         "the strategy is random"]),
-        (("--strategy", "infogain", "--active-keep", "2"), ["--active-keep does not apply"]),
-        (("--random-actions", "model"), ["--random-actions does not apply", "strategy random"]),
+         ["--kde-sampler does not apply", 'kde_draw = "fresh"']),
+        (("--ml-ties", "random"), ["--ml-ties does not apply", "the estimator is mean",
+                                   "strategy infogain"]),
+        (("--strategy", "random", "--candidates", "8"),
+         ["--candidates does not apply", "strategy random takes no option 'candidates'"]),
+        (("--strategy", "infogain", "--active-keep", "2"),
+         ["--active-keep does not apply", "strategy infogain takes no option"]),
+        (("--random-actions", "model"), ["--random-actions does not apply",
+                                         "strategy random does"]),
         (("--kde-draw", "sometimes", "--posterior", "kde"), ["kde_draw", "shared, fresh"]),
         (("--candidates", "0"), ["candidates"]),
     ],
@@ -260,8 +266,7 @@ def test_adapt_refuses_a_config_files_option_the_method_does_not_read(runner, fi
     conf.write_text('[adapt]\nmax_steps = 2\nrobust_eta = 0.5\n')
     r = _adapt(runner, files, "--config", str(conf), "--posterior", "kde", out="bad.h5")
     _one_line_error(r, "adapt: robust_eta (in", "a.toml) does not apply",
-                    "read only by posterior likelihood when robust = true",
-                    "the posterior is kde")
+                    "posterior kde takes no option 'robust_eta'", "posterior likelihood does")
     conf.write_text('[adapt]\nmax_steps = 2\n[adapt.robot]\nrobust = false\nrobust_blurs = [1.0]\n')
     _one_line_error(_adapt(runner, files, "--config", str(conf), out="bad.h5"),
                     "robust_blurs (in", "robust = false")
@@ -279,7 +284,7 @@ def test_run_refuses_flags_the_method_does_not_read_and_records_those_it_reads(r
                             "--kde-floor", "0.01", "--stop-ml", "0.1", "--stop-mass", "0",
                             "--candidates", "32"])
     assert r.exit_code == 0, r.output
-    robot = read_artifact(files / "loop.h5").config["loop"]["adapt"]["robot"]
+    robot = flat_view(read_artifact(files / "loop.h5").config["loop"]["adapt"]["robot"], SLOTS)
     assert (robot["kde_floor"], robot["stop_ml"], robot["stop_mass"], robot["candidates"]) == (
         0.01, 0.1, 0.0, 32)
 

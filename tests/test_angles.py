@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from kbcli.cli import app
-from kbcli.core.transforms import wrap_degrees
+from kbcli.core.instrument.transforms import wrap_degrees
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact
 
@@ -45,7 +45,7 @@ def test_perturb_wraps_the_angle(runner, kb_path, tmp_path):
 
 
 def test_max_angle_outside_its_range_is_refused():
-    from kbcli.core.adapter_config import AdapterConfig
+    from kbcli.core.adaptation.config import AdapterConfig
 
     with pytest.raises(ConfigError, match=r"\[0, 180\]"):
         AdapterConfig(family="rigid", max_angle=200.0)

@@ -8,7 +8,7 @@ from matplotlib import animation
 from PIL import Image
 
 from kbcli.cli import app
-from kbcli.core.keyboard import KeyboardConfig
+from kbcli.core.instrument.keyboard import KeyboardConfig
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.sim import SimConfig, forward_kinematics
 from kbcli.stages import adapt as adapt_stage

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 import kbcli
-from kbcli.core.adapter import Adapter as CoreAdapter
-from kbcli.core.detect import Detector as CoreDetector
-from kbcli.core.keyboard import KeyboardConfig
-from kbcli.core.model import ExactModel
+from kbcli.core.adaptation.adapter import Adapter as CoreAdapter
+from kbcli.core.detection.detectors import Detector as CoreDetector
+from kbcli.core.instrument.keyboard import KeyboardConfig
+from kbcli.core.model.base import ExactModel
 from kbcli.errors import ArtifactError, ConfigError, ObservationError
 from kbcli.io.artifact import write_artifact
 from kbcli.sim import IdealReacher, SimConfig, World
@@ -69,7 +69,7 @@ def test_from_model_file_done_and_budget(tmp_path):
     write_artifact(exact_artifact(KB_ART), tmp_path / "model.h5")
     ad = kbcli.Adapter.from_model(tmp_path / "model.h5", strategy="infogain", seed=3,
                                   max_steps=30, resolution=1.0, prior_halfwidth=20.0)
-    assert ad.cfg.strategy == "infogain" and ad.cfg.resolution == 1.0
+    assert ad.cfg.strategy.name == "infogain" and ad.cfg.resolution == 1.0
     world = World(KB, IdealReacher(SimConfig()), np.array([-9.0, 5.0]))
     rng = np.random.default_rng(0)
     assert not ad.done()

@@ -9,7 +9,7 @@ import pytest
 
 from kbcli.bench import arm as bench
 from kbcli.cli import app
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig, World, contact_points, make_reacher
 from kbcli.sim.arms import PRESETS, ArmConfig, arm_config

@@ -11,7 +11,7 @@ import h5py
 import numpy as np
 import pytest
 
-from kbcli.core.keyboard import KeyboardConfig
+from kbcli.core.instrument.keyboard import KeyboardConfig
 from kbcli.errors import ArtifactError
 from kbcli.io.artifact import describe, read_artifact, sha256_file, write_artifact
 from kbcli.stages import keyboard as keyboard_stage

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from kbcli.cli import app
-from kbcli.core.keyboard import KeyboardConfig
+from kbcli.core.instrument.keyboard import KeyboardConfig
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.sim import SimConfig
 from kbcli.stages import keyboard as keyboard_stage

@@ -11,10 +11,10 @@ from helpers import one_line_error
 
 from kbcli.cli import app
 from kbcli.cli import options as opts
-from kbcli.core.estimators import ESTIMATORS
-from kbcli.core.keyboard import KeyboardConfig
-from kbcli.core.posteriors import POSTERIORS
-from kbcli.core.transforms import FAMILIES
+from kbcli.core.adaptation.estimators import ESTIMATORS
+from kbcli.core.adaptation.posteriors import POSTERIORS
+from kbcli.core.instrument.keyboard import KeyboardConfig
+from kbcli.core.instrument.transforms import FAMILIES
 from kbcli.io.artifact import write_artifact
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages.models import exact_artifact

@@ -114,7 +114,7 @@ def test_ctrl_c_with_a_failing_checkpoint_write_still_exits_130_in_one_line(caps
 
     from kbcli.cli.app import run_checkpointed
     from kbcli.errors import KbcliError
-    from kbcli.io.runner import Checkpoint
+    from kbcli.io.checkpoint import Checkpoint
 
     class Full(Checkpoint):
         def flush(self):

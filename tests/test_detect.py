@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 
 from kbcli.bench import detect as bench
 from kbcli.cli import app
-from kbcli.core import detect as det
-from kbcli.core.detect import DETECTORS, Detector, DetectorConfig, run_batch
+from kbcli.core.detection import detectors as det
+from kbcli.core.detection.detectors import DETECTORS, Detector, DetectorConfig, run_batch
 from kbcli.errors import ArtifactError, ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import detect as stage

@@ -186,7 +186,7 @@ def test_the_protocol_examples_name_a_sound_of_the_default_model():
     """The serve protocol's example reply ("class": 13, "sound": "A4 106 bpm") is what the default
     model answers, in `kbcli serve --help` and in the stage's docstring."""
     import kbcli.stages.serve as serve_stage
-    from kbcli.core.notes import sound_name
+    from kbcli.core.instrument.notes import sound_name
     from kbcli.io.artifact import read_artifact
 
     features = read_artifact(ROOT / "data" / "default-model.h5", "model").data["model"]["class_features"]

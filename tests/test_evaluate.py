@@ -17,11 +17,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from kbcli.cli import app
-from kbcli.core import stats
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.adaptation import stats
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, sha256_file, write_artifact
-from kbcli.io.runner import Checkpoint, Job, execute, source_digest
+from kbcli.io.checkpoint import Checkpoint, source_digest
+from kbcli.io.runner import Job, execute
 from kbcli.stages import evaluate as stage
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages.models import exact_artifact
@@ -87,7 +88,7 @@ def small_config(**kw) -> stage.EvaluateConfig:
 def test_the_layout_before_methods_is_one_method():
     cfg = small_config(adapt={"posterior": "kde"})
     assert [m.name for m in cfg.methods] == ["kbcli"] and cfg.judged == "kbcli"
-    assert stage.adapt_config(cfg, "kbcli", "active", "ideal").robot.posterior == "kde"
+    assert stage.adapt_config(cfg, "kbcli", "active", "ideal").robot.posterior.name == "kde"
 
 
 @pytest.fixture
@@ -222,7 +223,7 @@ def test_curve_invariants(n, steps, seed):
 def test_playing_success_is_measured_by_replaying_the_melody(truth):
     """Algorithm 1 replayed on displacements that are not multiples of any grid spacing (0.5 px
     grid, 50 px keys): exact before and with the true correction; the analytic share otherwise."""
-    from kbcli.core.model import ExactModel
+    from kbcli.core.model.base import ExactModel
     from kbcli.sim import SimConfig
     from kbcli.stages.adapt import PlayCheck, play_success
 
@@ -246,9 +247,9 @@ def test_playing_success_is_measured_by_replaying_the_melody(truth):
 def test_replay_follows_algorithm_1():
     """MATCH moves on to the next note, NO_MATCH restarts from note 0: with note D always missed,
     the melody A D E D A plays A, D(miss), A, D(miss), ... so every second touch fails."""
-    from kbcli.core.melody import parse_melody
-    from kbcli.core.model import ExactModel
-    from kbcli.core.play import MATCH, NO_MATCH, note_classes, replay
+    from kbcli.core.instrument.melody import parse_melody
+    from kbcli.core.model.base import ExactModel
+    from kbcli.core.playing.play import MATCH, NO_MATCH, note_classes, replay
 
     kb = Keyboard(KeyboardConfig())
     model = ExactModel(kb)
@@ -275,13 +276,15 @@ def test_paper_config_parses_and_plans():
     assert [m.name for m in cfg.methods] == ["paper", "paper-v1", "kbcli", "paper-likelihood"]
     assert cfg.judged == "paper"
     paper = stage.adapt_config(cfg, "paper", "paper-active", "ideal")
-    assert (paper.robot.posterior, paper.robot.estimator) == ("kde", "ml")
-    assert (paper.robot.kde_draw, paper.robot.kde_floor, paper.robot.ml_ties) == \
+    assert (paper.robot.posterior.name, paper.robot.estimator) == ("kde", "ml")
+    assert (paper.robot.posterior.kde_draw, paper.robot.posterior.kde_floor,
+            paper.robot.ml_ties) == \
         ("fresh", 0.0, "random")
     v1 = stage.adapt_config(cfg, "paper-v1", "active", "ideal")
-    assert (v1.robot.kde_draw, v1.robot.kde_eps, v1.robot.ml_ties) == ("shared", 1e-3, "first")
+    assert (v1.robot.posterior.kde_draw, v1.robot.posterior.eps(v1.robot.outlier),
+            v1.robot.ml_ties) == ("shared", 1e-3, "first")
     ours = stage.adapt_config(cfg, "kbcli", "infogain", "dynamics")
-    from kbcli.core.adapter_config import AdapterConfig
+    from kbcli.core.adaptation.config import AdapterConfig
 
     # kbcli is the adapter's defaults: what they are, it is
     assert ours.robot == AdapterConfig(strategy="infogain")
@@ -293,11 +296,12 @@ def test_paper_config_parses_and_plans():
     v1_task = next(t for t in tasks if t.method == "paper-v1" and t.strategy == "active")
     assert v1_task.spawn_key[3] == stage.planning._key("paper")
     resolved = stage.resolved_methods(cfg)
-    assert resolved["paper"]["options"]["ideal"]["paper-active"]["robot"]["kde_samples"] == 10000
+    assert resolved["paper"]["options"]["ideal"]["paper-active"]["robot"]["posterior"][
+        "kde_samples"] == 10000
     assert resolved["paper-likelihood"]["modes"] == ["ideal"]
     # options left to the model are resolved with it: a model that rates its boundaries 4 px off
     # gets a 16 px spot radius and a blur grid up to 8 px on the robust posterior, none on the KDE
-    from kbcli.core.model import ExactModel
+    from kbcli.core.model.base import ExactModel
 
     weak = ExactModel(Keyboard(KeyboardConfig()))
     weak.reliability_ = {"boundary_error": 4.0}
@@ -586,7 +590,8 @@ def test_artifact_layout(tmp_path, model_path, fake):
         for i, j in ((0, 3), (1, 4)):  # random rep i and active rep i of the first displacement
             assert exp["param_index"][i] == exp["param_index"][j] and exp["rep"][i] == exp["rep"][j]
             assert exp[k][i] == exp[k][j]
-    assert art.attrs["methods"]["m"]["options"]["ideal"]["active"]["robot"]["strategy"] == "active"
+    assert art.attrs["methods"]["m"]["options"]["ideal"]["active"]["robot"]["strategy"][
+        "name"] == "active"
     ex = art.data["examples"]["ideal"]["m"]["active"]
     assert ex["snapshots"].shape == (3, 5, 5) and art.array("experiments/category")[ex["row"]] == "small"
     assert "step_ms" not in art.data["steps"]
@@ -612,20 +617,20 @@ def test_a_top_level_arm_table_is_refused_not_ignored(runner, tmp_path, model_pa
     ("method", "fragments"),
     [
         ({"posterior": "kde", "robust_eta": 0.5},
-         ["methods.m: robust_eta does not apply", "posterior likelihood", "the posterior is kde"]),
+         ["methods.m: robust_eta does not apply", "posterior kde takes no option 'robust_eta'",
+          "posterior likelihood does"]),
         ({"posterior": "kde", "robust": False}, ["methods.m: robust does not apply"]),
         ({"posterior": "kde", "robot": {"robust_blurs": [1.0]}},
          ["methods.m: robust_blurs does not apply"]),
         ({"robust": False, "redundancy_radius": 2.0},
          ["methods.m: redundancy_radius does not apply", "robust = false"]),
         ({"ml_ties": "random", "strategies": ["random", "infogain"]},
-         ["methods.m: ml_ties does not apply", "estimator ml", "the estimator is mean",
-          "stop_ml is not set"]),
-        ({"hypotheses": 64}, ["hypotheses does not apply", "strategy infogain",
-                              "the strategies are random, active"]),
+         ["methods.m: ml_ties does not apply", "the estimator is mean", "stop_ml is not set"]),
+        ({"hypotheses": 64}, ["hypotheses does not apply", "no strategy of it takes it",
+                              "strategy infogain does"]),
         ({"posterior": "kde", "kde_sampler": "raster"},
-         ["kde_sampler does not apply", 'kde_draw = "shared"']),
-        ({"kde_floor": 0.0}, ["kde_floor does not apply", "posterior kde"]),
+         ["kde_sampler does not apply", 'kde_draw = "fresh"']),
+        ({"kde_floor": 0.0}, ["kde_floor does not apply", "posterior kde does"]),
     ],
 )
 def test_a_method_option_its_parts_do_not_read_is_refused(runner, tmp_path, model_path, method,
@@ -659,7 +664,10 @@ def test_options_the_method_reads_are_accepted_and_recorded():
                                       "random_actions": "model", "candidates": 32,
                                       "active_keep": 4, "stop_ml": 0.02, "stop_mass": 0.0}})
     r = stage.adapt_config(cfg, "m", "paper-active", "ideal").robot
-    assert (r.kde_floor, r.kde_sampler, r.candidates, r.active_keep) == (0.0, "raster", 32, 4)
-    # every resolved option stays recorded, those the method does not read included
-    opts = stage.resolved_methods(cfg)["m"]["options"]["ideal"]["random"]["robot"]
-    assert opts["robust_eta"] is None and opts["hypotheses"] == 512
+    assert (r.posterior.kde_floor, r.kde_sampler, r.strategy.candidates,
+            r.strategy.active_keep) == (0.0, "raster", 32, 4)
+    # every resolved option of the chosen parts stays recorded; each strategy its own
+    opts = stage.resolved_methods(cfg)["m"]["options"]["ideal"]
+    assert opts["random"]["robot"]["strategy"] == {"name": "random", "random_actions": "model"}
+    assert opts["paper-active"]["robot"]["strategy"]["candidates"] == 32
+    assert opts["random"]["robot"]["posterior"]["kde_bandwidth"] is None

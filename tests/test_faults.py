@@ -25,7 +25,7 @@ from kbcli.cli import app
 from kbcli.errors import ArtifactError, KbcliError
 from kbcli.io import atomic, lock, processes, signals
 from kbcli.io.artifact import read_artifact, sha256_file, write_artifact
-from kbcli.io.runner import Checkpoint
+from kbcli.io.checkpoint import Checkpoint
 
 ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "data" / "golden"

@@ -133,13 +133,13 @@ def test_signal_while_kbcli_loads_is_one_line(tmp_path, sig, code, word):
 def test_checkpoint_whose_meta_cannot_be_written_leaves_no_folder(tmp_path, monkeypatch):
     """A full disk at the checkpoint's first file left an empty OUTPUT.ckpt/ that the error line
     did not mention and no --resume could use (battery disk-full-evaluate)."""
-    import kbcli.io.runner as runner_io
-    from kbcli.io.runner import Checkpoint
+    import kbcli.io.checkpoint as checkpoint_io
+    from kbcli.io.checkpoint import Checkpoint
 
     def full(path, data, suffix=".tmp"):
         raise ArtifactError(f"{path}: cannot write (No space left on device)")
 
-    monkeypatch.setattr(runner_io, "write_bytes", full)
+    monkeypatch.setattr(checkpoint_io, "write_bytes", full)
     ckpt = Checkpoint(tmp_path / "ev.h5.ckpt", {"a": 1})
     with pytest.raises(ArtifactError, match="meta.json: cannot write"):
         ckpt.start()

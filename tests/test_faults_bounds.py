@@ -12,7 +12,7 @@ import pytest
 from helpers import one_line_error
 
 from kbcli.cli import app
-from kbcli.core.explore import MAX_COVER_POINTS, check_cover
+from kbcli.core.model.explore import MAX_COVER_POINTS, check_cover
 from kbcli.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -12,7 +12,7 @@ import pytest
 from helpers import one_line_error
 
 from kbcli.cli import app
-from kbcli.core.geometry import (
+from kbcli.core.instrument.geometry import (
     MAX_COORD,
     OVERLAP_AREA,
     KeyShapes,
@@ -22,8 +22,8 @@ from kbcli.core.geometry import (
     points_in_polygon,
     segment_distance,
 )
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import LAYOUTS, PolygonKey, example_config_fields
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.layouts import LAYOUTS, PolygonKey, example_config_fields
 from kbcli.errors import ConfigError
 from kbcli.io.config import load_toml
 
@@ -91,7 +91,7 @@ def test_a_hexagon_shifted_by_a_whole_key_is_refused():
     px^2 for 50 px keys): the overlap check and the coverage test both see it."""
     kb = Keyboard(KeyboardConfig(layout="hex"))
     polys = [p.copy() for p in kb.shapes.polygons]
-    polys[5] = polys[5] + (kb.config.key_size, 0.0)
+    polys[5] = polys[5] + (kb.config.layout.key_size, 0.0)
     bad = KeyShapes(polygons=polys)
     with pytest.raises(ConfigError, match=r"keys 5 .* and 6 .* overlap"):
         check_overlaps(bad, kb.names)
@@ -193,16 +193,16 @@ GOOD_KEYS = '[[keyboard.keys]]\nvertices = [[300, 300], [340, 300], [340, 340], 
 @pytest.mark.parametrize(
     "body, fragments",
     [
-        ("rows = 2.5", ["keyboard.rows", "whole number"]),
-        ("rows = 0", ["keyboard.rows", "greater than or equal to 1"]),
-        ("rows = true", ["keyboard.rows", "whole number"]),
-        ('key_size = "big"', ["keyboard.key_size", "number"]),
+        ("rows = 2.5", ["keyboard.layout.rows", "whole number"]),
+        ("rows = 0", ["keyboard.layout.rows", "greater than or equal to 1"]),
+        ("rows = true", ["keyboard.layout.rows", "whole number"]),
+        ('key_size = "big"', ["keyboard.layout.key_size", "number"]),
         ("margin = -1.0", ["keyboard.margin", "in [0, 10000], got -1.0"]),
         ("match_threshold = 0.0", ["keyboard.match_threshold", "in (0, 100], got 0.0"]),
         ("noise_std = 1e308", ["keyboard.noise_std", "in [0, 100], got 1e+308"]),
         ("tempo_col_step = 1e308", ["keyboard.tempo_col_step", "in [0, 1000]"]),
         ("tempo_base = 1e308", ["keyboard.tempo_base", "in (0, 10000]"]),
-        ("key_size = 1e9", ["keyboard.key_size", "in (0, 10000]"]),
+        ("key_size = 1e9", ["keyboard.layout.key_size", "in (0, 10000]"]),
         ("origin = [1.0, 2.0, 3.0]", ["keyboard.origin must have at most 2 values, got 3"]),
         ("origin = [1.0]", ["keyboard.origin has too few values (no value [1]), got [1.0]"]),
         ("origin = [20000.0, 0.0]", ["keyboard.origin[0]", "less than or equal to 10000"]),
@@ -240,5 +240,5 @@ def test_bad_toml_through_the_cli_is_one_line_and_writes_nothing(runner, tmp_pat
     assert not out.exists()
     toml.write_text("[keyboard]\nrows = 2.5\n")
     r = runner.invoke(app, ["keyboard", "--config", str(toml), "-o", str(out)])
-    one_line_error(r, "keyboard.rows", "whole number")
+    one_line_error(r, "keyboard.layout.rows", "whole number")
     assert not out.exists()

@@ -13,11 +13,11 @@ import pytest
 from test_report import PAPER_LIKE, SHRINKING, _evaluation, _key
 
 from kbcli.cli import app
-from kbcli.core import stats
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.model import ExactModel
+from kbcli.core.adaptation import stats
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model.base import ExactModel
 from kbcli.io.artifact import read_artifact
 from kbcli.stages import report as stage
 from kbcli.stages.artifact import Artifact

@@ -9,8 +9,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kbcli.core import transforms
-from kbcli.core.keyboard import Keyboard, KeyboardConfig, match, midi_to_name, name_to_midi
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.keyboard import (
+    Keyboard,
+    KeyboardConfig,
+    match,
+    midi_to_name,
+    name_to_midi,
+)
 from kbcli.errors import ConfigError
 
 KB = Keyboard(KeyboardConfig())
@@ -82,7 +88,7 @@ def test_displaced_keyboard_plays_reference_sound_at_moved_point(dx, dy, angle, 
 
 
 def _near_edge(p):
-    u = (p[0] - np.array(KB.config.origin)) / KB.config.key_size
+    u = (p[0] - np.array(KB.config.origin)) / KB.config.layout.key_size
     return np.min(np.abs(u - np.round(u))) < 1e-6
 
 

@@ -9,17 +9,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from kbcli.cli import app
-from kbcli.core import transforms
-from kbcli.core.geometry import (
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.geometry import (
     KeyShapes,
     check_overlaps,
     check_polygon,
     points_in_polygon,
     polygon_area,
 )
-from kbcli.core.keyboard import Keyboard, KeyboardConfig, PolygonKey
-from kbcli.core.layouts import LAYOUTS, example_config_fields, example_polygon_keys
-from kbcli.core.model import ExactModel
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig, PolygonKey
+from kbcli.core.instrument.layouts import LAYOUTS, example_config_fields, example_polygon_keys
+from kbcli.core.model.base import ExactModel
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml
@@ -153,8 +153,8 @@ def test_layout_known_answers():
     # Wicki-Hayden: right a whole tone, up-right a fifth, up-left a fourth
     c = hexa.config
     assert hexa.pitches[1] - hexa.pitches[0] == 2
-    assert hexa.pitches[c.cols] - hexa.pitches[0] == 7  # row 1 is shifted right: up-right
-    assert hexa.pitches[c.cols] - hexa.pitches[1] == 5  # and up-left of key 1
+    assert hexa.pitches[c.layout.cols] - hexa.pitches[0] == 7  # row 1 is shifted right: up-right
+    assert hexa.pitches[c.layout.cols] - hexa.pitches[1] == 5  # and up-left of key 1
     # the piano: 12 white keys C3..G4 and their 8 black keys, chromatic by key index
     assert piano.n_keys == 20 and piano.names[0] == "C3" and piano.names[1] == "C#3"
     np.testing.assert_array_equal(np.diff(piano.pitches), 1)
@@ -206,7 +206,7 @@ def _keys(*offsets):
     "kwargs, fragment",
     [
         ({"layout": "staggered"}, "unknown layout 'staggered'; valid: grid, hex, piano, pads"),
-        ({"layout": "grid", "pad_radius": 10.0}, "pad_radius does not apply to the grid layout"),
+        ({"layout": "grid", "pad_radius": 10.0}, "layout grid takes no option 'pad_radius' (layout pads does)"),
         ({"layout": "hex", "scale": "diatonic"}, "scale does not apply to the hex layout"),
         ({"layout": "pads", "pad_radius": 30.0}, "pads would overlap"),
         ({"layout": "piano", "black_width": 40.0}, "black keys would overlap"),
@@ -267,7 +267,7 @@ def test_keyboard_cli_every_layout_and_bad_input(runner, tmp_path):
     cases = [
         (["--layout", "staggered"], ["unknown layout", "grid, hex, piano, pads, polygons"]),
         (["--layout", "pads", "--pad-radius", "40"], ["pad_radius", "overlap"]),
-        (["--layout", "grid", "--key-height", "3"], ["key_height does not apply"]),
+        (["--layout", "grid", "--key-height", "3"], ["--key-height does not apply to this layout", "layout grid takes no option 'key_height'"]),
         (["--layout", "grid", "--origin-x", "700"], ["out of reach"]),
     ]
     for args, fragments in cases:

@@ -7,9 +7,9 @@ import pytest
 from helpers import one_line_error as _one_line_error
 
 from kbcli.cli import app
-from kbcli.core.keyboard import KeyboardConfig
-from kbcli.core.model import ExactModel
-from kbcli.core.model_classes import MODEL_CLASSES
+from kbcli.core.instrument.keyboard import KeyboardConfig
+from kbcli.core.model.base import ExactModel
+from kbcli.core.model.classes import MODEL_CLASSES
 from kbcli.errors import ArtifactError, ConfigError, OutOfReachError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.sim import SimConfig
@@ -62,7 +62,7 @@ def test_learn_writes_a_model_artifact_and_plots_it(runner, files):
 
 def _truth(art):
     kb = keyboard_stage.load(art)
-    from kbcli.core.model import grid_points
+    from kbcli.core.model.base import grid_points
 
     _, pts = grid_points(kb.area, 1.0)
     return kb.key_at(pts.reshape(-1, 2)).reshape(pts.shape[:2])

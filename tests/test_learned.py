@@ -9,19 +9,19 @@ from hypothesis import strategies as st
 from sklearn.exceptions import NotFittedError
 from sklearn.svm import SVC
 
-from kbcli.core import accuracy as scoring
-from kbcli.core.explore import (
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model import accuracy as scoring
+from kbcli.core.model.base import ExactModel
+from kbcli.core.model.explore import (
     STRATEGIES,
     Exploration,
     ExploreConfig,
     farthest_points,
     hex_lattice,
 )
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.learned import LearnedModel
-from kbcli.core.model import ExactModel
-from kbcli.core.pieces import convex_hull, separating_line
-from kbcli.core.sounds import discover_classes
+from kbcli.core.model.lines import LearnedModel
+from kbcli.core.model.pieces import convex_hull, separating_line
+from kbcli.core.model.sounds import discover_classes
 from kbcli.errors import ArtifactError, ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.sim import SimConfig, World, make_reacher

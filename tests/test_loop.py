@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from kbcli.cli import app
-from kbcli.core import transforms
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.detect import DetectorConfig
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.loop import ADAPT, PLAY, closed_loop
-from kbcli.core.melody import parse_melody
-from kbcli.core.model import ExactModel
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.detection.detectors import DetectorConfig
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.melody import parse_melody
+from kbcli.core.model.base import ExactModel
+from kbcli.core.playing.loop import ADAPT, PLAY, closed_loop
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.sim import IdealReacher, SimConfig, World
@@ -136,7 +136,7 @@ def _two_adaptations():
 
 
 def test_adaptation_blocks_finds_every_run_of_adaptation_touches():
-    from kbcli.core.loop import adaptation_blocks
+    from kbcli.core.playing.loop import adaptation_blocks
 
     phase = np.zeros(50, int)
     phase[10:14] = ADAPT

@@ -10,21 +10,23 @@ from scipy.spatial import cKDTree
 from sklearn.exceptions import NotFittedError
 
 from kbcli.cli import app
-from kbcli.core import accuracy as scoring
-from kbcli.core.adapt import adapt
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.explore import Exploration, ExploreConfig
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import example_config_fields
-from kbcli.core.model_classes import (
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.loop import adapt
+from kbcli.core.adaptation.strategies import STRATEGIES
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.layouts import example_config_fields
+from kbcli.core.model import accuracy as scoring
+from kbcli.core.model.classes import (
     MODEL_CLASSES,
     fit_model,
     learned_classes,
     make_model,
     model_from_arrays,
 )
-from kbcli.core.svc_model import SVCModel
+from kbcli.core.model.explore import Exploration, ExploreConfig
+from kbcli.core.model.svc import SVCModel
+from kbcli.core.options import for_part
 from kbcli.errors import ArtifactError, ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.sim import SimConfig, World, make_reacher
@@ -104,7 +106,7 @@ def test_svc_learns_round_pads(pads_svc):
     assert scoring.accuracy_from_maps(pred, true) > 0.97
     assert scoring.boundary_error(pred, true) < 2.0
     # the active rule spent its reaches near the pads' circles, not in silence
-    d = PADS.shapes._tree.query(pads_svc.landed)[0] - PADS.config.pad_radius
+    d = PADS.shapes._tree.query(pads_svc.landed)[0] - PADS.config.layout.pad_radius
     assert np.mean(np.abs(d) < 3) > 0.4
 
 
@@ -112,7 +114,7 @@ def test_svc_probabilities_come_from_the_margin(pads_svc):
     """Across a pad's edge p goes through 1/2; deep inside a pad or far in silence it is sure."""
     model = pads_svc.model
     cx, cy = PADS.key_centres()[0]
-    r = PADS.config.pad_radius
+    r = PADS.config.layout.pad_radius
     # on the edge: the point of the pad's circle furthest from every sample (a sample landed
     # right on the edge tells its sound there)
     th = np.linspace(0.0, 2 * np.pi, 360, endpoint=False)
@@ -360,9 +362,10 @@ def test_every_strategy_adapts_with_an_svc_model(pads_svc, strategy, family):
     """Every adaptation strategy takes an svc model (any class behind the one interface) in both
     families: the posterior concentrates and the estimate moves towards the truth."""
     truth = np.array([6.0, -4.0]) if family == "translation" else np.array([1.0, 6.0, -4.0])
+    own = for_part(STRATEGIES, strategy,
+                   {"candidates": 64, "hypotheses": 64, "active_hypotheses": 256})
     cfg = AdapterConfig(strategy=strategy, family=family, resolution=1.0, prior_halfwidth=10.0,
-                        max_angle=2.0, angle_resolution=1.0, candidates=64, hypotheses=64,
-                        active_hypotheses=256)
+                        max_angle=2.0, angle_resolution=1.0, **own)
     adapter = Adapter(pads_svc.model, cfg, rng=np.random.default_rng(3))
     world = World(PADS, make_reacher(SimConfig()), truth, family)
     rng = np.random.default_rng(4)

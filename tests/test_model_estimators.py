@@ -13,17 +13,17 @@ import pytest
 from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
 
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.learned import LearnedModel
-from kbcli.core.model import ExactModel, ModelBase
-from kbcli.core.model_classes import (
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model.base import ExactModel, ModelBase
+from kbcli.core.model.classes import (
     MODEL_CLASSES,
     learned_classes,
     make_model,
     model_class_of,
 )
-from kbcli.core.reliability import expected_calibration_error
-from kbcli.core.svc_model import SVCModel
+from kbcli.core.model.lines import LearnedModel
+from kbcli.core.model.reliability import expected_calibration_error
+from kbcli.core.model.svc import SVCModel
 from kbcli.errors import ConfigError
 
 AREA = (150.0, 200.0, 650.0, 500.0)
@@ -115,7 +115,7 @@ def test_clone_and_get_params_round_trip(name):
 
 def test_set_params_recalibrates_a_fitted_lines_model():
     """The prediction-time calibration of the lines model is a parameter: set on a copy of the
-    fitted model (as :func:`kbcli.core.reliability.assess` does), it changes the probabilities
+    fitted model (as :func:`kbcli.core.model.reliability.assess` does), it changes the probabilities
     and leaves the original alone."""
     import copy
 

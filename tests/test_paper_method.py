@@ -7,16 +7,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kbcli.core.action_sampler import FreshSamples, RasterSampler
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.applies import applies
-from kbcli.core.grid import HypothesisGrid
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.model import ExactModel
-from kbcli.core.posterior import Posterior, fair_argmax
-from kbcli.core.strategies import STRATEGIES, Context
-from kbcli.core.table import LikelihoodTable
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.grid import HypothesisGrid
+from kbcli.core.adaptation.posteriors.kde.samples import FreshSamples
+from kbcli.core.adaptation.posteriors.posterior import Posterior, fair_argmax
+from kbcli.core.adaptation.strategies import STRATEGIES, Context
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model.base import ExactModel
+from kbcli.core.model.sampling import RasterSampler
+from kbcli.core.model.table import LikelihoodTable
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.runner import Job, execute
@@ -78,7 +78,7 @@ def test_ml_ties_have_no_positional_bias():
 
 
 def adapter(seed, **kw):
-    cfg = AdapterConfig.from_dict({**PAPER, **kw})
+    cfg = AdapterConfig.shared({**PAPER, **kw})  # the method's options its strategy takes
     return Adapter(MODEL, cfg, rng=np.random.default_rng(seed))
 
 
@@ -109,12 +109,14 @@ def test_simulate_draw_shared_reuses_one_draw_per_sound_in_the_simulations_only(
         assert ad.simulation_samples is ad.samples
     paper = [adapter(4, strategy="paper-active", **kw) for kw in ({}, {"simulate_draw": "fresh"})]
     np.testing.assert_array_equal(paper[0].suggest(), paper[1].suggest())
-    cfg = AdapterConfig.from_dict({**PAPER, "strategy": "paper-active", "simulate_draw": "shared"})
-    assert applies("simulate_draw", cfg)
-    assert not applies("simulate_draw", cfg.replace(posterior="likelihood"))
-    assert not applies("simulate_draw", cfg.replace(strategy="infogain"))
+    cfg = AdapterConfig.shared({**PAPER, "strategy": "paper-active", "simulate_draw": "shared"})
+    assert "simulate_draw" not in cfg.inactive()  # read: paper-active simulates, the KDE draws
+    assert "simulate_draw" not in cfg.replace(posterior="likelihood").flat()  # the KDE's option
+    assert "simulate_draw" in cfg.replace(strategy="infogain").inactive()
     with pytest.raises(ConfigError, match="shared, fresh"):
-        AdapterConfig(simulate_draw="sometimes")
+        AdapterConfig(posterior="kde", simulate_draw="sometimes")
+    with pytest.raises(ConfigError, match="posterior likelihood takes no option 'simulate_draw'"):
+        AdapterConfig(simulate_draw="shared")
 
 
 def test_no_floor_rules_out_and_floor_keeps():
@@ -122,9 +124,9 @@ def test_no_floor_rules_out_and_floor_keeps():
     t0, t1 = a0.simulate(np.array([400.0, 300.0]), 5), a1.simulate(np.array([400.0, 300.0]), 5)
     assert t0.min() < -600 and t1.min() > -20  # ruled out (log 1e-300) vs the floor
     with pytest.raises(ConfigError):
-        AdapterConfig(kde_floor=1.0)
+        AdapterConfig(posterior="kde", kde_floor=1.0)
     with pytest.raises(ConfigError, match="fresh"):
-        AdapterConfig(kde_draw="new")
+        AdapterConfig(posterior="kde", kde_draw="new")
 
 
 @pytest.mark.parametrize("strategy", ["paper-active", "random"])
@@ -150,7 +152,7 @@ def test_paper_active_keeps_the_most_confusing_candidates():
     t = two_key_table()
     grid = HypothesisGrid.build("translation", prior_halfwidth=1.0, resolution=1.0,
                                 centre=np.zeros(2))
-    cfg = AdapterConfig(candidates=64, active_keep=4)
+    cfg = AdapterConfig(strategy="paper-active", candidates=64, active_keep=4)
     seen = []
 
     def simulate(a, c):

@@ -10,11 +10,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from kbcli.cli import app
-from kbcli.core import audio
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.melody import DEFAULT_MELODY, parse_melody
-from kbcli.core.model import ExactModel
-from kbcli.core.play import MATCH, NO_MATCH, expected_failure_rate, note_classes, play
+from kbcli.core.instrument import audio
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.melody import DEFAULT_MELODY, parse_melody
+from kbcli.core.model.base import ExactModel
+from kbcli.core.playing.play import MATCH, NO_MATCH, expected_failure_rate, note_classes, play
 from kbcli.errors import ConfigError, OutOfReachError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.sim import SimConfig, workspace_check

@@ -10,16 +10,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kbcli.core import transforms
-from kbcli.core.adapt_setup import build_table
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.grid import HypothesisGrid, grid_bytes
-from kbcli.core.kde import ActionSamples, binned_kde, kde_term, scott_bandwidth
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.likelihood import cell_sigma, likelihood_term
-from kbcli.core.model import ExactModel
-from kbcli.core.posterior import Posterior, log_normalise
-from kbcli.core.table import LikelihoodTable
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.grid import HypothesisGrid, grid_bytes
+from kbcli.core.adaptation.posteriors.kde.density import binned_kde, kde_term
+from kbcli.core.adaptation.posteriors.kde.samples import ActionSamples, scott_bandwidth
+from kbcli.core.adaptation.posteriors.likelihood.term import cell_sigma, likelihood_term
+from kbcli.core.adaptation.posteriors.posterior import Posterior, log_normalise
+from kbcli.core.adaptation.setup import build_table
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model.base import ExactModel
+from kbcli.core.model.table import LikelihoodTable
 from kbcli.errors import ConfigError
 
 KB = Keyboard(KeyboardConfig())
@@ -68,9 +69,9 @@ def test_boundary_points_find_every_key_corner():
     edges, corners = TABLE.boundary_points()
     c = KB.config
     # vertices where 3 or 4 sounds meet: all inner vertices of the key lattice and the outline's
-    expected = (c.rows + 1) * (c.cols + 1) - 4
+    expected = (c.layout.rows + 1) * (c.layout.cols + 1) - 4
     assert len(corners) == expected
-    assert np.allclose(np.mod(corners - np.asarray(c.origin), c.key_size), 0)
+    assert np.allclose(np.mod(corners - np.asarray(c.origin), c.layout.key_size), 0)
     assert np.array_equal(TABLE.classes_at(edges[:, 0] + 0.3, edges[:, 1] + 0.3),
                           MODEL.predict_class(edges + 0.3))
 

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from kbcli.cli import app
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.model import ExactModel
-from kbcli.core.posteriors import POSTERIORS, KindBase, Observation, PosteriorKind
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.posteriors import POSTERIORS, KindBase, Observation, PosteriorKind
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model.base import ExactModel
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import keyboard as keyboard_stage
@@ -48,7 +48,7 @@ def test_an_unknown_posterior_lists_the_registered_ones():
     with pytest.raises(ConfigError, match="unknown posterior 'deaf'; valid: likelihood, kde"):
         AdapterConfig(posterior="deaf")
     with POSTERIORS.temporarily("deaf", DeafPosterior()):
-        assert AdapterConfig(posterior="deaf").posterior == "deaf"
+        assert AdapterConfig(posterior="deaf").posterior.name == "deaf"
     assert "deaf" not in POSTERIORS
 
 
@@ -78,7 +78,7 @@ def test_a_toy_posterior_runs_through_kbcli_adapt(runner, tmp_path):
         assert r.exit_code == 0, r.output
         assert "infogain/deaf" in r.output and "final error" in r.output
         art = read_artifact(tmp_path / "run.h5", "run")
-    assert art.config["adapt"]["robot"]["posterior"] == "deaf"
+    assert art.config["adapt"]["robot"]["posterior"] == {"name": "deaf"}
     # the deaf posterior never moves: the entropy stays that of the flat prior
     n = 2 * 10 + 1  # +-5 px at 0.5 px
     assert np.allclose(art.data["entropy"], math.log(n * n))

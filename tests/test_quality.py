@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from kbcli.cli import app
-from kbcli.core.keyboard import KeyboardConfig
+from kbcli.core.instrument.keyboard import KeyboardConfig
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import keyboard as keyboard_stage
@@ -97,7 +97,7 @@ def test_bad_quality_configs_are_refused(table):
     ({"categories": {"a": {"limit": 3}}}, ["quality.categories", "displacements"]),
     ({"budget": [10]}, ["unknown quality option 'budget'", "budgets"]),
     ({"rows": {"random": {"strategy": "random", "candidates": 9}}},
-     ["rows.random: candidates does not apply", "strategy active, paper-active or infogain"]),
+     ["rows.random: candidates does not apply", "strategy active, paper-active and infogain do"]),
     ({"adapt": {"kde_floor": 0.01}}, ["quality: adapt.kde_floor does not apply to any row",
                                       "posterior kde"]),
 ])
@@ -198,8 +198,8 @@ def test_a_tiny_sweep_runs_and_reports(runner, small_kb, tmp_path):
     info = sorted(art.attrs["models"].values(), key=lambda m: m["threshold"])
     ideal = [m["ideal_touches"]["small"] for m in info]  # a wider tau is never reached later
     assert all(1 <= v <= 7 for v in ideal) and ideal == sorted(ideal, reverse=True)
-    assert art.attrs["rows_resolved"][stage.IDEAL_ROW]["robot"]["strategy"] == "infogain"
-    assert art.attrs["rows_resolved"]["infogain"]["robot"]["robust"] is True
+    assert art.attrs["rows_resolved"][stage.IDEAL_ROW]["robot"]["strategy"]["name"] == "infogain"
+    assert art.attrs["rows_resolved"]["infogain"]["robot"]["posterior"]["robust"] is True
     assert not (tmp_path / "q.h5.ckpt").exists()
     # same inputs and seed: the same numbers
     r = runner.invoke(app, [*args[:-1], str(tmp_path / "again.h5")])

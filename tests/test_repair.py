@@ -10,16 +10,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kbcli.core import accuracy as scoring
-from kbcli.core import credible
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.applies import unused
-from kbcli.core.grid import HypothesisGrid
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.model import ExactModel
-from kbcli.core.model_classes import fit_model
-from kbcli.core.repair import (
+from kbcli.core.adaptation import credible
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.grid import HypothesisGrid
+from kbcli.core.adaptation.posteriors.likelihood.robust import Nuisance
+from kbcli.core.adaptation.repair import (
     RepairBelief,
     RepairMap,
     Touches,
@@ -28,8 +24,11 @@ from kbcli.core.repair import (
     repair_terms,
     repaired_map,
 )
-from kbcli.core.robust import Nuisance
-from kbcli.core.table import LikelihoodTable
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model import accuracy as scoring
+from kbcli.core.model.base import ExactModel
+from kbcli.core.model.classes import fit_model
+from kbcli.core.model.table import LikelihoodTable
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig, World, make_reacher
 
@@ -201,16 +200,18 @@ def test_credible_radius_of_known_posteriors():
 
 
 def test_repair_config_is_opt_in_and_checked():
-    assert AdapterConfig().repair is False
-    assert "repair" not in AdapterConfig().to_dict()  # stored configs read back unchanged
-    assert AdapterConfig(repair=True).to_dict()["repair"] is True
+    assert AdapterConfig().posterior.repair is False
+    assert AdapterConfig(repair=True).to_dict()["posterior"]["repair"] is True
     with pytest.raises(ConfigError, match="translation"):
         AdapterConfig.from_dict({"repair": True, "family": "rigid"})
     with pytest.raises(ConfigError, match="robust"):
+        AdapterConfig.from_dict({"repair": True, "robust": False})
+    with pytest.raises(ConfigError, match="posterior kde takes no option 'repair'"):
         AdapterConfig.from_dict({"repair": True, "posterior": "kde"})
     # the repair's own options are read only with it; the robust posterior's own ones not with it
-    assert unused(AdapterConfig(), ["repair_kernel"]) == ["repair_kernel"]
-    assert unused(AdapterConfig(repair=True), ["repair_kernel", "robust_eta"]) == ["robust_eta"]
+    assert "repair_kernel" in AdapterConfig().inactive()
+    inactive = AdapterConfig(repair=True).inactive()
+    assert "robust_eta" in inactive and "repair_kernel" not in inactive
 
 
 def test_adapter_with_repair_on_the_exact_model_finds_the_shift(exact_model, world_of):

@@ -8,7 +8,7 @@ import pytest
 from helpers import one_line_error
 
 from kbcli.cli import app
-from kbcli.core.keyboard import KeyboardConfig
+from kbcli.core.instrument.keyboard import KeyboardConfig
 from kbcli.io.artifact import read_artifact, sha256_file, write_artifact
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import learn as learn_stage

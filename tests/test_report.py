@@ -9,7 +9,7 @@ import pytest
 from test_evaluate import FAKE, small_config
 
 from kbcli.cli import app
-from kbcli.core.adapter_config import AdapterConfig
+from kbcli.core.adaptation.config import AdapterConfig
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import evaluate as evaluate_stage
 from kbcli.stages import report as stage
@@ -217,7 +217,7 @@ def test_schema_1_artifacts_are_still_read():
 
 
 def test_report_cli_from_an_evaluation(runner, tmp_path, monkeypatch):
-    from kbcli.core.keyboard import KeyboardConfig
+    from kbcli.core.instrument.keyboard import KeyboardConfig
     from kbcli.stages import keyboard as keyboard_stage
 
     cfg = small_config(modes=["ideal", "dynamics"])
@@ -476,13 +476,13 @@ def test_methods_table_marks_options_that_do_not_apply():
 
 def test_methods_table_of_kde_methods_lists_no_likelihood_only_option():
     art = _evaluation(PAPER_LIKE)
-    robot = {**AdapterConfig(posterior="kde", estimator="ml").to_dict(), "kde_floor": 0.0}
     for x in ("paper", "kbcli"):  # both read with the KDE: no method reads the robust options
         art.attrs["methods"][x]["from_model"] = {"redundancy_radius": 0.0, "robust_blurs": [],
                                                  "robust_eta": 1.0}
         for by_s in art.attrs["methods"][x]["options"].values():
-            for d in by_s.values():
-                d["robot"] = {**robot, "strategy": d["robot"]["strategy"]}
+            for s, d in by_s.items():
+                d["robot"] = AdapterConfig(posterior="kde", estimator="ml", kde_floor=0.0,
+                                           strategy=s).to_dict()
     table = "\n".join(stage.tables.methods_table(art))
     for k in ("robust", "robust_blurs", "robust_outliers", "robust_eta", "redundancy_radius",
               "cell_average", "hypotheses", "stop_angle", "max_angle"):
@@ -490,8 +490,9 @@ def test_methods_table_of_kde_methods_lists_no_likelihood_only_option():
     for k in ("kde_samples", "kde_floor", "kde_draw", "ml_ties", "candidates", "active_keep"):
         assert f"| {k} |" in table, k
     assert "n/a" not in table  # every row applies to both
-    # all of them stay recorded in the artifact
-    assert "robust_eta" in art.attrs["methods"]["paper"]["options"]["ideal"]["active"]["robot"]
+    # every option of the chosen parts stays recorded in the artifact
+    assert "kde_bandwidth" in art.attrs["methods"]["paper"]["options"]["ideal"]["active"]["robot"][
+        "posterior"]
 
 
 @pytest.mark.parametrize("robot,expected", [
@@ -504,6 +505,6 @@ def test_methods_table_of_kde_methods_lists_no_likelihood_only_option():
 def test_the_floor_departure_reads_a_recorded_none_as_the_outlier_rate(robot, expected):
     """A method recorded with kde_floor = None (the paper-v1 reading) names the floor it used;
     the row is there whatever the options (issue 39: every rule listed)."""
-    from kbcli.stages.report.departures import _floor
+    from kbcli.stages.report.departures import _no_kde, by_parts
 
-    assert expected in _floor(robot, None)
+    assert expected in by_parts("floor", _no_kde)(robot, None)

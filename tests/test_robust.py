@@ -8,11 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.special import logsumexp
 
-from kbcli.core import accuracy as scoring
-from kbcli.core.adapt import adapt
-from kbcli.core.adapt_setup import spot_count
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import (
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import (
     MAX_BLUR,
     REDUNDANCY_FACTOR,
     WIDE_BLUR_FACTOR,
@@ -20,15 +17,24 @@ from kbcli.core.adapter_config import (
     redundancy_radius,
     robust_blurs,
 )
-from kbcli.core.grid import HypothesisGrid
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.learned import LearnedModel
-from kbcli.core.likelihood import likelihood_term
-from kbcli.core.model import ExactModel, grid_points
-from kbcli.core.posterior import Posterior
-from kbcli.core.reliability import assess, choose_calibration, expected_calibration_error
-from kbcli.core.robust import Nuisance, RobustPosterior, blurred_map, raw_prob, robust_terms
-from kbcli.core.table import LikelihoodTable
+from kbcli.core.adaptation.grid import HypothesisGrid
+from kbcli.core.adaptation.loop import adapt
+from kbcli.core.adaptation.posteriors.likelihood.robust import (
+    Nuisance,
+    RobustPosterior,
+    blurred_map,
+    raw_prob,
+    robust_terms,
+)
+from kbcli.core.adaptation.posteriors.likelihood.term import likelihood_term
+from kbcli.core.adaptation.posteriors.posterior import Posterior
+from kbcli.core.adaptation.setup import spot_count
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model import accuracy as scoring
+from kbcli.core.model.base import ExactModel, grid_points
+from kbcli.core.model.lines import LearnedModel
+from kbcli.core.model.reliability import assess, choose_calibration, expected_calibration_error
+from kbcli.core.model.table import LikelihoodTable
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig, World, keys_heard_when_felt, make_reacher
 
@@ -142,8 +148,8 @@ class _Shrunk(ExactModel):
     def predict_class(self, points):
         p = np.asarray(points, float).reshape(-1, 2)
         c = self.keyboard.config
-        f = (p - np.asarray(c.origin)) % c.key_size
-        inner = ((f >= 3.0) & (f < c.key_size - 3.0)).all(axis=1)
+        f = (p - np.asarray(c.origin)) % c.layout.key_size
+        inner = ((f >= 3.0) & (f < c.layout.key_size - 3.0)).all(axis=1)
         return np.where(inner, self.keyboard.key_at(p), -1) + 1
 
 
@@ -213,7 +219,7 @@ def test_the_expected_mislabel_rate_is_not_fooled_by_touches_on_the_boundaries()
     """Active exploration puts its touches on the boundaries, so held-out touches are hard: their
     mislabel rate overstates the pad's (ideal arm, 300 reaches, seed 0: 26 % against 11 %). The
     rate the calibrated model expects over the pad does not depend on where the touches were."""
-    from kbcli.core.keyboard import KeyboardConfig
+    from kbcli.core.instrument.keyboard import KeyboardConfig
     from kbcli.stages import keyboard as keyboard_stage
     from kbcli.stages import learn as learn_stage
 
@@ -331,8 +337,8 @@ def test_the_blur_grid_widens_for_a_model_that_says_it_is_weak():
     """A model whose own boundary error is 4 px also has a blur of 2 x 4 = 8 px weighed; a good
     model (1.5 px), the exact one (no estimate) and the rigid family keep their grids; an explicit
     grid or model_blur wins."""
-    from kbcli.core.adapter_config import learning_rate
-    from kbcli.core.robust import DEFAULT_BLURS, RIGID_BLURS
+    from kbcli.core.adaptation.config import learning_rate
+    from kbcli.core.adaptation.posteriors.likelihood.robust import DEFAULT_BLURS, RIGID_BLURS
 
     class Rated(ExactModel):
         def __init__(self, kb, berr):
@@ -358,8 +364,8 @@ def test_the_learning_rate_tempers_a_model_that_says_it_is_weak():
     """eta = min(1, (1.5 px / b)^2) for a model rating its boundaries b px off: 1 up to 1.5 px and
     for the exact model, 0.25 at 3 px; an explicit robust_eta wins; the rigid family and the plain
     posterior are untouched; bad values are rejected."""
-    from kbcli.core.adapter_config import learning_rate, temper
-    from kbcli.core.robust import TEMPER_PX
+    from kbcli.core.adaptation.config import learning_rate, temper
+    from kbcli.core.adaptation.posteriors.likelihood.robust import TEMPER_PX
 
     class Rated(ExactModel):
         def __init__(self, kb, berr):
@@ -386,7 +392,7 @@ def test_a_tempered_posterior_is_the_plain_one_raised_to_its_rate(eta, seed):
     """After n touches the coarsened posterior is Bayes with the log-likelihood multiplied by
     zeta_n = alpha / (alpha + n), alpha = 30 eta / (1 - eta): zeta falls from about 1 and reaches
     eta at 30 touches; eta = 1 changes nothing."""
-    from kbcli.core.robust import HORIZON
+    from kbcli.core.adaptation.posteriors.likelihood.robust import HORIZON
 
     grid = HypothesisGrid.build("translation", prior_halfwidth=6.0, resolution=1.0,
                                 centre=np.array([300.0, 300.0]))
@@ -424,7 +430,7 @@ class _OneEdgeOff(ExactModel):
     def predict_class(self, points):
         p = np.asarray(points, float).reshape(-1, 2)
         c = self.keyboard.config
-        edge = c.origin[0] + c.key_size
+        edge = c.origin[0] + c.layout.key_size
         q = p.copy()
         near = (p[:, 0] >= edge) & (p[:, 0] < edge + 12.0)
         q[near, 0] = edge - 1e-6  # the first column reaches 12 px further
@@ -458,7 +464,7 @@ def test_one_wrong_edge_is_not_asked_again_and_again():
 
 
 def test_distance_weights_give_held_out_touches_the_areas_distance_profile():
-    from kbcli.core.reliability import _distance_weights
+    from kbcli.core.model.reliability import _distance_weights
 
     rng = np.random.default_rng(3)
     # pairs of samples 2 px apart, every pair far from the others: a held-out touch whose partner

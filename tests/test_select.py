@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kbcli.core.explore import Exploration, ExploreConfig
-from kbcli.core.model_classes import check_choice
-from kbcli.core.select import (
+from kbcli.core.model.classes import check_choice
+from kbcli.core.model.classifiers import ForestModel
+from kbcli.core.model.explore import Exploration, ExploreConfig
+from kbcli.core.model.select import (
     CANDIDATES,
     EXPLORE_CLASS,
     RESELECT,
@@ -19,7 +20,6 @@ from kbcli.core.select import (
     paired_z,
     prefer,
 )
-from kbcli.core.sk_models import ForestModel
 from kbcli.errors import ConfigError
 
 AREA = (150.0, 200.0, 650.0, 500.0)
@@ -154,8 +154,8 @@ def test_auto_rechooses_its_explorer_every_reselect_reaches(monkeypatch):
     RESELECT (here the choice is made to say svc), recorded with the reach count; the choice draws
     nothing from the exploration's generator (the reaches before it are a forest run's), and a
     named class is never re-chosen."""
-    from kbcli.core import explore
-    from kbcli.core.svc_model import SVCModel
+    from kbcli.core.model import explore
+    from kbcli.core.model.svc import SVCModel
 
     asked = []
     monkeypatch.setattr(explore, "explore_choice", lambda x, *a, **k: asked.append(len(x)) or "svc")

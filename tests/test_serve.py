@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from kbcli.cli import app
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.keyboard import KeyboardConfig
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.instrument.keyboard import KeyboardConfig
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.sim import IdealReacher, SimConfig, World
 from kbcli.stages import keyboard as keyboard_stage

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
 from kbcli.errors import OutOfReachError
 from kbcli.sim import (
     SimConfig,

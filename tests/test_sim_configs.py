@@ -54,7 +54,7 @@ def test_between_names_the_whole_interval(kw, line):
 
 
 # -- the configs of sim, detect and the stages --------------------------------------------------
-from kbcli.core.detect import DETECTORS, MAX_N_LT, MAX_N_ST, DetectorConfig  # noqa: E402
+from kbcli.core.detection.detectors import DETECTORS, MAX_N_LT, MAX_N_ST, DetectorConfig  # noqa: E402
 from kbcli.sim import MODES, PRESETS, ArmConfig, SimConfig, arm_config, make_reacher  # noqa: E402
 from kbcli.sim.arms import MAX_SETTLE_TIME  # noqa: E402
 from kbcli.stages.perturb import PerturbConfig  # noqa: E402

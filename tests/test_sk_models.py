@@ -14,9 +14,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kbcli.core.model_classes import MODEL_CLASSES, make_model, model_from_arrays
-from kbcli.core.reliability import assess, expected_calibration_error
-from kbcli.core.sk_models import ForestModel, ForestXYModel, KNNModel
+from kbcli.core.model.classes import MODEL_CLASSES, make_model, model_from_arrays
+from kbcli.core.model.classifiers import ForestModel, ForestXYModel, KNNModel
+from kbcli.core.model.reliability import assess, expected_calibration_error
 from kbcli.errors import ArtifactError, ConfigError
 
 AREA = (150.0, 200.0, 650.0, 500.0)

@@ -3,7 +3,7 @@ change to code that only presents, judges or records them (tables, report, prove
 import importlib
 import sys
 
-from kbcli.io.runner import PRESENTATION_ONLY, source_digest
+from kbcli.io.checkpoint import PRESENTATION_ONLY, source_digest
 
 
 def _package(root, name):
@@ -35,8 +35,9 @@ def test_only_the_code_that_makes_numbers_is_fingerprinted(tmp_path, monkeypatch
 
 
 def test_every_skipped_path_exists_in_kbcli():
-    import kbcli
     from pathlib import Path
+
+    import kbcli
 
     root = Path(kbcli.__file__).parent
     for rel in PRESENTATION_ONLY:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from kbcli.core.adapter_config import AdapterConfig
+from kbcli.core.adaptation.config import AdapterConfig
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact
 from kbcli.stages.adapt import AdaptConfig, PlayCheck
@@ -31,10 +31,11 @@ def _error(fn, *fragments):
 def test_adapt_config_nests_flat_robot_options():
     cfg = AdaptConfig(strategy="random", resolution=1.0, mode="dynamics", max_steps=5)
     assert cfg.robot == AdapterConfig(strategy="random", resolution=1.0)
-    assert (cfg.strategy, cfg.resolution, cfg.mode, cfg.max_steps) == ("random", 1.0, "dynamics", 5)
+    assert (cfg.strategy.name, cfg.resolution, cfg.mode, cfg.max_steps) == ("random", 1.0, "dynamics",
+                                                                          5)
     # a flat option overrides the robot table's, in the constructor as in from_dict
     both = AdaptConfig(robot=AdapterConfig(strategy="active"), strategy="infogain")
-    assert both.robot.strategy == "infogain"
+    assert both.robot.strategy.name == "infogain"
     assert AdaptConfig.from_dict(cfg.to_dict()) == cfg
     assert pickle.loads(pickle.dumps(cfg)) == cfg
     assert hash(cfg) == hash(AdaptConfig.from_dict(cfg.to_dict()))
@@ -45,7 +46,7 @@ def test_adapt_config_replace_and_with_robot():
     aim = cfg.replace(reach_noise=2.0, feedback="aim")
     assert (aim.max_steps, aim.reach_noise, aim.feedback) == (7, 2.0, "aim")
     assert aim.adapter_config().blur == 2.0 and aim.robot.blur == 0.0
-    assert cfg.replace(strategy="random").robot.strategy == "random"  # flat robot option
+    assert cfg.replace(strategy="random").robot.strategy.name == "random"  # flat robot option
     assert cfg.with_robot(family="rigid").robot.family == "rigid"
     assert cfg.max_steps == 7 and cfg.feedback == "landed"  # frozen: copies, never edits
     with pytest.raises(Exception):  # noqa: B017 (pydantic's frozen-instance error)

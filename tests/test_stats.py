@@ -1,4 +1,4 @@
-"""Known answers of kbcli.core.stats with unequal group sizes (issue 25: a Mann-Whitney effect
+"""Known answers of kbcli.core.adaptation.stats with unequal group sizes (issue 25: a Mann-Whitney effect
 normalised by n*n instead of n*m survived every equal-sized test)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from kbcli.core import stats
+from kbcli.core.adaptation import stats
 
 
 def test_mannwhitney_effect_unequal_groups_by_hand():

@@ -7,19 +7,20 @@ import math
 import numpy as np
 import pytest
 
-from kbcli.core.adapt import adapt
-from kbcli.core.adapt_setup import build_table
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.model import ExactModel
-from kbcli.core.posterior import Posterior
-from kbcli.core.strategies import (
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.loop import adapt
+from kbcli.core.adaptation.posteriors.posterior import Posterior
+from kbcli.core.adaptation.setup import build_table
+from kbcli.core.adaptation.strategies import (
     STRATEGIES,
     entropy_rows,
     outcome_distribution,
 )
-from kbcli.core.table import LikelihoodTable
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model.base import ExactModel
+from kbcli.core.model.table import LikelihoodTable
+from kbcli.core.options import for_part
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig, World, make_reacher
 
@@ -53,8 +54,10 @@ def test_registry_and_unknown_name():
 @pytest.mark.parametrize("family", ["translation", "rigid"])
 @pytest.mark.parametrize("soft", [False, True])
 def test_every_strategy_proposes_an_action_in_the_area(name, family, soft):
+    own = for_part(STRATEGIES, name, {"candidates": 64, "hypotheses": 64,
+                                      "active_hypotheses": 256})  # those the strategy takes
     cfg = AdapterConfig(strategy=name, family=family, prior_halfwidth=10.0, max_angle=2.0,
-                        angle_resolution=0.5, candidates=64, hypotheses=64, active_hypotheses=256)
+                        angle_resolution=0.5, **own)
     ad = Adapter(MODEL, cfg, rng=np.random.default_rng(0), table=SOFT if soft else TABLE)
     touch = make_touch([3.0, -2.0] if family == "translation" else [1.0, 3.0, -2.0], family)
     x0, y0, x1, y1 = KB.area
@@ -187,9 +190,9 @@ class _SoftWrapper:
 
 
 def test_the_plain_posterior_softens_learned_models_and_the_robust_one_learns_the_blur():
-    from kbcli.core.adapt_setup import total_blur
-    from kbcli.core.adapter_config import LEARNED_BLUR
-    from kbcli.core.robust import DEFAULT_BLURS
+    from kbcli.core.adaptation.config import LEARNED_BLUR
+    from kbcli.core.adaptation.posteriors.likelihood.robust import DEFAULT_BLURS
+    from kbcli.core.adaptation.setup import total_blur
 
     soft = _SoftWrapper(MODEL)
     plain = AdapterConfig(prior_halfwidth=10.0, raster_step=1.0, robust=False)
@@ -199,7 +202,7 @@ def test_the_plain_posterior_softens_learned_models_and_the_robust_one_learns_th
     # aim-only feedback's blur, and model_blur, when given, fixes the blur it weighs
     robust = AdapterConfig(prior_halfwidth=10.0, raster_step=1.0, blur=1.5)
     assert total_blur(soft, robust) == 1.5
-    assert robust.robust_blurs is None  # resolved with the model (robust_blurs())
+    assert robust.posterior.robust_blurs is None  # resolved with the model (robust_blurs())
     assert list(robust.nuisance().blurs) == sorted(DEFAULT_BLURS)
     assert list(AdapterConfig(robust_blurs=(2.0, 0.0)).nuisance().blurs) == [0.0, 2.0]
     assert list(AdapterConfig(model_blur=3.0).nuisance().blurs) == [3.0]
@@ -253,7 +256,7 @@ def test_active_keeps_the_most_confusing_then_simulates_the_best_hypothesis(monk
     (H(0.5) = 0.69) but, simulated under the best hypothesis h1, settles the posterior on h1
     (entropy ~0) where S2 leaves h1 and h4 (0.67 nats). W tells nothing. Active keeps the
     ``active_keep`` most confusing candidates, then picks the lowest simulated entropy."""
-    import kbcli.core.strategies as strategies
+    import kbcli.core.adaptation.strategies as strategies
 
     ad, hyp, w = _four_hypotheses()
     s1, s2, wasted = _find(hyp, "abbb"), _find(hyp, "aabb"), _find(hyp, "aaaa")
@@ -303,7 +306,7 @@ def test_information_gain_is_the_mutual_information_not_the_predictive_entropy()
     entropy is log 2 but nothing is learnt (I = 0): an infogain that ranked actions by predictive
     entropy would seek the coin flip.
     """
-    from kbcli.core.strategies import information_gain
+    from kbcli.core.adaptation.strategies import information_gain
 
     probs = np.array([[[0.0, 0.5, 0.5], [0.0, 1.0, 0.0]]], np.float32)  # (H=1, W=2, C=3)
     table = LikelihoodTable(np.zeros(2), 1.0, 3, 1e-9, probs=probs)

@@ -56,3 +56,23 @@ def test_mccabe_complexity_at_most_12():
            "--config", "lint.mccabe.max-complexity=12", "--output-format", "concise"]
     r = subprocess.run(cmd, capture_output=True, text=True)
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_no_switch_on_a_part_s_name():
+    """Code asks a registered part what it is or does (its traits, its options), never compares a
+    value with its name (``x == "kde"``, ``s in ("active", "paper-active")``): at most 3 such
+    comparisons in kbcli/ (issue 41; 35 before it, sim modes included)."""
+    found = structure.name_switches(structure.part_names())
+    assert len(found) <= 3, found
+
+
+def test_the_name_switch_scan_sees_a_switch(tmp_path, monkeypatch):
+    """The scanner itself: a made-up module that compares with a part's name, and one that reads an
+    option whose values only share a word with a part."""
+    pkg = tmp_path / "kbcli"
+    pkg.mkdir()
+    (pkg / "a.py").write_text('def f(cfg):\n    return cfg.posterior == "kde" or s in ("x", "active")\n')
+    (pkg / "b.py").write_text('def g(cfg, r):\n    return cfg.ml_ties == "random" or r.get("ml_ties") == "random"\n')
+    monkeypatch.setattr(structure, "ROOT", pkg)
+    found = structure.name_switches({"kde", "active", "random"})
+    assert [(m, line) for m, line, _ in found] == [("kbcli.a", 2), ("kbcli.a", 2)]

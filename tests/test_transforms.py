@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from kbcli.core import transforms
+from kbcli.core.instrument import transforms
 from kbcli.errors import ConfigError
 
 CENTRE = np.array([400.0, 350.0])

@@ -8,15 +8,16 @@ import math
 import numpy as np
 import pytest
 
-from kbcli.core.action_sampler import RasterSampler, SilentBeyond, beyond_margin
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.grid import HypothesisGrid
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.model import ExactModel
-from kbcli.core.posterior import Posterior
-from kbcli.core.sounds import SILENCE
-from kbcli.core.table import LikelihoodTable
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.grid import HypothesisGrid
+from kbcli.core.adaptation.posteriors.kde.samples import SilentBeyond, beyond_margin
+from kbcli.core.adaptation.posteriors.posterior import Posterior
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model.base import ExactModel
+from kbcli.core.model.sampling import RasterSampler
+from kbcli.core.model.sounds import SILENCE
+from kbcli.core.model.table import LikelihoodTable
 from kbcli.stages.report import runs
 
 

@@ -17,7 +17,7 @@ from matplotlib.colors import to_rgb
 from matplotlib.path import Path as MplPath
 
 from kbcli.cli import app
-from kbcli.core.keyboard import KeyboardConfig
+from kbcli.core.instrument.keyboard import KeyboardConfig
 from kbcli.io.artifact import read_artifact
 from kbcli.stages import adapt as adapt_stage
 from kbcli.stages import keyboard as keyboard_stage
@@ -258,8 +258,8 @@ def test_the_reports_posterior_figure_says_when_the_angle_is_marginalised(monkey
 
 def test_model_boundaries_are_drawn_only_where_they_separate_keys():
     """Issue 40: a fitted line was drawn across the whole pad, outside the keyboard too."""
-    from kbcli.core.keyboard import Keyboard
-    from kbcli.core.model import grid_points
+    from kbcli.core.instrument.keyboard import Keyboard
+    from kbcli.core.model.base import grid_points
 
     kb = Keyboard(KeyboardConfig())
     _, pts = grid_points(kb.area, viz_model.MAP_STEP)

@@ -10,7 +10,7 @@ Euclidean norm of the translation in (0, 10], (10, 20] or (20, 40] px. Per strat
 reports the median observations until the error is below 4, 2, 1, 0.5 px (first step below; runs
 that never get there within T count as T + 1, and how many never do), the RMSE at steps 1, 2, 3, 5,
 10, 20, 40, the p-value of the Wilcoxon signed-rank test of those counts against ``random`` on the
-paired runs (:func:`kbcli.core.stats.signed_rank_pvalues`; the smallest p-value ``n`` pairs can
+paired runs (:func:`kbcli.core.adaptation.stats.signed_rank_pvalues`; the smallest p-value ``n`` pairs can
 give is ``2 / 2^n``) and the median milliseconds per step (decision plus update).
 
 For the rigid family a threshold of ``t`` px also asks the angle to be within ``t / 2`` degrees
@@ -54,17 +54,16 @@ from typing import Annotated, ClassVar
 import numpy as np
 from pydantic import AfterValidator, Field, Strict
 
-from kbcli.core import stats
-from kbcli.core.adapt_setup import build_samples, build_table
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
+from kbcli.core.adaptation import stats
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.setup import build_samples, build_table
 from kbcli.core.config import Config, Count, Name, NonNegative, NonNegativeInt, each, member_of
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import LAYOUTS, example_config_fields
-from kbcli.core.model import ExactModel
-from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.layouts import LAYOUTS, example_config_fields
+from kbcli.core.instrument.transforms import FAMILIES
+from kbcli.core.model.base import ExactModel
 from kbcli.core.registry import Registry
-from kbcli.core.transforms import FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.stages.adapt import AdaptConfig, experiment
 from kbcli.stages.perturb import CATEGORIES, draw
@@ -95,6 +94,8 @@ class Section:
         Needs a learned model (``--model``); the table shows its boundary error.
     angle : bool
         The table shows the final angle RMSE.
+    timed : bool
+        ``kbcli bench adapt`` first times one step of the section's posterior (the KDE's).
     """
 
     variants: Callable[..., list[tuple[str, AdaptConfig, object]]]
@@ -103,6 +104,7 @@ class Section:
     learned: bool = False
     angle: bool = False
     default: bool = True
+    timed: bool = False
 
 
 #: The benchmark's sections (``--section``), in print order.
@@ -131,17 +133,22 @@ def _rigid(cfg, base, exact, learned):
 
 def _kde(cfg, base, exact, learned):
     rows = []
-    for s in ("random", "infogain"):
+    for s in KDE_PAIRED:
         if s in cfg.strategies:
             rows.append((f"{s}/kde", base.with_robot(strategy=s, posterior="kde"), exact))
             rows.append((f"{s}/likelihood", base.with_robot(strategy=s), exact))
     return rows
 
 
+#: The strategies the ``kde`` section runs with both posteriors, and the one the ``learned``
+#: section also runs on the unsoftened map (the sections' own definitions).
+KDE_PAIRED, UNSOFTENED = ("random", "infogain"), "infogain"
+
+
 def _learned(cfg, base, exact, learned):
     soft = base.with_robot(model_blur=cfg.model_blur)
     rows = [(s, soft.with_robot(strategy=s), learned) for s in cfg.strategies]
-    if "infogain" in cfg.strategies:
+    if UNSOFTENED in cfg.strategies:
         rows.append(("infogain/unsoftened", base.with_robot(model_blur=0.0), learned))
     return rows
 
@@ -162,7 +169,7 @@ SECTIONS.register("rigid", Section(_rigid, family="rigid", angle=True,
                                    title="exact model, " + _RIGID_NOTE),
                   summary="the rigid family (angles up to 5 degrees)")
 SECTIONS.register("kde", Section(
-    _kde, title="the paper's KDE posterior (Eq. 7) against the likelihood posterior"),
+    _kde, timed=True, title="the paper's KDE posterior (Eq. 7) against the likelihood posterior"),
     summary="the paper's KDE posterior against the likelihood one")
 SECTIONS.register("learned", Section(_learned, learned=True, title="learned model{model}"),
                   summary="a learned model (--model)")
@@ -255,7 +262,7 @@ def plan(cfg: BenchConfig, learned_model=None, keyboard: Keyboard | None = None)
         if section.learned and learned_model is None:
             raise ConfigError(f"section {name} needs a learned model: pass --model model.h5")
         for label, acfg, model in section.variants(cfg, base, exact, learned_model):
-            cells.extend(Cell(name, label, acfg.strategy, cat, acfg, model,
+            cells.extend(Cell(name, label, acfg.robot.strategy.name, cat, acfg, model,
                               _truths(cfg, section.family, cat), seeds, keyboard=kb)
                          for cat in cfg.categories)
     return cells
@@ -275,8 +282,9 @@ def run_cells(cells: list[Cell]) -> Iterator[tuple[Cell, int]]:
                acfg.model_blur, acfg.outlier)
         if key not in tables:
             tables[key] = build_table(cell.model, acfg)
-        skey = key + (acfg.kde_samples, acfg.kde_bandwidth)
-        if POSTERIORS.get(acfg.posterior).uses_samples and skey not in samples:  # once per class
+        shared = acfg.kind.sample_key(acfg)
+        skey = None if shared is None else key + shared
+        if skey is not None and skey not in samples:  # once per class
             samples[skey] = build_samples(cell.model, acfg, [0])
         for i, truth in enumerate(cell.truths):
             # a fresh copy: spawning from a shared SeedSequence would advance it for later cells

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
 from kbcli.sim import MODES, SimConfig, contact_points, make_reacher
 from kbcli.sim.arms import PRESETS
 

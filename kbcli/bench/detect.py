@@ -4,7 +4,7 @@ Streams of MATCH (0) / NO_MATCH (1) results are simulated as Bernoulli sequences
 failure rate ``p_pre`` (the learned model's failure rate, default 0.01), then, from a random step,
 a post-change rate. The post-change rate of each stream is that of the melody player
 (Algorithm 1) after a random displacement of the displacement category, computed with the true
-geometry (:func:`kbcli.core.play.expected_failure_rate`), or given explicitly.
+geometry (:func:`kbcli.core.playing.play.expected_failure_rate`), or given explicitly.
 
 Every detector is first *tuned* on separate change-free streams: its threshold (ours) or its
 sensitivity parameter (river's: DDM ``drift_threshold``, FHDDM ``confidence_level``, ADWIN
@@ -36,12 +36,12 @@ from typing import Annotated, ClassVar
 import numpy as np
 from pydantic import AfterValidator, Field, model_validator
 
-from kbcli.core import detect as det
 from kbcli.core.config import Config, Count, Name, Positive, Rate, Whole, each, member_of
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.melody import DEFAULT_MELODY, parse_melody
-from kbcli.core.model import ExactModel
-from kbcli.core.play import expected_failure_rate
+from kbcli.core.detection import detectors as det
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.melody import DEFAULT_MELODY, parse_melody
+from kbcli.core.model.base import ExactModel
+from kbcli.core.playing.play import expected_failure_rate
 from kbcli.errors import KbcliError
 from kbcli.stages.perturb import CATEGORIES, draw
 

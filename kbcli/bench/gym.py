@@ -28,10 +28,10 @@ import numpy as np
 from pydantic import AfterValidator, Field, Strict
 
 from kbcli.bench import adapt as adapt_bench
-from kbcli.core.adapt import adapt
-from kbcli.core.adapter import Adapter
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.loop import adapt
 from kbcli.core.config import Config, Count, Name, NonNegativeInt, each, member_of
-from kbcli.core.transforms import FAMILIES
+from kbcli.core.instrument.transforms import FAMILIES
 from kbcli.envs import ENVS, Agent, StrategyAgent
 from kbcli.sim import World, make_reacher
 from kbcli.stages.perturb import CATEGORIES, draw
@@ -140,7 +140,7 @@ def step_cost(env: gymnasium.Env, *, strategy: str = "infogain", episodes: int =
     """Milliseconds of one environment step against one ask/tell step, same strategy and model.
 
     Episode ``i`` runs twice from the same seed and displacement, one after the other (so a busy
-    machine slows both alike): through kbcli's ask/tell loop (:func:`kbcli.core.adapt.adapt`:
+    machine slows both alike): through kbcli's ask/tell loop (:func:`kbcli.core.adaptation.loop.adapt`:
     ``suggest()``, the touch, ``observe()``, the estimates, entropy and stopping rule read after
     it), and through the environment (``StrategyAgent(strategy)``, then ``env.step``). Each step
     is timed whole, in wall and in this process's CPU time.

@@ -34,9 +34,9 @@ from kbcli import __version__
 from kbcli.bench import adapt as adapt_bench
 from kbcli.bench import learn as learn_bench
 from kbcli.core.config import Config, Count, Name, Names, NonNegativeInt, Whole, each
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import LAYOUTS
-from kbcli.core.model_classes import check_learned
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.layouts import LAYOUTS
+from kbcli.core.model.classes import check_learned
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.atomic import atomic_path
@@ -172,8 +172,8 @@ class Pipeline:
         for name in self.cfg.layouts:
             toml = Path(self.cfg.keyboards) / f"{name}.toml"
             kcfg = KeyboardConfig.from_dict(load_toml(toml, "keyboard"))
-            if kcfg.layout != name:
-                raise ConfigError(f"{toml}: a {kcfg.layout} keyboard, expected {name}")
+            if kcfg.layout.name != name:
+                raise ConfigError(f"{toml}: a {kcfg.layout.name} keyboard, expected {name}")
             path = self.out / "keyboards" / f"{name}.h5"
             write_artifact(keyboard_stage.run(kcfg), path)
             self.results[name] = LayoutResult(name, Keyboard(kcfg))
@@ -200,7 +200,7 @@ class Pipeline:
         if self.cfg.adapt_class != "best":
             return self.cfg.adapt_class
         budget = self.cfg.adapt_budget
-        rows = [r for r in res.learn_rows if r["strategy"] == "active"] or res.learn_rows
+        rows = [r for r in res.learn_rows if r["strategy"] == learn_bench.COMPARED] or res.learn_rows
         acc = {r["model_class"]: float(np.median([
             learn_bench.nearest_checkpoint(run, budget) for run in res.learn_runs
             if (run.model_class, run.strategy) == (r["model_class"], r["strategy"])]))
@@ -317,7 +317,7 @@ def _pooled_median(rows: list[dict], cells: list, label: str, section: str,
                    threshold: float, ) -> tuple[float, int]:
     """Median touches to ``threshold`` px over every category's runs of one strategy (runs that
     never get there count as T + 1), and how many never did."""
-    from kbcli.core import stats
+    from kbcli.core.adaptation import stats
 
     counts = []
     T = 0
@@ -333,10 +333,14 @@ def _pooled_median(rows: list[dict], cells: list, label: str, section: str,
     return float(np.median(allc)), int(np.isinf(allc).sum())
 
 
+#: The layout and model class of the target "lines: accuracy >= 99 % at 800 reaches".
+LINES_TARGET = ("grid", "lines")
+
+
 def targets(cfg: LayoutsConfig, res: LayoutResult) -> list[dict]:
     """Each of the issue's targets for one layout: what was asked, what was measured, met or not."""
     out = []
-    active = [r for r in res.learn_rows if r["strategy"] == "active"]
+    active = [r for r in res.learn_rows if r["strategy"] == learn_bench.COMPARED]
     if active:
         b800 = 800 if 800 in cfg.budgets else None
         b1600 = 1600 if 1600 in cfg.budgets else None
@@ -363,8 +367,9 @@ def targets(cfg: LayoutsConfig, res: LayoutResult) -> list[dict]:
                          f"active {a:g}, random > {cfg.learn_config().max_budget} (never)")
                 out.append({"target": f"active needs at most half of random's reaches to 97 % "
                                       f"({q['model_class']})", "measured": shown, "met": met})
-        if res.layout == "grid" and b800:
-            lines = [r for r in active if r["model_class"] == "lines"]
+        layout, model_class = LINES_TARGET
+        if res.layout == layout and b800:
+            lines = [r for r in active if r["model_class"] == model_class]
             if lines:
                 v = lines[0]["accuracy"][b800]
                 out.append({"target": "lines: accuracy >= 99 % at 800 reaches",

@@ -1,11 +1,11 @@
 """Benchmark of learning the instrument model: sample efficiency and speed, per layout and class.
 
 For each layout (its default keyboard, :func:`bench_keyboard`; or a given keyboard), model class
-(:mod:`kbcli.core.model_classes`) and exploration strategy, the model is learned from ``seeds``
+(:mod:`kbcli.core.model.classes`) and exploration strategy, the model is learned from ``seeds``
 seeds (``SeedSequence(seed).spawn(seeds)``; run ``i`` uses the same seed for every layout, class and
 strategy) up to the largest budget. Every ``resolution`` reaches and at each budget the model is
 scored on a grid of ``eval_step`` px (1 px: the grid of ``kbcli learn``'s final accuracy) over the
-working area (accuracy, :mod:`kbcli.core.accuracy`). Reported per row: the median accuracy at each
+working area (accuracy, :mod:`kbcli.core.model.accuracy`). Reported per row: the median accuracy at each
 budget, the median reaches until the accuracy first reaches 97 % and 99 % (runs that never do count
 as more than the largest budget), the median boundary error (px, on a 1 px grid) at
 ``boundary_budget`` reaches and the median time of one fit on all the samples of the largest budget.
@@ -29,12 +29,12 @@ import numpy as np
 from pydantic import AfterValidator, Field, model_validator
 
 from kbcli import __version__
-from kbcli.core import accuracy as scoring
 from kbcli.core.config import Config, Count, Name, NonNegativeInt, Positive, each, member_of
-from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.layouts import LAYOUTS, example_config_fields
-from kbcli.core.model_classes import check_learned, fit_model
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.layouts import LAYOUTS, example_config_fields
+from kbcli.core.model import accuracy as scoring
+from kbcli.core.model.classes import check_learned, fit_model
+from kbcli.core.model.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.io.atomic import atomic_path
 from kbcli.sim import MODES, SimConfig, World, check_keyboard_reachable, make_reacher
 from kbcli.sim.config import ReachNoise
@@ -43,6 +43,8 @@ from kbcli.stages import learn as learn_stage
 
 DEFAULT_BUDGETS = (200, 400, 800, 1600)
 STRATEGY_ORDER = ("active", "random")
+#: The strategy the benchmark measures against the baseline (the exploration registered as one).
+COMPARED = "active"
 LEVELS = (0.97, 0.99)
 
 
@@ -219,8 +221,8 @@ def ratios(rows: list[dict], level: float = 0.97) -> list[dict]:
     out = []
     by = {(r["layout"], r["model_class"], r["strategy"]): r for r in rows}
     for (layout, model_class, strategy), r in by.items():
-        other = by.get((layout, model_class, "random"))
-        if strategy != "active" or other is None:
+        other = by.get((layout, model_class, STRATEGIES.having("baseline")[0]))
+        if strategy != COMPARED or other is None:
             continue
         a, b = r["to"][level], other["to"][level]
         out.append({"layout": layout, "model_class": model_class, "active": a, "random": b,

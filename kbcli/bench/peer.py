@@ -4,8 +4,8 @@ The peer is scikit-activeml's pool-based uncertainty sampling around plain sciki
 with fixed hyper-parameters (:data:`PEERS`). Both learn the same keyboard (each layout's default,
 :func:`kbcli.bench.learn.bench_keyboard`) from the same simulator (``ideal`` mode), with the same
 seeds (``SeedSequence(seed).spawn(seeds)``; run ``i`` of every learner uses seed ``i``), and are scored
-by the same functions (:func:`kbcli.core.accuracy.accuracy_from_maps` and
-:func:`~kbcli.core.accuracy.boundary_error`, on a grid of ``eval_step`` px over the working area) at
+by the same functions (:func:`kbcli.core.model.accuracy.accuracy_from_maps` and
+:func:`~kbcli.core.model.accuracy.boundary_error`, on a grid of ``eval_step`` px over the working area) at
 the same budgets of reaches.
 
 What each side knows: kbcli discovers its sound classes from what it hears; the peer is handed each
@@ -26,14 +26,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from kbcli.bench.learn import bench_keyboard
-from kbcli.core import accuracy as scoring
 from kbcli.core.config import Config, Count, Names, Positive, Whole
-from kbcli.core.explore import Exploration, ExploreConfig
-from kbcli.core.keyboard import Keyboard, match
-from kbcli.core.model import grid_points
-from kbcli.core.model_classes import AUTO, fit_model
+from kbcli.core.instrument.keyboard import Keyboard, match
+from kbcli.core.model import accuracy as scoring
+from kbcli.core.model.base import grid_points
+from kbcli.core.model.classes import AUTO, fit_model
+from kbcli.core.model.explore import Exploration, ExploreConfig
+from kbcli.core.model.select import choose
 from kbcli.core.registry import Registry
-from kbcli.core.select import choose
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig, World, make_reacher
 
@@ -160,9 +160,9 @@ def kbcli_run(cfg: PeerConfig, kb: Keyboard, seed: np.random.SeedSequence
               ) -> dict[int, tuple[float, float]]:
     """kbcli's default learner (``kbcli learn``: active exploration, ``--model-class auto``),
     scored at each budget: the exploration refits the class ``auto`` explores with (re-chosen
-    every :data:`kbcli.core.select.RESELECT` reaches), and at each
+    every :data:`kbcli.core.model.select.RESELECT` reaches), and at each
     budget the class is chosen by cross-validation on the samples so far
-    (:func:`kbcli.core.select.choose`, folds from a generator spawned off ``seed``) and fitted
+    (:func:`kbcli.core.model.select.choose`, folds from a generator spawned off ``seed``) and fitted
     to them (without the learn stage's calibration, which leaves the most probable sound alone
     but for the ``lines`` class's label-noise tolerance)."""
     rng = np.random.default_rng(seed)

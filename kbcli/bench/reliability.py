@@ -8,9 +8,9 @@ simulator on a 2 px grid over the working area:
   p(sound | felt action) against the simulator's own p(key | felt action), drawn by Monte Carlo
   (16 touches per grid point: the arm's proprioceptive noise and bias, its finger's contact disc;
   :func:`kbcli.sim.keys_heard_when_felt`);
-- the model's accuracy and boundary error (:mod:`kbcli.core.accuracy`);
+- the model's accuracy and boundary error (:mod:`kbcli.core.model.accuracy`);
 
-beside what the model estimated of itself from its samples alone (:mod:`kbcli.core.reliability`:
+beside what the model estimated of itself from its samples alone (:mod:`kbcli.core.model.reliability`:
 cross-validated calibration error and boundary error, and the mislabel rate its calibrated p expects
 on the pad). Pure: returns rows.
 
@@ -28,10 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kbcli.core import accuracy as scoring
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.model import grid_points
-from kbcli.core.reliability import expected_calibration_error
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.model import accuracy as scoring
+from kbcli.core.model.base import grid_points
+from kbcli.core.model.reliability import expected_calibration_error
 from kbcli.sim import SimConfig, keys_heard_when_felt
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import learn as learn_stage

@@ -5,11 +5,11 @@ them (seeds 1-3, the ideal arm in ideal mode and the realistic arm in dynamics m
 default), each adapted to the same ``moves`` displacements (magnitudes evenly spread over 5-30 px,
 directions by the golden angle: :func:`moves`) with ``touches`` infogain touches, by three methods
 on the same seeds: ``plain`` (infogain, the robust posterior: kbcli's default), ``repair`` (the
-repaired belief, ``repair = true``: :mod:`kbcli.core.repair`) and ``exact`` (infogain with the
+repaired belief, ``repair = true``: :mod:`kbcli.core.adaptation.repair`) and ``exact`` (infogain with the
 keyboard's own geometry, the reference). Per method: the median final error, the share of runs
 under 1 px, the median touches to *stay* under 1 px (the first touch after which every error is
 below 1 px; ``touches + 1`` when never), the runs made worse than ``plain`` by more than 0.5 px,
-the share of runs whose 90 % credible disc (:mod:`kbcli.core.credible`) holds the truth, and the
+the share of runs whose 90 % credible disc (:mod:`kbcli.core.adaptation.credible`) holds the truth, and the
 median wall-clock time of a touch (decision plus update); per model, the median final error.
 
 **Lifelong.** One weak model, the keyboard moved ``episodes`` times in a row (to the poses
@@ -30,9 +30,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kbcli.core import credible
-from kbcli.core.keyboard import KeyboardConfig
-from kbcli.core.model import ExactModel
+from kbcli.core.adaptation import credible
+from kbcli.core.instrument.keyboard import KeyboardConfig
+from kbcli.core.model.base import ExactModel
 from kbcli.sim import SimConfig
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages import learn as learn_stage

@@ -86,9 +86,9 @@ def step_time(model, keyboard, *, runs: int = 10, steps: int = 30, seed: int = 0
     estimate; no decision, no reaching), median and 90th percentile over ``runs`` x ``steps``
     touches of the ideal arm at random actions, for the robust and the plain posterior. Run it with
     one thread (``OMP_NUM_THREADS=1``) for a one-core figure."""
-    from kbcli.core.adapt_setup import build_table
-    from kbcli.core.adapter import Adapter
-    from kbcli.core.adapter_config import AdapterConfig
+    from kbcli.core.adaptation.adapter import Adapter
+    from kbcli.core.adaptation.config import AdapterConfig
+    from kbcli.core.adaptation.setup import build_table
     from kbcli.sim import SimConfig, World, make_reacher
 
     out = {}

@@ -27,9 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from kbcli.core.adapt_setup import build_table
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.setup import build_table
 from kbcli.sim import SimConfig, World, make_reacher
 from kbcli.stages.adapt import AdaptConfig, experiment
 from kbcli.stages.evaluate.methods import METHOD_KEYS, PAPER_METHOD

@@ -29,8 +29,9 @@ from kbcli.cli.app import (
 )
 from kbcli.cli.record import load_average, show_table
 from kbcli.cli.repair import check_model_out, write_repaired
-from kbcli.core.applies import refuse_unused
-from kbcli.core.transforms import FAMILIES
+from kbcli.core.adaptation.config import refuse_inactive
+from kbcli.core.config import refused_option
+from kbcli.core.instrument.transforms import DEFAULT_FAMILY, FAMILIES
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm, load_stage_table, with_file
@@ -130,18 +131,18 @@ def adapt_cmd(
     scene_art = read_artifact(scene, "scene")
     cfg, scene_family, table_snaps = _adapt_config(config, flags, arm,
                                                    scene_art.config.get("family", "translation"))
-    check_model_out(model_out, cfg.repair)
+    check_model_out(model_out, cfg.robot.repairs)
     steps = _snapshots(snapshots, table_snaps, cfg.max_steps)
     stage.check_inputs(model_art, scene_art)
     note_arm(cfg.arm, cfg.mode)
-    what = f"adapting ({cfg.strategy}, {cfg.posterior} posterior), observations"
+    what = f"adapting ({cfg.robot.strategy.name}, {cfg.robot.posterior.name} posterior), observations"
     timings: dict[str, float] = {}
     keep: dict = {}
     with ticker(cfg.max_steps, what) as tick:
         art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
                         snapshot_steps=steps, on_step=tick, timings=timings, keep=keep)
     write_artifact(art, output)
-    if scene_family and cfg.family != "translation":  # (said once the inputs passed every check)
+    if scene_family and cfg.family != DEFAULT_FAMILY:  # (said once the inputs passed every check)
         note_default("family", cfg.family, "the scene's (--family to choose)")
     _report_run(art, cfg, output, timings.get("setup_ms"))
     if model_out is not None:
@@ -164,7 +165,8 @@ def _adapt_config(config: Path | None, flags: dict, arm: str | None,
     """The [adapt] table of ``config`` (if any) with the flags given on top, the arm, and
     ``family`` (the scene's) unless set, whether it was the scene's, and the table's
     ``snapshot_steps`` (None if absent); a robot option set (in either) that the method does not
-    read is refused (:func:`kbcli.core.applies.refuse_unused`)."""
+    read is refused (the part refuses an option it does not take; one it takes but does not read
+    under the others: :func:`kbcli.core.adaptation.config.refuse_inactive`)."""
     table = load_stage_table(config, "adapt") if config is not None else {}
     snaps = table.pop("snapshot_steps", None)
     given = {k: v for k, v in flags.items() if v is not None}
@@ -173,8 +175,12 @@ def _adapt_config(config: Path | None, flags: dict, arm: str | None,
     scene_family = "family" not in {**table, **given}  # what the scene moved (rigid: an angle)
     if scene_family:
         given["family"] = family
-    cfg = with_file(stage.AdaptConfig, table, given, config)
-    refuse_unused(cfg.robot, opts.robot_given(flags, table, str(config)), "adapt")
+    labels = opts.robot_given(flags, table, str(config))
+    try:
+        cfg = with_file(stage.AdaptConfig, table, given, config)
+    except ConfigError as exc:
+        raise refused_option(exc, labels, "adapt") from None
+    refuse_inactive(cfg.robot, labels, "adapt")
     return cfg, scene_family, snaps
 
 
@@ -189,7 +195,7 @@ def _report_run(art, cfg, output: Path, setup_ms: float | None = None) -> None:
     angle = (f", angle error {a['final_angle_error_deg']:.2f} deg"
              if FAMILIES.get(cfg.family).rotates or FAMILIES.get(a["world_family"]).rotates
              else "")
-    out.print(f"wrote {output}: {cfg.strategy}/{cfg.posterior}, {a['steps']} steps; estimate "
+    out.print(f"wrote {output}: {cfg.robot.strategy.name}/{cfg.robot.posterior.name}, {a['steps']} steps; estimate "
               f"{est} (truth {truth}); final error {a['final_error_px']:.2f} px{angle}; "
               f"below 1 px {'from step ' + str(reach) if reach else 'never'}{stop_txt}; "
               + (f"set-up {setup_ms:.0f} ms, " if setup_ms is not None else "")
@@ -313,7 +319,7 @@ def bench_adapt_cmd(
         layout=layout or "grid")
     # tables are wide: never wrap them at a narrow default width when the output is not a terminal
     con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
-    if "kde" in sections:
+    if any(bench.SECTIONS.get(s).timed for s in sections):
         _kde_speed_table(bench, model, learned, kde_steps, seed, con)
     cells = bench.plan(cfg, learned, kb)
     total = sum(len(c.truths) for c in cells)

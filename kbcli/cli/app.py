@@ -266,7 +266,7 @@ def run_checkpointed(results: Iterable[tuple[int, dict]], todo: int, ckpt: Any, 
         :func:`kbcli.io.runner.execute`'s output.
     todo : int
         How many results to expect (the bar's length).
-    ckpt : kbcli.io.runner.Checkpoint
+    ckpt : kbcli.io.checkpoint.Checkpoint
     kept : int
         Results already in the checkpoint when this run resumed.
 

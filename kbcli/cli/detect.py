@@ -15,7 +15,7 @@ from rich.table import Table
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, out, progress
 from kbcli.cli.record import show_table
-from kbcli.core.detect import MAX_N_LT, MAX_N_ST, DetectorConfig
+from kbcli.core.detection.detectors import MAX_N_LT, MAX_N_ST, DetectorConfig
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import detect as stage
@@ -152,8 +152,8 @@ def _model_rate(model: Path | None, p_pre: float | None, rng) -> tuple:
     from ("" when given)."""
     if model is None:
         return None, None, 0.01 if p_pre is None else p_pre, ""
-    from kbcli.core.melody import DEFAULT_MELODY, parse_melody
-    from kbcli.core.play import expected_failure_rate
+    from kbcli.core.instrument.melody import DEFAULT_MELODY, parse_melody
+    from kbcli.core.playing.play import expected_failure_rate
     from kbcli.stages import keyboard as keyboard_stage
     from kbcli.stages.models import load_model
 

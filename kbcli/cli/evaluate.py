@@ -13,12 +13,13 @@ from rich.table import Table
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, out, progress, run_checkpointed
 from kbcli.cli.record import show_table
-from kbcli.core.transforms import FAMILIES
+from kbcli.core.instrument.transforms import FAMILIES
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.io.checkpoint import Checkpoint, source_digest
 from kbcli.io.config import arm_file, load_arm, load_toml
 from kbcli.io.paths import Output, checkout_file
-from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
+from kbcli.io.runner import Job, check_scheduler_address, execute
 from kbcli.stages import evaluate as stage
 from kbcli.stages.config import MAX_EXPERIMENTS
 
@@ -201,7 +202,7 @@ def bench_evaluate_cmd(
     if model is not None:
         model_art = read_artifact(model, "model")
     else:
-        from kbcli.core.keyboard import KeyboardConfig
+        from kbcli.core.instrument.keyboard import KeyboardConfig
         from kbcli.stages import keyboard as keyboard_stage
         from kbcli.stages.models import exact_artifact
 

@@ -10,7 +10,8 @@ import typer
 from rich.table import Table
 
 from kbcli.cli.app import command, out
-from kbcli.core.applies import applies, shown, view
+from kbcli.core.adaptation.config import SLOTS, option_names, shown
+from kbcli.core.options import flat_view
 from kbcli.errors import ArtifactError
 from kbcli.io.artifact import describe, provenance_chain
 
@@ -113,8 +114,8 @@ def _unread_resolved(config: dict, attrs: dict, hidden: list) -> dict:
     def drop(d: dict, robot: dict | None, strategies, prefix: str) -> dict:
         if robot is None:
             return d
-        cfg = view(robot)
-        out = {k: v for k, v in d.items() if k not in robot or applies(k, cfg, strategies)}
+        read, options = shown(robot, strategies), option_names()
+        out = {k: v for k, v in d.items() if k not in options or k in read}
         hidden.extend(f"{prefix}{k}" for k in d if k not in out)
         return out
 
@@ -131,13 +132,14 @@ def _unread_resolved(config: dict, attrs: dict, hidden: list) -> dict:
 
 def _flatten(d: dict, prefix: str = "", hidden: list | None = None):
     """``(dotted key, value)`` of a nested dict; a robot config (``...robot``) gives only the options
-    its method reads (:func:`kbcli.core.applies.shown`), the others' keys added to ``hidden``."""
+    its method reads (:func:`kbcli.core.adaptation.config.shown`), the others' keys added to
+    ``hidden``."""
     for k in sorted(d):
         v = d[k]
         if k == "robot" and isinstance(v, dict) and "posterior" in v:
             kept = shown(v)
             if hidden is not None:
-                hidden += [f"{prefix}{k}.{o}" for o in v if o not in kept]
+                hidden += [f"{prefix}{k}.{o}" for o in flat_view(v, SLOTS) if o not in kept]
             v = kept
         if isinstance(v, dict) and v:
             yield from _flatten(v, f"{prefix}{k}.", hidden)

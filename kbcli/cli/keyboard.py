@@ -9,8 +9,10 @@ import typer
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import busy, check_io, command, figure_output, out, plot_app
-from kbcli.core.keyboard import KeyboardConfig
-from kbcli.core.layouts import MAX_KEYS
+from kbcli.core.config import refused_option
+from kbcli.core.instrument.keyboard import KeyboardConfig
+from kbcli.core.instrument.layouts import MAX_KEYS
+from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml, with_file
 from kbcli.stages import keyboard as stage
@@ -68,7 +70,7 @@ def keyboard_cmd(
     sound alike (Eq. 2) and keys out of the (default) arm's reach. Writes OUTPUT (kind 'keyboard')
     and prints a one-line summary.
     """
-    from kbcli.core.keyboard import Keyboard
+    from kbcli.core.instrument.keyboard import Keyboard
     from kbcli.sim import SimConfig, check_keyboard_reachable
 
     check_io({"--config": config}, ("--output", output))
@@ -83,12 +85,16 @@ def keyboard_cmd(
         ox, oy = table.get("origin") or with_file(
             KeyboardConfig, {k: v for k, v in table.items() if k != "origin"}, flags, config).origin
         flags["origin"] = (ox if origin_x is None else origin_x, oy if origin_y is None else origin_y)
-    cfg = with_file(KeyboardConfig, table, flags, config)
+    labels = {k: "--" + k.replace("_", "-") for k, v in flags.items() if v is not None}
+    try:
+        cfg = with_file(KeyboardConfig, table, flags, config)
+    except ConfigError as exc:  # a layout refusing a flag's option: name the flag
+        raise refused_option(exc, labels, "keyboard", "this layout") from None
     check_keyboard_reachable(SimConfig(), Keyboard(cfg))
     art = stage.run(cfg)
     write_artifact(art, output)
     kb = stage.load(art)
-    out.print(f"wrote {output}: {cfg.layout} layout, {kb.describe()}, working area "
+    out.print(f"wrote {output}: {cfg.layout.name} layout, {kb.describe()}, working area "
               f"{tuple(round(v) for v in kb.area)}")
 
 

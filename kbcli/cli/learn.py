@@ -131,7 +131,7 @@ def _report_learned(a: dict, output: Path, strategy: str, mode: str) -> None:
 def _note_selection(attrs: dict) -> None:
     """Under ``--model-class auto``: the class chosen and every candidate's score, on stderr."""
     if "model_selection" in attrs:
-        from kbcli.core.select import Selection
+        from kbcli.core.model.select import Selection
 
         err.print(Selection(**attrs["model_selection"]).summary())
 

@@ -19,15 +19,16 @@ from typing import Annotated, Any
 
 import typer
 
-from kbcli.core.adapter_config import MAX_CANDIDATES, MAX_KDE_SAMPLES, AdapterConfig
-from kbcli.core.detect import DETECTORS
-from kbcli.core.estimators import ESTIMATORS
-from kbcli.core.explore import STRATEGIES as EXPLORATIONS
-from kbcli.core.layouts import LAYOUTS
-from kbcli.core.model_classes import MODEL_CLASSES, learned_classes
-from kbcli.core.posteriors import POSTERIORS
-from kbcli.core.strategies import STRATEGIES
-from kbcli.core.transforms import FAMILIES
+from kbcli.core.adaptation.config import option_default, option_names
+from kbcli.core.adaptation.estimators import ESTIMATORS
+from kbcli.core.adaptation.fields import MAX_CANDIDATES, MAX_KDE_SAMPLES
+from kbcli.core.adaptation.posteriors import POSTERIORS
+from kbcli.core.adaptation.strategies import STRATEGIES
+from kbcli.core.detection.detectors import DETECTORS
+from kbcli.core.instrument.layouts import LAYOUTS
+from kbcli.core.instrument.transforms import FAMILIES
+from kbcli.core.model.classes import MODEL_CLASSES, learned_classes
+from kbcli.core.model.explore import STRATEGIES as EXPLORATIONS
 from kbcli.sim import MODES
 from kbcli.sim.arms import PRESETS
 
@@ -207,18 +208,14 @@ def mode_option(default: str | None = None, help: str = "Reaching", note: str = 
         show_default=_shown(default))]
 
 
-ARM_HELP = ("Arm preset: ideal (lands on target, feels exactly), servo (finite servo gains and "
-            "joint friction) or realistic (servo plus a finger of finite radius and noisy, biased "
-            "proprioception); or a TOML file with an [arm] table (preset = NAME plus fields)")
-
-
 def arm_option(default: str | None = None, optional: bool = False, files: bool = True) -> Any:
     """``--arm``: an arm preset (or, with ``files``, a TOML file with an ``[arm]`` table)."""
     names = names_of("arm")
-    if files and set(names) == {"ideal", "servo", "realistic"}:
-        text = ARM_HELP  # (the presets described)
-    elif files:
-        text = f"Arm preset: {one_of('arm')}; or a TOML file with an [arm] table (preset = NAME plus fields)"
+    if files:
+        described = ", ".join(f"{n} ({s})" if (s := _REGISTRIES["arm"].summary(n)) else n
+                              for n in names)
+        text = (f"Arm preset: {described}; or a TOML file with an [arm] table (preset = NAME plus "
+                "fields)")
     else:
         text = f"Arm preset ({', '.join(names)})"
     return Annotated[str | None if optional else str, _opt("--arm", help=text + ".",
@@ -269,7 +266,7 @@ PriorHalfwidth = Annotated[float | None, _opt(
 # -- the paper's method's parts (issue 26); each refused where the method does not read it --------
 def _robot_default(name: str) -> str:
     """The adapter's default of option ``name``, for a help text."""
-    return str(AdapterConfig.model_fields[name].default)
+    return str(option_default(name))
 
 
 def _robot_option(name: str, kind: Any, help: str, default: str | None = None) -> Any:
@@ -289,8 +286,8 @@ def robot_given(flags: Mapping[str, Any], table: Mapping[str, Any] | None = None
                 source: str = "") -> dict[str, str]:
     """The robot options a user set, each with how the message names it: the flags given (not
     None) as ``--flag``, the keys of a TOML ``[adapt]`` table (and of its ``robot`` table) as
-    ``key`` (of ``source``) (:func:`kbcli.core.applies.refuse_unused`)."""
-    robot = set(AdapterConfig.model_fields)
+    ``key`` (of ``source``) (:func:`kbcli.core.adaptation.config.refuse_inactive`)."""
+    robot = set(option_names())
     table = dict(table or {})
     inner = table.pop("robot", None)
     keys = [*table, *(inner if isinstance(inner, Mapping) else ())]

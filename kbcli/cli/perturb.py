@@ -10,7 +10,7 @@ import typer
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import check_io, command, err, out
-from kbcli.core.transforms import FAMILIES, wrap_degrees
+from kbcli.core.instrument.transforms import FAMILIES, wrap_degrees
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import perturb as stage

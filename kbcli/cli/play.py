@@ -21,8 +21,8 @@ from kbcli.cli.app import (
     plot_app,
     progress,
 )
-from kbcli.core.audio import SAMPLE_RATE, to_pcm16
-from kbcli.core.melody import DEFAULT_MELODY, MAX_BEATS, MAX_NOTES, parse_melody
+from kbcli.core.instrument.audio import SAMPLE_RATE, to_pcm16
+from kbcli.core.instrument.melody import DEFAULT_MELODY, MAX_BEATS, MAX_NOTES, parse_melody
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm

@@ -13,9 +13,10 @@ from kbcli.cli.app import check_io, command, err, out, progress, run_checkpointe
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io import signals
 from kbcli.io.artifact import read_artifact, write_artifact
+from kbcli.io.checkpoint import Checkpoint, source_digest
 from kbcli.io.config import load_config, load_toml
 from kbcli.io.paths import Output, checkout_file
-from kbcli.io.runner import Checkpoint, Job, check_scheduler_address, execute, source_digest
+from kbcli.io.runner import Job, check_scheduler_address, execute
 from kbcli.stages import quality as stage
 from kbcli.stages.config import MAX_BUDGET, MAX_EXPERIMENTS
 from kbcli.stages.quality.config import MAX_BUDGETS

@@ -22,10 +22,13 @@ from kbcli.cli.app import (
     progress,
 )
 from kbcli.cli.repair import check_model_out, write_repaired
-from kbcli.core.applies import refuse_unused
-from kbcli.core.detect import MAX_N_LT, MAX_N_ST, DetectorConfig
-from kbcli.core.loop import PLAY
-from kbcli.core.melody import DEFAULT_MELODY
+from kbcli.core.adaptation.config import refuse_inactive
+from kbcli.core.config import refused_option
+from kbcli.core.detection.detectors import MAX_N_LT, MAX_N_ST, DetectorConfig
+from kbcli.core.instrument.melody import DEFAULT_MELODY
+from kbcli.core.instrument.transforms import DEFAULT_FAMILY
+from kbcli.core.playing.loop import PLAY
+from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm
 from kbcli.stages import keyboard as keyboard_stage
@@ -93,10 +96,13 @@ def run_cmd(
     if scene_family:
         family = scene_art.config.get("family", "translation")
     given = {"estimator": estimator, "repair": repair, **(paper_flags or {})}
-    adapt = AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
-                             reach_noise=reach_noise, arm=load_arm(arm), stop=True,
-                             **{k: v for k, v in given.items() if v is not None})
-    refuse_unused(adapt.robot, opts.robot_given(given), "run")
+    try:
+        adapt = AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
+                                 reach_noise=reach_noise, arm=load_arm(arm), stop=True,
+                                 **{k: v for k, v in given.items() if v is not None})
+    except ConfigError as exc:
+        raise refused_option(exc, opts.robot_given(given), "run") from None
+    refuse_inactive(adapt.robot, opts.robot_given(given), "run")
     cfg = stage.LoopConfig(
         melody=melody, steps=steps, perturb_at=perturb_at, max_adapt_steps=max_adapt_steps,
         detector=DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold),
@@ -116,7 +122,7 @@ def run_cmd(
         pass
     art = session.artifact()
     write_artifact(art, output)
-    if scene_family and family != "translation":  # (said once the inputs passed every check)
+    if scene_family and family != DEFAULT_FAMILY:  # (said once the inputs passed every check)
         note_default("family", family, "the scene's (--family to choose)")
     _report_loop(art.attrs, output)
     if model_out is not None:

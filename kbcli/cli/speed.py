@@ -51,7 +51,7 @@ def bench_speed_cmd(
     whole run over its touches (set-up included), with the ratio kde / likelihood.
     """
     from kbcli.bench import speed as bench
-    from kbcli.core.adapter_config import AdapterConfig
+    from kbcli.core.adaptation.config import AdapterConfig
     from kbcli.io.paths import default_model_path
     from kbcli.stages import keyboard as keyboard_stage
     from kbcli.stages.models import load_model

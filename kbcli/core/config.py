@@ -220,6 +220,9 @@ class Config(BaseModel):
             err = ConfigError(describe_error(exc, self.what, fields))
             # kept so that a config nesting this one names the key once: "loop.detector.n_st ..."
             err.validation = (exc, fields)
+            inner = (exc.errors(include_url=False)[0].get("ctx") or {}).get("error")
+            if hasattr(inner, "option"):  # a part refused an option: kept for the command
+                err.option, err.reason = inner.option, inner.reason
             raise err from None
 
     @classmethod
@@ -236,6 +239,18 @@ class Config(BaseModel):
     def replace(self, **changes: Any) -> Config:
         """A copy with ``changes`` applied and validated (``dataclasses.replace`` for configs)."""
         return type(self)(**{**self.to_dict(), **changes})
+
+
+def refused_option(exc: ConfigError, labels: Mapping[str, str], where: str,
+                   to: str = "this method") -> ConfigError:
+    """``exc`` naming the flag or file key (``labels``: option -> how the user gave it) of the
+    option a part refused (:func:`kbcli.core.options.refusal`); ``exc`` itself otherwise."""
+    option = getattr(exc, "option", None)
+    if option not in labels:
+        return exc
+    err = ConfigError(f"{where}: {labels[option]} does not apply to {to}: {exc.reason}")
+    err.option, err.reason = option, exc.reason
+    return err
 
 
 class Record:

@@ -26,47 +26,12 @@ kbcli.errors.ConfigError: unknown shape 'circle'; valid: square
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
 from typing import Any, Generic, TypeVar, overload
 
 from kbcli.errors import ConfigError
 
 T = TypeVar("T")
-
-
-@dataclass(frozen=True)
-class Uses:
-    """An option of the config a registered part reads (:meth:`Registry.uses`).
-
-    Attributes
-    ----------
-    option : str
-        The option's name (a field of the config that chooses the part).
-    when : callable, optional
-        ``when(cfg) -> bool``: the part reads the option only while this holds of the config (None:
-        always).
-    note : str
-        ``when`` in words, for messages (``"robust = true"``).
-    unmet : str
-        ``when`` failing, in words (``"robust = false"``; default: ``note`` "does not hold").
-    """
-
-    option: str
-    when: Callable[[Any], bool] | None = None
-    note: str = ""
-    unmet: str = ""
-
-    def holds(self, cfg: Any) -> bool:
-        """Whether the part reads the option under ``cfg``."""
-        return self.when is None or bool(self.when(cfg))
-
-    def describe(self) -> str:
-        return f" when {self.note}" if self.note else ""
-
-    def describe_unmet(self) -> str:
-        return self.unmet or f"{self.note} does not hold"
-
 
 
 class Registry(Generic[T]):
@@ -82,18 +47,19 @@ class Registry(Generic[T]):
         self.kind = kind
         self._entries: dict[str, T] = {}
         self._summaries: dict[str, str] = {}
-        self._uses: dict[str, tuple[Uses, ...]] = {}
+        self._traits: dict[str, dict[str, Any]] = {}
 
     @overload
     def register(self, name: str, obj: None = None, *, summary: str = "",
-                 replace: bool = False, uses: Iterable[str | Uses] = ()) -> Callable[[T], T]: ...
+                 replace: bool = False,
+                 traits: dict[str, Any] | None = None) -> Callable[[T], T]: ...
 
     @overload
     def register(self, name: str, obj: T, *, summary: str = "", replace: bool = False,
-                 uses: Iterable[str | Uses] = ()) -> T: ...
+                 traits: dict[str, Any] | None = None) -> T: ...
 
     def register(self, name: str, obj: T | None = None, *, summary: str = "",
-                 replace: bool = False, uses: Iterable[str | Uses] = ()) -> Any:
+                 replace: bool = False, traits: dict[str, Any] | None = None) -> Any:
         """Register ``obj`` as ``name``; without ``obj``, a decorator that registers what it wraps.
 
         Parameters
@@ -104,10 +70,11 @@ class Registry(Generic[T]):
         replace : bool
             Allow replacing an entry of the same name (otherwise a ``ValueError``: two parts
             claiming one name is a bug).
-        uses : iterable of str or Uses
-            The options of the config that only this part (and others that list them too) reads:
-            an option listed by some entry applies to a config only when its chosen entry lists it
-            (:mod:`kbcli.core.applies`). Options no entry lists apply to every choice.
+        traits : dict, optional
+            What the part declares of itself for the code that uses it: a capability
+            (``{"covers": True}``), its options model (``{"options": KdeOptions}``,
+            :mod:`kbcli.core.options`), report texts; read with :meth:`trait`, never inferred from
+            its name.
         """
         if not isinstance(name, str) or not name:
             raise ValueError(f"a {self.kind} needs a non-empty name, got {name!r}")
@@ -118,7 +85,7 @@ class Registry(Generic[T]):
             self._entries[name] = entry
             doc = (getattr(entry, "__doc__", None) or "").strip().splitlines()
             self._summaries[name] = summary or (doc[0] if doc else "")
-            self._uses[name] = tuple(u if isinstance(u, Uses) else Uses(u) for u in uses)
+            self._traits[name] = dict(traits or {})
             return entry
 
         return add if obj is None else add(obj)
@@ -127,12 +94,13 @@ class Registry(Generic[T]):
         """Remove ``name`` (a plug-in's tests clean up after themselves)."""
         self._entries.pop(name, None)
         self._summaries.pop(name, None)
-        self._uses.pop(name, None)
+        self._traits.pop(name, None)
 
     @contextlib.contextmanager
-    def temporarily(self, name: str, obj: T, *, summary: str = "") -> Iterator[T]:
+    def temporarily(self, name: str, obj: T, *, summary: str = "",
+                    traits: dict[str, Any] | None = None) -> Iterator[T]:
         """Register ``obj`` as ``name`` for the duration of a ``with`` block."""
-        self.register(name, obj, summary=summary)
+        self.register(name, obj, summary=summary, traits=traits)
         try:
             yield obj
         finally:
@@ -157,10 +125,14 @@ class Registry(Generic[T]):
         self.get(name)
         return name
 
-    def uses(self, name: str) -> tuple[Uses, ...]:
-        """The options ``name`` reads that not every part of this kind does (``register(uses=)``)."""
+    def trait(self, name: str, key: str, default: Any = None) -> Any:
+        """What ``name`` declared as ``key`` when registered (``traits=``), else ``default``."""
         self.get(name)
-        return self._uses[name]
+        return self._traits[name].get(key, default)
+
+    def having(self, key: str, value: Any = True) -> tuple[str, ...]:
+        """The names whose trait ``key`` is ``value``, in registration order."""
+        return tuple(n for n in self._entries if self._traits[n].get(key) == value)
 
     def names(self) -> tuple[str, ...]:
         """The registered names, in registration order."""

@@ -10,6 +10,7 @@ factory loads its policy there: ``examples/ppo_agent.py``).
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import importlib.util
 import os
@@ -21,7 +22,7 @@ from typing import Any
 import gymnasium
 import numpy as np
 
-from kbcli.core.strategies import STRATEGIES
+from kbcli.core.adaptation.strategies import STRATEGIES
 from kbcli.envs.env import KeyboardAdaptEnv
 from kbcli.errors import ConfigError
 
@@ -40,7 +41,7 @@ class StrategyAgent:
     Parameters
     ----------
     strategy : str
-        A name in :data:`kbcli.core.strategies.STRATEGIES`.
+        A name in :data:`kbcli.core.adaptation.strategies.STRATEGIES`.
     env : gymnasium.Env
         The kbcli environment it acts in (wrapped or not; one environment, not a vector of them:
         it reads that environment's posterior).
@@ -66,6 +67,7 @@ class StrategyAgent:
                               f"(gymnasium.make('kbcli/KeyboardAdapt-v0')), got {env!r}")
         self.strategy = strategy
         self.env = base
+        self._cfg = None  # (the environment's adapter config, it with the agent's strategy)
 
     def reset(self, seed: int | None = None) -> None:
         """Nothing to reset: its generator is the episode's robot generator, which
@@ -80,7 +82,12 @@ class StrategyAgent:
             raise ConfigError(f"StrategyAgent acts on its environment's current posterior: the "
                               f"observation is of step {int(obs['step'])}, the environment is at "
                               f"step {adapter.touches}")
-        return np.asarray(self._fn(adapter.context(), adapter.rng), float)
+        ctx = adapter.context()
+        if ctx.cfg.strategy.name != self.strategy:  # the agent's strategy, with its own options
+            if self._cfg is None or self._cfg[0] is not adapter.cfg:
+                self._cfg = (adapter.cfg, adapter.cfg.replace(strategy=self.strategy))
+            ctx = dataclasses.replace(ctx, cfg=self._cfg[1])
+        return np.asarray(self._fn(ctx, adapter.rng), float)
 
     act = __call__
 

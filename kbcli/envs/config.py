@@ -16,7 +16,7 @@ from typing import Annotated, Any, ClassVar
 from pydantic import AfterValidator, BeforeValidator, Field, model_validator
 
 from kbcli.core.config import Config, Flag, Name, Number, Whole, between, member_of
-from kbcli.core.transforms import FAMILIES
+from kbcli.core.instrument.transforms import FAMILIES
 from kbcli.envs.rewards import REWARDS
 from kbcli.errors import ConfigError
 from kbcli.sim.config import ModeName

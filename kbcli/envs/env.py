@@ -5,11 +5,11 @@ displacement; at each :meth:`~KeyboardAdaptEnv.step` the agent touches the pad a
 px, inside the working area), the simulated arm reaches for it (:class:`kbcli.sim.World`), and the
 agent observes what the robot has: the class of the sound it heard (``model.classify``, Eq. 2: 0
 silence, -1 a sound the model does not know), where it felt its finger land, and the step. kbcli's
-own robot side, an :class:`~kbcli.core.adapter.Adapter` fed with the same touches, keeps the
+own robot side, an :class:`~kbcli.core.adaptation.adapter.Adapter` fed with the same touches, keeps the
 posterior over the displacement (Eq. 8): with ``belief=True`` the agent observes it too, its
 estimate, error and entropy are in ``info``, the reward is read from it, and its stopping rule ends
 the episode (``terminated``). The environment writes none of the adaptation again: a step is the
-body of :func:`kbcli.core.adapt.adapt` with the agent's action in place of ``suggest()``.
+body of :func:`kbcli.core.adaptation.loop.adapt` with the agent's action in place of ``suggest()``.
 
 Randomness: ``reset(seed=s)`` seeds ``np_random`` as ``numpy.random.default_rng(s)``; each episode
 spawns three children of it, the robot's (kbcli's posterior; :class:`~kbcli.envs.StrategyAgent`
@@ -31,10 +31,10 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from kbcli.core.adapt import Step, step_record
-from kbcli.core.adapt_setup import build_table
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.loop import Step, step_record
+from kbcli.core.adaptation.setup import build_table
 from kbcli.envs.config import EnvConfig, check_move
 from kbcli.envs.rewards import REWARDS
 from kbcli.errors import ConfigError, KbcliError, ObservationError

@@ -24,9 +24,10 @@ from typing import Any
 import h5py
 import numpy as np
 
-from kbcli.errors import ArtifactError
+from kbcli.errors import ArtifactError, ConfigError
 from kbcli.io.atomic import atomic_paths
 from kbcli.io.schema import validate as check_schema
+from kbcli.io.schema.migrate import upgrade
 from kbcli.stages.artifact import SCHEMA_VERSIONS, Artifact
 
 _COMPRESS_ABOVE = 4096  # elements; small datasets stay contiguous
@@ -297,6 +298,12 @@ def read_artifact(path: str | os.PathLike, kind: str | tuple[str, ...] | None = 
         raise ArtifactError(f"{path}: attribute 'inputs' must map each input to a table")
     if validate:
         check_schema(art, str(path))
+    try:
+        art = upgrade(art)
+    except ConfigError as exc:
+        if validate:
+            raise ArtifactError(f"{path}: its robot options cannot be read: {exc}") from None
+
     art.sha256 = sha256_file(path)
     art.path = str(path)
     return art

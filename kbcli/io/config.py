@@ -55,7 +55,10 @@ def with_file(cls: type[C], table: Mapping[str, Any], flags: Mapping[str, Any],
     except ConfigError as exc:
         words = set(re.findall(r"[A-Za-z_]\w*", str(exc).split(" must ")[0].split(" has ")[0]))
         if path is not None and any(k in words and k not in given for k in table):
-            raise ConfigError(f"{path}: {exc}") from None
+            err = ConfigError(f"{path}: {exc}")
+            if hasattr(exc, "option"):  # a part's refusal: the command names where it came from
+                err.option, err.reason = exc.option, exc.reason
+            raise err from None
         raise
 
 

@@ -131,14 +131,14 @@ class ArmConfig(Config):
 
 #: Name -> the arm it stands for (see the module docstring).
 PRESETS: Registry[ArmConfig] = Registry("arm preset")
-PRESETS.register("ideal", ArmConfig(preset="ideal"), summary="no error at all")
+PRESETS.register("ideal", ArmConfig(preset="ideal"), summary="lands on target, feels exactly")
 PRESETS.register("servo", ArmConfig(preset="servo", kp=2.0e7, kd=2.4e6, max_torque=3.0e7,
                                     friction=8.0e4, settle_time=2.0),
                  summary="finite servo gains and joint friction")
 PRESETS.register("realistic", ArmConfig(preset="realistic", kp=2.0e7, kd=2.4e6, max_torque=3.0e7,
                                         friction=8.0e4, settle_time=2.0, finger_radius=2.5,
                                         proprio_noise=3.5e-3, proprio_bias=(1.5e-3, -1.0e-3)),
-                 summary="servo plus a finite finger and imperfect proprioception")
+                 summary="servo plus a finger of finite radius and noisy, biased proprioception")
 
 
 def arm_config(value: str | Mapping | ArmConfig | None) -> ArmConfig:

@@ -7,7 +7,7 @@ from typing import Annotated
 from pydantic import AfterValidator, BeforeValidator, InstanceOf
 
 from kbcli.core.config import Config, Name, Number, between
-from kbcli.core.geometry import MAX_COORD, Coordinate
+from kbcli.core.instrument.geometry import MAX_COORD, Coordinate
 from kbcli.sim.arms import PRESETS, ArmConfig, arm_config
 from kbcli.sim.modes import MODES
 
@@ -34,9 +34,9 @@ class SimConfig(Config):
         target (the paper's Sect. IV); ``dynamics``, a pymunk two-link arm driven by motors
         (Sect. IV-C).
     base : tuple of float
-        Pad coordinates of the shoulder joint, within +-:data:`~kbcli.core.geometry.MAX_COORD`.
+        Pad coordinates of the shoulder joint, within +-:data:`~kbcli.core.instrument.geometry.MAX_COORD`.
     link_lengths : tuple of float
-        Upper arm and forearm lengths, px, at most :data:`~kbcli.core.geometry.MAX_COORD`.
+        Upper arm and forearm lengths, px, at most :data:`~kbcli.core.instrument.geometry.MAX_COORD`.
     reach_noise : float
         Std (px) of the landing scatter, at most :data:`MAX_REACH_NOISE`: motor noise in ``dynamics`` mode, Gaussian scatter of the
         landing point in ``ideal`` mode.

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core.geometry import points_in_polygon, segment_distance
-from kbcli.core.keyboard import Keyboard
+from kbcli.core.instrument.geometry import points_in_polygon, segment_distance
+from kbcli.core.instrument.keyboard import Keyboard
 from kbcli.errors import OutOfReachError
 from kbcli.sim.kinematics import SimSpec
 

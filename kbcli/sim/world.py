@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kbcli.core.keyboard import Keyboard
+from kbcli.core.instrument.keyboard import Keyboard
 from kbcli.sim.kinematics import SimSpec, contact_points, forward_kinematics, inverse_kinematics
 
 

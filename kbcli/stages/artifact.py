@@ -21,11 +21,12 @@ SCHEMA_VERSIONS: dict[str, int] = {
     "scene": 1,
     "history": 1,
     "detection": 1,
-    "run": 3,  # 2: joint_angles (dynamics mode), attrs arm and mode; serve sessions (no truth);
-    #            3: the adapt config holds the robot's options under "robot" (2 still read)
-    "closed_loop": 3,  # 2: steps/joint_angles, steps/estimate, the adaptation posteriors; 3: likewise
-    "evaluation": 2,  # 2: named methods, measured playing success, tie-corrected tests
-    "model_quality": 1,
+    "run": 4,  # 2: joint_angles (dynamics mode), attrs arm and mode; serve sessions (no truth);
+    #            3: the adapt config holds the robot's options under "robot" (2 still read);
+    #            4: the robot's strategy and posterior hold their own options (3 still read)
+    "closed_loop": 4,  # 2: steps/joint_angles, steps/estimate, the adaptation posteriors; 3, 4: as run
+    "evaluation": 3,  # 2: named methods, measured playing success, tie-corrected tests; 3: as run 4
+    "model_quality": 2,  # 2: as run 4
 }
 
 

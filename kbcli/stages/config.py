@@ -61,7 +61,11 @@ class StageConfig(Config):
             BaseModel.__init__(self, **data)
         except ValidationError as exc:
             cls = type(self)
-            raise ConfigError(message(exc, cls.where(data), tuple(cls.model_fields))) from None
+            err = ConfigError(message(exc, cls.where(data), tuple(cls.model_fields)))
+            cause = (exc.errors(include_url=False)[0].get("ctx") or {}).get("error")
+            if hasattr(cause, "option"):  # a part refused an option: kept for the command
+                err.option, err.reason = cause.option, cause.reason
+            raise err from None
 
     @classmethod
     def where(cls, data: Mapping[str, Any]) -> str:

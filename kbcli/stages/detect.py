@@ -1,7 +1,7 @@
 """Stage ``detect``: run a failure detector online over a play history (paper Sect. III-C, Eq. 4-6).
 
 Feeds the history's MATCH (0) / NO_MATCH (1) results one at a time to a detector of
-:mod:`kbcli.core.detect` (the paper's binomial test by default) exactly as the robot would while
+:mod:`kbcli.core.detection.detectors` (the paper's binomial test by default) exactly as the robot would while
 playing, and records its score at every step and the steps where it fired. A detector resets after
 firing, so a long history can hold several firings. With the history's perturbation step it also
 reports the first firing after the perturbation (the detection), its delay and the false alarms
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core.detect import DetectorConfig, detect_stream
+from kbcli.core.detection.detectors import DetectorConfig, detect_stream
 from kbcli.errors import ArtifactError
 from kbcli.stages.artifact import Artifact, ref
 

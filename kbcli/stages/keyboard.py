@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core.keyboard import Keyboard, KeyboardConfig
+from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
 from kbcli.stages.artifact import Artifact
 
 
@@ -32,7 +32,7 @@ def run(cfg: KeyboardConfig) -> Artifact:
             "key_centres": kb.key_centres(),
             "outlines": {"vertices": np.vstack(outlines), "offsets": offsets},
         },
-        attrs={"n_keys": kb.n_keys, "layout": cfg.layout, "area": list(kb.area),
+        attrs={"n_keys": kb.n_keys, "layout": cfg.layout.name, "area": list(kb.area),
                "bounds": list(kb.bounds)},
     )
 

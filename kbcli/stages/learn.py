@@ -1,18 +1,18 @@
 """Stage ``learn``: learn the instrument model M_INST by exploration (paper Sect. III-A, ref. [11]).
 
 The simulated arm (``ideal`` or ``dynamics`` mode, :mod:`kbcli.sim`) reaches for targets chosen by
-an exploration strategy (:mod:`kbcli.core.explore`) on the pad where the keyboard lies at its
+an exploration strategy (:mod:`kbcli.core.model.explore`) on the pad where the keyboard lies at its
 reference pose; the robot hears what its finger played and fits a model of p(sound | action) of the
-chosen class (:mod:`kbcli.core.model_classes`: ``lines``, :class:`~kbcli.core.learned.LearnedModel`;
-``svc``, :class:`~kbcli.core.svc_model.SVCModel`; ``forest``, ``forest-xy`` and ``knn``,
-:mod:`kbcli.core.sk_models`) or, by default (``auto``), explores with the ``forest`` class (the
+chosen class (:mod:`kbcli.core.model.classes`: ``lines``, :class:`~kbcli.core.model.lines.LearnedModel`;
+``svc``, :class:`~kbcli.core.model.svc.SVCModel`; ``forest``, ``forest-xy`` and ``knn``,
+:mod:`kbcli.core.model.classifiers`) or, by default (``auto``), explores with the ``forest`` class (the
 class it refits re-chosen every 200 reaches among ``forest`` and ``svc``) and then fits the class
-that cross-validation on the samples prefers (:mod:`kbcli.core.select`; the artifact's config then names the class chosen, its
+that cross-validation on the samples prefers (:mod:`kbcli.core.model.select`; the artifact's config then names the class chosen, its
 ``model_class_requested`` is ``auto``, and its attrs' ``model_selection`` hold every candidate's
 score). The ground truth (the keyboard) is
 used only to score the model: the learning curve (accuracy on a 2 px grid over the working area
 every ``curve_every`` reaches) and the final accuracy and boundary error on a 1 px grid
-(:mod:`kbcli.core.accuracy`).
+(:mod:`kbcli.core.model.accuracy`).
 
 ``strategy = "exact"`` skips exploration and returns the exact-model artifact
 (:func:`kbcli.stages.models.exact_artifact`), for calibration experiments.
@@ -28,7 +28,7 @@ from ``evaluation/origin``). Its attrs hold the final ``accuracy``, ``boundary_e
 budget when only the final model, of another class than the explorer's, gets there; or None), the
 ``model_class``, ``n_classes`` and ``reliability``: what the model estimates of itself from its
 samples alone (cross-validated mislabel rate, log loss, calibration error and boundary error, and
-the calibration it chose; :mod:`kbcli.core.reliability`). The final model is calibrated that way.
+the calibration it chose; :mod:`kbcli.core.model.reliability`). The final model is calibrated that way.
 The fit time is measured by ``kbcli bench learn``, not stored: identical runs give identical files.
 Schema 3 (schema 2: ``lines`` only, calibrated; schema 1: ``lines``, uncalibrated).
 """
@@ -41,13 +41,13 @@ from typing import Annotated, Any, ClassVar
 import numpy as np
 from pydantic import AfterValidator, Field, InstanceOf, field_serializer
 
-from kbcli.core import accuracy as scoring
-from kbcli.core import reliability, select
 from kbcli.core.config import Config, Name, Positive, Whole, between
-from kbcli.core.explore import STRATEGIES, Exploration, ExploreConfig
-from kbcli.core.keyboard import Keyboard
-from kbcli.core.model import grid_points
-from kbcli.core.model_classes import AUTO, EXACT, check_choice, fit_model, learned_classes
+from kbcli.core.instrument.keyboard import Keyboard
+from kbcli.core.model import accuracy as scoring
+from kbcli.core.model import reliability, select
+from kbcli.core.model.base import grid_points
+from kbcli.core.model.classes import AUTO, EXACT, check_choice, fit_model, learned_classes
+from kbcli.core.model.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.errors import ArtifactError, ConfigError
 from kbcli.sim import SimConfig, World, check_keyboard_reachable, make_reacher
 from kbcli.stages import keyboard as keyboard_stage
@@ -102,11 +102,11 @@ class LearnConfig(Config):
         The arm and its reach mode.
     model_class : str
         The class of model fitted (a learned class of
-        :data:`~kbcli.core.model_classes.MODEL_CLASSES`), or ``auto`` (the default): explore with
-        :data:`kbcli.core.select.EXPLORE_CLASS`, re-chosen every
-        :data:`kbcli.core.select.RESELECT` reaches (:func:`kbcli.core.select.explore_choice`),
+        :data:`~kbcli.core.model.classes.MODEL_CLASSES`), or ``auto`` (the default): explore with
+        :data:`kbcli.core.model.select.EXPLORE_CLASS`, re-chosen every
+        :data:`kbcli.core.model.select.RESELECT` reaches (:func:`kbcli.core.model.select.explore_choice`),
         then fit the class with the best cross-validated score on the samples
-        (:func:`kbcli.core.select.choose`; never the simulator's truth).
+        (:func:`kbcli.core.model.select.choose`; never the simulator's truth).
     """
 
     what: ClassVar[str] = "learn"
@@ -202,7 +202,7 @@ class Learning:
     def reliability(self, chosen: str | None = None):
         """The final model (of class ``chosen``, default the one explored with), calibrated, and
         its own estimate of how good it is, from its samples alone
-        (:func:`kbcli.core.reliability.assess`: 5-fold cross-validation)."""
+        (:func:`kbcli.core.model.reliability.assess`: 5-fold cross-validation)."""
         ex, kb = self.exploration, self.keyboard
         name = ex.explorer if chosen is None else chosen
         model = ex.model

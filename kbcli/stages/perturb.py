@@ -1,7 +1,7 @@
 """Stage ``perturb``: move the keyboard to a new pose (paper Sect. III-B, Eq. 3).
 
 A scene artifact (kind ``scene``) holds the keyboard, the transform family (``translation``: the
-paper's ``(dx, dy)``; ``rigid``: ``(angle, dx, dy)``, see :mod:`kbcli.core.transforms`) and the true
+paper's ``(dx, dy)``; ``rigid``: ``(angle, dx, dy)``, see :mod:`kbcli.core.instrument.transforms`) and the true
 parameters, given explicitly or drawn at random by category.
 
 Size categories (one definition for ``perturb``, the adapt benchmark and ``evaluate``): the paper's
@@ -25,9 +25,9 @@ from __future__ import annotations
 import numpy as np
 from pydantic import field_validator, model_validator
 
-from kbcli.core import transforms
 from kbcli.core.config import Config, Name, Number, between
-from kbcli.core.keyboard import Keyboard
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.keyboard import Keyboard
 from kbcli.errors import ConfigError, OutOfReachError
 from kbcli.sim import SimConfig, workspace_check
 from kbcli.stages import keyboard as keyboard_stage
@@ -52,7 +52,7 @@ class PerturbConfig(Config):
     Parameters
     ----------
     family : str
-        ``translation`` or ``rigid`` (:data:`kbcli.core.transforms.FAMILIES`).
+        ``translation`` or ``rigid`` (:data:`kbcli.core.instrument.transforms.FAMILIES`).
     params : tuple of float, optional
         The transform parameters (``(dx, dy)`` or ``(angle, dx, dy)``, px and degrees).
     category : str, optional

@@ -2,7 +2,7 @@
 
 The stage builds the simulated :class:`~kbcli.sim.World` from the model's keyboard at its reference
 pose; at step ``perturb_at`` it puts the keyboard at the scene's true pose. The robot's side,
-:func:`kbcli.core.play.play`, only gets the world's ``touch``. The history artifact (kind
+:func:`kbcli.core.playing.play.play`, only gets the world's ``touch``. The history artifact (kind
 ``history``) records per step the action, landed point, perceived features, aimed melody note and
 the MATCH (0) / NO_MATCH (1) result, which :mod:`kbcli.stages.detect` reads (Sect. III-C).
 
@@ -18,8 +18,8 @@ import numpy as np
 from pydantic import field_validator, model_validator
 
 from kbcli.core.config import Config, Name, NonNegativeInt, Whole, between
-from kbcli.core.melody import DEFAULT_MELODY, MAX_NOTES, parse_melody
-from kbcli.core.play import NO_MATCH, PlayStep, play
+from kbcli.core.instrument.melody import DEFAULT_MELODY, MAX_NOTES, parse_melody
+from kbcli.core.playing.play import NO_MATCH, PlayStep, play
 from kbcli.errors import ConfigError
 from kbcli.sim import PRESETS, SimConfig, World, make_reacher
 from kbcli.sim.config import Arm, ModeName, ReachNoise
@@ -30,13 +30,13 @@ from kbcli.stages.models import load_model
 
 #: Most actions a play session may take (``steps``).
 MAX_PLAY_STEPS = 100_000
-#: Longest melody text (characters; :func:`~kbcli.core.melody.parse_melody` also allows at most
-#: :data:`~kbcli.core.melody.MAX_NOTES` notes).
+#: Longest melody text (characters; :func:`~kbcli.core.instrument.melody.parse_melody` also allows at most
+#: :data:`~kbcli.core.instrument.melody.MAX_NOTES` notes).
 MAX_MELODY_CHARS = 64 * MAX_NOTES
 
 
 def check_melody_text(v: str) -> str:
-    """``v`` unless it has more than :data:`~kbcli.core.melody.MAX_NOTES` notes or is longer than
+    """``v`` unless it has more than :data:`~kbcli.core.instrument.melody.MAX_NOTES` notes or is longer than
     :data:`MAX_MELODY_CHARS` (a field validator; the message counts notes, the user's unit)."""
     if len(v) > MAX_MELODY_CHARS:
         n = len(v.split())
@@ -54,7 +54,7 @@ class PlayConfig(Config):
     Parameters
     ----------
     melody : str
-        Notes and durations, ``"A:1 D:1 E:0.5 D:2 A:1"`` (see :mod:`kbcli.core.melody`).
+        Notes and durations, ``"A:1 D:1 E:0.5 D:2 A:1"`` (see :mod:`kbcli.core.instrument.melody`).
     steps : int
         Number of actions, at most :data:`MAX_PLAY_STEPS`.
     perturb_at : int, optional
@@ -88,7 +88,7 @@ class PlayConfig(Config):
 
 
 class Session:
-    """One play session, an iterator of :class:`~kbcli.core.play.PlayStep`.
+    """One play session, an iterator of :class:`~kbcli.core.playing.play.PlayStep`.
 
     Parameters
     ----------
@@ -220,12 +220,12 @@ def run(
 
 
 def heard_audio(history: Artifact, keyboard_features: np.ndarray, *, sample_rate: int) -> np.ndarray:
-    """What was heard in a history, as audio samples (see :func:`kbcli.core.audio.render`).
+    """What was heard in a history, as audio samples (see :func:`kbcli.core.instrument.audio.render`).
 
     Silent steps last the aimed note's duration at that note's tempo (from ``keyboard_features``,
     the reference features of the keys).
     """
-    from kbcli.core.audio import render
+    from kbcli.core.instrument.audio import render
 
     target = history.array("target")
     keys = history.array("melody/keys")[target]

@@ -1,12 +1,12 @@
 """The robot keeps what it learned (issue 42): a model artifact repaired by adaptations' touches.
 
 ``kbcli adapt --repair --model-out`` and ``kbcli run --repair --model-out`` write, beside their
-run, a new ``model`` artifact: the input model refitted (:func:`kbcli.core.repair.absorb`) with the
+run, a new ``model`` artifact: the input model refitted (:func:`kbcli.core.adaptation.repair.absorb`) with the
 touches of its adaptations, each mapped back into the model's reference frame by that
 adaptation's estimate, then calibrated and self-assessed again as ``kbcli learn`` does
-(:func:`kbcli.core.reliability.assess`), so the robot's next run starts from it. An adaptation
+(:func:`kbcli.core.model.reliability.assess`), so the robot's next run starts from it. An adaptation
 whose posterior is not sure enough (its 90 % credible disc wider than ``absorb_radius`` px,
-:mod:`kbcli.core.credible`) gives nothing: a belief that does not know where the keyboard is
+:mod:`kbcli.core.adaptation.credible`) gives nothing: a belief that does not know where the keyboard is
 writes no labels.
 
 Lineage: the artifact's ``inputs`` hold its ``parent`` (the model it repaired, with its sha256,
@@ -22,11 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kbcli.core import accuracy as scoring
-from kbcli.core import reliability
-from kbcli.core.credible import LEVEL, radius, radius_of
-from kbcli.core.loop import ADAPT
-from kbcli.core.repair import absorb
+from kbcli.core.adaptation.credible import LEVEL, radius, radius_of
+from kbcli.core.adaptation.repair import absorb
+from kbcli.core.model import accuracy as scoring
+from kbcli.core.model import reliability
+from kbcli.core.playing.loop import ADAPT
 from kbcli.errors import ConfigError
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages.artifact import Artifact, ref
@@ -67,7 +67,7 @@ class Adaptation:
 
     @classmethod
     def of_adapter(cls, adapter, aims: np.ndarray, perceived: np.ndarray) -> Adaptation:
-        """What an :class:`~kbcli.core.adapter.Adapter` with ``repair`` concluded (its touches in
+        """What an :class:`~kbcli.core.adaptation.adapter.Adapter` with ``repair`` concluded (its touches in
         observation order, with the ``aims`` and ``perceived`` features of the touches it
         absorbed)."""
         t = adapter.repair.touches
@@ -88,7 +88,7 @@ def run_adaptation(adapter, run: Artifact | dict) -> Adaptation:
 
 def session_adaptations(steps, model) -> list[Adaptation]:
     """The adaptations of a closed-loop session (``kbcli run``: its
-    :class:`~kbcli.core.loop.LoopStep` records), each a run of consecutive adaptation touches
+    :class:`~kbcli.core.playing.loop.LoopStep` records), each a run of consecutive adaptation touches
     ending in its estimate (the correction in force after it) and its posterior's credible
     radius; touches classified by ``model``."""
     out, block = [], []

@@ -2,7 +2,7 @@
 
 The world (:class:`~kbcli.sim.World`) starts with the keyboard at its reference pose and moves it to
 the scene's pose after ``perturb_at`` touches, without telling the robot. The robot's side,
-:func:`kbcli.core.loop.closed_loop`, only gets the world's ``touch``. The ``closed_loop`` artifact
+:func:`kbcli.core.playing.loop.closed_loop`, only gets the world's ``touch``. The ``closed_loop`` artifact
 records every touch (phase, action, landed point, heard features, MATCH/NO_MATCH, detector score,
 the correction in force; schema 2 adds the arm's joint angles after each touch in dynamics mode
 ``steps/joint_angles``, the adapter's estimate during adaptation ``steps/estimate`` (NaN while
@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 from pydantic import Field, field_serializer, field_validator, model_validator
 
-from kbcli.core import transforms
-from kbcli.core.adapt_setup import build_table
-from kbcli.core.adapter_config import learning_rate, redundancy_radius, robust_blurs
+from kbcli.core.adaptation.config import learning_rate, redundancy_radius, robust_blurs
+from kbcli.core.adaptation.setup import build_table
 from kbcli.core.config import Config, Name, NonNegativeInt, Whole, as_table, between
-from kbcli.core.detect import DetectorConfig
-from kbcli.core.loop import ADAPT, PLAY, LoopStep, adaptation_blocks, closed_loop
-from kbcli.core.melody import DEFAULT_MELODY, parse_melody
+from kbcli.core.detection.detectors import DetectorConfig
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.melody import DEFAULT_MELODY, parse_melody
+from kbcli.core.playing.loop import ADAPT, PLAY, LoopStep, adaptation_blocks, closed_loop
 from kbcli.errors import ConfigError
 from kbcli.sim import World, make_reacher
 from kbcli.stages import keyboard as keyboard_stage
@@ -47,7 +47,7 @@ class LoopConfig(Config):
     Parameters
     ----------
     melody : str
-        The melody played in a loop (see :mod:`kbcli.core.melody`).
+        The melody played in a loop (see :mod:`kbcli.core.instrument.melody`).
     steps : int
         Play touches in the session (adaptation touches come on top), at most
         :data:`MAX_LOOP_STEPS`.
@@ -97,7 +97,7 @@ def _rate(results: np.ndarray) -> float | None:
 
 
 class LoopSession:
-    """One closed-loop session: iterate it for :class:`~kbcli.core.loop.LoopStep` records, then
+    """One closed-loop session: iterate it for :class:`~kbcli.core.playing.loop.LoopStep` records, then
     take :meth:`artifact`.
 
     Parameters

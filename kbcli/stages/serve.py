@@ -2,7 +2,7 @@
 
 A robot that is not kbcli's simulator (a real arm, MuJoCo, Gazebo) touches, listens and feels
 where it landed; kbcli decides where to touch next and keeps the posterior (the same
-:class:`~kbcli.core.adapt.Adapter` the ``adapt`` and ``run`` stages use). :class:`Session` is the
+:class:`~kbcli.core.adaptation.loop.Adapter` the ``adapt`` and ``run`` stages use). :class:`Session` is the
 protocol without the transport: one message in (a line of JSON), one reply out (a dict). The CLI
 (``kbcli serve``) moves the lines over stdin/stdout or a local socket and writes the session as an
 ordinary ``run`` artifact (:class:`kbcli.stages.adapt.Recorder`) after every touch; the truth being
@@ -63,13 +63,13 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from kbcli import __version__
-from kbcli.core import transforms
-from kbcli.core.adapt import step_record
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.loop import step_record
 from kbcli.core.config import Config, Flag, Whole, as_table, between
-from kbcli.core.keyboard import FEATURE_NAMES, sound_name
-from kbcli.core.sounds import UNKNOWN
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.keyboard import FEATURE_NAMES, sound_name
+from kbcli.core.model.sounds import UNKNOWN
 from kbcli.errors import ArtifactError, ConfigError, KbcliError
 from kbcli.stages.adapt import Recorder, run_attrs, run_data
 from kbcli.stages.artifact import Artifact, ref

@@ -23,7 +23,7 @@ import numpy as np
 from matplotlib.lines import Line2D
 from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator
 
-from kbcli.core.transforms import FAMILIES
+from kbcli.core.instrument.transforms import FAMILIES
 from kbcli.stages.artifact import Artifact
 from kbcli.viz.common import angle_note, external, save
 

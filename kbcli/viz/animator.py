@@ -12,9 +12,9 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 
-from kbcli.core import transforms
-from kbcli.core.keyboard import Keyboard
-from kbcli.core.loop import adaptation_blocks
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.keyboard import Keyboard
+from kbcli.core.playing.loop import adaptation_blocks
 from kbcli.viz.common import angle_note, external
 from kbcli.viz.palette import BELIEF, TRUTH, key_colours
 from kbcli.viz.replay import Replay

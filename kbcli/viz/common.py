@@ -14,8 +14,8 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon
 from matplotlib.path import Path
 
-from kbcli.core.keyboard import Keyboard
-from kbcli.core.transforms import FAMILIES
+from kbcli.core.instrument.keyboard import Keyboard
+from kbcli.core.instrument.transforms import FAMILIES
 from kbcli.io.atomic import write_bytes
 from kbcli.io.paths import figure_format
 from kbcli.viz.palette import key_colours

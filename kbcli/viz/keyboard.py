@@ -8,7 +8,7 @@ import os
 import matplotlib.pyplot as plt
 from matplotlib.patches import Rectangle
 
-from kbcli.core.keyboard import Keyboard
+from kbcli.core.instrument.keyboard import Keyboard
 from kbcli.viz.common import draw_keyboard, fit_title, save
 
 
@@ -22,7 +22,7 @@ def plot_keyboard(kb: Keyboard, path: str | os.PathLike) -> None:
     ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ls="--", ec="grey", lw=1))
     ax.set_xlabel("pad x (px)")
     ax.set_ylabel("pad y (px)")
-    fit_title(ax, f"{kb.config.layout} layout: {kb.describe()}\nlabels: note, tempo (bpm); "
+    fit_title(ax, f"{kb.layout} layout: {kb.describe()}\nlabels: note, tempo (bpm); "
                   f"dashed: working area (margin {kb.config.margin:g} px); outside the keys is "
                   "silence")
     save(fig, path)

@@ -11,8 +11,8 @@ from matplotlib.colors import ListedColormap
 from matplotlib.patches import Rectangle
 from matplotlib.ticker import FixedLocator, NullFormatter, ScalarFormatter
 
-from kbcli.core import accuracy as scoring
-from kbcli.core.model import grid_points
+from kbcli.core.model import accuracy as scoring
+from kbcli.core.model.base import grid_points
 from kbcli.stages.artifact import Artifact
 from kbcli.viz.common import draw_keyboard, save
 from kbcli.viz.palette import key_colours
@@ -97,7 +97,7 @@ def _learning_panel(ax, res) -> None:
 
 def _adapt_panel(ax, res) -> None:
     """Bottom right: the median error while adapting with the learned model, per strategy."""
-    from kbcli.core import stats
+    from kbcli.core.adaptation import stats
 
     for cell_label in dict.fromkeys(c.label for c in res.cells):
         for section, ls in (("learned", "-"), ("learned-rigid", "--")):

@@ -20,9 +20,9 @@ import numpy as np
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Polygon
 
-from kbcli.core import transforms
-from kbcli.core.keyboard import Keyboard
-from kbcli.core.loop import adaptation_blocks
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.keyboard import Keyboard
+from kbcli.core.playing.loop import adaptation_blocks
 from kbcli.viz.common import draw_keyboard, place_labels, save
 from kbcli.viz.palette import BELIEF, TRUTH
 

@@ -5,7 +5,7 @@ its uncertainty (the confusion factor 1 - (p1 - p2), Sect. III-E) shaded dark wi
 the fitted boundary lines thin, and the explored points (where the finger landed) as dots; cells
 whose predicted key is wrong are red; a legend names each. Middle: the true layout. Right: the
 learning curve (accuracy on a 2 px grid against reaches), with the 99 % level dashed and labelled.
-The model's own estimate of its reliability (cross-validated, :mod:`kbcli.core.reliability`)
+The model's own estimate of its reliability (cross-validated, :mod:`kbcli.core.model.reliability`)
 sits beside the measured values. An exact-model artifact shows its map and the layout, titled as
 such.
 """
@@ -20,9 +20,9 @@ from matplotlib.colors import LinearSegmentedColormap, ListedColormap
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from kbcli.core import accuracy as scoring
-from kbcli.core.keyboard import Keyboard
-from kbcli.core.model import grid_points
+from kbcli.core.instrument.keyboard import Keyboard
+from kbcli.core.model import accuracy as scoring
+from kbcli.core.model.base import grid_points
 from kbcli.io.schema.rules import learned, model_class_of
 from kbcli.stages.artifact import Artifact
 from kbcli.viz.common import draw_keyboard, save

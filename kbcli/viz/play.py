@@ -9,7 +9,7 @@ import os
 import matplotlib.pyplot as plt
 import numpy as np
 
-from kbcli.core.keyboard import midi_to_name
+from kbcli.core.instrument.keyboard import midi_to_name
 from kbcli.stages.artifact import Artifact
 from kbcli.viz.common import save
 

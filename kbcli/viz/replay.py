@@ -7,10 +7,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kbcli.core import transforms
-from kbcli.core.estimators import ESTIMATORS
-from kbcli.core.keyboard import Keyboard, sound_name
+from kbcli.core.adaptation.estimators import ESTIMATORS
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.keyboard import Keyboard, sound_name
 from kbcli.errors import KbcliError
+from kbcli.sim.modes import MODES
 from kbcli.stages.artifact import Artifact
 from kbcli.viz.common import external
 
@@ -75,8 +76,9 @@ def _arm_shown(art: Artifact, mode: str | None) -> bool:
 def _ik_note(mode: str | None) -> str:
     """How an arm pose computed by inverse kinematics is labelled: the finger's ideal reach,
     except in ``dynamics`` mode (whose joint angles were not recorded)."""
-    return "arm (ideal reach: pose from inverse kinematics)" if mode != "dynamics" else \
-        "arm (pose from inverse kinematics)"
+    physics = mode in MODES and MODES.get(mode).physics
+    return "arm (pose from inverse kinematics)" if physics else \
+        "arm (ideal reach: pose from inverse kinematics)"
 
 
 def _arm(art: Artifact, angles: np.ndarray | None, landed: np.ndarray) -> tuple[np.ndarray | None, str]:

@@ -20,6 +20,7 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import LogNorm  # noqa: E402
 
 from kbcli.stages.artifact import Artifact  # noqa: E402
+from kbcli.stages.report.source import exact_mode  # noqa: E402
 from kbcli.viz.common import angle_note, save  # noqa: E402
 
 COLOURS = {"random": "tab:gray", "active": "tab:blue", "paper-active": "tab:cyan",
@@ -54,7 +55,7 @@ def _snapshot_arrays(ex: dict) -> tuple[np.ndarray, np.ndarray, tuple[float, flo
 def _shown_mode(modes: list[str]) -> str:
     """The sim mode whose examples are shown by default: ``ideal`` when measured, else the first
     (the one place this module names a sim mode)."""
-    return "ideal" if "ideal" in modes else modes[0]
+    return exact_mode(modes) or modes[0]
 
 
 def _rows(art: Artifact, mode: str, key: str = "curves") -> list[tuple[str, str]]:

@@ -297,11 +297,13 @@ SCHEMAS: dict[str, dict[int, Schema]] = {
     "scene": {1: _SCENE_1},
     "history": {1: _HISTORY_1},
     "detection": {1: _DETECTION_1},
-    # run 3, closed_loop 3: the adapt config nests the robot's options under "robot"
-    "run": {1: _RUN_1, 2: _RUN_2, 3: _RUN_2},
-    "closed_loop": {1: _CLOSED_LOOP_1, 2: _CLOSED_LOOP_2, 3: _CLOSED_LOOP_2},
-    "evaluation": {1: _EVALUATION_1, 2: _EVALUATION_2},
-    "model_quality": {1: _MODEL_QUALITY_1},
+    # run 3, closed_loop 3: the adapt config nests the robot's options under "robot"; run 4,
+    # closed_loop 4, evaluation 3, model_quality 2: the robot's parts hold their own options
+    # (older ones are migrated on read: :mod:`kbcli.io.schema.migrate`)
+    "run": {1: _RUN_1, 2: _RUN_2, 3: _RUN_2, 4: _RUN_2},
+    "closed_loop": {1: _CLOSED_LOOP_1, 2: _CLOSED_LOOP_2, 3: _CLOSED_LOOP_2, 4: _CLOSED_LOOP_2},
+    "evaluation": {1: _EVALUATION_1, 2: _EVALUATION_2, 3: _EVALUATION_2},
+    "model_quality": {1: _MODEL_QUALITY_1, 2: _MODEL_QUALITY_1},
 }
 
 

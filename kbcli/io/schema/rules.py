@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from kbcli.core import model_classes
-from kbcli.core.model_classes import MODEL_CLASSES
+from kbcli.core.model import classes as model_classes
+from kbcli.core.model.classes import MODEL_CLASSES
 from kbcli.errors import KbcliError
 from kbcli.io.schema.spec import MIN_SOUNDS, TYPES
 
@@ -24,7 +24,7 @@ def learned(art) -> bool:
 
 
 def model_class_of(art) -> str:
-    """The model class a model artifact names (:func:`kbcli.core.model_classes.model_class_of`)."""
+    """The model class a model artifact names (:func:`kbcli.core.model.classes.model_class_of`)."""
     return model_classes.model_class_of(art.config)
 
 
@@ -78,7 +78,7 @@ def model_class(art) -> str | None:
     """A learned model names a registered model class."""
     if not learned(art):
         return None
-    from kbcli.core.model_classes import MODEL_CLASSES
+    from kbcli.core.model.classes import MODEL_CLASSES
 
     name = model_class_of(art)
     if name not in MODEL_CLASSES:
@@ -130,7 +130,7 @@ def reliability(art) -> str | None:
 
 def scene_params(art) -> str | None:
     """A scene's parameters fit its transform family (an angle in (-180, 180] if it rotates)."""
-    from kbcli.core.transforms import FAMILIES
+    from kbcli.core.instrument.transforms import FAMILIES
 
     fam = art.config["family"]
     if fam not in FAMILIES:
@@ -165,7 +165,7 @@ def _short(v: np.ndarray) -> str:
 
 def truth_keys(art) -> str | None:
     """A ground truth names every parameter of the world's transform family."""
-    from kbcli.core.transforms import FAMILIES, family_for
+    from kbcli.core.instrument.transforms import FAMILIES, family_for
 
     truth = art.attrs.get("truth")
     if not truth:

@@ -1,6 +1,6 @@
 """Stage ``adapt``: recover a displaced keyboard's pose with few touches (paper Sect. III-D, III-E).
 
-:func:`experiment` runs one adaptation of the robot's :class:`~kbcli.core.adapt.Adapter` against a
+:func:`experiment` runs one adaptation of the robot's :class:`~kbcli.core.adaptation.loop.Adapter` against a
 simulated :class:`~kbcli.sim.World` at a given true pose; :func:`run` does it for a model artifact
 and a scene artifact and returns a ``run`` artifact. The scene is read only to build the world and
 to score the estimates: the robot's side never sees it.
@@ -18,19 +18,19 @@ after each touch in dynamics mode, and the arm's geometry and the mode in the at
 another process (``kbcli serve``, :mod:`kbcli.stages.serve`): there the truth is unknown and the
 errors are NaN (their summaries None).
 
-The stage's config, :class:`AdaptConfig` (:mod:`.config`), holds the robot's :class:`~kbcli.core.adapt.AdapterConfig`
+The stage's config, :class:`AdaptConfig` (:mod:`.config`), holds the robot's :class:`~kbcli.core.adaptation.loop.AdapterConfig`
 by composition (``AdaptConfig(robot=AdapterConfig(...), mode=..., reach_noise=...)``) beside the
 simulated arm's and the loop's options; run artifacts of schema 2 store it nested
 (``config["adapt"]["robot"]``), and the flat layout of schema 1 is still read.
 
 :func:`play_success` measures the playing success around an adaptation by replaying the melody
-with Algorithm 1 (:func:`kbcli.core.play.replay`): before the displacement, after it without
+with Algorithm 1 (:func:`kbcli.core.playing.play.replay`): before the displacement, after it without
 adaptation, and after it with the final estimate as the correction (``experiment(play=...)``).
 """
 
 from __future__ import annotations
 
-from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.adaptation.posteriors import POSTERIORS
 from kbcli.stages.adapt.config import (
     DEFAULT_SNAPSHOTS,
     FEEDBACKS,

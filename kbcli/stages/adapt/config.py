@@ -8,9 +8,9 @@ from typing import Any, ClassVar
 
 from pydantic import Field, InstanceOf, field_validator, model_validator
 
-from kbcli.core.adapter_config import AdapterConfig
+from kbcli.core.adaptation.config import AdapterConfig, option_names
 from kbcli.core.config import Flag, Name, Whole, between
-from kbcli.core.melody import DEFAULT_MELODY
+from kbcli.core.instrument.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
 from kbcli.sim import SimConfig
 from kbcli.sim.arms import PRESETS
@@ -26,8 +26,9 @@ LOOP_FIELDS = ("mode", "reach_noise", "arm", "feedback", "max_steps", "stop")
 
 
 def robot_fields() -> tuple[str, ...]:
-    """The robot's option names (:class:`kbcli.core.adapt.AdapterConfig`)."""
-    return tuple(AdapterConfig.model_fields)
+    """The robot's option names in the flat layout (:func:`~kbcli.core.adaptation.config.option_names`:
+    the adapter's own and its parts')."""
+    return option_names()
 
 
 def _robot(robot: Any, flat: dict[str, Any]) -> AdapterConfig:
@@ -43,7 +44,7 @@ def _robot(robot: Any, flat: dict[str, Any]) -> AdapterConfig:
 
 
 class AdaptConfig(StageConfig):
-    """One adaptation: the robot's settings (``robot``, a :class:`kbcli.core.adapt.AdapterConfig`)
+    """One adaptation: the robot's settings (``robot``, a :class:`kbcli.core.adaptation.loop.AdapterConfig`)
     plus the simulated arm's and the loop's.
 
     Parameters
@@ -68,7 +69,8 @@ class AdaptConfig(StageConfig):
 
     Notes
     -----
-    The robot's options read through as attributes (``cfg.strategy`` is ``cfg.robot.strategy``).
+    The robot's own options read through as attributes (``cfg.family`` is ``cfg.robot.family``;
+    ``cfg.strategy`` the strategy's options, ``cfg.strategy.name`` its name).
     They may also be given at the top level, beside ``mode`` (``AdaptConfig(strategy="random")``,
     the flat layout of schema-1 artifacts and older TOML files): there they override the same
     option of ``robot`` (as a command-line flag overrides a TOML file).
@@ -116,7 +118,7 @@ class AdaptConfig(StageConfig):
 
     def __getattr__(self, name: str) -> Any:
         # the robot's options read through (``cfg.strategy``); only called for missing attributes
-        if not name.startswith("_") and name in robot_fields():
+        if not name.startswith("_") and name in AdapterConfig.model_fields:
             return getattr(self.robot, name)
         return super().__getattr__(name)
 
@@ -151,7 +153,7 @@ class PlayCheck(StageConfig):
     Parameters
     ----------
     melody : str
-        Notes ``NOTE:BEATS`` (:mod:`kbcli.core.melody`).
+        Notes ``NOTE:BEATS`` (:mod:`kbcli.core.instrument.melody`).
     notes : int
         Touches per replay.
     reference : bool

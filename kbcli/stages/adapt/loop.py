@@ -9,17 +9,16 @@ from collections.abc import Callable
 
 import numpy as np
 
-from kbcli.core import transforms
-from kbcli.core.adapt import adapt
-from kbcli.core.adapt_setup import build_samples, build_table
-from kbcli.core.adapter import Adapter
-from kbcli.core.estimators import ESTIMATORS
-from kbcli.core.kde import ActionSamples
-from kbcli.core.keyboard import Keyboard
-from kbcli.core.melody import parse_melody
-from kbcli.core.play import MATCH, replay
-from kbcli.core.posteriors import POSTERIORS
-from kbcli.core.table import LikelihoodTable
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.estimators import ESTIMATORS
+from kbcli.core.adaptation.loop import adapt
+from kbcli.core.adaptation.posteriors.kde.samples import ActionSamples
+from kbcli.core.adaptation.setup import build_samples, build_table
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.keyboard import Keyboard
+from kbcli.core.instrument.melody import parse_melody
+from kbcli.core.model.table import LikelihoodTable
+from kbcli.core.playing.play import MATCH, replay
 from kbcli.sim import SimConfig, World, make_reacher
 from kbcli.stages.adapt.config import AdaptConfig, PlayCheck
 from kbcli.stages.adapt.record import Recorder, end_angles
@@ -36,7 +35,7 @@ def play_success(model, keyboard: Keyboard, sim: SimConfig, family: str, truth: 
     (at ``truth``, no correction) and ``adapted`` (at ``truth``, actions corrected by
     ``estimate``); NaN for what was not measured. Each replay has its own child of ``rng``, by
     name (``PLAY_RUNS``), whichever others run. ``pool``: per-class draws of p(action | sound)
-    to resample instead of calling ``model.sample_actions`` (see :func:`kbcli.core.play.replay`).
+    to resample instead of calling ``model.sample_actions`` (see :func:`kbcli.core.playing.play.replay`).
     """
     melody = parse_melody(check.melody, keyboard)
     n = len(transforms.FAMILIES.get(family).params)
@@ -91,11 +90,11 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     rng : numpy.random.Generator
         Split into the robot's and the world's generators.
     table : LikelihoodTable, optional
-        A prebuilt :func:`kbcli.core.adapt.build_table` for ``model`` (rasterise once, reuse).
+        A prebuilt :func:`kbcli.core.adaptation.loop.build_table` for ``model`` (rasterise once, reuse).
     snapshot_steps : tuple of int
         Steps (0: the prior) at which to keep the posterior.
     samples : ActionSamples, optional
-        The ``kde`` posterior's per-class samples (:func:`kbcli.core.adapt.build_samples`), shared
+        The ``kde`` posterior's per-class samples (:func:`kbcli.core.adaptation.loop.build_samples`), shared
         across experiments; default: drawn per run.
     play : PlayCheck, optional
         Also measure the playing success (adds ``play_before``, ``play_unadapted``,
@@ -124,7 +123,7 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         ``errors`` (T,) px error of the estimate (``cfg.robot.estimator``) vs truth, ``ml_errors`` (T,),
         ``angle_errors`` (T,) deg, ``entropy`` (T,) nats, ``ml_prob`` (T,), ``mass`` (T,),
         ``stop`` (T,) bool, ``step_ms`` (T,); ``truth_logratio`` (T,) the log of the posterior at
-        the truth over its maximum (:meth:`~kbcli.core.posterior.Posterior.log_ratio_at`; world
+        the truth over its maximum (:meth:`~kbcli.core.adaptation.posteriors.posterior.Posterior.log_ratio_at`; world
         side, for the evaluation); ``joint_angles`` (T, 2) the arm's pose after each
         touch (dynamics mode); ``snapshot_steps`` (S,), ``snapshots`` (S, ny, nx)
         log translation marginals, ``snapshot_angles`` (S, A) angle marginals (rigid); ``dx``,
@@ -243,6 +242,6 @@ def build_shared_samples(cfg: AdaptConfig, model, seed,
     """The ``kde`` posterior's per-class samples for ``cfg`` (None for other posteriors), drawn
     from ``seed`` once per class, to share across many :func:`experiment` calls (``table``: the
     model raster for ``cfg``, built when needed and not given)."""
-    if not POSTERIORS.get(cfg.robot.posterior).uses_samples:
+    if not cfg.robot.kind.uses_samples:
         return None
     return build_samples(model, cfg.adapter_config(), seed, table=table)

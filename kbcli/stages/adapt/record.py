@@ -5,12 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core import transforms
-from kbcli.core.adapt import Step
-from kbcli.core.adapter import Adapter
-from kbcli.core.adapter_config import AdapterConfig
-from kbcli.core.estimators import ESTIMATORS
-from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.adaptation.adapter import Adapter
+from kbcli.core.adaptation.config import AdapterConfig
+from kbcli.core.adaptation.estimators import ESTIMATORS
+from kbcli.core.adaptation.loop import Step
+from kbcli.core.instrument import transforms
 
 #: Per-step records of a ``run`` artifact, in the order :meth:`Recorder.add` takes them.
 RECORDS = ("actions", "landed", "perceived", "classes", "estimates", "means", "errors", "ml_errors",
@@ -93,7 +92,7 @@ class Recorder:
         if self.snap_t:
             out["snapshots"] = np.stack(self.snap_log)
             out["snapshot_angles"] = np.stack(self.snap_ang)
-        if POSTERIORS.get(self.adapter.cfg.posterior).uses_samples:
+        if self.adapter.kind.uses_samples:
             out["bandwidths"] = np.asarray(self.adapter.bandwidths, float)
         out["redundancy_radius"] = np.float64(getattr(self.adapter, "redundancy_radius", 0.0))
         rob = getattr(self.adapter, "robust", None)
@@ -134,8 +133,8 @@ def run_attrs(res: dict[str, np.ndarray], acfg: AdapterConfig, *, truth: np.ndar
         final = ESTIMATORS.get(acfg.estimator).final(res)
     wf = world_family or acfg.family
     return {
-        "strategy": acfg.strategy,
-        "posterior": acfg.posterior,
+        "strategy": acfg.strategy.name,
+        "posterior": acfg.posterior.name,
         "family": acfg.family,
         "world_family": wf if truth is not None else None,
         "steps": n,

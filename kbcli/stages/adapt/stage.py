@@ -8,8 +8,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from kbcli.core import transforms
-from kbcli.core.keyboard import KeyboardConfig
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.keyboard import KeyboardConfig
 from kbcli.errors import ArtifactError, KbcliError
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages.adapt.config import DEFAULT_SNAPSHOTS, AdaptConfig

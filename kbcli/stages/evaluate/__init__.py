@@ -8,9 +8,9 @@ A **method** is a named table of adapt options plus the strategies it compares
   (``posterior = "kde"``), the maximum-likelihood hypothesis as the estimate (``estimator = "ml"``),
   the model as learned (``model_blur = 0``), strategies ``random`` (the baseline) and ``active``
   (Sect. III-E; its candidates' confusion and simulated updates use the model's
-  ``p(sound | action)``, see :mod:`kbcli.core.strategies`, while the posterior it reads and the
+  ``p(sound | action)``, see :mod:`kbcli.core.adaptation.strategies`, while the posterior it reads and the
   one that is updated are the KDE product);
-- ``kbcli``: our best choice: whatever :class:`kbcli.core.adapt.AdapterConfig`'s defaults are (the
+- ``kbcli``: our best choice: whatever :class:`kbcli.core.adaptation.loop.AdapterConfig`'s defaults are (the
   likelihood posterior and the posterior mean today), strategies random, active and infogain. Its
   TOML table names only the strategies, so changing kbcli's defaults changes what ``kbcli`` means;
 - any other name: an ablation (e.g. the paper's strategies and estimator on our posterior).
@@ -33,7 +33,7 @@ worker that ran it nor on which modes or methods were selected.
 This package holds the config (:mod:`.config`, :mod:`.methods`), plans the experiments
 (:func:`plan`, :mod:`.planning`), runs one in a worker (:func:`setup`, :func:`run_experiment`,
 :mod:`.worker`) and assembles the results into the ``evaluation`` artifact (:func:`assemble`,
-:mod:`.assembly`) with :mod:`kbcli.core.stats`: RMSE against observations per category, method
+:mod:`.assembly`) with :mod:`kbcli.core.adaptation.stats`: RMSE against observations per category, method
 and strategy (Fig. 7), observations to each error threshold, tie-corrected Mann-Whitney U p-values
 against the baseline strategy of the same method (and the smallest p-value the design can give),
 entropy per step (Fig. 6), playing success, and one example run's posterior snapshots per method

@@ -1,5 +1,5 @@
 """Assembling the ``evaluation`` artifact from every experiment's result, with
-:mod:`kbcli.core.stats`: curves per mode, method, category and strategy, observations to each
+:mod:`kbcli.core.adaptation.stats`: curves per mode, method, category and strategy, observations to each
 threshold, the tests against the baseline strategy, entropy, playing success and the example runs
 (:func:`assemble`)."""
 
@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from kbcli.core import stats
-from kbcli.core.keyboard import Keyboard
+from kbcli.core.adaptation import stats
+from kbcli.core.instrument.keyboard import Keyboard
 from kbcli.errors import ConfigError
 from kbcli.stages.artifact import Artifact, ref
 from kbcli.stages.evaluate.config import EvaluateConfig, resolved_methods

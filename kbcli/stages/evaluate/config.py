@@ -11,8 +11,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import Field, InstanceOf, field_validator, model_validator
 
-from kbcli.core import transforms
-from kbcli.core.applies import refuse_unused
+from kbcli.core.adaptation.config import refuse_inactive
 from kbcli.core.config import (
     Name,
     Names,
@@ -21,8 +20,10 @@ from kbcli.core.config import (
     Positive,
     Whole,
     between,
+    refused_option,
 )
-from kbcli.core.melody import DEFAULT_MELODY
+from kbcli.core.instrument import transforms
+from kbcli.core.instrument.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
 from kbcli.sim import MODES
 from kbcli.sim.config import ReachNoise
@@ -189,7 +190,7 @@ class EvaluateConfig(StageConfig):
     modes : tuple of str
         Reaching modes (:data:`kbcli.sim.MODES`).
     family : str
-        Transform family (:data:`kbcli.core.transforms.FAMILIES`).
+        Transform family (:data:`kbcli.core.instrument.transforms.FAMILIES`).
     max_steps : int
         Observations per experiment (T).
     thresholds : tuple of float
@@ -315,9 +316,13 @@ class EvaluateConfig(StageConfig):
         for meth in self.methods:
             for s in meth.strategies:
                 for m in self.modes:
-                    acfg = adapt_config(self, meth.name, s, m)
+                    try:
+                        acfg = adapt_config(self, meth.name, s, m)
+                    except ConfigError as exc:  # a part refused an option: name the method's
+                        raise refused_option(exc, {k: k for k in meth.given()},
+                                             f"methods.{meth.name}") from None
             if acfg is not None:  # options the method's parts do not read are refused
-                refuse_unused(acfg.robot, meth.given(), f"methods.{meth.name}", meth.strategies)
+                refuse_inactive(acfg.robot, meth.given(), f"methods.{meth.name}", meth.strategies)
         return self
 
     def _check_names(self) -> None:
@@ -397,7 +402,7 @@ def adapt_config(cfg: EvaluateConfig, method: str, strategy: str, mode: str):
     adapt = adapt_stage()
     if adapt is None:
         return None
-    values = {**cfg.method(method).options, "strategy": strategy, "mode": mode,
+    values = {**cfg.method(method).options_for(strategy), "strategy": strategy, "mode": mode,
               "max_steps": cfg.max_steps, "family": cfg.family,
               "reach_noise": cfg.reach_noise[mode], "arm": dict(cfg.arm[mode])}
     if isinstance(values.get("robot"), Mapping):
@@ -414,7 +419,7 @@ def resolved_methods(cfg: EvaluateConfig, model=None) -> dict:
     ``model``: the robust posterior's ``redundancy_radius`` (px), ``robust_blurs`` (px) and
     ``robust_eta`` (its learning rate); 0, [] and 1 with the plain or KDE posterior. Empty without a model.
     """
-    from kbcli.core.adapter_config import learning_rate, redundancy_radius, robust_blurs
+    from kbcli.core.adaptation.config import learning_rate, redundancy_radius, robust_blurs
 
     out = {}
     for m in cfg.methods:

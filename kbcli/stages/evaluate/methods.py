@@ -10,7 +10,9 @@ from typing import Any, ClassVar
 
 from pydantic import Field, field_validator, model_validator
 
+from kbcli.core.adaptation.strategies import STRATEGIES
 from kbcli.core.config import Name, Names, each, member_of
+from kbcli.core.options import for_part, owners
 from kbcli.errors import ConfigError
 from kbcli.sim import MODES
 from kbcli.stages.config import StageConfig
@@ -55,8 +57,8 @@ def adapt_stage():
 
 
 def known_strategies() -> tuple[str, ...]:
-    """Strategy names the adapter offers (:data:`kbcli.core.strategies.STRATEGIES`)."""
-    from kbcli.core.strategies import STRATEGIES
+    """Strategy names the adapter offers (:data:`kbcli.core.adaptation.strategies.STRATEGIES`)."""
+    from kbcli.core.adaptation.strategies import STRATEGIES
 
     return tuple(STRATEGIES)
 
@@ -139,6 +141,29 @@ class Method(StageConfig):
                 f"methods.{self.name}.{fixed[0]} is set per experiment by the protocol: use "
                 "strategies, modes, max_steps, family, reach_noise and arm of [evaluate] instead")
         return self
+
+    @model_validator(mode="after")
+    def _strategies_take(self) -> Method:
+        """A strategy option (``candidates``, ...) must be taken by one of the method's
+        strategies (each gets those it takes: :meth:`options_for`)."""
+        robot = self.options.get("robot")
+        flat = {**self.options, **(dict(robot) if isinstance(robot, Mapping) else {})}
+        flat.pop("robot", None)
+        for key in flat:
+            who = owners(STRATEGIES, key)
+            if who and not set(who) & set(self.strategies):
+                raise ConfigError(f"methods.{self.name}: {key} does not apply to this method: no "
+                                  f"strategy of it takes it (strategy {', '.join(who)} "
+                                  f"{'does' if len(who) == 1 else 'do'})")
+        return self
+
+    def options_for(self, strategy: str) -> dict[str, Any]:
+        """The method's adapt options for one of its strategies: a strategy option another of its
+        strategies takes left out (a ``robot`` table's too)."""
+        out = for_part(STRATEGIES, strategy, self.options)
+        if isinstance(out.get("robot"), Mapping):
+            out["robot"] = for_part(STRATEGIES, strategy, out["robot"])
+        return out
 
     def given(self) -> list[str]:
         """The adapt options the method's table sets (a ``robot`` table's too)."""

@@ -7,8 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from kbcli.core.estimators import ESTIMATORS
-from kbcli.core.posteriors import POSTERIORS
+from kbcli.core.adaptation.estimators import ESTIMATORS
 from kbcli.errors import ConfigError
 from kbcli.stages.evaluate.config import EvaluateConfig, adapt_config
 from kbcli.stages.evaluate.methods import adapt_stage
@@ -82,7 +81,7 @@ def run_experiment(state: dict, task: Task) -> dict[str, np.ndarray]:
         if task.play_reference:  # a seed of their own: the same whichever task runs them
             kw["reference_rng"] = np.random.default_rng(task.reference_seed)
         if "play_pool" not in state:  # Algorithm 1's actions: a pool per class, resampled
-            from kbcli.core.kde import ActionSamples
+            from kbcli.core.adaptation.posteriors.kde.samples import ActionSamples
 
             state["play_pool"] = ActionSamples(state["model"], PLAY_POOL, [cfg.seed, _key("play")])
         kw["play_pool"] = state["play_pool"]
@@ -116,13 +115,12 @@ def _samples(state: dict, acfg, seed: int):
     same sampling settings; drawn from ``SeedSequence([seed, cls])`` once per class, so every
     process draws the same ones (None for other posteriors)."""
     adapt = adapt_stage()
-    if acfg is None or adapt is None or not POSTERIORS.get(getattr(acfg, "posterior", "likelihood")).uses_samples:
+    if acfg is None or adapt is None:
         return None
     r = acfg.adapter_config()
-    if r.kde_draw != "shared":  # drawn anew for every observation, by the adapter itself
+    key = r.kind.sample_key(r)  # None: no samples shared (or drawn anew at every touch)
+    if key is None:
         return None
-    key = (r.kde_samples, r.kde_bandwidth, r.resolution, r.kde_beyond, r.family,
-           r.prior_halfwidth, r.max_angle, r.angle_resolution)
     if key not in state["samples"]:
         state["samples"][key] = adapt.build_shared_samples(acfg, state["model"], [seed],
                                                            table=_table(state, acfg))

@@ -6,7 +6,7 @@ iCub robot", asking for "more experiments to confirm this hypothesis". This stag
 1. **learn** a model for every exploration strategy x reach budget of ``[quality]`` (e.g. active
    and random exploration, 100 to 1600 reaches) with the configured arm (``realistic`` by default),
    each from its own seed; its quality is measured against the simulator (accuracy, boundary
-   error) and self-estimated (:mod:`kbcli.core.reliability`);
+   error) and self-estimated (:mod:`kbcli.core.model.reliability`);
 2. **adapt** with every model, for every row (a strategy and its adapt options: random, active and
    infogain with the robust posterior, and infogain with the plain posterior for reference), to
    the paper's fixed displacements (small / medium / large), ``experiments`` times each. The

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 from scipy import stats as sps
 
-from kbcli.core.adapter_config import REDUNDANCY_FACTOR, blur_grid, own_boundary_error, temper
+from kbcli.core.adaptation.config import REDUNDANCY_FACTOR, blur_grid, own_boundary_error, temper
 from kbcli.stages.artifact import Artifact, ref
 from kbcli.stages.quality.config import (
     EXACT,

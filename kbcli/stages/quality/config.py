@@ -8,7 +8,7 @@ from typing import Any
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from kbcli.core.applies import refuse_unused, unused, why
+from kbcli.core.adaptation.config import SLOTS, option_names, refuse_inactive
 from kbcli.core.config import (
     Config,
     Flag,
@@ -17,8 +17,10 @@ from kbcli.core.config import (
     NonNegativeInt,
     Whole,
     between,
+    refused_option,
 )
-from kbcli.core.model_classes import EXACT  # the reference row's model: the exact class
+from kbcli.core.model.classes import EXACT  # the reference row's model: the exact class
+from kbcli.core.options import for_part, owners
 from kbcli.errors import ConfigError
 from kbcli.sim.arms import arm_config
 from kbcli.sim.config import ModeName, ReachNoise
@@ -192,20 +194,28 @@ class QualityConfig(Config):
     @model_validator(mode="after")
     def _rows_adapt(self) -> QualityConfig:
         """Let the adapt stage check every row's options (the shared ones and the row's); a row's
-        own option its method does not read is refused (:func:`kbcli.core.applies.refuse_unused`)."""
+        own option its method does not read is refused (by the part that does not take it, or
+        :func:`kbcli.core.adaptation.config.refuse_inactive`)."""
         configs = {}
         for name in self.rows:
             try:
                 configs[name] = acfg = adapt_config(self, name)
             except ConfigError as exc:
+                labels = {**{k: f"adapt.{k}" for k in self.adapt}, **{k: k for k in self.rows[name]}}
+                refused = refused_option(exc, labels, f"rows.{name}")
+                if refused is not exc:
+                    raise refused from None
                 raise ValueError(f"the adapt options of row {name!r}: {exc}") from None
-            refuse_unused(acfg.robot, [k for k in self.rows[name] if k != "strategy"],
-                          f"rows.{name}")
+            refuse_inactive(acfg.robot, [k for k in self.rows[name] if k != "strategy"],
+                            f"rows.{name}")
         for option in self.adapt:  # a shared option some row reads is fine; one none reads is not
-            if configs and all(unused(c.robot, [option]) for c in configs.values()):
+            if option not in option_names() or not configs:
+                continue
+            whys = {n: _unread(c.robot, option) for n, c in configs.items()}
+            if all(whys.values()):
                 first = next(iter(configs))
-                raise ValueError(f"adapt.{option} does not apply to any row: "
-                                 f"{why(option, configs[first].robot)} (row {first!r})")
+                raise ValueError(f"adapt.{option} does not apply to any row: {whys[first]} "
+                                 f"(row {first!r})")
         return self
 
     @model_validator(mode="after")
@@ -287,7 +297,11 @@ def adapt_config(cfg: QualityConfig, row: str):
     from kbcli.stages.adapt import AdaptConfig
 
     opts = {"strategy": "infogain"} if row == IDEAL_ROW else dict(cfg.rows[row])
-    values = {**dict(cfg.adapt), **opts, "mode": cfg.mode, "arm": dict(cfg.arm),
+    shared = dict(cfg.adapt)
+    for slot, (registry, default) in SLOTS.items():  # the shared options the row's parts take
+        part = opts.get(slot, shared.get(slot, default))
+        shared = for_part(registry, part if isinstance(part, str) else part["name"], shared)
+    values = {**shared, **opts, "mode": cfg.mode, "arm": dict(cfg.arm),
               "reach_noise": float(cfg.reach_noise), "max_steps": cfg.max_steps,
               "family": "translation", "stop": False}
     return AdaptConfig.from_dict(values)
@@ -296,3 +310,15 @@ def adapt_config(cfg: QualityConfig, row: str):
 def model_names(cfg: QualityConfig) -> list[tuple[str, str, int]]:
     """(name, exploration, budget) of every model of the sweep, in artifact order."""
     return [(f"{e}-{b}", e, b) for e in cfg.explorations for b in cfg.budgets]
+
+
+def _unread(robot, option: str) -> str:
+    """Why a row's robot config does not read ``option`` ('' when it does)."""
+    if option in robot.flat():
+        return robot.inactive().get(option, "")
+    for slot, (registry, _) in SLOTS.items():
+        who = owners(registry, option)
+        if who:
+            return (f"it is an option of {registry.kind} {' and '.join(who)}; here the {slot} is "
+                    f"{getattr(robot, slot).name}")
+    return "no part of the row takes it"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core.adapt_setup import table_key
+from kbcli.core.adaptation.setup import table_key
 from kbcli.stages.quality.config import EXACT, QualityConfig, adapt_config
 from kbcli.stages.quality.plan import LearnTask, Task
 

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 from kbcli.stages.artifact import Artifact
-from kbcli.stages.report.source import Figure, upgrade
+from kbcli.stages.report.source import Figure, exact_mode, upgrade
 
 
 def figures(art: Artifact) -> list[Figure]:
     """The figures of the report (file names and captions)."""
     art = upgrade(art)
     modes = art.attrs["modes"]
-    first = "ideal" if "ideal" in modes else modes[0]
+    first = exact_mode(modes) or modes[0]
     figs = []
     ex = art.data.get("examples", {}).get(first, {})
     if any(any("snapshots" in e for e in by_s.values()) for by_s in ex.values()):

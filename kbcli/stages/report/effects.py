@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import ndtr
 
-from kbcli.core import stats
+from kbcli.core.adaptation import stats
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.report.source import fmt_p
 

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core import stats
+from kbcli.core.adaptation import stats
+from kbcli.core.adaptation.strategies import STRATEGIES
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.report.source import (
     ENTROPY_STEPS,
@@ -22,6 +23,7 @@ from kbcli.stages.report.source import (
     methods_of,
     others,
     pct,
+    physical_mode,
     played,
     robot,
 )
@@ -159,7 +161,7 @@ def restores(art: Artifact, method: str, *, test: bool = False) -> tuple[str, st
     success after adaptation significantly below the one before (one-sided Mann-Whitney,
     p < :data:`NOT_SIGNIFICANT`)."""
     exp = art.data["experiments"]
-    sel = (exp["mode"] == "dynamics") & (exp["method"] == method)
+    sel = (exp["mode"] == physical_mode(art.attrs["modes"])) & (exp["method"] == method)
     first = methods_of(art)[method]["strategies"][0]
     # before and unadapted are shared by the rows of a displacement and repetition: count once
     before = played(art, sel & (exp["strategy"] == first), "play_before")
@@ -244,7 +246,7 @@ def large_why(art: Artifact, mode: str) -> str:
                          + (", same runs" if sfx else "") + f", {s})")
                 txt = f"{label}: p={fmt_p(best[0])} at {best[1]:g} px"
                 (sig if best[0] < NOT_SIGNIFICANT else calm).append(txt)
-                if x == judged and not sfx and s in ("active", "paper-active"):
+                if x == judged and not sfx and STRATEGIES.trait(s, "paper", False):
                     judged_sig = best[0] < NOT_SIGNIFICANT
     if not sig and not calm:
         return ""

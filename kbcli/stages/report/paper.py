@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 from functools import partial
 
+from kbcli.core.adaptation.estimators import ESTIMATORS
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.report.effects import falls, shrinks
 from kbcli.stages.report.judge import (
@@ -22,8 +23,10 @@ from kbcli.stages.report.source import (
     Claim,
     check,
     compared,
+    exact_mode,
     methods_of,
     others,
+    physical_mode,
     robot,
     short,
     upgrade,
@@ -59,7 +62,7 @@ def claims(art: Artifact, own: Artifact | None = None) -> list[Claim]:
     art = upgrade(art)
     check(art)
     modes = art.attrs["modes"]
-    ideal = "ideal" if "ideal" in modes else None
+    ideal = exact_mode(modes)
     rms = rms_view(art)
     out = [*_entropy_claims(art, ideal), *_displacement_claims(art, ideal, rms),
            *_dynamics_claims(art, rms)]
@@ -126,7 +129,7 @@ def _trend_fn(art: Artifact, mode: str, sfx: str = ""):
 def _other_estimate(art: Artifact, method: str, fn_of_sfx, s: str, verdict: str) -> str:
     """The same claim read with the posterior mean when ``method`` estimates by the ML cell (so
     that no verdict rests on its tie rule unseen), or ''."""
-    if robot(art, method).get("estimator") != "ml":
+    if not ESTIMATORS.trait(robot(art, method).get("estimator", "mean"), "ties", False):
         return ""
     sfx, label = OTHER_ESTIMATE
     text, v = fn_of_sfx(sfx)(method, s)
@@ -198,7 +201,8 @@ def _dynamics(art: Artifact, x: str, s: str, sfx: str = "", *,
     """'Not significant' in dynamics mode over every category, one verdict."""
     parts, verdicts = [], []
     for cat in art.attrs["categories"]:
-        m, v = not_significant(art, "dynamics", x, cat, s, sfx, two_sided=two_sided)
+        m, v = not_significant(art, physical_mode(art.attrs["modes"]), x, cat, s, sfx,
+                               two_sided=two_sided)
         if m == "not evaluated":
             continue
         parts.append(f"{cat}: {m}")
@@ -211,17 +215,18 @@ def _dynamics(art: Artifact, x: str, s: str, sfx: str = "", *,
 def _dynamics_claims(art: Artifact, rms: Artifact | None = None) -> list[Claim]:
     judged, base = art.attrs["judged"], art.attrs["baseline"]
     opts = short(art, judged)
-    if "dynamics" not in art.attrs["modes"]:
+    mode = physical_mode(art.attrs["modes"])
+    if mode is None:
         return [Claim("Sect. IV-C", DYN_RESTORES, judged, opts, "dynamics mode not evaluated",
                       "not measured"),
                 Claim("Sect. IV-C", DYN_NS, judged, opts, "dynamics mode not evaluated",
                       "not measured")]
     measured, verdict = restores(art, judged)
     others_ = "; ".join(f"{x}: {restores(art, x)[0]} [{restores(art, x)[1]}]"
-                        for x in others(art) if "dynamics" in methods_of(art)[x]["modes"])
+                        for x in others(art) if physical_mode(methods_of(art)[x]["modes"]))
     out = [Claim("Sect. IV-C", DYN_RESTORES, judged, opts, measured, verdict, others_,
                  readings=join(reading("restore", restores(art, judged, test=True))),
-                 mode="dynamics")]
+                 mode=mode)]
 
     dyn = partial(_dynamics, art)
     for s in compared(art, judged):
@@ -231,7 +236,7 @@ def _dynamics_claims(art: Artifact, rms: Artifact | None = None) -> list[Claim]:
         alt = join(reading("error", _dynamics(rms, judged, s) if rms is not None else None),
                    reading("ns", _dynamics(art, judged, s, two_sided=True)))
         out.append(Claim("Sect. IV-C", DYN_NS, judged, opts, f"{s} vs {base}: {measured}",
-                         verdict, beside(art, dyn), readings=alt, mode="dynamics", strategy=s))
+                         verdict, beside(art, dyn), readings=alt, mode=mode, strategy=s))
     return out
 
 
@@ -241,14 +246,15 @@ def claim_rules(art: Artifact) -> dict:
     art = upgrade(art)
     modes = art.attrs["modes"]
     rules: dict = {}
-    if "ideal" in modes:
-        rules[FIG6] = lambda x, s: entropy_claim(art, "ideal", x, s)
+    ideal = exact_mode(modes)
+    if ideal is not None:
+        rules[FIG6] = lambda x, s: entropy_claim(art, ideal, x, s)
         for cat, _, text, rule in DISPLACEMENT_CLAIMS:
             if cat in art.attrs["categories"]:
-                rules[text] = rule_fn(art, "ideal", cat, rule)
+                rules[text] = rule_fn(art, ideal, cat, rule)
         if all(c in art.attrs["categories"] for c, *_ in DISPLACEMENT_CLAIMS):
-            rules[TREND[1]] = _trend_fn(art, "ideal")
-    if "dynamics" in modes:
+            rules[TREND[1]] = _trend_fn(art, ideal)
+    if physical_mode(modes) is not None:
         rules[DYN_RESTORES] = lambda x, s: restores(art, x)
         rules[DYN_NS] = partial(_dynamics, art)
     return rules

@@ -26,6 +26,7 @@ from kbcli.stages.report.source import (
     Figure,
     Report,
     check,
+    exact_mode,
     methods_of,
     upgrade,
 )
@@ -199,14 +200,15 @@ def _figures_section(figs: list[Figure]) -> list[str]:
 
 
 def _ablation_section(art: Artifact) -> list[str]:
-    if "ideal" not in art.attrs["modes"] or "large" not in art.attrs["categories"]:
+    ideal = exact_mode(art.attrs["modes"])
+    if ideal is None or "large" not in art.attrs["categories"]:
         return []
     return ["## Large displacements: representation, estimator or strategy? (ideal mode)", "",
             "Each method's runs on the large displacements; rows marked *same runs* read the "
             "other estimate (maximum-likelihood cell or posterior mean) of the same runs, "
             "which every run records at every step. In brackets: the share of runs that got "
             "below the threshold within max_steps.", "",
-            *ablation_table(art, "ideal"), ""]
+            *ablation_table(art, ideal), ""]
 
 
 def _mode_sections(art: Artifact, m: str) -> list[str]:

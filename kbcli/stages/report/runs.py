@@ -9,7 +9,7 @@
   the adapter's default ``stop_mass`` within each method's ``stop_radius``. A rule that fires
   early while the error is large is a rule the robot should not trust; the table shows both.
 - **The truth ruled out**: each run records, at every step, the log of the posterior at the true
-  displacement over its maximum (:meth:`kbcli.core.posterior.Posterior.log_ratio_at`, read on the
+  displacement over its maximum (:meth:`kbcli.core.adaptation.posteriors.posterior.Posterior.log_ratio_at`, read on the
   grid cells around the truth). A run *ruled the truth out* when that fell below
   :data:`EXCLUDED` (1e-12 of the maximum) at any step: a method whose posterior can do that for
   reasons other than the evidence (samples that stop where the model's working area stops) has
@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from kbcli.core.adapter_config import AdapterConfig
+from kbcli.core.adaptation.config import AdapterConfig
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.report.source import methods_of, robot
 

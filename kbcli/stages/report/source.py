@@ -10,8 +10,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kbcli.core import stats
+from kbcli.core.adaptation import stats
+from kbcli.core.adaptation.config import SLOTS
+from kbcli.core.options import flat_view
 from kbcli.errors import ArtifactError
+from kbcli.sim.modes import MODES
 from kbcli.stages.artifact import Artifact
 
 #: Steps at which the RMSE table is read (those beyond max_steps are dropped).
@@ -60,6 +63,17 @@ class Report:
     readme: str
     claims: list[Claim]
     figures: list[Figure] = field(default_factory=list)
+
+
+def exact_mode(modes) -> str | None:
+    """The first of ``modes`` whose arm simulates no physics (the paper's Sect. IV-A and IV-B:
+    the finger lands where it aims), None when none of them is such a mode."""
+    return next((m for m in modes if m in MODES and not MODES.get(m).physics), None)
+
+
+def physical_mode(modes) -> str | None:
+    """The first of ``modes`` whose arm simulates its dynamics (the paper's Sect. IV-C), or None."""
+    return next((m for m in modes if m in MODES and MODES.get(m).physics), None)
 
 
 def fmt_p(p: float) -> str:
@@ -183,14 +197,15 @@ def methods_of(art: Artifact) -> dict:
 
 
 def robot(art: Artifact, method: str) -> dict:
-    """The robot options a method resolved to (those of its first mode and strategy, with the
-    per-experiment strategy dropped)."""
+    """The robot options a method resolved to, in the flat layout (those of its first mode, each
+    strategy's own options beside the shared ones; the per-experiment strategy dropped)."""
     opts = methods_of(art)[method]["options"]
     for by_s in opts.values():
+        r: dict = {}
         for d in by_s.values():
-            r = dict(d.get("robot", {}))
-            r.pop("strategy", None)
-            return r
+            r.update(flat_view(d.get("robot", {}), SLOTS))
+        r.pop("strategy", None)
+        return r
     return {}
 
 
@@ -241,7 +256,7 @@ def played(art: Artifact, sel: np.ndarray, key: str) -> np.ndarray:
 def prior_entropy(art: Artifact, method: str) -> float | None:
     """Entropy (nats) of a method's uniform prior over its hypothesis grid: the posterior entropy
     at t = 0, before any observation (None when its options do not say the grid)."""
-    from kbcli.core.grid import grid_bytes
+    from kbcli.core.adaptation.grid import grid_bytes
 
     r = robot(art, method)
     try:

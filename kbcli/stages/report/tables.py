@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kbcli.core.applies import applies, view
+from kbcli.core.adaptation.config import shown
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.report.source import (
     KEY_OPTIONS,
@@ -33,16 +33,16 @@ def methods_table(art: Artifact) -> list[str]:
             *_loop_rows(_loop_options(info, meths), meths)]
 
 
-#: What the methods table prints for an option a method does not read (:mod:`kbcli.core.applies`).
+#: What the methods table prints for an option a method does not read.
 NOT_APPLICABLE = "n/a"
 
 
 def applicable(art: Artifact, method: str) -> dict:
     """A method's robot options, :data:`NOT_APPLICABLE` for those it does not read (its parts
-    name what they read: :func:`kbcli.core.applies.applies`)."""
+    and the adapter say which: :func:`kbcli.core.adaptation.config.shown`)."""
     r, strategies = robot(art, method), methods_of(art)[method]["strategies"]
-    cfg = view(r)
-    return {k: v if applies(k, cfg, strategies) else NOT_APPLICABLE for k, v in r.items()}
+    read = shown(r, strategies)
+    return {k: v if k in read else NOT_APPLICABLE for k, v in r.items()}
 
 
 def _robot_rows(art: Artifact, meths: list[str]) -> list[str]:
@@ -53,7 +53,7 @@ def _robot_rows(art: Artifact, meths: list[str]) -> list[str]:
     keys += sorted({k for r in robots.values() for k in r} - set(keys))
     lines = []
     for k in keys:
-        vals = [robots[x].get(k, "(default)") for x in meths]
+        vals = [robots[x].get(k, NOT_APPLICABLE) for x in meths]
         if all(v == NOT_APPLICABLE for v in vals):
             continue
         name = f"**{k}**" if len({str(v) for v in vals}) > 1 else k
@@ -87,7 +87,7 @@ def _model_rows(art: Artifact, info: dict, meths: list[str]) -> list[str]:
     lines = []
     robots = {x: applicable(art, x) for x in meths}
     for k in ("redundancy_radius", "robust_blurs", "robust_eta"):  # as the model resolved them
-        reads = [robots[x].get(k) != NOT_APPLICABLE for x in meths]
+        reads = [robots[x].get(k, NOT_APPLICABLE) != NOT_APPLICABLE for x in meths]
         if any(k in info[x].get("from_model", {}) for x in meths) and any(reads):
             vals = [info[x].get("from_model", {}).get(k, "") for x in meths]
             vals = [NOT_APPLICABLE if not ok else

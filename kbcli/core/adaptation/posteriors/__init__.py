@@ -1,0 +1,30 @@
+"""The kinds of posterior over the transform (Sect. III-D): a registry read by name.
+
+``AdapterConfig.posterior`` names one :class:`~kbcli.core.adaptation.posteriors.base.PosteriorKind`
+(the protocol: :mod:`kbcli.core.adaptation.posteriors.base`), one module per kind:
+
+``likelihood`` (ours, :mod:`kbcli.core.adaptation.posteriors.likelihood`)
+    Each touch multiplies the posterior by the model's classifier read at the touch (Eq. 8 with
+    the learned p(sound | action)); it can be made robust to the model's own errors
+    (:mod:`kbcli.core.adaptation.posteriors.likelihood.robust`).
+``kde`` (the paper's, Eq. 7, :mod:`kbcli.core.adaptation.posteriors.kde`)
+    Each touch multiplies it by a kernel density estimate of p(action | sound) built from
+    samples of the model (:class:`~kbcli.core.adaptation.posteriors.kde.samples.ActionSamples`).
+"""
+
+from __future__ import annotations
+
+# registration order is the order ``--help`` and error messages list the kinds in
+from kbcli.core.adaptation.posteriors import likelihood as _likelihood  # noqa: F401  registers "likelihood"
+
+# isort: split
+from kbcli.core.adaptation.posteriors import kde as _kde  # noqa: F401  registers "kde"
+from kbcli.core.adaptation.posteriors.base import (
+    POSTERIORS,
+    KindBase,
+    Observation,
+    PosteriorKind,
+    RobustKind,
+)
+
+__all__ = ["POSTERIORS", "KindBase", "Observation", "PosteriorKind", "RobustKind"]

@@ -1,0 +1,424 @@
+"""Adaptation that repairs the model: a joint belief over the shift and the model's map.
+
+Every touch the robot makes while adapting is a labelled sample of the instrument: under a
+hypothesis ``h`` of the displacement, the touch at ``a`` that sounded ``c`` says that the reference
+map holds ``c`` at ``T_h^-1(a)`` (``a - h`` for a translation). This module keeps, for every
+hypothesis of the grid, the model's map *repaired* by the touches mapped at that hypothesis, and
+scores each hypothesis by how well its own repaired map predicted each touch before it was made: a
+Rao-Blackwellised joint belief over (shift, map), the map integrated out given the shift (the
+scheme of Rao-Blackwellised particle filters for SLAM, Grisetti et al. 2005: each pose hypothesis
+carries its own map). A wrong hypothesis only ever writes labels into its own map, so it cannot
+poison the others.
+
+The map at a reference point ``x`` is a Dirichlet over the sounds (Bayesian kernel inference,
+Doherty et al. 2017; Gan et al. 2020 for classes): its prior is the model's own probabilities
+``q(. | x)`` weighed by a **local confidence** ``kappa(x)``, and each touch adds a kernel-weighted
+count of its sound, ``k(x - x_s) = exp(-|x - x_s|^2 / (2 w^2))``:
+
+``alpha_c(x) = kappa(x) q(c | x) + sum_s k(x - x_s) [c_s = c]``.
+
+``kappa(x)`` is the model's training samples counted with the same kernel (a training sample at
+``x`` is worth one touch there) plus a small floor: high where the model had many nearby samples,
+low where it had few. The predictive of touch ``t`` under ``h``, its previous touches mapped at
+``h``, is the Dirichlet-multinomial one, with an outlier rate ``eps``:
+
+``p(c_t | a_t, h, D_<t) = (1 - eps) (kappa(x) q(c_t | x) + N_t^c) / (kappa(x) + N_t) + eps / C``,
+``x = a_t - h``,
+
+where ``N_t^c = sum_{s<t} k(a_t - a_s) [c_s = c_t]`` and ``N_t`` the same over every sound. For a
+translation the offsets between touches do not depend on ``h``, so these counts are numbers, and
+the whole joint belief is one gather over the grid per touch, as the likelihood posterior's: the
+map is integrated out exactly (given the kernel), without a map per hypothesis in memory. A touch
+near earlier ones is predicted mostly by them, at every hypothesis alike: the ``k``-th touch at one
+spot says little more about the shift than the first (the redundancy the robust posterior
+discounts by hand is here a consequence of the model).
+
+**Local model uncertainty.** The model's probabilities ``q`` are those of the learned model blurred
+by a Gaussian whose width grows with the distance to its nearest training sample,
+``sigma(x) = s d(x)``: the model knows its edges as well as its samples pin them (in a gap of width
+``g`` between samples of two sounds the edge lies anywhere, ``sigma = g / sqrt(12)`` at ``s``
+about 0.6). The scale ``s`` and the outlier rate ``eps`` are unknowns on a small grid marginalised
+online with the shift (:class:`~kbcli.core.adaptation.posteriors.likelihood.robust.RobustPosterior` holds the accumulated
+log-likelihood per value), so the evidence picks how far to trust the model, region by region.
+
+The strategies plan with the same predictive (:func:`repair_outcome`): a candidate's predictive at
+each hypothesis is its repaired map's, so a spot already touched promises little, and the model's
+uncertain regions promise what they can really tell.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.ndimage import gaussian_filter
+from scipy.spatial import cKDTree
+from sklearn.base import clone
+
+from kbcli.core.adaptation.grid import HypothesisGrid
+from kbcli.core.adaptation.posteriors.likelihood.robust import (
+    Nuisance,
+    RobustPosterior,
+    blurred_map,
+    raw_prob,
+)
+from kbcli.core.adaptation.posteriors.likelihood.term import inverse_coords
+from kbcli.core.adaptation.strategies import entropy_rows, outcome_distribution
+from kbcli.core.model.table import LikelihoodTable
+
+#: Default scale ``s`` of the local blur ``sigma(x) = s d(x)``: about ``1 / sqrt(3)``, the std of an
+#: edge uniform in the gap between two samples of different sounds, read at the gap's middle.
+DEFAULT_SCALE = 0.6
+#: Default outlier rates (marginalised).
+DEFAULT_OUTLIERS = (0.001, 0.02, 0.1)
+#: Blur levels (px) the local blur interpolates between; wider local blurs are clipped to the last.
+LEVELS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
+#: Kernel width ``w`` (px) of a touch's (and a training sample's) count.
+DEFAULT_KERNEL = 10.0
+#: Confidence floor: the weight of the model's prior where it has no sample nearby.
+KAPPA_FLOOR = 0.2
+#: A model without training samples (the exact model) is trusted with this weight everywhere.
+KAPPA_EXACT = 1e9
+#: Cell of the planning maps, px.
+PLAN_STEP = 1.0
+
+
+def kernel(d2: np.ndarray, width: float) -> np.ndarray:
+    """The count kernel ``exp(-d^2 / (2 w^2))`` of squared distances ``d2`` (px^2)."""
+    return np.exp(-0.5 * np.asarray(d2, float) / (width * width))
+
+
+@dataclass(frozen=True)
+class RepairMap:
+    """What the repaired belief reads of a model, built once per model raster.
+
+    Attributes
+    ----------
+    table : LikelihoodTable
+        The model's raster (reference frame).
+    distance : (H, W) float32 ndarray
+        Distance (px) of every raster cell to the model's nearest training sample (inf: none).
+    kappa : (H, W) float32 ndarray
+        The local confidence ``kappa(x)``: training samples counted with the kernel, plus the
+        floor.
+    width : float
+        Kernel width ``w``, px.
+    """
+
+    table: LikelihoodTable
+    distance: np.ndarray
+    kappa: np.ndarray
+    width: float
+    floor_blur: float = 0.0
+    _plans: dict = field(default_factory=dict, compare=False, repr=False)
+
+    @classmethod
+    def build(cls, table: LikelihoodTable, samples: np.ndarray | None,
+              width: float = DEFAULT_KERNEL, floor: float = KAPPA_FLOOR,
+              floor_blur: float = 0.0) -> RepairMap:
+        """The repair map of ``table`` for a model whose training samples are at ``samples``
+        ((n, 2) px, reference frame; None or empty: a model without samples, trusted fully)."""
+        h, w = table.shape
+        if samples is None or len(samples) == 0:
+            dist = np.zeros((h, w), np.float32)
+            kappa = np.full((h, w), KAPPA_EXACT, np.float32)
+            return cls(table, dist, kappa, float(width), float(floor_blur))
+        pts = np.asarray(samples, float).reshape(-1, 2)
+        ys = table.origin[1] + table.step * np.arange(h)
+        xs = table.origin[0] + table.step * np.arange(w)
+        gx, gy = np.meshgrid(xs, ys)
+        dist, _ = cKDTree(pts).query(np.column_stack([gx.ravel(), gy.ravel()]))
+        dist = dist.reshape(h, w).astype(np.float32)
+        # the samples splatted on the raster and smoothed: a Gaussian filter of a unit impulse
+        # peaks at 1 / (2 pi sig^2) (sig in cells), so scaling by that counts a sample as 1 at its
+        # own cell
+        counts = np.zeros((h, w))
+        col = np.clip(np.rint((pts[:, 0] - table.origin[0]) / table.step).astype(int), 0, w - 1)
+        row = np.clip(np.rint((pts[:, 1] - table.origin[1]) / table.step).astype(int), 0, h - 1)
+        np.add.at(counts, (row, col), 1.0)
+        sig = width / table.step
+        kappa = gaussian_filter(counts, sig, mode="constant", truncate=4.0) * (2 * math.pi * sig**2)
+        return cls(table, dist, (kappa + floor).astype(np.float32), float(width),
+                   float(floor_blur))
+
+    def _read(self, grid_x: np.ndarray, grid_y: np.ndarray, raster: np.ndarray,
+              outside: float) -> np.ndarray:
+        row, col, inside = self.table._index(grid_x, grid_y)
+        v = raster[row, col]
+        return np.where(inside, v, np.float32(outside)) if not inside.all() else v
+
+    def confidence(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """``kappa`` at coordinates (broadcast); outside the raster the model's silence is sure."""
+        return self._read(x, y, self.kappa, KAPPA_EXACT)
+
+    def local_sigma(self, x: np.ndarray, y: np.ndarray, scale: float) -> np.ndarray:
+        """``sigma(x) = hypot(g, scale d(x))`` (px) at coordinates (``g``: ``floor_blur``),
+        clipped to the widest level."""
+        g = np.float32(self.floor_blur)
+        if scale == 0.0:
+            return np.full(np.broadcast(x, y).shape, g, np.float32)
+        d = self._read(x, y, self.distance, 0.0)
+        return np.minimum(np.hypot(np.float32(scale) * d, g), np.float32(LEVELS[-1]))
+
+    def prob(self, x: np.ndarray, y: np.ndarray, cls: int, scale: float) -> np.ndarray:
+        """``q_s(cls | x)``: the model's map locally blurred by ``sigma(x) = scale d(x)``, read at
+        coordinates (broadcast), linearly interpolated between the blur levels ``LEVELS``."""
+        sig = self.local_sigma(x, y, scale)
+        shape = np.broadcast(x, y).shape
+        if not sig.any():
+            return np.broadcast_to(raw_prob(self.table, x, y, cls), shape)
+        lv = np.asarray(LEVELS, np.float32)
+        j = np.clip(np.searchsorted(lv, sig, side="right") - 1, 0, len(lv) - 2)
+        frac = (sig - lv[j]) / (lv[j + 1] - lv[j])
+        out = np.zeros(shape, np.float32)
+        xb, yb = np.broadcast_arrays(x, y)
+        for k in np.unique(j):
+            for level, wt in ((k, 1.0 - frac), (k + 1, frac)):
+                sel = j == k
+                m = blurred_map(self.table, float(lv[level]))
+                out[sel] += (wt[sel] * raw_prob(m, xb[sel], yb[sel], cls)).astype(np.float32)
+        return out
+
+    def planning_table(self, scale: float, eps: float) -> LikelihoodTable:
+        """The model's map locally blurred at ``scale``, floored at ``eps``, on ``PLAN_STEP`` px
+        cells: what the strategies read a hypothesis' prior predictive from. Cached."""
+        key = (round(float(scale), 6), round(float(eps), 9))
+        if key not in self._plans:
+            t = self.table
+            x0 = t.origin[0]
+            y0 = t.origin[1]
+            h, w = t.shape
+            k = max(1, int(round(PLAN_STEP / t.step)))
+            xs = x0 + t.step * np.arange(0, w, k)
+            ys = y0 + t.step * np.arange(0, h, k)
+            gx, gy = np.meshgrid(xs, ys)
+            probs = np.stack([self.prob(gx, gy, c, scale) for c in range(t.n_classes)], axis=-1)
+            probs /= np.maximum(probs.sum(axis=-1, keepdims=True), 1e-12)
+            self._plans[key] = LikelihoodTable(np.array([x0, y0]), t.step * k, t.n_classes,
+                                               float(eps), probs=probs.astype(np.float32))
+        return self._plans[key]
+
+
+def repair_map(table: LikelihoodTable, samples: np.ndarray | None, width: float,
+               floor_blur: float) -> RepairMap:
+    """:meth:`RepairMap.build` for ``table``, cached on it (every adaptation sharing a table
+    shares its repair map)."""
+    cache = getattr(table, "_repair_cache", None)
+    if cache is None:
+        cache = {}
+        object.__setattr__(table, "_repair_cache", cache)
+    key = (round(float(width), 6), round(float(floor_blur), 6),
+           None if samples is None else len(samples))
+    if key not in cache:
+        cache[key] = RepairMap.build(table, samples, width, floor_blur=floor_blur)
+    return cache[key]
+
+
+@dataclass(frozen=True)
+class Touches:
+    """The touches absorbed so far: where they were read and what they sounded (immutable)."""
+
+    points: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    classes: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
+
+    def add(self, point: np.ndarray, cls: int) -> Touches:
+        return Touches(np.vstack([self.points, np.asarray(point, float).reshape(1, 2)]),
+                       np.append(self.classes, int(cls)))
+
+    def counts(self, points: np.ndarray, n_classes: int, width: float) -> np.ndarray:
+        """(m, C) the kernel-weighted counts of each sound at ``points`` (m, 2)."""
+        pts = np.asarray(points, float).reshape(-1, 2)
+        out = np.zeros((len(pts), n_classes))
+        if len(self.classes) == 0:
+            return out
+        d2 = ((pts[:, None, :] - self.points[None, :, :]) ** 2).sum(axis=2)
+        wts = kernel(d2, width)
+        for c in np.unique(self.classes):
+            out[:, c] = wts[:, self.classes == c].sum(axis=1)
+        return out
+
+    def __len__(self) -> int:
+        return len(self.classes)
+
+
+def repaired_map(rmap: RepairMap, touches: Touches, shift: np.ndarray,
+                 scale: float = DEFAULT_SCALE) -> np.ndarray:
+    """(H, W, C) the Dirichlet parameters ``alpha`` of the map repaired by ``touches`` mapped back
+    by ``shift`` (the map one hypothesis of the joint belief carries), on ``rmap``'s raster: the
+    model's prior ``kappa q_s`` plus each touch's kernel-weighted count of its sound. Its argmax
+    is the repaired map's most probable sound, ``alpha / alpha.sum(-1)`` its predictive."""
+    t = rmap.table
+    h, w = t.shape
+    gx, gy = np.meshgrid(t.origin[0] + t.step * np.arange(w), t.origin[1] + t.step * np.arange(h))
+    prior = np.stack([rmap.prob(gx, gy, c, scale) for c in range(t.n_classes)], axis=-1)
+    alpha = rmap.kappa[..., None].astype(float) * prior
+    pts = touches.points - np.asarray(shift, float)[-2:]
+    for p, c in zip(pts, touches.classes, strict=True):
+        alpha[..., c] += kernel((gx - p[0]) ** 2 + (gy - p[1]) ** 2, rmap.width)
+    return alpha
+
+
+def repair_terms(grid: HypothesisGrid, rmap: RepairMap, touches: Touches, action: np.ndarray,
+                 cls: int, nuisance: Nuisance) -> np.ndarray:
+    """``log p(cls | action, h, D_<t)`` under every nuisance value (scale, outlier) and cell h:
+    the Dirichlet-multinomial predictive of the map repaired by ``touches`` at h.
+
+    Returns
+    -------
+    (S * E, *grid.shape) float32 ndarray
+        Nuisance values in row-major (scale, outlier) order.
+    """
+    if grid.rigid:
+        raise ValueError("the repaired belief needs a translation grid")
+    x, y = inverse_coords(grid, action)
+    c = rmap.table.n_classes
+    cnt = touches.counts(np.asarray(action, float), c, rmap.width)[0]
+    n_c, n = np.float32(cnt[cls]), np.float32(cnt.sum())
+    kappa = np.broadcast_to(rmap.confidence(x, y), grid.shape)
+    s_n, e_n = len(nuisance.blurs), len(nuisance.outliers)
+    out = np.empty((s_n, e_n) + grid.shape, np.float32)
+    for i, s in enumerate(nuisance.blurs):
+        q = np.broadcast_to(rmap.prob(x, y, cls, float(s)), grid.shape)
+        p = (kappa * q + n_c) / (kappa + n)
+        for j, e in enumerate(nuisance.outliers):
+            out[i, j] = p * np.float32(1 - e) + np.float32(e / c)
+    np.log(out, out=out)
+    return out.reshape((s_n * e_n,) + grid.shape)
+
+
+class RepairBelief:
+    """The joint belief over the shift and the repaired map (module docstring); immutable.
+
+    Attributes
+    ----------
+    posterior : RobustPosterior
+        Accumulated log-likelihood per (scale, outlier) value and hypothesis.
+    rmap : RepairMap
+    touches : Touches
+    """
+
+    __slots__ = ("posterior", "rmap", "touches")
+
+    def __init__(self, posterior: RobustPosterior, rmap: RepairMap,
+                 touches: Touches | None = None) -> None:
+        self.posterior = posterior
+        self.rmap = rmap
+        self.touches = Touches() if touches is None else touches
+
+    @classmethod
+    def start(cls, grid: HypothesisGrid, rmap: RepairMap, scales=(DEFAULT_SCALE,),
+              outliers=DEFAULT_OUTLIERS, eta: float = 1.0) -> RepairBelief:
+        """The flat prior over the grid and the nuisance values."""
+        return cls(RobustPosterior(grid, Nuisance.build(scales, outliers), eta=eta), rmap)
+
+    @classmethod
+    def for_model(cls, grid: HypothesisGrid, table: LikelihoodTable, model, cfg) -> RepairBelief:
+        """The flat prior for ``model`` (rasterised as ``table``) and an adapter config ``cfg``
+        (its likelihood posterior's ``repair_kernel``, ``repair_scale``, ``repair_blur``,
+        ``robust_outliers``: None reads the defaults, and the model's own landing scatter for the
+        blur)."""
+        cfg = cfg.posterior
+        width = DEFAULT_KERNEL if cfg.repair_kernel is None else float(cfg.repair_kernel)
+        blur = (float(getattr(model, "reach_sd_", 0.0)) if cfg.repair_blur is None
+                else float(cfg.repair_blur))
+        scale = DEFAULT_SCALE if cfg.repair_scale is None else float(cfg.repair_scale)
+        rmap = repair_map(table, getattr(model, "actions_", None), width, blur)
+        return cls.start(grid, rmap, (scale,), cfg.robust_outliers or DEFAULT_OUTLIERS)
+
+    def update(self, point: np.ndarray, cls: int) -> RepairBelief:
+        """Absorb a touch read at ``point`` that sounded ``cls``."""
+        post = self.posterior
+        terms = repair_terms(post.grid, self.rmap, self.touches, point, cls, post.nuisance)
+        return RepairBelief(post.update(terms), self.rmap, self.touches.add(point, cls))
+
+    def marginal(self):
+        return self.posterior.marginal()
+
+    def outcome(self, table: LikelihoodTable, hyp: np.ndarray, weights: np.ndarray,
+                actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`repair_outcome` of this belief (the strategies' ``Context.outcome``)."""
+        return repair_outcome(self, table, hyp, weights, actions)
+
+    def planning_table(self) -> LikelihoodTable:
+        """The prior predictive map at the most probable (scale, outlier) value."""
+        i, j = self.posterior.map_index()
+        nz = self.posterior.nuisance
+        return self.rmap.planning_table(float(nz.blurs[i]), float(nz.outliers[j]))
+
+
+def repair_outcome(belief: RepairBelief, table: LikelihoodTable, hyp: np.ndarray,
+                   weights: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The posterior predictive of each action's outcome under the repaired belief, and the
+    expected conditional entropy (as :func:`kbcli.core.adaptation.strategies.outcome_distribution`).
+
+    At hypothesis h the outcome of action a follows its repaired map,
+    ``(kappa q(. | a - h) + N(a)) / (kappa + N)``, ``q`` read from ``table`` (the belief's
+    planning table, floor included) and the counts ``N`` of the touches near ``a``.
+
+    Parameters
+    ----------
+    hyp : (K, 2) ndarray
+        Translation hypotheses (dx, dy).
+    weights : (K,) ndarray
+    actions : (M, 2) ndarray
+
+    Returns
+    -------
+    pred : (M, C) ndarray
+    cond : (M,) ndarray
+    """
+    rmap = belief.rmap
+    c = table.n_classes
+    pred, cond = outcome_distribution(table, "translation", hyp, weights, actions,
+                                      np.zeros(2))
+    cnt = belief.touches.counts(actions, c, rmap.width)
+    n = cnt.sum(axis=1)
+    near = np.flatnonzero(n > 1e-3)
+    if len(near) == 0:
+        return pred, cond
+    a = actions[near]
+    x = a[None, :, 0] - hyp[:, 0, None]
+    y = a[None, :, 1] - hyp[:, 1, None]
+    kappa = rmap.confidence(x, y).astype(np.float64)  # (K, m)
+    prior = table.prob_all(x, y)  # (K, m, C), floor included
+    eps = table.eps
+    # the floor stays outside the counts: (1 - eps) (kappa q + N) / (kappa + N) + eps / C
+    q = (prior - eps / c) / (1 - eps)
+    p = (kappa[..., None] * q + cnt[near][None]) / (kappa + n[near][None])[..., None]
+    p = (1 - eps) * p + eps / c
+    pred[near] = np.einsum("k,kmc->mc", weights, p)
+    cond[near] = np.einsum("k,km->m", weights, entropy_rows(p))
+    return pred, cond
+
+
+def absorb(model, points: np.ndarray, classes: np.ndarray, shift: np.ndarray):
+    """The model refitted on its own training samples and the touches mapped into its reference
+    frame by ``shift`` (the translation estimate): a new, unfitted-then-fitted estimator of the
+    same class and parameters (``sklearn.base.clone``); ``model`` is left as it is.
+
+    Parameters
+    ----------
+    model : ModelBase
+        A learned model (``actions_``, ``labels_``, ``class_features_``).
+    points : (n, 2) ndarray
+        Where the touches were read (pad px).
+    classes : (n,) int ndarray
+        Their classes (-1, unknown sounds, are left out).
+    shift : (2,) ndarray
+        The displacement ``(dx, dy)`` the touches are mapped back by (``a - shift``).
+
+    Returns
+    -------
+    model
+        Fitted on ``n_train + n_kept`` samples, the touches last; the class ids are unchanged (the
+        samples carry the class features of ``model``, which every class of it has).
+    """
+    pts = np.asarray(points, float).reshape(-1, 2)
+    cls = np.asarray(classes, np.int64).reshape(-1)
+    keep = cls >= 0
+    actions = np.vstack([model.actions_, pts[keep] - np.asarray(shift, float)[-2:]])
+    labels = np.concatenate([model.labels_, cls[keep]])
+    new = clone(model).fit(actions, np.asarray(model.class_features_, float)[labels])
+    new.reach_sd_ = model.reach_sd_
+    return new

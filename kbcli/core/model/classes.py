@@ -1,0 +1,217 @@
+"""Model classes of the instrument: one registry, one interface (``kbcli learn --model-class``).
+
+A model class is a learned model of p(sound | action) (paper Sect. III-A) that every other part of
+kbcli (the exploration, the adapter, its strategies, the play loop, the plots) uses through one
+interface, whatever the class:
+
+- ``fit(actions (n, 2), perceived (n, D), targets=None) -> self``: learn from exploration samples
+  (where the finger landed, what was heard; NaN rows are silence);
+- ``predict_proba(points) -> (n, C)``, ``predict_class(points) -> (n,)``;
+- ``sample_actions(cls, n, rng) -> (n, 2)``: draws from p(action | sound) (Algorithm 2, line 3);
+- ``classify(perceived) -> (n,)``: Eq. 2 matching (0 silence, -1 unknown);
+- ``raster(step)``: :class:`~kbcli.core.model.base.ProbabilityRaster` over the working area;
+- ``boundary_sites(step, extend, phase) -> {"points", "width", ...}``: where the model places the
+  boundaries between sounds and how wide the band is that each could lie in (px): the predictive
+  uncertainty that the ``active`` exploration bisects;
+- attributes ``class_features_``, ``match_threshold``, ``area``, ``n_classes``, ``reach_sd_``;
+- ``to_arrays() -> dict`` and ``from_arrays(dict)``: storage as plain arrays, never pickle.
+
+Registered (:data:`MODEL_CLASSES`, a :class:`~kbcli.core.registry.Registry`; every learned class
+is a scikit-learn estimator deriving from :class:`~kbcli.core.model.base.ModelBase`):
+
+``lines`` (:class:`~kbcli.core.model.lines.LearnedModel`)
+    Keys bounded by straight lines shared across keys: exact and sample-efficient for polygon keys
+    (grid, hex, piano, polygons); it cannot bend around a round pad.
+``svc`` (:class:`~kbcli.core.model.svc.SVCModel`)
+    One scikit-learn support-vector machine per pair of neighbouring sounds (linear where a
+    straight line separates the pair's samples, RBF elsewhere), probabilities from the margin: any
+    key shape, curved boundaries included.
+
+``forest`` (:class:`~kbcli.core.model.classifiers.ForestModel`)
+    scikit-learn's random forest on the two coordinates and oblique projections: p is the share of
+    trees voting for a sound (any key shape; axis-aligned keys exactly).
+``forest-xy`` (:class:`~kbcli.core.model.classifiers.ForestXYModel`)
+    The same forest splitting on the two coordinates only: exact and sharper where every key edge
+    is horizontal or vertical (piano, grid); it staircases a slanted edge.
+``knn`` (:class:`~kbcli.core.model.classifiers.KNNModel`)
+    scikit-learn's k nearest samples, distance-weighted votes (any key shape).
+
+``exact`` (:class:`~kbcli.core.model.base.ExactModel`)
+    The keyboard's own geometry (calibration experiments, ``kbcli learn --strategy exact``): not
+    learned (``learned`` False), built from the keyboard, its ``exact_map`` attribute True (every
+    learned model's is False: callers ask the attribute, never the class or its name).
+
+Adding a class is registering a :class:`ModelClass` with ``MODEL_CLASSES.register(name, ...)``:
+a loader of the estimator class (imported lazily), which takes ``match_threshold``, ``area`` and
+its own keyword parameters and has ``from_arrays``. Fitting goes through :func:`fit_model`
+(``fit(actions, perceived)`` for every class), so anything that wraps every class (a reliability
+estimate, a calibration) has one place to hook in.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from kbcli.core.registry import Registry
+from kbcli.errors import ConfigError
+
+#: The class of model artifacts that do not name one (schema 1: every learned model was ``lines``).
+DEFAULT_MODEL_CLASS = "lines"
+#: The class (and the ``learn`` strategy) of the keyboard's own geometry.
+EXACT = "exact"
+#: Not a class: ``kbcli learn --model-class auto`` chooses one by cross-validation on the samples
+#: (:mod:`kbcli.core.model.select`).
+AUTO = "auto"
+_COMMON = ("match_threshold", "area")
+
+
+@dataclass(frozen=True)
+class ModelClass:
+    """A registered model class.
+
+    Attributes
+    ----------
+    estimator : callable
+        ``estimator() -> type``: the class (imported on first use: scikit-learn's SVC is slow to
+        import).
+    learned : bool
+        Fitted to exploration samples (``fit``, ``to_arrays`` / ``from_arrays``); False for the
+        exact model, built from the keyboard.
+    """
+
+    estimator: Callable[[], type]
+    learned: bool = True
+
+    @property
+    def params(self) -> tuple[str, ...]:
+        """The class's own keyword parameters (besides ``match_threshold`` and ``area``)."""
+        if not self.learned:
+            return ()
+        return tuple(p for p in self.estimator()._get_param_names() if p not in _COMMON)
+
+    def load(self, arrays: Mapping | None, keyboard: Any = None):
+        """The stored model: ``from_arrays(arrays)`` of a learned class, the exact model of
+        ``keyboard`` otherwise."""
+        if self.learned:
+            return self.estimator().from_arrays(arrays)
+        return self.estimator()(keyboard)
+
+
+MODEL_CLASSES: Registry[ModelClass] = Registry("model class")
+
+
+def _lines() -> type:
+    from kbcli.core.model.lines import LearnedModel
+
+    return LearnedModel
+
+
+def _svc() -> type:
+    from kbcli.core.model.svc import SVCModel
+
+    return SVCModel
+
+
+def _forest() -> type:
+    from kbcli.core.model.classifiers import ForestModel
+
+    return ForestModel
+
+
+def _forest_xy() -> type:
+    from kbcli.core.model.classifiers import ForestXYModel
+
+    return ForestXYModel
+
+
+def _knn() -> type:
+    from kbcli.core.model.classifiers import KNNModel
+
+    return KNNModel
+
+
+def _exact() -> type:
+    from kbcli.core.model.base import ExactModel
+
+    return ExactModel
+
+
+MODEL_CLASSES.register("lines", ModelClass(_lines),
+                       summary="straight key edges shared across keys (polygon keys)")
+MODEL_CLASSES.register("svc", ModelClass(_svc), summary="scikit-learn SVMs per pair of "
+                       "neighbouring sounds, linear or RBF (any key shape)")
+MODEL_CLASSES.register("forest", ModelClass(_forest), summary="scikit-learn random forest on the "
+                       "coordinates and oblique projections (any key shape)")
+MODEL_CLASSES.register("forest-xy", ModelClass(_forest_xy), summary="scikit-learn random forest "
+                       "on the two coordinates only (keys with horizontal and vertical edges)")
+MODEL_CLASSES.register("knn", ModelClass(_knn), summary="scikit-learn k nearest samples, "
+                       "distance-weighted votes (any key shape)")
+MODEL_CLASSES.register(EXACT, ModelClass(_exact, learned=False),
+                       summary="the keyboard's own geometry (not learned)")
+
+
+def learned_classes() -> tuple[str, ...]:
+    """The model classes fitted to exploration samples (valid ``--model-class`` values)."""
+    return tuple(n for n, mc in MODEL_CLASSES.items() if mc.learned)
+
+
+def check_learned(name: str) -> str:
+    """``name`` when it is a learned model class; ConfigError listing them otherwise."""
+    if not MODEL_CLASSES.get(name).learned:
+        raise ConfigError(f"model class {name!r} is not learned from samples; valid: "
+                          f"{', '.join(learned_classes())}")
+    return name
+
+
+def check_choice(name: str) -> str:
+    """``name`` when it is ``auto`` or a learned model class; ConfigError listing them otherwise."""
+    if name == AUTO:
+        return name
+    if name not in MODEL_CLASSES:
+        raise ConfigError(f"unknown model class {name!r}; valid: "
+                          f"{', '.join((AUTO, *learned_classes()))}")
+    return check_learned(name)
+
+
+def model_class_of(config: Mapping) -> str:
+    """The model class a model artifact's config names: ``exact`` for the exact model (its
+    ``strategy``), else its ``model_class`` (absent in schema 1: ``lines``)."""
+    if config.get("strategy") == EXACT:
+        return EXACT
+    name = config.get("model_class")
+    return DEFAULT_MODEL_CLASS if name is None else name
+
+
+def make_model(name: str, *, match_threshold: float, area: tuple[float, float, float, float],
+               **params: Any):
+    """An unfitted model of the learned class ``name``.
+
+    Raises
+    ------
+    ConfigError
+        For an unknown or not learned class, or a parameter the class does not take.
+    """
+    mc = MODEL_CLASSES.get(check_learned(name))
+    unknown = sorted(set(params) - set(mc.params))
+    if unknown:
+        raise ConfigError(f"model class {name} takes no parameter {unknown[0]!r}; valid: "
+                          f"{', '.join(mc.params) or 'none'}")
+    return mc.estimator()(match_threshold=float(match_threshold),
+                          area=tuple(float(v) for v in area), **params)
+
+
+def fit_model(name: str, actions: np.ndarray, perceived: np.ndarray, *, match_threshold: float,
+              area: tuple[float, float, float, float], targets: np.ndarray | None = None,
+              **params: Any):
+    """A model of class ``name`` fitted to exploration samples (the one entry every caller uses)."""
+    model = make_model(name, match_threshold=match_threshold, area=area, **params)
+    return model.fit(actions, perceived, targets=targets)
+
+
+def model_from_arrays(d: dict, name: str | None = None):
+    """Rebuild a stored model of the learned class ``name`` (default ``lines``) from its arrays."""
+    return MODEL_CLASSES.get(check_learned(DEFAULT_MODEL_CLASS if name is None else name)).load(d)

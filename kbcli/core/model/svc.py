@@ -1,0 +1,359 @@
+"""A general learned model of the instrument on scikit-learn: pairwise support-vector machines.
+
+M_INST = p(sound, action) for keys of any shape (the ``svc`` model class; ``lines``,
+:mod:`kbcli.core.model.lines`, assumes straight key edges). From the exploration samples alone (where
+the finger landed, what was heard), the model
+
+1. **finds the sound classes** as the ``lines`` model does (:func:`~kbcli.core.model.sounds.
+   discover_classes`: leader clustering of the perceived features with the Eq. 2 threshold; class 0
+   is silence);
+2. **finds the neighbouring sounds**: a Delaunay edge of the samples whose ends were heard as two
+   different sounds i < j crosses their boundary (:func:`~kbcli.core.model.sounds.straddling_edges`);
+3. **fits one scikit-learn** :class:`~sklearn.svm.SVC` **per pair of neighbouring sounds** on the
+   samples of the two sounds within ``local_radius`` px of their straddling edges: a hard-margin
+   *linear* machine when a straight line separates those samples (``linear_pairs``; a linear
+   program decides), else an RBF kernel of length scale ``length_scale`` px with a near-hard margin
+   ``C``. Two convex keys meet along a straight edge (hex keys, piano keys side by side, polygon
+   keys), and the max-margin line between their samples is that edge, straight to its ends: where
+   three keys meet, the straight pair boundaries cross in a sharp corner, which an RBF boundary
+   would round off over about a length scale. Where no line separates the pair's samples but a
+   circle does and one of the two sounds is an island in the other (at least :data:`ISLAND` of its
+   straddling edges are with it: a round pad in silence; ``circle_pairs``, the same linear program
+   on the features ``(u, v, u^2 + v^2)``), a hard-margin machine on those features: its boundary is
+   the circle midway between the samples inside and out. (A key at the edge of a hex keyboard
+   meets its neighbours too: circles there would not change the map but flatter the SVMs'
+   cross-validated score against the forest's, whose map is better, :mod:`kbcli.core.model.select`.)
+   Elsewhere (the silence around the keyboard, an L-shaped white key around a black key) the RBF
+   boundary bends with the keys.
+   Fitting pairs locally keeps each machine small (tens of support vectors), so predicting a
+   raster of the working area stays cheap;
+4. **reads probabilities off the margin**: at an action a whose ``n_neighbors`` nearest samples
+   were heard as several sounds, each pair (i, j) of them with a machine contests a: with f(a) its
+   decision value (+-1 on the margin's support vectors, the nearest samples on either side of the
+   boundary), ``p(a on j's side) = Phi(sqrt(3) f(a))``: the boundary is taken to lie anywhere in the
+   margin, uniformly (standard deviation 1 / sqrt(3) of the half-margin, as the ``lines`` model's
+   band width / sqrt(12)). A candidate's log-score sums its contests (``log_ndtr``); p(sound | a) is
+   their softmax. Where every neighbour was heard as one sound, that sound is certain. Far from the
+   samples a machine was fitted on (beyond half a length scale) its decision fades into the
+   nearest-sample rule: an RBF machine there only extrapolates its intercept, which would paint
+   blobs of a key into the silence around the keyboard (and a line would run on past its edge).
+
+Active exploration (:mod:`kbcli.core.model.explore`) reads the model's predictive uncertainty through
+:meth:`SVCModel.boundary_sites`: points on the predicted boundaries (where a pair's machine changes
+sign along its straddling edges, and where the predicted class changes on a 2 px grid), each with
+the width of the band the boundary is known to lie in there (the distance to the nearest sample of
+either sound, summed): a reach at the widest site bisects the widest band.
+
+Defaults: ``length_scale`` 25 px, ``C`` 1000, linear and circle pairs on (how they were chosen:
+``docs/design-notes.md``, Model classes).
+
+Storage without pickle: :meth:`SVCModel.to_arrays` keeps the samples, the classes and the
+hyper-parameters; :meth:`SVCModel.from_arrays` refits the machines, which is deterministic (libsvm's
+solver has no randomness when probabilities are not asked of it). The estimator is a scikit-learn
+one (:class:`~kbcli.core.model.base.ModelBase`: ``fit`` returns ``self``, fitted attributes end in ``_``,
+predicting before fitting raises, ``get_params`` / ``set_params`` / ``clone``); the candidates and
+their softmax are the base's, shared with the ``lines`` class.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import linprog
+from scipy.spatial import cKDTree
+from scipy.special import log_ndtr
+from sklearn.svm import SVC
+
+from kbcli.core.model.base import DEFAULT_AREA, ModelBase
+from kbcli.core.model.sounds import straddling_edges
+from kbcli.errors import ArtifactError, ConfigError
+
+_SQRT3 = float(np.sqrt(3.0))
+_EDGE_STEPS = 17  # points along a straddling edge where the boundary site is looked for
+SITE_GRID = 2.0  # px, grid on which boundary sites between straddling edges are looked for
+#: a sound whose straddling edges are at least this share with one other sound is an island in
+#: it (a pad in silence; early on a few edges cross the gap to the next pad): their pair may get a
+#: circle machine (0.75 rather than 0.9: ``docs/design-notes.md``, Model classes)
+ISLAND = 0.75
+_HARD_C = 1e6  # margin penalty of a pair's linear machine: a hard margin (its samples separate)
+
+
+def _separable(x: np.ndarray, y: np.ndarray) -> bool:
+    """Whether a hyperplane separates the points ``x`` (n, F) of labels ``y`` in {0, 1} (a
+    straight line for F = 2): the linear program ``(2 y - 1) (w . x + b) >= 1`` is feasible."""
+    s = (2.0 * y - 1.0)[:, None]
+    f = x.shape[1] + 1
+    res = linprog(np.zeros(f), A_ub=-s * np.column_stack([x, np.ones(len(x))]),
+                  b_ub=-np.ones(len(x)), bounds=[(None, None)] * f, method="highs")
+    return res.status == 0
+
+
+class _CircleMachine:
+    """A hard-margin linear machine on the features ``(u, v, u^2 + v^2)`` of points (in length
+    scales, relative to the centre of its samples): its boundary is a circle (or a straight line,
+    its limit). Near a circle the feature-space margin is the geometric one times about twice the
+    radius, the same all round, so the circle runs midway between the samples on either side."""
+
+    def __init__(self, centre: np.ndarray) -> None:
+        self.centre_ = np.asarray(centre, float)
+
+    def features(self, x: np.ndarray) -> np.ndarray:
+        u, v = (np.asarray(x, float) - self.centre_).T
+        return np.column_stack([u, v, u * u + v * v])
+
+    def fit(self, x: np.ndarray, y: np.ndarray) -> _CircleMachine:
+        self.svm_ = SVC(kernel="linear", C=_HARD_C).fit(self.features(x), y)
+        self.n_support_ = self.svm_.n_support_
+        return self
+
+    def decision_function(self, x: np.ndarray) -> np.ndarray:
+        return self.svm_.decision_function(self.features(x))
+
+
+def _stored_params(d: dict) -> dict:
+    """The parameters of a stored svc model (:meth:`SVCModel.from_arrays`)."""
+    return {
+        "length_scale": float(d["length_scale"]),
+        "C": float(d["C"]),
+        "local_radius": float(d["local_radius"]),
+        "n_neighbors": int(d["n_neighbors"]),
+        # models stored before linear pairs existed had RBF machines only
+        "linear_pairs": bool(int(d["linear_pairs"])) if "linear_pairs" in d else False,
+        # and before circle pairs existed, no circles
+        "circle_pairs": bool(int(d["circle_pairs"])) if "circle_pairs" in d else False,
+    }
+
+
+class SVCModel(ModelBase):
+    """p(sound | action) from pairwise linear or RBF SVMs (see the module docstring).
+
+    Parameters
+    ----------
+    match_threshold, area
+        As every class (:class:`~kbcli.core.model.base.ModelBase`).
+    length_scale : float
+        Length scale (px) of the RBF kernel: ``exp(-|a - b|^2 / (2 length_scale^2))``.
+    C : float
+        Penalty of margin violations (large: a hard margin; the samples' labels are exact).
+    local_radius : float
+        A pair's machine is fitted on the samples of its two sounds within this many px of one of
+        their straddling edges' ends.
+    n_neighbors : int
+        Samples looked at around an action to find the sounds it could make.
+    linear_pairs : bool
+        Fit a hard-margin linear machine to a pair whose samples a straight line separates (else,
+        and for every pair when False, the RBF one). Models stored before this option existed
+        load with False, their predictions unchanged.
+    circle_pairs : bool
+        Fit a hard-margin machine with a circular boundary to a pair whose samples a circle
+        separates and no line does, one sound an island in the other (:class:`_CircleMachine`).
+        Models stored before this option existed load with False, their predictions unchanged.
+
+    Attributes
+    ----------
+    class_features_, actions_, labels_, reach_sd_
+        As every class (:class:`~kbcli.core.model.base.ModelBase`).
+    pairs_ : (P, 2) int ndarray
+        The neighbouring pairs of classes (lower first) that have a machine.
+    edges_ : (m, 2) int ndarray
+        Straddling edges: sample indices, the lower class's end first.
+    """
+
+    def __init__(self, *, match_threshold: float = 1.5,
+                 area: tuple[float, float, float, float] = DEFAULT_AREA,
+                 length_scale: float = 25.0, C: float = 1e3, local_radius: float = 30.0,
+                 n_neighbors: int = 8, linear_pairs: bool = True,
+                 circle_pairs: bool = True) -> None:
+        self.match_threshold = match_threshold
+        self.area = area
+        self.length_scale = length_scale
+        self.C = C
+        self.local_radius = local_radius
+        self.n_neighbors = n_neighbors
+        self.linear_pairs = linear_pairs
+        self.circle_pairs = circle_pairs
+
+    # -- parameters -----------------------------------------------------------------------------
+    def _check_params(self) -> None:
+        self._check_common()
+        for name in ("length_scale", "C", "local_radius"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                raise ConfigError(f"{name} must be a positive number, got {v!r}")
+        if int(self.n_neighbors) < 2:
+            raise ConfigError(f"n_neighbors must be >= 2, got {self.n_neighbors!r}")
+        for name in ("linear_pairs", "circle_pairs"):
+            v = getattr(self, name)
+            if not isinstance(v, (bool, np.bool_)):
+                raise ConfigError(f"{name} must be True or False, got {v!r}")
+
+    # -- fitting --------------------------------------------------------------------------------
+    def _set_fitted(self, features: np.ndarray, actions: np.ndarray, labels: np.ndarray,
+                    reach_sd: float) -> None:
+        self.class_features_ = np.asarray(features, float)
+        self.actions_ = np.asarray(actions, float)
+        self.labels_ = np.asarray(labels, np.int64)
+        self.reach_sd_ = float(reach_sd)
+        self._tree = cKDTree(self.actions_)
+        e = straddling_edges(self.actions_, self.labels_)
+        self.edges_ = e[np.lexsort((e[:, 1], e[:, 0]))] if len(e) else e
+        nc = len(self.class_features_)
+        code = self.labels_[self.edges_[:, 0]] * nc + self.labels_[self.edges_[:, 1]]
+        #: pair code -> its machine (the contests of :class:`~kbcli.core.model.base.ModelBase`)
+        self._pairs: dict[int, SVC] = {}
+        self._support: dict[int, tuple[cKDTree, cKDTree, cKDTree]] = {}
+        self._edge_code = code
+        pairs = []
+        # straddling edges of each sound (an edge joins two different sounds: one for each)
+        per_sound = np.bincount(self.labels_[self.edges_].ravel(), minlength=nc)
+        for c in np.unique(code):  # one machine per pair of neighbouring sounds
+            i, j = divmod(int(c), nc)
+            ends = np.unique(self.edges_[code == c])
+            near = self._tree.query_ball_point(self.actions_[ends], r=self.local_radius)
+            idx = np.unique(np.concatenate([ends, *[np.asarray(n, np.int64) for n in near]]))
+            idx = idx[np.isin(self.labels_[idx], (i, j))]
+            y = (self.labels_[idx] == j).astype(np.int64)
+            # an island: nearly all of one sound's straddling edges are with the other
+            island = np.count_nonzero(code == c) >= ISLAND * min(per_sound[i], per_sound[j])
+            svm = self._pair_machine(self.actions_[idx] / self.length_scale, y, island)
+            self._pairs[int(c)] = svm
+            self._support[int(c)] = (cKDTree(self.actions_[idx]), cKDTree(self.actions_[idx][y == 0]),
+                                     cKDTree(self.actions_[idx][y == 1]))
+            pairs.append((i, j))
+        self.pairs_ = np.array(pairs, np.int64).reshape(-1, 2)
+
+    def _pair_machine(self, x: np.ndarray, y: np.ndarray, island: bool = False) -> SVC:
+        """A pair's machine on its samples ``x`` (in length scales) of labels ``y`` in {0, 1}:
+        a hard-margin linear one when a straight line separates them (``linear_pairs``), else,
+        when one of the two sounds is an island in the other (``island``: a pad in silence), a
+        hard-margin circle when one separates them (``circle_pairs``), else the RBF one."""
+        if self.linear_pairs and y.min() < y.max() and _separable(x, y):
+            svm = SVC(kernel="linear", C=_HARD_C).fit(x, y)
+            if np.all((2 * y - 1) * svm.decision_function(x) > 0):
+                return svm
+        if self.circle_pairs and island and y.min() < y.max():
+            circle = _CircleMachine(x.mean(axis=0))
+            if _separable(circle.features(x), y):
+                circle.fit(x, y)
+                if np.all((2 * y - 1) * circle.decision_function(x) > 0):
+                    return circle
+        return SVC(kernel="rbf", gamma=0.5, C=float(self.C)).fit(x, y)
+
+    # -- the pairwise contests ------------------------------------------------------------------
+    def _decision(self, code: int, q: np.ndarray) -> np.ndarray:
+        """(n,) the pair's decision value: > 0 on the higher class's side, +-1 on the margin.
+
+        Far from the samples it was fitted on, a machine only extrapolates its intercept: its
+        decision fades (weight ``exp(-2 d^2 / length_scale^2)``, d the distance to the nearest of
+        them, beyond half a length scale) into the nearest-sample rule
+        ``(d_lower - d_higher) / length_scale``.
+        """
+        f = self._pairs[code].decision_function(q / self.length_scale)
+        both, lo, hi = self._support[code]
+        d = both.query(q)[0]
+        near = d > 0.5 * self.length_scale
+        if near.any():
+            qn = q[near]
+            nn = (lo.query(qn)[0] - hi.query(qn)[0]) / self.length_scale
+            w = np.exp(-2.0 * (d[near] / self.length_scale) ** 2)
+            f[near] = w * f[near] + (1 - w) * nn
+        return f
+
+    def _pair_logp(self, code: int, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """log p(on the lower / higher class's side) of a pair's boundary at each point: the
+        boundary anywhere in the margin, ``log Phi(-+sqrt(3) f)``."""
+        z = _SQRT3 * self._decision(code, q)
+        return log_ndtr(-z), log_ndtr(z)
+
+    # -- exploration ----------------------------------------------------------------------------
+    def boundary_sites(self, step: float = 1.0, extend: float = 25.0,
+                       phase: float = 0.0) -> dict[str, np.ndarray]:
+        """Where the model places each boundary, and how uncertain it is there.
+
+        Sites: on every straddling edge, the point where its pair's machine changes sign (the
+        edge's midpoint when it does not); and between those, wherever the predicted class changes
+        between two neighbouring cells of a 2 px grid over the working area (shifted by ``phase``
+        in [0, 1) of a cell). ``width`` is the distance from a site to the nearest sample of either
+        of its two sounds, summed: the band the boundary is known to lie in there. (``step`` and
+        ``extend`` are accepted for the ``lines`` model's signature.)
+
+        Returns
+        -------
+        dict with ``points`` (m, 2), ``width`` (m,), ``pair`` (m, 2)
+        """
+        self._check_fitted()
+        e = self.edges_
+        if len(e) == 0:
+            return {"points": np.empty((0, 2)), "width": np.empty(0),
+                    "pair": np.empty((0, 2), dtype=np.int64)}
+        a, b = self.actions_[e[:, 0]], self.actions_[e[:, 1]]
+        t = np.linspace(0.0, 1.0, _EDGE_STEPS)
+        line = a[:, None, :] + t[None, :, None] * (b - a)[:, None, :]  # (m, T, 2)
+        f = np.empty(line.shape[:2])
+        for c in np.unique(self._edge_code):  # one call per pair
+            sel = np.flatnonzero(self._edge_code == c)
+            f[sel] = self._decision(int(c), line[sel].reshape(-1, 2)).reshape(len(sel), -1)
+        cross = (f[:, :-1] < 0) & (f[:, 1:] >= 0)  # from the lower class (< 0) to the higher
+        has = cross.any(axis=1)
+        j = np.argmax(cross, axis=1)
+        r = np.arange(len(e))
+        f0, f1 = f[r, j], f[r, j + 1]
+        frac = np.where(has, (t[j] + (t[j + 1] - t[j]) * f0 / np.where(f0 != f1, f0 - f1, 1.0)),
+                        0.5)
+        pts = a + np.clip(frac, 0.0, 1.0)[:, None] * (b - a)
+        la, lb = self.labels_[e[:, 0]], self.labels_[e[:, 1]]
+        # and where the predicted class changes between neighbouring cells of a SITE_GRID px grid
+        # (shifted by ``phase``): the boundary between the straddling edges
+        gs = SITE_GRID
+        x0, y0, x1, y1 = (float(v) for v in self.area)
+        g = np.stack(np.meshgrid(np.arange(x0 + phase * gs, x1, gs),
+                                 np.arange(y0 + phase * gs, y1, gs)), -1)
+        cl = self.predict_class(g.reshape(-1, 2)).reshape(g.shape[:2])
+        iy, ix = np.nonzero(cl[:, 1:] != cl[:, :-1])
+        jy, jx = np.nonzero(cl[1:, :] != cl[:-1, :])
+        pts = np.vstack([pts, (g[iy, ix] + g[iy, ix + 1]) / 2, (g[jy, jx] + g[jy + 1, jx]) / 2])
+        cc = np.vstack([np.column_stack([cl[iy, ix], cl[iy, ix + 1]]),
+                        np.column_stack([cl[jy, jx], cl[jy + 1, jx]])])
+        la = np.r_[la, cc.min(axis=1)]
+        lb = np.r_[lb, cc.max(axis=1)]
+        width = self._class_distance(pts, la) + self._class_distance(pts, lb)
+        return {"points": pts, "width": width, "pair": np.column_stack([la, lb])}
+
+    def _class_distance(self, pts: np.ndarray, cls: np.ndarray) -> np.ndarray:
+        """(m,) distance from each point to the nearest sample of its class ``cls``."""
+        out = np.full(len(pts), np.inf)
+        for c in np.unique(cls):  # one tree per class present
+            sel = np.flatnonzero(cls == c)
+            mine = self.actions_[self.labels_ == c]
+            out[sel] = cKDTree(mine).query(pts[sel])[0]
+        return out
+
+    # -- storage --------------------------------------------------------------------------------
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """The fitted model as named arrays: the samples, their classes and the hyper-parameters
+        (:meth:`from_arrays` refits the machines, deterministically)."""
+        self._check_fitted()
+        return self._arrays(
+            pairs=self.pairs_.copy(),
+            n_support=np.array([int(self._pairs[int(c)].n_support_.sum()) for c in
+                                self.pairs_[:, 0] * self.n_classes + self.pairs_[:, 1]], np.int64),
+            length_scale=np.float64(self.length_scale),
+            C=np.float64(self.C),
+            local_radius=np.float64(self.local_radius),
+            n_neighbors=np.int64(self.n_neighbors),
+            linear_pairs=np.int64(bool(self.linear_pairs)),
+            circle_pairs=np.int64(bool(self.circle_pairs)),
+        )
+
+    @classmethod
+    def from_arrays(cls, d: dict) -> SVCModel:
+        """Rebuild a fitted model from :meth:`to_arrays` output (the same predictions: the
+        machines are refitted on the stored samples; nothing is unpickled)."""
+        model = cls._from_stored(d, "svc", _stored_params)
+        if "pairs" in d and not np.array_equal(np.asarray(d["pairs"]).reshape(-1, 2),
+                                               model.pairs_):
+            raise ArtifactError("stored svc model: refitting found other pairs of sounds than "
+                                "were stored (a different scikit-learn or scipy?)")
+        return model
+
+
+__all__ = ["SVCModel"]

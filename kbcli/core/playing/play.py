@@ -1,0 +1,272 @@
+"""Playing a melody in a loop with the learned model (paper Sect. III-A, Algorithm 1).
+
+At each step the robot aims for the current melody note: it samples an action from its model's
+p(action | sound) for that note's sound class (Algorithm 1, line 10), reaches, and hears a sound. The
+heard sound is matched against the melody's sounds with the Manhattan distance and threshold of
+Eq. 2 (:func:`kbcli.core.instrument.keyboard.match`). If it is the sound of the note the robot aimed for, the
+step is a MATCH (history value 0) and the robot moves on to the next note, looping after the last
+(lines 4-6); otherwise it is a NO_MATCH (history value 1) and the robot restarts from note 0
+(lines 7-9).
+
+Algorithm 1 as printed takes the best-matching melody note ``i`` and continues from ``i + 1``. The
+paper's example melody repeats notes (A and D twice), so that index is ambiguous; and Sect. III-C
+counts an action as successful only if it "ended up producing the expected sound perception".
+So here a MATCH means the heard sound matches (Eq. 2) a melody note *with the aimed note's sound*;
+hearing another note of the melody is a failure, like hearing silence or a note not in the melody.
+
+The robot side knows only its model, the melody and a ``touch`` callback (in the simulation
+:meth:`kbcli.sim.World.touch`): it never sees where the keyboard really is.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from kbcli.core.instrument.keyboard import match
+from kbcli.core.instrument.melody import Melody
+from kbcli.errors import ConfigError
+
+MATCH = 0
+NO_MATCH = 1
+
+#: ``touch(actions (n, 2)) -> (landed (n, 2), perceived (n, D))``
+Touch = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+@dataclass(frozen=True)
+class PlayStep:
+    """One step of Algorithm 1.
+
+    Attributes
+    ----------
+    step : int
+        Step number, from 0.
+    target : int
+        Index in the melody of the note aimed for.
+    cls : int
+        The model's sound class of that note (the class the action was sampled from).
+    action : (2,) ndarray
+        Target finger position sent to the arm.
+    landed : (2,) ndarray
+        Where the finger landed (proprioception).
+    perceived : (D,) ndarray
+        Heard features (NaN for silence).
+    heard : int
+        Index of the best-matching melody note (Eq. 2), -1 if none is within the threshold.
+    result : int
+        :data:`MATCH` (0) or :data:`NO_MATCH` (1): the history value H of Sect. III-C.
+    """
+
+    step: int
+    target: int
+    cls: int
+    action: np.ndarray
+    landed: np.ndarray
+    perceived: np.ndarray
+    heard: int
+    result: int
+
+
+def note_classes(model, melody: Melody) -> np.ndarray:
+    """The model's sound class of each melody note, matched by pitch.
+
+    The robot knows the notes it wants by name; its model knows sound classes by their features.
+    A note's class is the one whose pitch is nearest to the note's, within the model's match
+    threshold.
+
+    Returns
+    -------
+    (N,) int ndarray
+
+    Raises
+    ------
+    ConfigError
+        If a note has no class in the model.
+    """
+    feats = np.asarray(model.class_features_, float)
+    pitch = feats[:, 0]
+    out = np.empty(len(melody), dtype=np.int64)
+    for i, (name, midi) in enumerate(zip(melody.notes, melody.midi, strict=True)):
+        d = np.abs(pitch - midi)
+        d[0] = np.inf  # class 0 is silence
+        d = np.where(np.isnan(d), np.inf, d)
+        best = int(np.argmin(d))
+        if not d[best] < model.match_threshold:
+            raise ConfigError(f"melody note {name!r} is not among the model's sound classes")
+        out[i] = best
+    return out
+
+
+def play(model, melody: Melody, touch: Touch, *, rng: np.random.Generator) -> Iterator[PlayStep]:
+    """Play ``melody`` in a loop forever (Algorithm 1); take as many steps as needed.
+
+    Parameters
+    ----------
+    model : SoundModel
+        The robot's model of the instrument (:class:`kbcli.core.model.base.SoundModel`).
+    melody : Melody
+        The notes to play, looped.
+    touch : callable
+        ``touch(actions (1, 2)) -> (landed (1, 2), perceived (1, D))``: the only contact with the
+        world.
+    rng : numpy.random.Generator
+        Draws the actions.
+
+    Yields
+    ------
+    PlayStep
+    """
+    classes = note_classes(model, melody)
+    sounds = np.asarray(model.class_features_, float)[classes]  # (N, D) expected sounds
+    n = len(melody)
+    target = 0
+    step = 0
+    while True:
+        cls = int(classes[target])
+        action = np.asarray(model.sample_actions(cls, 1, rng), float).reshape(2)
+        landed, heard = touch(action[None, :])
+        landed = np.asarray(landed, float).reshape(2)
+        heard = np.asarray(heard, float).reshape(-1)
+        m = int(match(heard[None, :], sounds, model.match_threshold)[0])  # Eq. 2
+        ok = m >= 0 and classes[m] == cls
+        yield PlayStep(step=step, target=target, cls=cls, action=action, landed=landed,
+                       perceived=heard, heard=m, result=MATCH if ok else NO_MATCH)
+        target = (target + 1) % n if ok else 0
+        step += 1
+
+
+def expected_failure_rate(
+    model,
+    keyboard,
+    melody: Melody,
+    family: str,
+    params: np.ndarray | None,
+    *,
+    rng: np.random.Generator,
+    n_samples: int = 400,
+) -> np.ndarray:
+    """Long-run NO_MATCH rate of Algorithm 1 with the keyboard at each given pose (evaluation side).
+
+    For each note, the probability ``f_i`` that an action drawn from the model for that note does not
+    land on the note's key of the displaced keyboard is estimated from ``n_samples`` draws (common to
+    all poses, ideal reaching, no perception noise). The player is a Markov chain over melody notes
+    (success: ``i -> i + 1 mod N``, failure: ``i -> 0``); its stationary distribution ``pi`` weights
+    the notes: the rate is ``sum_i pi_i f_i``.
+
+    Parameters
+    ----------
+    keyboard : Keyboard
+        The true instrument (uses its geometry, so this is for benchmarks and evaluation only).
+    family : str
+        Transform family of ``params``.
+    params : (H, P) ndarray or None
+        Poses; None for the reference pose only.
+
+    Returns
+    -------
+    (H,) ndarray (``(1,)`` for ``params=None``)
+    """
+    from kbcli.core.instrument import transforms
+
+    classes = note_classes(model, melody)
+    n = len(melody)
+    if params is None:
+        params = np.zeros((1, len(transforms.check_family(family))))
+    params = np.atleast_2d(np.asarray(params, float))
+    pts = np.concatenate([np.asarray(model.sample_actions(int(c), n_samples, rng), float)
+                          for c in classes])  # (n * n_samples, 2)
+    ref = transforms.inverse_many(family, params, pts, keyboard.centre)  # (H, n * n_samples, 2)
+    keys = keyboard.key_at(ref.reshape(-1, 2)).reshape(len(params), n, n_samples)
+    want = np.asarray(melody.keys)[None, :, None]
+    f = (keys != want).mean(axis=2)  # (H, N) failure probability of each note
+    # stationary distribution of the note chain, solved for every pose at once
+    h = len(params)
+    p = np.zeros((h, n, n))
+    idx = np.arange(n)
+    p[:, idx, (idx + 1) % n] += 1.0 - f
+    p[:, idx, 0] += f
+    a = np.transpose(p, (0, 2, 1)) - np.eye(n)[None]
+    a[:, -1, :] = 1.0
+    b = np.zeros((h, n, 1))
+    b[:, -1, 0] = 1.0
+    pi = np.linalg.solve(a, b)[..., 0]
+    return (pi * f).sum(axis=1)
+
+
+def replay(model, melody: Melody, touch: Touch, *, rng: np.random.Generator, n_notes: int = 200,
+           correction: np.ndarray | None = None, family: str = "translation",
+           centre: np.ndarray | None = None, chunk: int = 32,
+           sampler: Callable[[int, int, np.random.Generator], np.ndarray] | None = None
+           ) -> np.ndarray:
+    """Play ``n_notes`` touches of Algorithm 1 and return their history (vectorised).
+
+    The same rules as :func:`play` (sample an action for the aimed note, touch, match the heard
+    sound with Eq. 2; MATCH moves on to the next note, NO_MATCH restarts from note 0), with the
+    touches batched: for each sound class, ``chunk`` actions are drawn and touched at once, and the
+    note sequence consumes them in order (a class's next chunk is drawn when its actions run out).
+    The draws are i.i.d., so this is Algorithm 1 exactly, except that in ``dynamics`` mode the arm
+    reaches a class's batch one after the other rather than in the order of the melody (each reach
+    starts from where the previous one ended).
+
+    Parameters
+    ----------
+    touch : callable
+        ``touch(actions (n, 2)) -> (landed (n, 2), perceived (n, D))``.
+    n_notes : int
+        Touches to play.
+    correction : (P,) ndarray, optional
+        The robot's estimate of the displacement: every sampled action ``a`` is sent as
+        ``T_correction(a)`` (as :mod:`kbcli.core.playing.loop` resumes after adapting). None: no correction.
+    family : str
+        Transform family of ``correction``.
+    centre : (2,) ndarray, optional
+        Rotation centre of the family (default: the centre of the model's working area).
+    sampler : callable, optional
+        ``sampler(cls, n, rng) -> (n, 2)`` draws from p(action | sound) (Algorithm 1, line 10);
+        default ``model.sample_actions``. A pool of draws made once per class, resampled (e.g.
+        :meth:`kbcli.core.adaptation.posteriors.posterior.ActionSamples.draw`), saves the model's rejection sampling in
+        repeated replays.
+
+    Returns
+    -------
+    (n_notes,) int ndarray
+        :data:`MATCH` (0) or :data:`NO_MATCH` (1) per touch; the success rate is
+        ``mean(history == MATCH)``.
+    """
+    from kbcli.core.instrument import transforms
+
+    if n_notes < 1:
+        raise ConfigError(f"n_notes must be >= 1, got {n_notes}")
+    classes = note_classes(model, melody)
+    sounds = np.asarray(model.class_features_, float)[classes]
+    if centre is None:
+        x0, y0, x1, y1 = model.area
+        centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
+    corr = None if correction is None else np.asarray(correction, float)
+    draw = model.sample_actions if sampler is None else sampler
+    queues: dict[int, list] = {}  # class -> [ok (k,) bool, next index]
+
+    def outcomes(cls: int) -> np.ndarray:
+        a = np.asarray(draw(cls, chunk, rng), float).reshape(-1, 2)
+        if corr is not None:
+            a = transforms.apply(family, corr, a, centre)
+        _, heard = touch(a)
+        m = match(np.asarray(heard, float).reshape(len(a), -1), sounds, model.match_threshold)
+        return (m >= 0) & (classes[np.maximum(m, 0)] == cls)
+
+    history = np.empty(n_notes, dtype=np.int64)
+    n = len(melody)
+    target = 0
+    for step in range(n_notes):
+        cls = int(classes[target])
+        q = queues.get(cls)
+        if q is None or q[1] >= len(q[0]):
+            q = queues[cls] = [outcomes(cls), 0]
+        ok = bool(q[0][q[1]])
+        q[1] += 1
+        history[step] = MATCH if ok else NO_MATCH
+        target = (target + 1) % n if ok else 0
+    return history

@@ -1,0 +1,59 @@
+"""The one migration of stored configs: the flat robot options of kbcli before parts owned their
+options, read in the nested layout.
+
+Until run 3, closed loop 3, evaluation 2 and model quality 1, an artifact recorded the adapter's
+config flat: the strategy's and the posterior's names beside every option of every part
+(``{"posterior": "likelihood", "kde_samples": 10000, "candidates": 256, ...}``); schema 1 and 2
+runs put the loop's options beside them too. Read now, each such robot config has its parts'
+options moved into the parts (``{"posterior": {"name": "likelihood", "robust": true, ...},
+"strategy": {"name": "infogain", "candidates": 256, ...}, ...}``) and the options the chosen parts
+do not take (recorded at their defaults, never read) dropped: the same numbers, the current
+layout (:func:`kbcli.core.options.route`, lenient).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from kbcli.core.adaptation.config import SLOTS, AdapterConfig, option_names
+from kbcli.core.options import route
+
+#: The first schema of each kind that records the nested layout (older ones are migrated).
+NESTED = {"run": 4, "closed_loop": 4, "evaluation": 3, "model_quality": 2}
+
+
+def _flat_robot(v: Any) -> bool:
+    return isinstance(v, dict) and isinstance(v.get("posterior"), str)
+
+
+def nest(robot: dict) -> dict:
+    """A flat recorded robot config in the nested layout."""
+    return route(robot, SLOTS, AdapterConfig.model_fields, strict=False)
+
+
+def _walk(tree: Any) -> Any:
+    if isinstance(tree, list):
+        return [_walk(v) for v in tree]
+    if not isinstance(tree, dict):
+        return tree
+    out = {}
+    for k, v in tree.items():
+        if k == "robot" and _flat_robot(v):
+            out[k] = nest(v)
+        elif k == "adapt" and _flat_robot(v) and "robot" not in v:  # schema 1-2 runs: all flat
+            robot = {o: x for o, x in v.items() if o in option_names()}
+            out[k] = {**{o: x for o, x in v.items() if o not in robot}, "robot": nest(robot)}
+        else:
+            out[k] = _walk(v)
+    return out
+
+
+def upgrade(art) -> Any:
+    """``art`` with its config and attributes in the current layout (the artifact itself when its
+    schema records it already)."""
+    first = NESTED.get(art.kind)
+    if first is None or art.schema_version >= first:
+        return art
+    art.config = _walk(art.config)
+    art.attrs = _walk(art.attrs)
+    return art
