@@ -119,3 +119,16 @@ def test_a_result_file_records_the_load_it_ran_under(tmp_path, monkeypatch):
     record.write(tmp_path / "r.json", ["bench", "arm"])
     d = json.loads((tmp_path / "r.json").read_text())
     assert d["load"]["start"] == [6.0, 5.0, 4.0] and d["load"]["end"] == [2.0, 3.0, 4.0]
+
+
+def test_the_note_under_a_timing_table_prints_the_load_or_says_unknown(monkeypatch):
+    from kbcli.cli import record
+
+    monkeypatch.setattr(record.os, "getloadavg", lambda: (6.125, 5.0, 4.5))
+    assert record.load_note() == "6.12 5 4.5"
+
+    def unsupported():
+        raise OSError("no load average here")
+
+    monkeypatch.setattr(record.os, "getloadavg", unsupported)
+    assert record.load_note() == "unknown"

@@ -27,7 +27,7 @@ from kbcli.cli.app import (
     progress,
     ticker,
 )
-from kbcli.cli.record import load_average, show_table
+from kbcli.cli.record import load_note, show_table
 from kbcli.cli.repair import check_model_out, write_repaired
 from kbcli.core.adaptation.config import refuse_inactive
 from kbcli.core.config import refused_option
@@ -260,8 +260,7 @@ def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: 
                   f"{np.percentile(ms, 90):.2f}", f"{np.median(cpu):.2f}",
                   f"{np.median(cpu) / np.median(r['likelihood_cpu_ms']):.1f}x")
     show_table(con, t)
-    load = load_average()
-    load = f" (load average {load})" if load else ""
+    load = f" (load average {load_note()})"
     con.print(f"wall time per step on a shared machine{load}; CPU time: this process only")
     con.print(f"drawing one class's {10000} samples of p(action | sound) once: median "
               f"{r['sample_ms']:.0f} ms over the {r['classes']} classes heard (not per touch)")

@@ -12,7 +12,7 @@ from rich.table import Table
 from kbcli.cli import options as opts
 from kbcli.cli.adapt import _fmt_med, _fmt_p
 from kbcli.cli.app import bench_app, check_io, command, err, interactive, out, progress
-from kbcli.cli.record import load_average, show_table
+from kbcli.cli.record import load_note, show_table
 from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_EXPERIMENTS
 
 #: Episodes of the step-cost table at most.
@@ -114,7 +114,7 @@ def _speed_table(bench, env, episodes: int, seed: int, con: Console) -> None:
         ms, cpu = np.median(r[f"{key}_ms"]), np.median(r[f"{key}_cpu_ms"])
         t.add_row(name, f"{ms:.2f}", f"{cpu:.2f}", f"{ms / base_ms:.2f}x", f"{cpu / base_cpu:.2f}x")
     show_table(con, t)
-    load = load_average()
+    load = load_note()
     con.print(f"the same touches and estimates both ways: {'yes' if r['same'] else 'NO'}; "
               f"wall time on a shared machine{f' (load average {load})' if load else ''}; "
               "CPU time: this process only; target: the environment at most 1.2x")

@@ -41,16 +41,6 @@ def show_table(con: Console, table: Table) -> None:
         _recorded.append(table)
 
 
-def load_average() -> str | None:
-    """The machine's 1, 5 and 15 minute load averages (``/proc/loadavg``), for the note under a
-    timing table; None where the system does not say."""
-    try:
-        with open("/proc/loadavg") as f:
-            return " ".join(f.read().split()[:3])
-    except OSError:
-        return None
-
-
 def start(path: Path | None = None) -> None:
     """Keep every table shown from now on (for :func:`finish` to write to ``path``)."""
     global _recorded, _path, _load_at_start
@@ -98,6 +88,12 @@ def load_average() -> list[float] | None:
         return [round(x, 2) for x in os.getloadavg()]
     except (AttributeError, OSError):
         return None
+
+
+def load_note() -> str:
+    """The load averages as a reader sees them under a timing table ("6.1 5.9 5.2"), or "unknown"."""
+    load = load_average()
+    return " ".join(f"{x:g}" for x in load) if load else "unknown"
 
 
 def write(path: Path, argv: list[str] | None = None) -> None:

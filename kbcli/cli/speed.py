@@ -11,7 +11,7 @@ from rich.table import Table
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, busy, command, interactive, out
-from kbcli.cli.record import load_average, show_table
+from kbcli.cli.record import load_note, show_table
 from kbcli.io.artifact import read_artifact
 from kbcli.stages.config import MAX_ADAPT_STEPS
 
@@ -87,7 +87,7 @@ def bench_speed_cmd(
         t.add_row(r.posterior, f"{r.setup_ms:.0f}", f"{r.touch_ms:.1f}", f"{r.per_touch_ms:.1f}",
                   f"{r.per_touch_cpu_ms:.1f}", f"{r.per_touch_ms / base:.2f}x")
     show_table(con, t)
-    con.print(f"wall time on a shared machine (load average {load_average() or 'unknown'}); "
+    con.print(f"wall time on a shared machine (load average {load_note()}); "
               "CPU time: this process only. "
               f"Targets (issue 26): paper-active + kde <= {bench.TARGET_MS:g} CPU ms per touch "
               f"(met by: {_met(rows, bench.TARGET_MS)}); kde within 3x of likelihood, set-up "
