@@ -112,7 +112,7 @@ def test_ctrl_c_with_a_failing_checkpoint_write_still_exits_130_in_one_line(caps
     only what is on disk, not a second error."""
     import typer
 
-    from kbcli.cli.app import run_checkpointed
+    from kbcli.cli.jobs import run_checkpointed
     from kbcli.errors import KbcliError
     from kbcli.io.checkpoint import Checkpoint
 

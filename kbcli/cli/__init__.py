@@ -7,8 +7,8 @@ import importlib
 from kbcli.cli.app import app
 
 # Each stage's commands live in their own module; importing it registers them on ``app``.
-_COMMAND_MODULES = ("keyboard", "inspect", "learn", "perturb", "play", "detect", "adapt", "run",
-                    "evaluate", "report", "serve", "animate", "quality", "speed", "gym",
+_COMMAND_MODULES = ("keyboard", "inspect", "learn", "perturb", "play", "detect", "adapt", "robust",
+                    "run", "evaluate", "report", "serve", "animate", "quality", "speed", "gym",
                     "repair")
 for _name in _COMMAND_MODULES:
     try:

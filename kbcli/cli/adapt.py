@@ -14,21 +14,18 @@ from rich.table import Table
 from kbcli.cli import options as opts
 from kbcli.cli.app import (
     bench_app,
-    busy,
     check_io,
     command,
     err,
     figure_output,
-    interactive,
     note_arm,
     note_default,
     out,
     plot_app,
-    progress,
-    ticker,
 )
-from kbcli.cli.record import load_note, show_table
+from kbcli.cli.record import show_table, timing_note
 from kbcli.cli.repair import check_model_out, write_repaired
+from kbcli.cli.show import busy, drain, table, ticker, wide
 from kbcli.core.adaptation.config import refuse_inactive
 from kbcli.core.config import refused_option
 from kbcli.core.instrument.transforms import DEFAULT_FAMILY, FAMILIES
@@ -135,20 +132,27 @@ def adapt_cmd(
     steps = _snapshots(snapshots, table_snaps, cfg.max_steps)
     stage.check_inputs(model_art, scene_art)
     note_arm(cfg.arm, cfg.mode)
+    art, adapter, setup_ms = _adapt(cfg, model_art, scene_art, seed, steps)
+    write_artifact(art, output)
+    if scene_family and cfg.family != DEFAULT_FAMILY:  # (said once the inputs passed every check)
+        note_default("family", cfg.family, "the scene's (--family to choose)")
+    _report_run(art, cfg, output, setup_ms)
+    if model_out is not None:
+        write_repaired(model_art, adapter.model, [repair_stage.run_adaptation(adapter, art)],
+                       model_out, "adapt")
+
+
+def _adapt(cfg: stage.AdaptConfig, model_art, scene_art, seed: int, steps: tuple[int, ...]
+           ) -> tuple:
+    """The run of the adapt stage behind a progress bar: its artifact, the adapter (whose model
+    the touches repaired) and the set-up time (ms; None if not measured)."""
     what = f"adapting ({cfg.robot.strategy.name}, {cfg.robot.posterior.name} posterior), observations"
     timings: dict[str, float] = {}
     keep: dict = {}
     with ticker(cfg.max_steps, what) as tick:
         art = stage.run(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed,
                         snapshot_steps=steps, on_step=tick, timings=timings, keep=keep)
-    write_artifact(art, output)
-    if scene_family and cfg.family != DEFAULT_FAMILY:  # (said once the inputs passed every check)
-        note_default("family", cfg.family, "the scene's (--family to choose)")
-    _report_run(art, cfg, output, timings.get("setup_ms"))
-    if model_out is not None:
-        ad = keep["adapter"]
-        write_repaired(model_art, ad.model, [repair_stage.run_adaptation(ad, art)], model_out,
-                       "adapt")
+    return art, keep.get("adapter"), timings.get("setup_ms")
 
 
 def _note_beyond(steps: tuple[int, ...], max_steps: int, given: str) -> None:
@@ -228,15 +232,6 @@ def plot_adapt_cmd(
     out.print(f"wrote {output}")
 
 
-def _fmt_med(v: float, never: int) -> str:
-    s = "-" if math.isnan(v) else f"{v:g}"
-    return f"{s} ({never})" if never else s
-
-
-def _fmt_p(p: float) -> str:
-    return "1" if p >= 0.9995 else f"{p:.0e}" if p < 1e-3 else f"{p:.3f}"
-
-
 def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: int,
                      con: Console) -> None:
     """Print the KDE step's speed on the learned model (the issue's target: <= 5 ms per step)."""
@@ -248,11 +243,9 @@ def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: 
         learned = load_model(read_artifact(model_path, "model"))
     r = bench.kde_speed(learned, steps=steps, seed=seed)
     k, lk = r["kde_ms"], r["likelihood_ms"]
-    t = Table(title=f"one adaptation step on {model_path} ({r['grid_cells']:,} grid cells, "
-                    f"{steps} touches, one process)", title_justify="left")
-    for col in ("posterior", "median ms/step", "p10", "p90", "median CPU ms/step",
-                "vs likelihood (CPU)"):
-        t.add_column(col, justify="left" if col == "posterior" else "right")
+    t = table(f"one adaptation step on {model_path} ({r['grid_cells']:,} grid cells, {steps} "
+              "touches, one process)", ("posterior", "median ms/step", "p10", "p90",
+                                        "median CPU ms/step", "vs likelihood (CPU)"))
     rows = (("kde (Algorithm 2: binning + FFT, Eq. 8 product)", k, r["kde_cpu_ms"]),
             ("likelihood", lk, r["likelihood_cpu_ms"]))
     for name, ms, cpu in rows:
@@ -260,17 +253,15 @@ def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: 
                   f"{np.percentile(ms, 90):.2f}", f"{np.median(cpu):.2f}",
                   f"{np.median(cpu) / np.median(r['likelihood_cpu_ms']):.1f}x")
     show_table(con, t)
-    load = f" (load average {load_note()})"
-    con.print(f"wall time per step on a shared machine{load}; CPU time: this process only")
+    con.print(timing_note("wall time per step"))
     con.print(f"drawing one class's {10000} samples of p(action | sound) once: median "
               f"{r['sample_ms']:.0f} ms over the {r['classes']} classes heard (not per touch)")
 
 
 @command(bench_app, name="adapt")
 def bench_adapt_cmd(
-    experiments: Annotated[int, typer.Option(
-        "--experiments", help=opts.at_most("Runs per strategy and displacement category",
-                                           MAX_EXPERIMENTS))] = 50,
+    experiments: opts.count_option("--experiments", "Runs per strategy and displacement category",
+                                   MAX_EXPERIMENTS) = 50,
     section: Annotated[list[str] | None, typer.Option(
         "--section", help="Sections to run (repeat): exact, noise, rigid, kde, learned or "
         "learned-rigid.", show_default="exact, noise, rigid and kde, plus learned with --model")
@@ -278,11 +269,8 @@ def bench_adapt_cmd(
     model: opts.model_option("A learned model artifact for the learned section.",
                              optional=True) = None,
     strategy: opts.strategies_option("random, active, infogain") = None,
-    category: Annotated[list[str] | None, typer.Option(
-        "--category", help="Displacement categories (repeat): small, medium, large.",
-        show_default="all three")] = None,
-    max_steps: Annotated[int, typer.Option("--max-steps", "-T", help=opts.at_most(
-        "Touches per run", MAX_ADAPT_STEPS))] = 40,
+    category: opts.Categories = None,
+    max_steps: opts.count_option("--max-steps", "Touches per run", MAX_ADAPT_STEPS, "-T") = 40,
     seed: opts.seed_option("Seed of displacements and runs.") = 0,
     model_blur: Annotated[float | None, typer.Option(
         "--model-blur", help="learned section: soften the model's map by this many px.",
@@ -290,10 +278,9 @@ def bench_adapt_cmd(
     layout: opts.layout_option("Keyboard layout of every section: {layouts} (its default "
                                "keyboard).", show_default="the model's keyboard with --model, "
                                "else grid") = None,
-    kde_steps: Annotated[int, typer.Option(
-        "--kde-steps", min=1, help=opts.at_most(
-            "kde section: touches timed for the KDE step's speed (on --model, else the embedded "
-            "default model)", opts.MAX_TIMED_STEPS))] = 200,
+    kde_steps: opts.count_option("--kde-steps", "kde section: touches timed for the KDE step's "
+                                 "speed (on --model, else the embedded default model)",
+                                 opts.MAX_TIMED_STEPS, min=1) = 200,
 ) -> None:
     """Benchmark the adaptation strategies: sample efficiency and speed, on any layout.
 
@@ -316,26 +303,30 @@ def bench_adapt_cmd(
         strategies=tuple(strategy) if strategy else bench.STRATEGY_ORDER,
         categories=tuple(category) if category else tuple(bench.CATEGORIES), model_blur=model_blur,
         layout=layout or "grid")
-    # tables are wide: never wrap them at a narrow default width when the output is not a terminal
-    con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
+    con = wide(200)
     if any(bench.SECTIONS.get(s).timed for s in sections):
         _kde_speed_table(bench, model, learned, kde_steps, seed, con)
     cells = bench.plan(cfg, learned, kb)
-    total = sum(len(c.truths) for c in cells)
-    for _ in progress(bench.run_cells(cells), total, "adaptation runs"):
-        pass
+    drain(bench.run_cells(cells), sum(len(c.truths) for c in cells), "adaptation runs")
     rows = bench.summarize(cells)
     bnd = model_art.attrs.get("boundary_error_px") if model_art is not None else None
     for sec in sections:
-        sec_rows = [r for r in rows if r["section"] == sec]
-        if sec_rows:
-            show_table(con, _section_table(bench, cfg, sec, sec_rows, bench.section_title(
-                sec, cfg, str(model) if model else None), bnd))
-    err.print("medians: observations until the error first drops below the threshold; (k): runs "
-              "that never got there within T; rmse in px over all runs; p: Wilcoxon signed-rank "
-              "test of the observation counts against random on the paired runs (same "
-              f"displacement and seed; the smallest p {experiments} pairs can give is "
-              f"{2.0 ** (1 - experiments):.0e})", markup=False)
+        if sec_rows := [r for r in rows if r["section"] == sec]:
+            title = bench.section_title(sec, cfg, str(model) if model else None)
+            show_table(con, _section_table(bench, cfg, sec, sec_rows, title, bnd))
+    note = medians_note(experiments, "observations", "observation", "runs",
+                        "rmse in px over all runs; ")
+    err.print(note, markup=False)
+
+
+def medians_note(pairs: int, counted: str, count: str, runs: str, also: str = "") -> str:
+    """What the medians of a sample-efficiency table are (``counted``: what is counted, plural;
+    ``count``: singular; ``runs``: what a row repeats, plural) and the smallest p-value ``pairs``
+    pairs can give."""
+    return (f"medians: {counted} until the error first drops below the threshold; (k): {runs} that "
+            f"never got there within T; {also}p: Wilcoxon signed-rank test of the {count} counts "
+            f"against random on the paired {runs} (same displacement and seed; the smallest p "
+            f"{pairs} pairs can give is {2.0 ** (1 - pairs):.0e})")
 
 
 def _bench_model(model: Path | None, layout: str | None) -> tuple:
@@ -359,26 +350,15 @@ def _section_table(bench, cfg, sec: str, sec_rows: list[dict], title: str, bnd) 
     at steps, the p-values, ms per step (and the angle and boundary columns of its section)."""
     part = bench.SECTIONS.get(sec)
     T = sec_rows[0]["T"]
-    t = Table(title=f"{cfg.layout} layout, {title}: {cfg.experiments} runs per row, T = {T}",
-              title_justify="left")
-    t.add_column("strategy")
-    t.add_column("category")
-    for thr in bench.THRESHOLDS:
-        t.add_column(f"<{thr:g}px", justify="right")
-    for s in bench.RMSE_STEPS:
-        if s <= T:
-            t.add_column(f"rmse@{s}", justify="right")
-    t.add_column("p vs random, paired (<4/2/1/0.5)", justify="right")
-    t.add_column("ms/step", justify="right")
-    if part.angle:
-        t.add_column("final angle rmse", justify="right")
-    if part.learned:
-        t.add_column("final err / boundary err", justify="right")
+    rmse_steps = [s for s in bench.RMSE_STEPS if s <= T]
+    t = table(f"{cfg.layout} layout, {title}: {cfg.experiments} runs per row, T = {T}",
+              ("strategy", "category", *(f"<{thr:g}px" for thr in bench.THRESHOLDS),
+               *(f"rmse@{s}" for s in rmse_steps), "p vs random, paired (<4/2/1/0.5)", "ms/step",
+               *(["final angle rmse"] if part.angle else []),
+               *(["final err / boundary err"] if part.learned else [])), left=2)
     for r in sec_rows:
-        cells_txt = [_fmt_med(m, n) for m, n in zip(r["median"], r["never"], strict=True)]
-        rm = [f"{r['rmse'][s]:.2f}" for s in bench.RMSE_STEPS if s <= T]
-        p = " ".join(_fmt_p(v) for v in r["p"]) if r["p"] is not None else ""
-        row = [r["label"], r["category"], *cells_txt, *rm, p, f"{r['ms']:.1f}"]
+        rm = [f"{r['rmse'][s]:.2f}" for s in rmse_steps]
+        row = [r["label"], r["category"], *medians(r), *rm, pvalues(r), f"{r['ms']:.1f}"]
         if part.angle:
             row.append(f"{r['final_angle_rmse']:.2f} deg")
         if part.learned:
@@ -388,59 +368,18 @@ def _section_table(bench, cfg, sec: str, sec_rows: list[dict], title: str, bnd) 
     return t
 
 
-@command(bench_app, name="robust")
-def bench_robust_cmd(
-    model: opts.model_option("Model artifact (.h5, kind 'model').", optional=True,
-                             show_default="the embedded default model") = None,
-    experiments: Annotated[int, typer.Option(
-        "--experiments", help=opts.at_most("Runs per category, strategy and posterior",
-                                           MAX_EXPERIMENTS))] = 30,
-    max_steps: Annotated[int, typer.Option("--max-steps", "-T", help=opts.at_most(
-        "Touches per run", MAX_ADAPT_STEPS))] = 30,
-    strategy: opts.strategies_option("random, active, infogain") = None,
-    seed: opts.seed_option("Seed of displacements and runs.") = 0,
-) -> None:
-    """The robust posterior against the plain one on a model: touches to 1 px, final error, time.
+def medians(r: dict) -> list[str]:
+    """A row's median counts to each threshold, with the runs that never got there: ``3 (2)``."""
+    def med(m: float, never: int) -> str:
+        s = "-" if math.isnan(m) else f"{m:g}"
+        return f"{s} ({never})" if never else s
 
-    Reads MODEL (default: the embedded default model). Writes nothing. Prints, for the ideal arm in
-    ideal mode and the realistic arm in dynamics mode, per strategy, posterior and category: the
-    median touches to an error below 1 px, the median and 90th percentile of the final error, and
-    the median wall-clock time of one step and the run's CPU time per touch (setup and reaching
-    included); then the CPU time of one translation step of the posterior alone.
-    """
-    from kbcli.bench import robust as bench
-    from kbcli.io.paths import default_model_path
-    from kbcli.stages import keyboard as keyboard_stage
-    from kbcli.stages.models import load_model
+    return [med(m, n) for m, n in zip(r["median"], r["never"], strict=True)]
 
-    opts.check_counts(("--experiments", experiments, MAX_EXPERIMENTS),
-                      ("--max-steps", max_steps, MAX_ADAPT_STEPS))
-    model = default_model_path() if model is None else model
-    art = read_artifact(model, "model")
-    m, kb = load_model(art), keyboard_stage.load(art)
-    strategies = tuple(strategy) if strategy else bench.STRATEGIES
-    total = len(bench.SETTINGS) * 3 * len(strategies) * len(bench.POSTERIORS) * experiments
-    bar = progress(iter(range(total)), total, "adaptations")
-    rows = bench.run(m, kb, experiments=experiments, max_steps=max_steps, seed=seed,
-                     strategies=strategies, progress=lambda n: next(bar, None))
-    for _ in bar:  # close the bar
-        pass
-    t = Table(title=f"robust vs plain posterior, {model}: {experiments} runs per row, T = "
-                    f"{max_steps}", title_justify="left")
-    for col in ("mode / arm", "strategy", "posterior", "category", "touches to <1 px",
-                "final median", "final p90", "median step ms (wall)",
-                "run CPU ms / touch (setup, reaching included)"):
-        t.add_column(col, justify="left" if col in ("mode / arm", "strategy", "posterior",
-                                                   "category") else "right")
-    for r in rows:
-        t.add_row(f"{r.mode} / {r.arm}", r.strategy, r.posterior, r.category,
-                  f"{r.touches_1px:g}" if r.touches_1px <= max_steps else f">{max_steps}",
-                  f"{r.final_median:.2f}", f"{r.final_p90:.2f}", f"{r.ms_wall:.1f}",
-                  f"{r.ms_cpu:.1f}")
-    con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
-    show_table(con, t)
-    st = bench.step_time(m, kb, seed=seed)
-    con.print("translation step of the posterior alone (update + estimate, CPU ms, median / 90th "
-              "percentile of 300 touches; one core with OMP_NUM_THREADS=1): "
-              + "; ".join(f"{p} {a:.2f} / {b:.2f}" for p, (a, b) in st.items()) + " (target: robust "
-              "<= 5 ms)")
+
+def pvalues(r: dict) -> str:
+    """A row's p-values against random, one per threshold ("" for random itself)."""
+    def fmt(p: float) -> str:
+        return "1" if p >= 0.9995 else f"{p:.0e}" if p < 1e-3 else f"{p:.3f}"
+
+    return " ".join(fmt(v) for v in r["p"]) if r["p"] is not None else ""

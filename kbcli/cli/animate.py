@@ -8,8 +8,9 @@ from typing import Annotated
 import typer
 
 from kbcli.cli import options as opts
-from kbcli.cli.app import bench_app, check_io, command, err, interactive, out
+from kbcli.cli.app import bench_app, check_io, command, err, out
 from kbcli.cli.record import show_table
+from kbcli.cli.show import interactive
 from kbcli.io.paths import DEFAULT_MODEL, default_model_path
 from kbcli.stages.config import MAX_ADAPT_STEPS
 

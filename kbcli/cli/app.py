@@ -7,27 +7,16 @@ Click's exit 2; Ctrl-C exits 130 and SIGTERM 143, without a traceback.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import inspect
-import os
 import re
 import sys
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
 import typer
 from rich.console import Console
-from rich.progress import (
-    BarColumn,
-    MofNCompleteColumn,
-    Progress,
-    SpinnerColumn,
-    TextColumn,
-    TimeElapsedColumn,
-    TimeRemainingColumn,
-)
 from typer.core import TyperCommand
 
 import kbcli.cli.record as record
@@ -193,53 +182,6 @@ def command(typer_app: typer.Typer = app, **kwargs: Any) -> Callable[[F], F]:
     return deco
 
 
-def interactive() -> bool:
-    """Whether to draw progress bars: only on a terminal, never in CI logs."""
-    return sys.stderr.isatty() and not os.environ.get("CI")
-
-
-T = TypeVar("T")
-
-
-def _bar_columns() -> tuple:
-    """The columns of a progress bar: description, bar, count, elapsed, time left."""
-    return (
-        TextColumn("[progress.description]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TextColumn("left"),
-        TimeRemainingColumn(),
-    )
-
-
-def progress(items: Iterable[T], total: int | None, description: str, *,
-             advance: Callable[[T], float] | None = None,
-             describe: Callable[[T], str | None] | None = None) -> Iterator[T]:
-    """Iterate with a Rich progress bar on a terminal (count, rate, time left); plain otherwise.
-
-    Parameters
-    ----------
-    total : int, optional
-        Units of work in all (None: a count without a bar end).
-    advance : callable, optional
-        Units of work an item stands for (default 1), e.g. the reaches of a batch.
-    describe : callable, optional
-        A new description after an item (None keeps the current one).
-    """
-    if not interactive():
-        yield from items
-        return
-    cols = _bar_columns()
-    with Progress(*cols, console=err, transient=True) as bar:
-        task = bar.add_task(description, total=total)
-        for item in items:
-            yield item
-            bar.advance(task, 1 if advance is None else advance(item))
-            if describe is not None and (text := describe(item)) is not None:
-                bar.update(task, description=text)
-
-
 def note_default(name: str, value: Any, why: str) -> None:
     """Say on stderr, once, a default that depends on the input: ``family: rigid, the scene's``."""
     err.print(f"{name}: {value}, {why}", markup=False)
@@ -251,106 +193,6 @@ def note_arm(arm: Any, mode: str) -> None:
 
     if (line := ideal_mode_note(arm, mode)) is not None:
         err.print(line, markup=False)
-
-
-def run_checkpointed(results: Iterable[tuple[int, dict]], todo: int, ckpt: Any, *, kept: int,
-                     total: int, what: str) -> dict[int, dict]:
-    """Drain ``(index, result)`` pairs of a parallel job into its checkpoint, with a progress bar.
-
-    On Ctrl-C the pending results are flushed, one line says how many of ``total`` ``what`` (a
-    plural noun) are kept and how to resume, and the command exits 130.
-
-    Parameters
-    ----------
-    results : iterable of (int, dict)
-        :func:`kbcli.io.runner.execute`'s output.
-    todo : int
-        How many results to expect (the bar's length).
-    ckpt : kbcli.io.checkpoint.Checkpoint
-    kept : int
-        Results already in the checkpoint when this run resumed.
-
-    Returns
-    -------
-    dict
-        The new results by index.
-    """
-    fresh: dict[int, dict] = {}
-    try:
-        for i, res in progress(results, todo, what):
-            ckpt.add(i, res)
-            fresh[i] = res
-        ckpt.flush()
-    except KeyboardInterrupt as exc:
-        failed = False
-        try:
-            ckpt.flush()
-        except KbcliError:
-            failed = True
-        n = kept + ckpt.written  # what is on disk
-        lost = f" (writing the last {ckpt.pending} failed)" if failed else ""
-        if ckpt.exists():  # (it may hold earlier phases' work even when n is 0)
-            msg = (f"{n} of {total} {what} kept in {ckpt.folder}{lost}: rerun with --resume to "
-                   "continue")
-        elif fresh:
-            msg = f"{len(fresh)} of {total} {what} had finished, but writing them failed; nothing was kept"
-        else:
-            msg = f"none of {total} {what} had finished; nothing was kept"
-        err.print(f"kbcli: {signals.what(exc)}; {msg}", markup=False)
-        raise typer.Exit(signals.exit_code(exc)) from None
-    except BaseException as exc:  # keep what finished, then let the error speak
-        with contextlib.suppress(KbcliError):
-            ckpt.flush()
-        if not isinstance(exc, KbcliError) or not ckpt.exists():
-            raise
-        n = kept + ckpt.written  # what is on disk
-        if all(p.name == "meta.json" for p in ckpt.folder.iterdir()):  # nothing to resume
-            with contextlib.suppress(OSError):
-                ckpt.remove()
-            raise
-        raise KbcliError(f"{exc}; {n} of {total} {what} kept in {ckpt.folder}: rerun with "
-                         "--resume to continue") from None
-    return fresh
-
-
-@contextlib.contextmanager
-def ticker(total: int | None, description: str) -> Iterator[Callable[..., None]]:
-    """A progress bar driven by a callback, for stages that report their steps through one:
-    ``with ticker(T, "adapting") as tick: stage.run(..., on_step=tick)``. Plain when not a
-    terminal (the callback does nothing)."""
-    if not interactive():
-        yield lambda *a, **k: None
-        return
-    cols = _bar_columns()
-    with Progress(*cols, console=err, transient=True) as bar:
-        task = bar.add_task(description, total=total)
-        yield lambda *a, **k: bar.advance(task)
-
-
-@contextlib.contextmanager
-def busy(description: str) -> Iterator[None]:
-    """A spinner with the elapsed time on a terminal, for work that has no natural count (drawing a
-    figure, writing a report); nothing otherwise."""
-    if not interactive():
-        yield
-        return
-    cols = (SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn())
-    with Progress(*cols, console=err, transient=True) as bar:
-        bar.add_task(description, total=None)
-        yield
-
-
-@contextlib.contextmanager
-def phases(description: str) -> Iterator[Callable[[str], None]]:
-    """A spinner with the elapsed time on a terminal for work done in named phases: yields
-    ``phase(text)``, which shows the phase now running (nothing when not a terminal)."""
-    if not interactive():
-        yield lambda text: None
-        return
-    cols = (SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn())
-    with Progress(*cols, console=err, transient=True) as bar:
-        task = bar.add_task(description, total=None)
-        yield lambda text: bar.update(task, description=text)
 
 
 def output_path(path: Path, force: bool = True) -> Path:

@@ -13,8 +13,9 @@ from rich.console import Console
 from rich.table import Table
 
 from kbcli.cli import options as opts
-from kbcli.cli.app import bench_app, check_io, command, err, out, progress
+from kbcli.cli.app import bench_app, check_io, command, err, out
 from kbcli.cli.record import show_table
+from kbcli.cli.show import progress
 from kbcli.core.detection.detectors import MAX_N_LT, MAX_N_ST, DetectorConfig
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact

@@ -11,15 +11,17 @@ import typer
 from rich.table import Table
 
 from kbcli.cli import options as opts
-from kbcli.cli.app import bench_app, check_io, command, err, out, progress, run_checkpointed
+from kbcli.cli.app import bench_app, check_io, command, out
+from kbcli.cli.jobs import check_backend, load_checkpoint, note_resumed, run_checkpointed
 from kbcli.cli.record import show_table
+from kbcli.cli.show import progress
 from kbcli.core.instrument.transforms import FAMILIES
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.checkpoint import Checkpoint, source_digest
 from kbcli.io.config import arm_file, load_arm, load_toml
 from kbcli.io.paths import Output, checkout_file
-from kbcli.io.runner import Job, check_scheduler_address, execute
+from kbcli.io.runner import Job, execute
 from kbcli.stages import evaluate as stage
 from kbcli.stages.config import MAX_EXPERIMENTS
 
@@ -50,15 +52,6 @@ def _job(cfg: stage.EvaluateConfig, model_art, experiment: str) -> Job:
     ctx = stage.context(cfg, model_art, experiment)
     return Job(setup="kbcli.stages.evaluate:setup", run="kbcli.stages.evaluate:run_experiment",
                context=ctx, context_key=stage.context_key(ctx), tasks=tuple(tasks))
-
-
-def _check_backend(jobs: int, scheduler: str | None) -> None:
-    if jobs < 1:
-        raise ConfigError(f"--jobs must be >= 1, got {jobs}")
-    if scheduler is not None:
-        if jobs != 1:
-            raise ConfigError("--jobs and --scheduler exclude each other (the cluster sets the workers)")
-        check_scheduler_address(scheduler)
 
 
 def _summary(art, elapsed: float, n_run: int, step_ms: np.ndarray) -> None:
@@ -138,7 +131,7 @@ def evaluate_cmd(
     if arm is not None:
         arm_cfg = load_arm(arm).to_dict()
         cfg = cfg.replace(arm={m: arm_cfg for m in cfg.modes})
-    _check_backend(jobs, scheduler)
+    check_backend(jobs, scheduler, " (the cluster sets the workers)")
     if checkpoint_every < 1:
         raise ConfigError(f"--checkpoint-every must be >= 1, got {checkpoint_every}")
     model_art = read_artifact(model, "model")
@@ -150,12 +143,8 @@ def evaluate_cmd(
     fingerprint = {**stage.fingerprint(cfg, model_art, stage.EXPERIMENT),
                    "source_code": source_digest()}
     ckpt = Checkpoint(Checkpoint.beside(output), fingerprint, every=checkpoint_every)
-    if resume and not ckpt.exists():  # (make's targets always pass --resume: a note, not a refusal)
-        err.print(f"kbcli: note: --resume: no checkpoint {ckpt.folder}/ to continue; starting "
-                  f"from the first experiment", markup=False)
-    done = ckpt.load(resume)
-    if done:
-        err.print(f"resuming: {len(done)} of {len(tasks)} experiments already done", markup=False)
+    done = load_checkpoint(ckpt, resume, "experiment")
+    note_resumed(done, len(tasks), "experiments")
     todo = [t.row for t in tasks if t.row not in done]
     started = time.perf_counter()
     fresh = run_checkpointed(execute(job, todo, jobs=jobs, scheduler=scheduler), len(todo), ckpt,

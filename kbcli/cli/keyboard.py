@@ -8,7 +8,8 @@ from typing import Annotated
 import typer
 
 from kbcli.cli import options as opts
-from kbcli.cli.app import busy, check_io, command, figure_output, out, plot_app
+from kbcli.cli.app import check_io, command, figure_output, out, plot_app
+from kbcli.cli.show import busy
 from kbcli.core.config import refused_option
 from kbcli.core.instrument.keyboard import KeyboardConfig
 from kbcli.core.instrument.layouts import MAX_KEYS

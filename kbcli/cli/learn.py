@@ -11,21 +11,9 @@ from rich.console import Console
 from rich.table import Table
 
 from kbcli.cli import options as opts
-from kbcli.cli.app import (
-    bench_app,
-    busy,
-    check_io,
-    command,
-    err,
-    figure_output,
-    interactive,
-    note_arm,
-    out,
-    phases,
-    plot_app,
-    progress,
-)
+from kbcli.cli.app import bench_app, check_io, command, err, figure_output, note_arm, out, plot_app
 from kbcli.cli.record import show_table
+from kbcli.cli.show import busy, interactive, phases, progress
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm

@@ -121,6 +121,17 @@ def at_most(text: str, bound: int) -> str:
     return f"{text.rstrip('.')}, at most {bound}."
 
 
+def count_option(flag: str, text: str, bound: int, *decls: str, **kw: Any) -> Any:
+    """A count option ``flag`` (and ``decls``) whose help ``text`` ends with its upper bound."""
+    return Annotated[int, _opt(flag, *decls, help=at_most(text, bound), **kw)]
+
+
+#: ``--category`` repeated: the displacement categories a benchmark runs.
+Categories = Annotated[list[str] | None, _opt(
+    "--category", help="Displacement categories (repeat): small, medium, large.",
+    show_default="all three")]
+
+
 def check_counts(*counts: tuple[str, int | None, int]) -> None:
     """Refuse, in one line, a count outside ``[1, bound]``: ``(option, value, bound)`` each (a
     None value: not given)."""

@@ -11,16 +11,8 @@ import numpy as np
 import typer
 
 from kbcli.cli import options as opts
-from kbcli.cli.app import (
-    busy,
-    check_io,
-    command,
-    figure_output,
-    note_arm,
-    out,
-    plot_app,
-    progress,
-)
+from kbcli.cli.app import check_io, command, figure_output, note_arm, out, plot_app
+from kbcli.cli.show import busy, progress
 from kbcli.core.instrument.audio import SAMPLE_RATE, to_pcm16
 from kbcli.core.instrument.melody import DEFAULT_MELODY, MAX_BEATS, MAX_NOTES, parse_melody
 from kbcli.errors import ConfigError

@@ -9,14 +9,16 @@ from typing import Annotated
 import typer
 
 from kbcli.cli import options as opts
-from kbcli.cli.app import check_io, command, err, out, progress, run_checkpointed
+from kbcli.cli.app import check_io, command, err, out
+from kbcli.cli.jobs import check_backend, load_checkpoint, note_resumed, run_checkpointed
+from kbcli.cli.show import progress
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io import signals
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.checkpoint import Checkpoint, source_digest
 from kbcli.io.config import load_config, load_toml
 from kbcli.io.paths import Output, checkout_file
-from kbcli.io.runner import Job, check_scheduler_address, execute
+from kbcli.io.runner import Job, execute
 from kbcli.stages import quality as stage
 from kbcli.stages.config import MAX_BUDGET, MAX_EXPERIMENTS
 from kbcli.stages.quality.config import MAX_BUDGETS
@@ -76,14 +78,11 @@ def quality_cmd(
              Output(ckpt_dir, "checkpoint folder", folder=True, removes=True),
              *((Output(models_dir, "--models folder", folder=True, files=names),)
                if models_dir is not None else ()))
-    _check_backend(jobs, scheduler)
+    check_backend(jobs, scheduler)
     kb_art = read_artifact(keyboard, "keyboard")
     fp = {**stage.fingerprint(cfg, kb_art), "source_code": source_digest()}
     ckpt = Checkpoint(ckpt_dir, fp, every=20)
-    if resume and not ckpt.exists():  # (make's targets always pass --resume: a note, not a refusal)
-        err.print(f"kbcli: note: --resume: no checkpoint {ckpt.folder}/ to continue; starting "
-                  f"from the first model", markup=False)
-    done = ckpt.load(resume)
+    done = load_checkpoint(ckpt, resume, "model")
     started = time.perf_counter()
     models = _learn_models(cfg, kb_art, ckpt, resume, jobs, scheduler)
     learned_s = time.perf_counter() - started
@@ -108,15 +107,6 @@ def _load_config(config: Path, experiments: int | None, budgets: str | None) -> 
                           "(the sweep's arm is the arm key of [quality])")
     cfg = load_config(stage.QualityConfig, config)
     return cfg.with_overrides(experiments=experiments, budgets=_budgets(budgets))
-
-
-def _check_backend(jobs: int, scheduler: str | None) -> None:
-    if jobs < 1:
-        raise ConfigError(f"--jobs must be >= 1, got {jobs}")
-    if scheduler is not None:
-        if jobs != 1:
-            raise ConfigError("--jobs and --scheduler exclude each other")
-        check_scheduler_address(scheduler)
 
 
 def _learn_models(cfg, kb_art, ckpt: Checkpoint, resume: bool, jobs: int,
@@ -176,8 +166,7 @@ def _adapt_all(cfg, models: dict, kb_art, ckpt: Checkpoint, done: dict, jobs: in
     job = Job(setup="kbcli.stages.quality:adapt_setup", run="kbcli.stages.quality:adapt_one",
               context=ctx, context_key=key, tasks=tuple(tasks))
     todo = [t.row for t in tasks if t.row not in done]
-    if done:
-        err.print(f"resuming: {len(done)} of {len(tasks)} adaptations already done", markup=False)
+    note_resumed(done, len(tasks), "adaptations")
     fresh = run_checkpointed(execute(job, todo, jobs=jobs, scheduler=scheduler), len(todo), ckpt,
                              kept=len(done), total=len(tasks), what="adaptations")
     return tasks, {**done, **fresh}

@@ -96,6 +96,12 @@ def load_note() -> str:
     return " ".join(f"{x:g}" for x in load) if load else "unknown"
 
 
+def timing_note(what: str = "wall time") -> str:
+    """What the times of a timing table are: ``what`` on a machine others share (its load), and
+    CPU time of this process only."""
+    return f"{what} on a shared machine (load average {load_note()}); CPU time: this process only"
+
+
 def write(path: Path, argv: list[str] | None = None) -> None:
     """Write the tables kept so far to ``path`` (atomically) and stop keeping them."""
     global _recorded

@@ -11,17 +11,9 @@ from rich.console import Console
 from rich.table import Table
 
 from kbcli.cli import options as opts
-from kbcli.cli.app import (
-    bench_app,
-    busy,
-    check_io,
-    command,
-    figure_output,
-    interactive,
-    out,
-    progress,
-)
+from kbcli.cli.app import bench_app, check_io, command, figure_output, out
 from kbcli.cli.record import show_table
+from kbcli.cli.show import busy, interactive, progress
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import write_artifact
 from kbcli.stages import repair as repair_stage

@@ -10,8 +10,9 @@ from rich.console import Console
 from rich.table import Table
 
 from kbcli.cli import options as opts
-from kbcli.cli.app import bench_app, busy, check_io, command, interactive, out
+from kbcli.cli.app import bench_app, check_io, command, out
 from kbcli.cli.record import show_table
+from kbcli.cli.show import busy, interactive
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact
 from kbcli.io.atomic import atomic_folder

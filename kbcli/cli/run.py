@@ -10,7 +10,6 @@ import typer
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import (
-    busy,
     check_io,
     command,
     err,
@@ -19,9 +18,9 @@ from kbcli.cli.app import (
     note_default,
     out,
     plot_app,
-    progress,
 )
 from kbcli.cli.repair import check_model_out, write_repaired
+from kbcli.cli.show import busy, progress
 from kbcli.core.adaptation.config import refuse_inactive
 from kbcli.core.config import refused_option
 from kbcli.core.detection.detectors import MAX_N_LT, MAX_N_ST, DetectorConfig

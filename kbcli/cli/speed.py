@@ -10,8 +10,9 @@ from rich.console import Console
 from rich.table import Table
 
 from kbcli.cli import options as opts
-from kbcli.cli.app import bench_app, busy, command, interactive, out
+from kbcli.cli.app import bench_app, command, out
 from kbcli.cli.record import load_note, show_table
+from kbcli.cli.show import busy, interactive
 from kbcli.io.artifact import read_artifact
 from kbcli.stages.config import MAX_ADAPT_STEPS
 
