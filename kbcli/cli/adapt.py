@@ -61,11 +61,7 @@ def _snapshots(text: str | None, table: object, max_steps: int) -> tuple[int, ..
 def _parse_snapshots(text: str, max_steps: int) -> tuple[int, ...]:
     if text.strip().lower() == "all":
         return tuple(range(max_steps + 1))
-    try:
-        steps = tuple(int(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise ConfigError(f"--snapshots must be step numbers separated by commas, got {text!r}") \
-            from None
+    steps = opts.comma_list(text, "--snapshots", "step numbers separated by commas")
     if any(s < 0 for s in steps):
         raise ConfigError(f"--snapshots must be steps >= 0, got {text!r}")
     return steps

@@ -10,7 +10,7 @@ import typer
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, out
 from kbcli.cli.record import show_table
-from kbcli.cli.show import interactive
+from kbcli.cli.show import table, wide
 from kbcli.io.paths import DEFAULT_MODEL, default_model_path
 from kbcli.stages.config import MAX_ADAPT_STEPS
 
@@ -65,9 +65,6 @@ def bench_animate_cmd(
     Reads MODEL. Writes nothing (renders into a temporary folder). Prints per run the frames, the
     median CPU seconds and wall seconds of the rendering, and the GIF's size.
     """
-    from rich.console import Console
-    from rich.table import Table
-
     from kbcli.bench import animate as bench
     from kbcli.io.artifact import read_artifact
 
@@ -77,17 +74,13 @@ def bench_animate_cmd(
     if model == Path(DEFAULT_MODEL):
         model = default_model_path()
     runs = bench.make_runs(cfg, read_artifact(model, "model"))
-    t = Table(title=f"kbcli animate: median of {repeats} renders to GIF (target: a "
-                    f"40-touch run in {bench.TARGET_S:g} s or less on one core)",
-              title_justify="left")
-    for col in ("run", "frames", "CPU s", "wall s", "s per frame (CPU)", "GIF MB"):
-        t.add_column(col, justify="left" if col == "run" else "right")
+    t = table(f"kbcli animate: median of {repeats} renders to GIF (target: a 40-touch run in "
+              f"{bench.TARGET_S:g} s or less on one core)",
+              ("run", "frames", "CPU s", "wall s", "s per frame (CPU)", "GIF MB"))
     for name, art in runs.items():
         m = bench.measure(art, repeats)
         t.add_row(name, str(m["frames"]), f"{m['cpu_s']:.2f}", f"{m['wall_s']:.2f}",
                   f"{m['cpu_s'] / m['frames']:.3f}", f"{m['mb']:.1f}")
-    # a wide table is never wrapped at a narrow default width when the output is not a terminal
-    con = out if interactive() else Console(width=max(out.width, 120), highlight=False)
-    show_table(con, t)
+    show_table(wide(120), t)
     err.print("CPU s: process time of the rendering (one thread); wall s includes waiting for "
               "a shared machine; neither includes kbcli's start-up (~2 s)", markup=False)

@@ -17,7 +17,6 @@ from kbcli.cli.app import bench_app, check_io, command, err, out
 from kbcli.cli.record import show_table
 from kbcli.cli.show import progress
 from kbcli.core.detection.detectors import MAX_N_LT, MAX_N_ST, DetectorConfig
-from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import detect as stage
 
@@ -115,7 +114,8 @@ def bench_detect_cmd(
                       ("--n-st", n_st, MAX_N_ST))
     rng = np.random.default_rng(seed)
     m, kb, p_pre, note = _model_rate(model, p_pre, rng)
-    posts = _rates(p_post)
+    posts = None if p_post is None else opts.comma_list(
+        p_post, "--p-post", "comma-separated numbers", float)
     cfg = bench.BenchConfig(
         p_pre=p_pre, p_post=posts, streams=streams, tune_actions=tune_actions, horizon=horizon,
         fa_target=fa_target, n_lt=n_lt, n_st=n_st,
@@ -168,14 +168,6 @@ def _model_rate(model: Path | None, p_pre: float | None, rng) -> tuple:
     note = (f"p_pre {measured:.4f}: the model's failure rate on the reference pose"
             if measured > 0 else "the model never fails on its reference pose: p_pre 0.01")
     return m, kb, measured if measured > 0 else 0.01, note
-
-
-def _rates(p_post: str | None) -> tuple[float, ...] | None:
-    """``--p-post``'s comma-separated rates (None when not given)."""
-    try:
-        return None if p_post is None else tuple(float(v) for v in p_post.split(",") if v.strip())
-    except ValueError:
-        raise ConfigError(f"--p-post must be comma-separated numbers, got {p_post!r}") from None
 
 
 def _group_table(res, group: str, g: dict, horizon: int) -> Table:

@@ -7,13 +7,11 @@ from typing import Annotated
 
 import numpy as np
 import typer
-from rich.console import Console
-from rich.table import Table
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, figure_output, note_arm, out, plot_app
 from kbcli.cli.record import show_table
-from kbcli.cli.show import busy, interactive, phases, progress
+from kbcli.cli.show import busy, drain, phases, progress, table, wide
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm
@@ -74,6 +72,15 @@ def learn_cmd(
         out.print(f"wrote {output}: exact model (the keyboard's own geometry, "
                   f"{stage.check_keyboard(kb_art).n_keys} keys)")
         return
+    art = _explore(cfg, kb_art, seed, f"{strategy} exploration ({mode}, {model_class}), reaches")
+    write_artifact(art, output)
+    _note_selection(art.attrs)
+    _report_learned(art.attrs, output, strategy, mode)
+
+
+def _explore(cfg: stage.LearnConfig, kb_art, seed: int, what: str):
+    """The model learned by exploring behind a progress bar of the reaches, then a spinner of
+    its finishing phases; refused (nothing written) when it heard too few sounds."""
     learning = stage.learn(cfg, kb_art, rng=np.random.default_rng(seed), seed=seed)
     done = [0]
 
@@ -81,9 +88,7 @@ def learn_cmd(
         step, done[0] = n - done[0], n
         return step
 
-    for _ in progress(learning, cfg.budget, f"{strategy} exploration ({mode}, {model_class}), "
-                      "reaches", advance=reaches):
-        pass
+    drain(learning, cfg.budget, what, advance=reaches)
     with phases("finishing the model") as phase:  # (model selection and calibration take a while)
         art = learning.artifact(on_phase=phase)
     a = art.attrs
@@ -93,9 +98,7 @@ def learn_cmd(
             f"learned only {sounds} sound class(es) besides silence in {a['n_reaches']} reaches, "
             f"fewer than the {MIN_SOUNDS} a model needs to find a moved keyboard; nothing written: "
             f"raise --budget")
-    write_artifact(art, output)
-    _note_selection(a)
-    _report_learned(a, output, strategy, mode)
+    return art
 
 
 def _report_learned(a: dict, output: Path, strategy: str, mode: str) -> None:
@@ -145,11 +148,7 @@ MAX_BUDGETS = 64
 
 
 def _budgets(text: str) -> tuple[int, ...]:
-    try:
-        vals = tuple(int(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise ConfigError(
-            f"--budgets must be whole numbers separated by commas, got {text!r}") from None
+    vals = opts.comma_list(text, "--budgets")
     if not vals or any(v < 1 or v > MAX_BUDGET for v in vals):
         raise ConfigError(f"--budgets must be whole numbers in [1, {MAX_BUDGET}], got {text!r}")
     if len(vals) > MAX_BUDGETS:
@@ -159,8 +158,7 @@ def _budgets(text: str) -> tuple[int, ...]:
 
 @command(bench_app, name="learn")
 def bench_learn_cmd(
-    seeds: Annotated[int, typer.Option("--seeds", help=opts.at_most("Runs per row",
-                                                                    opts.MAX_SEEDS))] = 5,
+    seeds: opts.count_option("--seeds", "Runs per row", opts.MAX_SEEDS) = 5,
     budgets: Annotated[str | None, typer.Option(
         "--budgets", help="Budgets (reaches) at which to report the accuracy, comma-separated, "
         f"each at most {MAX_BUDGET}.", show_default="200,400,800,1600; with --peer 150,300,800")] = None,
@@ -174,9 +172,8 @@ def bench_learn_cmd(
     mode: opts.mode_option(help="Reaching") = "ideal",
     reach_noise: opts.ReachNoise = 0.0,
     seed: opts.seed_option("Seed of the runs.") = 0,
-    boundary_budget: Annotated[int, typer.Option(
-        "--boundary-budget", help=opts.at_most("Reaches at which the boundary error and the learn "
-                                               "wall time are measured", MAX_BUDGET))] = 800,
+    boundary_budget: opts.count_option("--boundary-budget", "Reaches at which the boundary error "
+                                       "and the learn wall time are measured", MAX_BUDGET) = 800,
     eval_step: Annotated[float, typer.Option(
         "--eval-step", help="Grid (px) on which the accuracy is measured.")] = 1.0,
     cache: Annotated[Path | None, typer.Option(
@@ -216,15 +213,19 @@ def bench_learn_cmd(
                             eval_step=eval_step)
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
+    _learning_tables(bench, cfg, kb, cache)
+
+
+def _learning_tables(bench, cfg, kb, cache: Path | None) -> None:
+    """Run the learning benchmark and print its table, the reaches to 97 % per strategy, the wall
+    time of one learn stage and the dynamics simulator's rate."""
     results = list(progress(bench.runs(cfg, kb, cache), cfg.n_runs, "learning runs"))
     rows = bench.summarize(cfg, results)
-    con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
-    t = Table(title=f"learning the model: {seeds} seeds per row, {mode} mode"
-                    + (f", {reach_noise:g} px reach noise" if reach_noise else "")
-                    + f"; median accuracy (%) on a {eval_step:g} px grid", title_justify="left")
+    con = wide(200)
     head, body = bench.table(cfg, rows)
-    for i, h in enumerate(head):
-        t.add_column(h, justify="left" if i < 3 else "right")
+    t = table(f"learning the model: {cfg.seeds} seeds per row, {cfg.mode} mode"
+              + (f", {cfg.reach_noise:g} px reach noise" if cfg.reach_noise else "")
+              + f"; median accuracy (%) on a {cfg.eval_step:g} px grid", head, left=3)
     for row in body:
         t.add_row(*row)
     show_table(con, t)
@@ -234,7 +235,7 @@ def bench_learn_cmd(
     for line in bench.ratio_lines(cfg, rows):
         con.print(line)
     wall = bench.learn_wall_time(cfg, kb)
-    con.print(f"kbcli learn ({cfg.layouts[0]}, {cfg.model_classes[0]}, active, {mode}, budget "
+    con.print(f"kbcli learn ({cfg.layouts[0]}, {cfg.model_classes[0]}, active, {cfg.mode}, budget "
               f"{cfg.boundary_budget}, one core): {wall:.1f} s")
     rate = bench.dynamics_rate()
     con.print(f"dynamics simulator: {rate:.0f} reaches/s (1000 reaches, one core)")
@@ -258,12 +259,10 @@ def _bench_peer(peer: bool, seeds: int, budgets: str | None, layout: list[str] |
     n = len(cfg.layouts) * cfg.seeds * (1 + len(cfg.peers))
     results = list(progress(bench.runs(cfg, jobs), n, "learning runs (kbcli and peers)"))
     tables = bench.tables(cfg, bench.summarize(cfg, results))
-    con = out if interactive() else Console(width=max(out.width, 200), highlight=False)
+    con = wide(200)
     for tb in tables:
-        t = Table(title=tb["title"], title_justify="left")
-        for c in tb["columns"]:
-            t.add_column(c, justify="right" if c in ("budget",) or "%" in c
-                         or "px" in c else "left")
+        t = table(tb["title"], tb["columns"], [c for c in tb["columns"] if c != "budget"
+                                               and "%" not in c and "px" not in c])
         for r in tb["rows"]:
             t.add_row(*(str(r[c]) for c in tb["columns"]))
         show_table(con, t)
@@ -307,13 +306,10 @@ def bench_layouts_cmd(
     output.mkdir(parents=True, exist_ok=True)
     pipe = Pipeline(cfg, output)
     pipe.keyboards()
-    for _ in progress(pipe.learn(), pipe.n_learn_runs, "learning runs"):
-        pass
-    for _ in progress(pipe.models(), len(cfg.layouts), "adaptation models"):
-        pass
+    drain(pipe.learn(), pipe.n_learn_runs, "learning runs")
+    drain(pipe.models(), len(cfg.layouts), "adaptation models")
     total = pipe.plan_adapt()
-    for _ in progress(pipe.adapt(), total, "adaptation runs"):
-        pass
+    drain(pipe.adapt(), total, "adaptation runs")
     folder = pipe.report()
     met = [t["met"] for res in pipe.results.values() for t in _targets(cfg, res)]
     out.print(f"wrote {folder}/README.md, {len(cfg.layouts)} figures and results.json: "
@@ -343,16 +339,13 @@ def bench_arm_cmd(
 
     opts.check_counts(("--reaches", reaches, opts.MAX_REACHES))
     rows = bench.run(reaches=reaches, seed=seed)
-    t = Table(title=f"arm presets: {reaches} reaches each over the default working area, px "
-                    "(median / 95th percentile)", title_justify="left")
-    for col in ("preset", "mode", "|landed - target|", "|felt - landed|", "|contact - landed|",
-                "reaches/s"):
-        t.add_column(col, justify="left" if col in ("preset", "mode") else "right")
+    t = table(f"arm presets: {reaches} reaches each over the default working area, px (median / "
+              "95th percentile)", ("preset", "mode", "|landed - target|", "|felt - landed|",
+                                   "|contact - landed|", "reaches/s"), left=2)
     for r in rows:
         t.add_row(r.preset, r.mode, *(f"{m:.2f} / {p:.2f}" for m, p in (r.landing, r.felt, r.contact)),
                   f"{r.reaches_per_s:,.0f}")
-    con = out if interactive() else Console(width=max(out.width, 140), highlight=False)
-    show_table(con, t)
+    show_table(wide(140), t)
 
 
 @command(bench_app, name="reliability")
@@ -382,18 +375,18 @@ def bench_reliability_cmd(
                                      seeds=seeds))
     last = seed + seeds - 1
     seed_text = f"seed {seed}" if seeds == 1 else f"medians over seeds {seed}-{last}"
-    t = Table(title=f"calibration and self-assessment of learned models ({mode} mode, arm {arm}, "
-                    f"{seed_text}): measured / the model's own estimate", title_justify="left")
-    for col in ("exploration", "reaches", "calibration error", "(min-max)", "mislabel rate",
-                "boundary error (px)", f"chosen calibration (seed {seed})", "learn s"):
-        t.add_column(col, justify="left" if col == "exploration" or col.startswith("chosen") else "right")
+    chosen = f"chosen calibration (seed {seed})"
+    t = table(f"calibration and self-assessment of learned models ({mode} mode, arm {arm}, "
+              f"{seed_text}): measured / the model's own estimate",
+              ("exploration", "reaches", "calibration error", "(min-max)", "mislabel rate",
+               "boundary error (px)", chosen, "learn s"), left=("exploration", chosen))
     for r in rows:
         cal = ", ".join(f"{k} {v:g}" for k, v in sorted(r.calibration.items()))
         t.add_row(r.exploration, str(r.budget), f"{r.ece:.3f} / {r.est_ece:.3f}",
                   f"{r.ece_min:.3f}-{r.ece_max:.3f}",
                   f"{100 * r.mislabel:.1f} % / {100 * r.est_mislabel:.1f} %",
                   f"{r.boundary_error:.2f} / {r.est_boundary_error:.2f}", cal, f"{r.seconds:.0f}")
-    con = out if interactive() else Console(width=max(out.width, 180), highlight=False)
+    con = wide(180)
     show_table(con, t)
     worst = max(r.ece for r in rows)
     con.print(f"largest median calibration error: {worst:.3f} (target <= 0.03)")

@@ -29,6 +29,7 @@ from kbcli.core.instrument.layouts import LAYOUTS
 from kbcli.core.instrument.transforms import FAMILIES
 from kbcli.core.model.classes import MODEL_CLASSES, learned_classes
 from kbcli.core.model.explore import STRATEGIES as EXPLORATIONS
+from kbcli.errors import ConfigError
 from kbcli.sim import MODES
 from kbcli.sim.arms import PRESETS
 
@@ -132,11 +133,19 @@ Categories = Annotated[list[str] | None, _opt(
     show_default="all three")]
 
 
+def comma_list(text: str, option: str, what: str = "whole numbers separated by commas",
+               kind: type = int) -> tuple:
+    """The values of ``option``'s comma-separated ``text`` (each a ``kind``, empty items
+    skipped); any other text is refused in one line saying ``what`` the option takes."""
+    try:
+        return tuple(kind(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise ConfigError(f"{option} must be {what}, got {text!r}") from None
+
+
 def check_counts(*counts: tuple[str, int | None, int]) -> None:
     """Refuse, in one line, a count outside ``[1, bound]``: ``(option, value, bound)`` each (a
     None value: not given)."""
-    from kbcli.errors import ConfigError
-
     for option, value, bound in counts:
         if value is not None and not 1 <= value <= bound:
             raise ConfigError(f"{option} must be a whole number in [1, {bound}], got {value}")

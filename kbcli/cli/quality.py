@@ -11,7 +11,7 @@ import typer
 from kbcli.cli import options as opts
 from kbcli.cli.app import check_io, command, err, out
 from kbcli.cli.jobs import check_backend, load_checkpoint, note_resumed, run_checkpointed
-from kbcli.cli.show import progress
+from kbcli.cli.show import progress, table
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io import signals
 from kbcli.io.artifact import read_artifact, write_artifact
@@ -25,16 +25,6 @@ from kbcli.stages.quality.config import MAX_BUDGETS
 
 DEFAULT_CONFIG = Path("pipelines/model-quality.toml")
 DEFAULT_KEYBOARD = Path("data/keyboard.h5")
-
-
-def _budgets(text: str | None) -> tuple[int, ...] | None:
-    if text is None:
-        return None
-    try:
-        return tuple(int(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise ConfigError(f"--budgets must be whole numbers separated by commas, got {text!r}") \
-            from None
 
 
 @command(name="quality")
@@ -106,7 +96,8 @@ def _load_config(config: Path, experiments: int | None, budgets: str | None) -> 
         raise ConfigError(f"{config}: quality does not read a top-level [arm] table: remove it "
                           "(the sweep's arm is the arm key of [quality])")
     cfg = load_config(stage.QualityConfig, config)
-    return cfg.with_overrides(experiments=experiments, budgets=_budgets(budgets))
+    return cfg.with_overrides(experiments=experiments, budgets=None if budgets is None else
+                              opts.comma_list(budgets, "--budgets"))
 
 
 def _learn_models(cfg, kb_art, ckpt: Checkpoint, resume: bool, jobs: int,
@@ -173,14 +164,10 @@ def _adapt_all(cfg, models: dict, kb_art, ckpt: Checkpoint, done: dict, jobs: in
 
 
 def _summary(art) -> None:
-    from rich.table import Table
-
     a = art.attrs
     rows = stage.compared_rows(a)
-    t = Table(title=f"advantage over {a['baseline']} (touches saved to tau, all categories; p)",
-              title_justify="left")
-    for col in ("model", "accuracy", "boundary err", *rows):
-        t.add_column(col, justify="left" if col == "model" else "right")
+    t = table(f"advantage over {a['baseline']} (touches saved to tau, all categories; p)",
+              ("model", "accuracy", "boundary err", *rows))
     for m, mi in a["models"].items():
         cells = []
         for r in rows:

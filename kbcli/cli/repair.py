@@ -7,13 +7,11 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
-from rich.table import Table
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, figure_output, out
 from kbcli.cli.record import show_table
-from kbcli.cli.show import busy, interactive, progress
+from kbcli.cli.show import busy, table, ticker, wide
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import write_artifact
 from kbcli.stages import repair as repair_stage
@@ -73,20 +71,14 @@ def bench_repair_cmd(
     check_io({}, figure_output(plot))
     with busy("learning the weak models"):
         models = bench.weak_models(seeds=tuple(range(1, seeds + 1)))
-    total = len(models) * len(bench.METHODS) * moves
-    bar = progress(iter(range(total)), total, "adaptations")
-    runs = bench.side_by_side(models, n_moves=moves, touches=touches, seed=seed,
-                              progress=lambda n: next(bar, None))
-    for _ in bar:
-        pass
-    con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
+    with ticker(len(models) * len(bench.METHODS) * moves, "adaptations") as tick:
+        runs = bench.side_by_side(models, n_moves=moves, touches=touches, seed=seed, progress=tick)
+    con = wide(160)
     _side_table(con, bench.summarize(runs, touches), models, moves, touches)
     if episodes:
-        bar = progress(iter(range(episodes)), episodes, "lifelong moves")
-        start, eps = bench.lifelong(models[0], episodes=episodes, touches=touches, seed=seed,
-                                    progress=lambda n: next(bar, None))
-        for _ in bar:
-            pass
+        with ticker(episodes, "lifelong moves") as tick:
+            start, eps = bench.lifelong(models[0], episodes=episodes, touches=touches, seed=seed,
+                                        progress=tick)
         _lifelong_table(con, models[0], start, eps, touches)
         from kbcli.viz.repair import plot_lifelong  # (matplotlib: seconds)
         with busy("drawing"):
@@ -96,13 +88,11 @@ def bench_repair_cmd(
 
 
 def _side_table(con, rows: list[dict], models, moves: int, touches: int) -> None:
-    t = Table(title=f"repair vs plain infogain vs exact model: {len(models)} weak models "
-                    f"(random, 250 reaches) x {moves} moves (5-30 px), {touches} touches",
-              title_justify="left")
-    for col in ("method", "runs", "median final px", "under 1 px", "touches to stay < 1 px",
-                "never", "worse than plain by > 0.5 px", "90 % disc covers truth",
-                "ms / touch (median)", "x plain"):
-        t.add_column(col, justify="left" if col == "method" else "right")
+    t = table(f"repair vs plain infogain vs exact model: {len(models)} weak models (random, 250 "
+              f"reaches) x {moves} moves (5-30 px), {touches} touches",
+              ("method", "runs", "median final px", "under 1 px", "touches to stay < 1 px",
+               "never", "worse than plain by > 0.5 px", "90 % disc covers truth",
+               "ms / touch (median)", "x plain"))
     for r in rows:
         t.add_row(r["method"], str(r["runs"]), f"{r['median_final_px']:.2f}",
                   f"{100 * r['under_1px']:.0f} %", f"{r['median_touches_stay_1px']:g}",
@@ -110,24 +100,19 @@ def _side_table(con, rows: list[dict], models, moves: int, touches: int) -> None
                   f"{100 * r['coverage_90']:.0f} %", f"{r['median_ms']:.1f}",
                   f"{r['ms_ratio']:.2f}")
     show_table(con, t)
-    pm = Table(title="median final error per model, px", title_justify="left")
-    pm.add_column("method")
     names = [m.name for m in models]
-    for n in names:
-        pm.add_column(n, justify="right")
+    pm = table("median final error per model, px", ("method", *names))
     for r in rows:
         pm.add_row(r["method"], *(f"{r['per_model'][n]:.2f}" for n in names))
     show_table(con, pm)
 
 
 def _lifelong_table(con, wm, start: float, eps: list, touches: int) -> None:
-    t = Table(title=f"lifelong: the {wm.name} model (boundary error {start:.2f} px as learned) "
-                    f"carried over {len(eps)} moves, {touches} touches each",
-              title_justify="left")
-    for col in ("move", "dx", "dy", "repair: touches to stay < 1 px", "repair final px",
-                "plain: touches to stay < 1 px", "plain final px", "touches absorbed",
-                "carried model's boundary error px"):
-        t.add_column(col, justify="right")
+    t = table(f"lifelong: the {wm.name} model (boundary error {start:.2f} px as learned) "
+              f"carried over {len(eps)} moves, {touches} touches each",
+              ("move", "dx", "dy", "repair: touches to stay < 1 px", "repair final px",
+               "plain: touches to stay < 1 px", "plain final px", "touches absorbed",
+               "carried model's boundary error px"), left=0)
     for e in eps:
         t.add_row(str(e.episode), f"{e.truth[0]:+.1f}", f"{e.truth[1]:+.1f}",
                   _stay(e.repair_stay, touches), f"{e.repair_final:.2f}",

@@ -3,16 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
-
-import typer
-from rich.console import Console
-from rich.table import Table
 
 from kbcli.cli import options as opts
-from kbcli.cli.app import bench_app, command, out
-from kbcli.cli.record import load_note, show_table
-from kbcli.cli.show import busy, interactive
+from kbcli.cli.app import bench_app, command
+from kbcli.cli.record import show_table, timing_note
+from kbcli.cli.show import busy, table, wide
 from kbcli.io.artifact import read_artifact
 from kbcli.stages.config import MAX_ADAPT_STEPS
 
@@ -34,10 +29,9 @@ def _touch_rows(adapter_config) -> list:
 def bench_speed_cmd(
     model: opts.model_option("Model artifact.", optional=True,
                              show_default="the embedded default model") = None,
-    repeats: Annotated[int, typer.Option("--repeats", help=opts.at_most(
-        "Adaptations per row (each its own seed); the table gives medians", MAX_REPEATS))] = 5,
-    touches: Annotated[int, typer.Option("--touches", "-T", help=opts.at_most(
-        "Touches per adaptation", MAX_ADAPT_STEPS))] = 20,
+    repeats: opts.count_option("--repeats", "Adaptations per row (each its own seed); the table "
+                               "gives medians", MAX_REPEATS) = 5,
+    touches: opts.count_option("--touches", "Touches per adaptation", MAX_ADAPT_STEPS, "-T") = 20,
     seed: opts.seed_option("Seed of the adaptations.") = 0,
 ) -> None:
     """Time the adaptation per touch: the paper's method and kbcli's, and kbcli adapt's posteriors.
@@ -61,15 +55,14 @@ def bench_speed_cmd(
     path = default_model_path() if model is None else Path(model)
     art = read_artifact(path, "model")
     learned, kb = load_model(art), keyboard_stage.load(art)
-    con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
+    con = wide(160)
     with busy("timing per touch"):
         rows = [bench.touch_times(learned, kb, cfg, name, runs=repeats, touches=touches,
                                   seed=seed) for cfg, name in _touch_rows(AdapterConfig)]
-    t = Table(title=f"time per touch on {path}: {repeats} adaptations x {touches} touches per "
-                    f"row, set-up excluded, one thread", title_justify="left")
-    for col in ("strategy + posterior", "median CPU ms / touch", "p90 CPU ms", "median wall ms",
-                f"<= {bench.TARGET_MS:g} ms (issue 26)"):
-        t.add_column(col, justify="left" if col.startswith("strategy") else "right")
+    t = table(f"time per touch on {path}: {repeats} adaptations x {touches} touches per row, "
+              "set-up excluded, one thread", ("strategy + posterior", "median CPU ms / touch",
+                                              "p90 CPU ms", "median wall ms",
+                                              f"<= {bench.TARGET_MS:g} ms (issue 26)"))
     for r in rows:
         meets = ("yes" if r.cpu_ms <= bench.TARGET_MS else "no") \
             if r.name.startswith("paper-active") else ""
@@ -78,19 +71,16 @@ def bench_speed_cmd(
     with busy("timing kbcli adapt"):
         arows = [bench.adapt_times(art, kb, p, runs=repeats, touches=touches, seed=seed)
                  for p in ("likelihood", "kde")]
-    t = Table(title=f"kbcli adapt --posterior P on {path} (infogain, defaults): {repeats} runs of "
-                    f"{touches} touches per row, one thread", title_justify="left")
-    for col in ("posterior", "set-up ms", "median touch ms", "ms / touch, set-up included",
-                "CPU ms / touch, set-up included", "vs likelihood"):
-        t.add_column(col, justify="left" if col == "posterior" else "right")
+    t = table(f"kbcli adapt --posterior P on {path} (infogain, defaults): {repeats} runs of "
+              f"{touches} touches per row, one thread",
+              ("posterior", "set-up ms", "median touch ms", "ms / touch, set-up included",
+               "CPU ms / touch, set-up included", "vs likelihood"))
     base = arows[0].per_touch_ms
     for r in arows:
         t.add_row(r.posterior, f"{r.setup_ms:.0f}", f"{r.touch_ms:.1f}", f"{r.per_touch_ms:.1f}",
                   f"{r.per_touch_cpu_ms:.1f}", f"{r.per_touch_ms / base:.2f}x")
     show_table(con, t)
-    con.print(f"wall time on a shared machine (load average {load_note()}); "
-              "CPU time: this process only. "
-              f"Targets (issue 26): paper-active + kde <= {bench.TARGET_MS:g} CPU ms per touch "
+    con.print(f"{timing_note()}. Targets (issue 26): paper-active + kde <= {bench.TARGET_MS:g} CPU ms per touch "
               f"(met by: {_met(rows, bench.TARGET_MS)}); kde within 3x of likelihood, set-up "
               f"included")
 
