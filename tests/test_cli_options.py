@@ -11,6 +11,7 @@ from helpers import one_line_error
 
 from kbcli.cli import app
 from kbcli.cli import options as opts
+from kbcli.cli import paper_flags as paper
 from kbcli.core.adaptation.estimators import ESTIMATORS
 from kbcli.core.adaptation.posteriors import POSTERIORS
 from kbcli.core.instrument.keyboard import KeyboardConfig
@@ -123,21 +124,21 @@ def test_estimator_flag_reaches_the_run(runner, files):
 
 
 def test_every_paper_flag_is_declared_once_and_reaches_adapt_and_run():
-    """opts.with_paper_flags adds each of opts.PAPER_FLAGS to a command, typed as declared."""
+    """paper.with_paper_flags adds each of paper.PAPER_FLAGS to a command, typed as declared."""
     import typer
 
-    assert set(opts._PAPER_TYPES) == set(opts.PAPER_FLAGS)
+    assert set(paper._PAPER_TYPES) == set(paper.PAPER_FLAGS)
     for name in ("adapt", "run"):
         cmd = typer.main.get_command(app).commands[name]
         flags = {o for p in cmd.params for o in p.opts}
-        missing = {"--" + f.replace("_", "-") for f in opts.PAPER_FLAGS} - flags
+        missing = {"--" + f.replace("_", "-") for f in paper.PAPER_FLAGS} - flags
         assert not missing, (name, missing)
 
 
 def test_with_paper_flags_hands_the_flags_over_as_one_dict():
     seen = {}
 
-    @opts.with_paper_flags
+    @paper.with_paper_flags
     def cmd(a: int = 1, paper_flags: dict | None = None, b: int = 2):
         seen.update(paper_flags, a=a, b=b)
 
@@ -145,6 +146,6 @@ def test_with_paper_flags_hands_the_flags_over_as_one_dict():
 
     names = list(inspect.signature(cmd).parameters)
     assert names[0] == "a" and names[-1] == "b" and "paper_flags" not in names
-    assert names[1:-1] == list(opts._PAPER_TYPES)
+    assert names[1:-1] == list(paper._PAPER_TYPES)
     cmd(a=3, b=4, kde_floor=0.5)
     assert seen["kde_floor"] == 0.5 and seen["candidates"] is None and (seen["a"], seen["b"]) == (3, 4)

@@ -23,6 +23,7 @@ from kbcli.cli.app import (
     out,
     plot_app,
 )
+from kbcli.cli.paper_flags import robot_given, with_paper_flags
 from kbcli.cli.record import show_table, timing_note
 from kbcli.cli.repair import check_model_out, write_repaired
 from kbcli.cli.show import busy, drain, table, ticker, wide
@@ -68,7 +69,7 @@ def _parse_snapshots(text: str, max_steps: int) -> tuple[int, ...]:
 
 
 @command(name="adapt")
-@opts.with_paper_flags
+@with_paper_flags
 def adapt_cmd(
     model: opts.model_option(),
     scene: Annotated[Path, typer.Option("--scene", help="Scene artifact (.h5, kind 'scene'): the "
@@ -118,30 +119,26 @@ def adapt_cmd(
     flags = {"strategy": strategy, "posterior": posterior, "estimator": estimator,
              "family": family, "mode": mode, "reach_noise": reach_noise, "feedback": feedback,
              "model_blur": model_blur, "repair": repair, "max_steps": max_steps,
-             "resolution": resolution,
-             "prior_halfwidth": prior_halfwidth, "stop": stop, **(paper_flags or {})}
+             "resolution": resolution, "prior_halfwidth": prior_halfwidth, "stop": stop,
+             **(paper_flags or {})}
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
-    cfg, scene_family, table_snaps = _adapt_config(config, flags, arm,
-                                                   scene_art.config.get("family", "translation"))
-    check_model_out(model_out, cfg.robot.repairs)
-    steps = _snapshots(snapshots, table_snaps, cfg.max_steps)
-    stage.check_inputs(model_art, scene_art)
-    note_arm(cfg.arm, cfg.mode)
+    cfg, scene_family, steps = _adapt_config(config, flags, arm, scene_art, model_out, snapshots)
     art, adapter, setup_ms = _adapt(cfg, model_art, scene_art, seed, steps)
     write_artifact(art, output)
-    if scene_family and cfg.family != DEFAULT_FAMILY:  # (said once the inputs passed every check)
-        note_default("family", cfg.family, "the scene's (--family to choose)")
-    _report_run(art, cfg, output, setup_ms)
+    _report_run(art, cfg, output, setup_ms, scene_family)
     if model_out is not None:
-        write_repaired(model_art, adapter.model, [repair_stage.run_adaptation(adapter, art)],
-                       model_out, "adapt")
+        adaptations = [repair_stage.run_adaptation(adapter, art)]
+        write_repaired(model_art, adapter.model, adaptations, model_out, "adapt")
 
 
 def _adapt(cfg: stage.AdaptConfig, model_art, scene_art, seed: int, steps: tuple[int, ...]
            ) -> tuple:
-    """The run of the adapt stage behind a progress bar: its artifact, the adapter (whose model
-    the touches repaired) and the set-up time (ms; None if not measured)."""
+    """The run of the adapt stage behind a progress bar (once its inputs passed their checks):
+    its artifact, the adapter (whose model the touches repaired) and the set-up time (ms; None if
+    not measured)."""
+    stage.check_inputs(model_art, scene_art)
+    note_arm(cfg.arm, cfg.mode)
     what = f"adapting ({cfg.robot.strategy.name}, {cfg.robot.posterior.name} posterior), observations"
     timings: dict[str, float] = {}
     keep: dict = {}
@@ -160,13 +157,15 @@ def _note_beyond(steps: tuple[int, ...], max_steps: int, given: str) -> None:
                   "recorded", markup=False)
 
 
-def _adapt_config(config: Path | None, flags: dict, arm: str | None,
-                  family: str) -> tuple[stage.AdaptConfig, bool, object]:
-    """The [adapt] table of ``config`` (if any) with the flags given on top, the arm, and
-    ``family`` (the scene's) unless set, whether it was the scene's, and the table's
-    ``snapshot_steps`` (None if absent); a robot option set (in either) that the method does not
-    read is refused (the part refuses an option it does not take; one it takes but does not read
-    under the others: :func:`kbcli.core.adaptation.config.refuse_inactive`)."""
+def _adapt_config(config: Path | None, flags: dict, arm: str | None, scene_art,
+                  model_out: Path | None, snapshots: str | None
+                  ) -> tuple[stage.AdaptConfig, bool, tuple[int, ...]]:
+    """The [adapt] table of ``config`` (if any) with the flags given on top, the arm, and the
+    scene's family unless set; whether it was the scene's; and the steps to snapshot
+    (:func:`_snapshots`). A robot option set (in either) that the method does not read is refused
+    (the part refuses an option it does not take; one it takes but does not read under the
+    others: :func:`kbcli.core.adaptation.config.refuse_inactive`), and so is a ``--model-out``
+    without the repaired belief."""
     table = load_stage_table(config, "adapt") if config is not None else {}
     snaps = table.pop("snapshot_steps", None)
     given = {k: v for k, v in flags.items() if v is not None}
@@ -174,19 +173,23 @@ def _adapt_config(config: Path | None, flags: dict, arm: str | None,
         given["arm"] = load_arm(arm)
     scene_family = "family" not in {**table, **given}  # what the scene moved (rigid: an angle)
     if scene_family:
-        given["family"] = family
-    labels = opts.robot_given(flags, table, str(config))
+        given["family"] = scene_art.config.get("family", "translation")
+    labels = robot_given(flags, table, str(config))
     try:
         cfg = with_file(stage.AdaptConfig, table, given, config)
     except ConfigError as exc:
         raise refused_option(exc, labels, "adapt") from None
     refuse_inactive(cfg.robot, labels, "adapt")
-    return cfg, scene_family, snaps
+    check_model_out(model_out, cfg.robot.repairs)
+    return cfg, scene_family, _snapshots(snapshots, snaps, cfg.max_steps)
 
 
-def _report_run(art, cfg, output: Path, setup_ms: float | None = None) -> None:
-    """One line on the run written (its set-up time apart from the median touch's); a note when
-    the truth lay outside the prior."""
+def _report_run(art, cfg, output: Path, setup_ms: float | None = None,
+                scene_family: bool = False) -> None:
+    """One line on the run written (its set-up time apart from the median touch's); notes on a
+    family taken from the scene and on a truth outside the prior."""
+    if scene_family and cfg.family != DEFAULT_FAMILY:  # (said once the inputs passed every check)
+        note_default("family", cfg.family, "the scene's (--family to choose)")
     a = art.attrs
     est = ", ".join(f"{k}={v:.2f}" for k, v in a["estimate"].items())
     truth = ", ".join(f"{k}={v:.2f}" for k, v in a["truth"].items())

@@ -45,9 +45,6 @@ app = typer.Typer(
 )
 plot_app = typer.Typer(help="Draw an artifact as a figure (PNG, PDF or SVG by the -o suffix).",
                        no_args_is_help=True)
-
-#: help of every plot command's -o option
-FIGURE_HELP = "Figure to write: .png, .pdf or .svg (the suffix picks the format)."
 bench_app = typer.Typer(
     help="Benchmarks: tables of speed and sample efficiency (not tests).",
     no_args_is_help=True,

@@ -15,7 +15,7 @@ from rich.table import Table
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, out
 from kbcli.cli.record import show_table
-from kbcli.cli.show import progress
+from kbcli.cli.show import progress, table
 from kbcli.core.detection.detectors import MAX_N_LT, MAX_N_ST, DetectorConfig
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import detect as stage
@@ -80,20 +80,18 @@ def bench_detect_cmd(
     model: opts.model_option("Model artifact whose melody player sets the failure rates.",
                              optional=True,
                              show_default="the exact model of the default keyboard") = None,
-    streams: Annotated[int, typer.Option("--streams", help=opts.at_most(
-        "Evaluation streams per category", opts.MAX_STREAMS))] = 400,
-    tune_actions: Annotated[int, typer.Option(
-        "--tune-actions", help=opts.at_most("Change-free actions used to tune every detector",
-                                            opts.MAX_TUNE_ACTIONS))] = 1_000_000,
-    horizon: Annotated[int, typer.Option(
-        "--horizon", help=opts.at_most("Post-change actions after which a change counts as missed",
-                                       opts.MAX_HORIZON))] = 1000,
+    streams: opts.count_option("--streams", "Evaluation streams per category",
+                               opts.MAX_STREAMS) = 400,
+    tune_actions: opts.count_option("--tune-actions", "Change-free actions used to tune every "
+                                    "detector", opts.MAX_TUNE_ACTIONS) = 1_000_000,
+    horizon: opts.count_option("--horizon", "Post-change actions after which a change counts as "
+                               "missed", opts.MAX_HORIZON) = 1000,
     fa_target: Annotated[float, typer.Option(
         "--fa-target", help="False alarms allowed per 10,000 actions when tuning.")] = 1.0,
-    n_lt: Annotated[int, typer.Option("--n-lt", help=opts.at_most(
-        "Long-term window of our detectors", MAX_N_LT))] = DEFAULT.n_lt,
-    n_st: Annotated[int, typer.Option("--n-st", help=opts.at_most(
-        "Short-term window of our detectors", MAX_N_ST))] = DEFAULT.n_st,
+    n_lt: opts.count_option("--n-lt", "Long-term window of our detectors",
+                            MAX_N_LT) = DEFAULT.n_lt,
+    n_st: opts.count_option("--n-st", "Short-term window of our detectors",
+                            MAX_N_ST) = DEFAULT.n_st,
     detectors: Annotated[str, typer.Option(
         "--detectors", help="Comma-separated subset of binomial,cusum,bocpd,fhddm,ddm,adwin.")] =
         "binomial,cusum,bocpd,fhddm,ddm,adwin",
@@ -126,12 +124,18 @@ def bench_detect_cmd(
     if note:
         err.print(note)
     n_groups = len(posts) if posts is not None else len(cfg.categories)
-    total = len(cfg.detectors) * (1 + n_groups)
     t0 = time.perf_counter()
     res = None
-    for _, partial in progress(bench.run(cfg, rng=rng, model=m, keyboard=kb), total, "benchmark"):
+    for _, partial in progress(bench.run(cfg, rng=rng, model=m, keyboard=kb),
+                               len(cfg.detectors) * (1 + n_groups), "benchmark"):
         res = partial
     elapsed = time.perf_counter() - t0
+    _show_results(bench, res, cfg)
+    out.print(f"benchmark took {elapsed:.0f} s")
+
+
+def _show_results(bench, res, cfg) -> None:
+    """The benchmark's settings, a table per group and how our detectors compare with river's."""
     wide = Console(width=max(out.width, 110), highlight=False)  # the table needs ~100 columns
     wide.print(f"detection delay = actions after the change until the alarm; p_pre={cfg.p_pre:g}; "
               f"{cfg.streams} streams per category, change at a step in "
@@ -144,7 +148,6 @@ def bench_detect_cmd(
     for group in res.groups:
         if (line := _verdict(bench, res, group, cfg)) is not None:
             wide.print(line)
-    out.print(f"benchmark took {elapsed:.0f} s")
 
 
 def _model_rate(model: Path | None, p_pre: float | None, rng) -> tuple:
@@ -172,17 +175,14 @@ def _model_rate(model: Path | None, p_pre: float | None, rng) -> tuple:
 
 def _group_table(res, group: str, g: dict, horizon: int) -> Table:
     """One group's table: each detector's setting, false alarms, delays and misses."""
-    table = Table(title=f"{group}: post-change failure rate median {g['median_p_post']:.2f} "
-                        f"(10-90%: {g['p10']:.2f}-{g['p90']:.2f})", title_justify="left")
-    for col in ("detector", "setting", "FA tune", "FA eval", "median", "p90", "missed"):
-        table.add_column(col, justify="left" if col in ("detector", "setting") else "right",
-                         no_wrap=True)
+    t = table(f"{group}: post-change failure rate median {g['median_p_post']:.2f} (10-90%: "
+              f"{g['p10']:.2f}-{g['p90']:.2f})", ("detector", "setting", "FA tune", "FA eval",
+                                                  "median", "p90", "missed"), left=2, no_wrap=True)
     for r in res.rows:
         if r.group == group:
-            table.add_row(r.detector, r.setting, f"{r.tuned_fa:.2f}", f"{r.fa:.2f}",
-                          _fmt(r.median, horizon), _fmt(r.p90, horizon),
-                          f"{r.missed}/{r.streams}")
-    return table
+            t.add_row(r.detector, r.setting, f"{r.tuned_fa:.2f}", f"{r.fa:.2f}",
+                      _fmt(r.median, horizon), _fmt(r.p90, horizon), f"{r.missed}/{r.streams}")
+    return t
 
 
 def _verdict(bench, res, group: str, cfg) -> str | None:

@@ -8,28 +8,31 @@ from typing import Annotated
 
 import numpy as np
 import typer
-from rich.table import Table
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, out
 from kbcli.cli.jobs import check_backend, load_checkpoint, note_resumed, run_checkpointed
 from kbcli.cli.record import show_table
-from kbcli.cli.show import progress
+from kbcli.cli.show import progress, table
 from kbcli.core.instrument.transforms import FAMILIES
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.checkpoint import Checkpoint, source_digest
 from kbcli.io.config import arm_file, load_arm, load_toml
-from kbcli.io.paths import Output, checkout_file
+from kbcli.io.paths import Output, checkout_file, default_model_path
 from kbcli.io.runner import Job, execute
 from kbcli.stages import evaluate as stage
+from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages.config import MAX_EXPERIMENTS
 
 DEFAULT_CONFIG = Path("pipelines/paper.toml")
 
 
 def _load_config(config: Path, experiments: int | None, mode: str | None,
-                 methods: list[str] | None = None) -> stage.EvaluateConfig:
+                 methods: list[str] | None = None, arm: str | None = None
+                 ) -> stage.EvaluateConfig:
+    """The [evaluate] table of ``config`` with the command line's overrides (``arm``: every
+    mode's)."""
     if config == DEFAULT_CONFIG:
         config = checkout_file(config, "--config")
     doc = load_toml(config)
@@ -43,8 +46,12 @@ def _load_config(config: Path, experiments: int | None, mode: str | None,
                 if not -180.0 < float(d[0]) <= 180.0:
                     raise ConfigError(f"{config}: categories.{cat.name}: angle {d[0]:g} is outside "
                                       f"(-180, 180] degrees")
-    return cfg.with_overrides(experiments=experiments, mode=mode,
-                              methods=tuple(methods) if methods else None)
+    cfg = cfg.with_overrides(experiments=experiments, mode=mode,
+                             methods=tuple(methods) if methods else None)
+    if arm is not None:
+        arm_cfg = load_arm(arm).to_dict()
+        cfg = cfg.replace(arm={m: arm_cfg for m in cfg.modes})
+    return cfg
 
 
 def _job(cfg: stage.EvaluateConfig, model_art, experiment: str) -> Job:
@@ -60,12 +67,10 @@ def _summary(art, elapsed: float, n_run: int, step_ms: np.ndarray) -> None:
     j = int(np.argmin(np.abs(thr - 4.0)))  # the threshold nearest 4 px
     T = art.attrs["max_steps"]
     exp = art.data["experiments"]
-    table = Table(title="evaluation summary")
-    for col in ("mode", "method", "category", "strategy", f"RMSE at t={T} (px)",
-                f"median obs. to < {thr[j]:g} px", f"p vs {base} (< {thr[j]:g} px)",
-                "playing success after"):
-        table.add_column(col, justify="left" if col in ("mode", "method", "category", "strategy")
-                         else "right")
+    t = table("evaluation summary", ("mode", "method", "category", "strategy",
+                                     f"RMSE at t={T} (px)", f"median obs. to < {thr[j]:g} px",
+                                     f"p vs {base} (< {thr[j]:g} px)", "playing success after"),
+              left=4, title_justify="center")
     from kbcli.stages.report import ordered
 
     for m in art.attrs["modes"]:
@@ -76,9 +81,9 @@ def _summary(art, elapsed: float, n_run: int, step_ms: np.ndarray) -> None:
                    & (exp["strategy"] == s))
             play = exp["play_adapted"][sel]
             ptxt = "" if np.isnan(play).all() else f"{100 * np.nanmedian(play):.1f} %"
-            table.add_row(m, x, c, s, f"{cur['rmse'][-1]:.2f}",
-                          f">{T}" if np.isnan(med) else f"{med:g}", p, ptxt)
-    out.print(table)
+            t.add_row(m, x, c, s, f"{cur['rmse'][-1]:.2f}",
+                      f">{T}" if np.isnan(med) else f"{med:g}", p, ptxt)
+    out.print(t)
     if n_run:
         med = float(np.median(step_ms)) if len(step_ms) else float("nan")
         out.print(f"ran {n_run} experiments in {elapsed:.1f} s ({n_run / max(elapsed, 1e-9):.2f}/s); "
@@ -119,24 +124,16 @@ def evaluate_cmd(
     continues from there. Prints a progress bar, then a table of final RMSE, median observations,
     p-values and playing success, and the speed.
     """
-    if model is None:
-        from kbcli.io.paths import default_model_path
-
-        model = default_model_path()
+    model = default_model_path() if model is None else model
     if config == DEFAULT_CONFIG:
         config = checkout_file(config, "--config")
     check_io({"--model": model, "--config": config, "--arm": arm_file(arm)}, ("--output", output),
              Output(Checkpoint.beside(output), "checkpoint folder", folder=True, removes=True))
-    cfg = _load_config(config, experiments, mode, method)
-    if arm is not None:
-        arm_cfg = load_arm(arm).to_dict()
-        cfg = cfg.replace(arm={m: arm_cfg for m in cfg.modes})
+    cfg = _load_config(config, experiments, mode, method, arm)
     check_backend(jobs, scheduler, " (the cluster sets the workers)")
     if checkpoint_every < 1:
         raise ConfigError(f"--checkpoint-every must be >= 1, got {checkpoint_every}")
     model_art = read_artifact(model, "model")
-    from kbcli.stages import keyboard as keyboard_stage
-
     keyboard = keyboard_stage.load(model_art)
     job = _job(cfg, model_art, stage.EXPERIMENT)
     tasks = list(job.tasks)
@@ -145,23 +142,34 @@ def evaluate_cmd(
     ckpt = Checkpoint(Checkpoint.beside(output), fingerprint, every=checkpoint_every)
     done = load_checkpoint(ckpt, resume, "experiment")
     note_resumed(done, len(tasks), "experiments")
-    todo = [t.row for t in tasks if t.row not in done]
-    started = time.perf_counter()
-    fresh = run_checkpointed(execute(job, todo, jobs=jobs, scheduler=scheduler), len(todo), ckpt,
-                             kept=len(done), total=len(tasks), what="experiments")
-    elapsed = time.perf_counter() - started
-    results = {**done, **fresh}
-    art = stage.assemble(cfg, tasks, results, model_art, keyboard)
-    try:
-        write_artifact(art, output)
-    except KbcliError as exc:  # e.g. a full disk: the experiments stay in the checkpoint
-        hint = (f"; all {len(tasks)} experiments are kept in {ckpt.folder}: rerun with --resume "
-                "to write it" if ckpt.exists() else "")
-        raise KbcliError(f"{exc}{hint}") from None
-    ckpt.remove()
+    fresh, elapsed = _run(job, done, ckpt, jobs, scheduler)
+    art = stage.assemble(cfg, tasks, {**done, **fresh}, model_art, keyboard)
+    _write(art, output, ckpt, len(tasks))
     out.print(f"wrote {output}: {len(tasks)} experiments ({', '.join(cfg.modes)}; methods "
               + ", ".join(f"{m.name} ({', '.join(m.strategies)})" for m in cfg.methods) + ")")
     _summary(art, elapsed, len(fresh), stage.timing(fresh))
+
+
+def _run(job: Job, done: dict, ckpt: Checkpoint, jobs: int, scheduler: str | None
+         ) -> tuple[dict, float]:
+    """Run the experiments not ``done`` into the checkpoint: their results, and the seconds."""
+    todo = [t.row for t in job.tasks if t.row not in done]
+    started = time.perf_counter()
+    fresh = run_checkpointed(execute(job, todo, jobs=jobs, scheduler=scheduler), len(todo), ckpt,
+                             kept=len(done), total=len(job.tasks), what="experiments")
+    return fresh, time.perf_counter() - started
+
+
+def _write(art, output: Path, ckpt: Checkpoint, n: int) -> None:
+    """Write the evaluation of ``n`` experiments, then remove their checkpoint; a failed write (a
+    full disk) keeps the checkpoint and says how to write it."""
+    try:
+        write_artifact(art, output)
+    except KbcliError as exc:
+        hint = (f"; all {n} experiments are kept in {ckpt.folder}: rerun with --resume "
+                "to write it" if ckpt.exists() else "")
+        raise KbcliError(f"{exc}{hint}") from None
+    ckpt.remove()
 
 
 @command(bench_app, name="evaluate")
@@ -169,9 +177,8 @@ def bench_evaluate_cmd(
     config: opts.config_option("TOML with an [evaluate] table.", optional=False) = DEFAULT_CONFIG,
     model: opts.model_option("Model artifact (.h5, kind 'model').", optional=True,
                              show_default="the exact model of the config's keyboard") = None,
-    experiments: Annotated[int, typer.Option(
-        "--experiments", help=opts.at_most("Repetitions per parametrization and strategy",
-                                           MAX_EXPERIMENTS))] = 2,
+    experiments: opts.count_option("--experiments", "Repetitions per parametrization and strategy",
+                                   MAX_EXPERIMENTS) = 2,
     mode: opts.mode_option() = "ideal",
     workers: Annotated[int, typer.Option("--workers", help="Workers of the parallel backends; at "
                                          "most the number of cores this process may use (more "
@@ -192,11 +199,37 @@ def bench_evaluate_cmd(
         model_art = read_artifact(model, "model")
     else:
         from kbcli.core.instrument.keyboard import KeyboardConfig
-        from kbcli.stages import keyboard as keyboard_stage
         from kbcli.stages.models import exact_artifact
 
         model_art = exact_artifact(keyboard_stage.run(KeyboardConfig()))
     job = _job(cfg, model_art, stage.EXPERIMENT)
+    n = len(job.tasks)
+    rows = _time_backends(job, workers)
+    ref = rows[0][-1]
+
+    def same(res: dict) -> bool:
+        return all(np.array_equal(res[i][k], ref[i][k], equal_nan=True)
+                   for i in ref for k in stage.STEP_KEYS)
+
+    t = table(f"kbcli evaluate backends: {n} experiments ({mode}, {cfg.max_steps} steps, "
+              f"{model_art.config.get('strategy')} model)", ("backend", "wall s", "start-up s",
+                                                            "exp/s", "exp/s after start-up",
+                                                            "same as serial"),
+              title_justify="center")
+    for label, secs, startup, steady, res in rows:
+        t.add_row(label, f"{secs:.1f}", f"{startup:.1f}", f"{n / secs:.2f}", f"{steady:.2f}",
+                      "yes" if same(res) else "NO")
+    show_table(out, t)
+    out.print("start-up: until the first result (process spawn, imports, model raster; for Dask "
+              "also starting the LocalCluster on loopback)")
+    if not all(same(r[-1]) for r in rows):
+        raise KbcliError("the backends gave different results")
+
+
+def _time_backends(job: Job, workers: int) -> list[tuple[str, float, float, float, dict]]:
+    """Run ``job``'s experiments serially, on ``workers`` local processes and on a Dask
+    LocalCluster of ``workers`` on loopback: per backend its label, wall seconds, seconds to the
+    first result (start-up), experiments per second after it, and the results by index."""
     n = len(job.tasks)
     rows: list[tuple[str, float, float, float, dict]] = []
 
@@ -221,22 +254,4 @@ def bench_evaluate_cmd(
                       dashboard_address=None) as cluster:
         timed(f"dask, {workers} workers", time.perf_counter() - t0,
               scheduler=cluster.scheduler_address)
-
-    ref = rows[0][-1]
-
-    def same(res: dict) -> bool:
-        return all(np.array_equal(res[i][k], ref[i][k], equal_nan=True) for i in ref for k in stage.STEP_KEYS)
-
-    table = Table(title=f"kbcli evaluate backends: {n} experiments ({mode}, {cfg.max_steps} steps, "
-                        f"{model_art.config.get('strategy')} model)")
-    for col in ("backend", "wall s", "start-up s", "exp/s", "exp/s after start-up",
-                "same as serial"):
-        table.add_column(col, justify="left" if col == "backend" else "right")
-    for label, secs, startup, steady, res in rows:
-        table.add_row(label, f"{secs:.1f}", f"{startup:.1f}", f"{n / secs:.2f}", f"{steady:.2f}",
-                      "yes" if same(res) else "NO")
-    show_table(out, table)
-    out.print("start-up: until the first result (process spawn, imports, model raster; for Dask "
-              "also starting the LocalCluster on loopback)")
-    if not all(same(r[-1]) for r in rows):
-        raise KbcliError("the backends gave different results")
+    return rows

@@ -18,51 +18,58 @@ from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import load_toml, with_file
 from kbcli.stages import keyboard as stage
 
+#: The flags of the keyboard, each a field of its config (over the TOML table's); ``--origin-x``
+#: and ``--origin-y`` set the two of its ``origin``.
+_FLAGS = {
+    "layout": opts.layout_option("Layout of the keys. {described}.", show_default="grid"),
+    "rows": Annotated[int | None, typer.Option(
+        help=f"Rows of keys (grid, hex, pads); rows x cols at most {MAX_KEYS} keys.",
+        show_default="4")],
+    "cols": Annotated[int | None, typer.Option(
+        help=f"Columns of keys (grid, hex, pads); white keys (piano); at most {MAX_KEYS} keys in "
+        "all.", show_default="8; piano 12")],
+    "key_size": Annotated[float | None, typer.Option(
+        help="Key size, px: a square's side (grid), a hexagon's width across the flats (hex), a "
+        "white key's width (piano), the distance between pad centres (pads).",
+        show_default="50; piano 36")],
+    "key_height": Annotated[float | None, typer.Option(
+        help="piano: height of the white keys, px.", show_default="160")],
+    "black_width": Annotated[float | None, typer.Option(
+        help="piano: width of the black keys, px.", show_default="20")],
+    "black_height": Annotated[float | None, typer.Option(
+        help="piano: height of the black keys, px.", show_default="100")],
+    "pad_radius": Annotated[float | None, typer.Option(
+        help="pads: radius of a pad, px.", show_default="20")],
+    "origin_x": Annotated[float | None, typer.Option(
+        help="Pad x of the keyboard's lower-left corner, px.",
+        show_default="the keyboard centred on x = 400; grid 200; polygons 0")],
+    "origin_y": Annotated[float | None, typer.Option(
+        help="Pad y of the keyboard's lower-left corner, px.",
+        show_default="centred on y = 350; grid 250; polygons 0")],
+    "margin": Annotated[float | None, typer.Option(
+        help="Width of the working band around the keyboard, px.", show_default="50")],
+    "base_note": Annotated[str | None, typer.Option(
+        help="Note of the first key (a name like C3, F#4 or Bb2).", show_default="C3")],
+    "scale": Annotated[str | None, typer.Option(
+        help="Scale the keys climb: diatonic, chromatic or pentatonic (grid, pads, polygons).",
+        show_default="diatonic")],
+    "noise_std": Annotated[float | None, typer.Option(
+        "--noise", help="Standard deviation of the perception noise on pitch (semitones) and tempo "
+        "(bpm).", show_default="0")],
+    "match_threshold": Annotated[float | None, typer.Option(
+        "--threshold", help="Match threshold (Eq. 2): the largest Manhattan distance, in semitones "
+        "plus bpm, between a heard sound and a key's.", show_default="1.5")],
+}
+
 
 @command(name="keyboard")
+@opts.with_flags("flags", _FLAGS)
 def keyboard_cmd(
     output: opts.output_option("Keyboard artifact to write (.h5)."),
     config: opts.config_option(
         "TOML file with a [keyboard] table (e.g. pipelines/keyboard.toml; pipelines/layouts/*.toml "
         "for the other layouts, polygons' keys included).") = None,
-    layout: opts.layout_option("Layout of the keys. {described}.", show_default="grid") = None,
-    rows: Annotated[int | None, typer.Option(
-        help=f"Rows of keys (grid, hex, pads); rows x cols at most {MAX_KEYS} keys.",
-        show_default="4")] = None,
-    cols: Annotated[int | None, typer.Option(
-        help=f"Columns of keys (grid, hex, pads); white keys (piano); at most {MAX_KEYS} keys in "
-        "all.", show_default="8; piano 12")] = None,
-    key_size: Annotated[float | None, typer.Option(
-        help="Key size, px: a square's side (grid), a hexagon's width across the flats (hex), a "
-        "white key's width (piano), the distance between pad centres (pads).",
-        show_default="50; piano 36")] = None,
-    key_height: Annotated[float | None, typer.Option(
-        help="piano: height of the white keys, px.", show_default="160")] = None,
-    black_width: Annotated[float | None, typer.Option(
-        help="piano: width of the black keys, px.", show_default="20")] = None,
-    black_height: Annotated[float | None, typer.Option(
-        help="piano: height of the black keys, px.", show_default="100")] = None,
-    pad_radius: Annotated[float | None, typer.Option(
-        help="pads: radius of a pad, px.", show_default="20")] = None,
-    origin_x: Annotated[float | None, typer.Option(
-        help="Pad x of the keyboard's lower-left corner, px.",
-        show_default="the keyboard centred on x = 400; grid 200; polygons 0")] = None,
-    origin_y: Annotated[float | None, typer.Option(
-        help="Pad y of the keyboard's lower-left corner, px.",
-        show_default="centred on y = 350; grid 250; polygons 0")] = None,
-    margin: Annotated[float | None, typer.Option(
-        help="Width of the working band around the keyboard, px.", show_default="50")] = None,
-    base_note: Annotated[str | None, typer.Option(
-        help="Note of the first key (a name like C3, F#4 or Bb2).", show_default="C3")] = None,
-    scale: Annotated[str | None, typer.Option(
-        help="Scale the keys climb: diatonic, chromatic or pentatonic (grid, pads, polygons).",
-        show_default="diatonic")] = None,
-    noise: Annotated[float | None, typer.Option(
-        "--noise", help="Standard deviation of the perception noise on pitch (semitones) and tempo "
-        "(bpm).", show_default="0")] = None,
-    threshold: Annotated[float | None, typer.Option(
-        "--threshold", help="Match threshold (Eq. 2): the largest Manhattan distance, in semitones "
-        "plus bpm, between a heard sound and a key's.", show_default="1.5")] = None,
+    flags: dict | None = None,
 ) -> None:
     """Build a virtual keyboard of any layout and write its artifact.
 
@@ -76,12 +83,8 @@ def keyboard_cmd(
 
     check_io({"--config": config}, ("--output", output))
     table = dict(load_toml(config, "keyboard")) if config is not None else {}
-    flags = {
-        "layout": layout, "rows": rows, "cols": cols, "key_size": key_size,
-        "key_height": key_height, "black_width": black_width, "black_height": black_height,
-        "pad_radius": pad_radius, "margin": margin, "base_note": base_note, "scale": scale,
-        "noise_std": noise, "match_threshold": threshold,
-    }
+    flags = dict(flags or {})
+    origin_x, origin_y = flags.pop("origin_x", None), flags.pop("origin_y", None)
     if origin_x is not None or origin_y is not None:
         ox, oy = table.get("origin") or with_file(
             KeyboardConfig, {k: v for k, v in table.items() if k != "origin"}, flags, config).origin

@@ -19,9 +19,7 @@ from typing import Annotated, Any
 
 import typer
 
-from kbcli.core.adaptation.config import option_default, option_names
 from kbcli.core.adaptation.estimators import ESTIMATORS
-from kbcli.core.adaptation.fields import MAX_CANDIDATES, MAX_KDE_SAMPLES
 from kbcli.core.adaptation.posteriors import POSTERIORS
 from kbcli.core.adaptation.strategies import STRATEGIES
 from kbcli.core.detection.detectors import DETECTORS
@@ -33,34 +31,20 @@ from kbcli.errors import ConfigError
 from kbcli.sim import MODES
 from kbcli.sim.arms import PRESETS
 
-
-def _learned_classes() -> tuple[str, ...]:
-    """The model classes learned from samples (``--model-class``; the exact model is not one)."""
-    return learned_classes()
-
-
-#: Where each kind of part's names come from: its registry (model classes: the learned ones).
-_SOURCES: dict[str, Callable[[], Iterable[str]]] = {
-    "posterior": lambda: POSTERIORS,
-    "estimator": lambda: ESTIMATORS,
-    "family": lambda: FAMILIES,
-    "layout": lambda: LAYOUTS,
-    "model class": _learned_classes,
-    "strategy": lambda: STRATEGIES,
-    "exploration": lambda: EXPLORATIONS,
-    "detector": lambda: DETECTORS,
-    "arm": lambda: PRESETS,
-    "mode": lambda: MODES,
-}
 #: The registry that describes each kind's parts.
 _REGISTRIES = {"posterior": POSTERIORS, "estimator": ESTIMATORS, "family": FAMILIES,
                "layout": LAYOUTS, "model class": MODEL_CLASSES, "strategy": STRATEGIES,
                "exploration": EXPLORATIONS, "detector": DETECTORS, "arm": PRESETS, "mode": MODES}
 
 
+#: Where a kind's names come from when not its whole registry: the model classes learned from
+#: samples (``--model-class``; the exact model is not one).
+_NAMES: dict[str, Callable[[], Iterable[str]]] = {"model class": learned_classes}
+
+
 def names_of(kind: str) -> tuple[str, ...]:
     """The registered names of a kind of part (``"posterior"``, ``"layout"``, ...), in order."""
-    return tuple(_SOURCES[kind]())
+    return tuple(_NAMES[kind]() if kind in _NAMES else _REGISTRIES[kind])
 
 
 def describe_of(kind: str) -> str:
@@ -79,8 +63,7 @@ def one_of(kind: str, *extra: str, sep: str = "or") -> str:
     return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} {sep} {names[-1]}"
 
 
-def _opt(*decls: str, **kw: Any) -> Any:
-    return typer.Option(*decls, **kw)
+_opt = typer.Option
 
 
 # -- paths ------------------------------------------------------------------------------------------
@@ -283,97 +266,6 @@ PriorHalfwidth = Annotated[float | None, _opt(
     "move within +-this).", show_default="45")]
 
 
-# -- the paper's method's parts (issue 26); each refused where the method does not read it --------
-def _robot_default(name: str) -> str:
-    """The adapter's default of option ``name``, for a help text."""
-    return str(option_default(name))
-
-
-def _robot_option(name: str, kind: Any, help: str, default: str | None = None) -> Any:
-    """``--NAME`` (dashes for underscores) of the adapter's option ``name`` (None: the config's),
-    its help closed by the adapter's default."""
-    flag = "--" + name.replace("_", "-")
-    return Annotated[kind | None, _opt(flag, help=f"{help}.",
-                                       show_default=str(default or _robot_default(name)))]
-
-
-#: The adapter options of the flags above (and those every adapting command has), by flag.
-PAPER_FLAGS = ("kde_samples", "kde_draw", "simulate_draw", "kde_sampler", "kde_beyond", "kde_floor",
-               "ml_ties", "stop_ml", "stop_mass", "random_actions", "candidates", "active_keep")
-
-
-def robot_given(flags: Mapping[str, Any], table: Mapping[str, Any] | None = None,
-                source: str = "") -> dict[str, str]:
-    """The robot options a user set, each with how the message names it: the flags given (not
-    None) as ``--flag``, the keys of a TOML ``[adapt]`` table (and of its ``robot`` table) as
-    ``key`` (of ``source``) (:func:`kbcli.core.adaptation.config.refuse_inactive`)."""
-    robot = set(option_names())
-    table = dict(table or {})
-    inner = table.pop("robot", None)
-    keys = [*table, *(inner if isinstance(inner, Mapping) else ())]
-    where = f" (in {source})" if source else ""
-    given = {k: f"{k}{where}" for k in keys if k in robot}
-    given.update({k: "--" + k.replace("_", "-") for k, v in flags.items()
-                  if v is not None and k in robot})
-    return given
-
-
-#: ``--kde-samples``: N of Algorithm 2.
-KdeSamples = _robot_option("kde_samples", int, "kde posterior: actions drawn from p(action | "
-                           "sound) per KDE term (N of Algorithm 2), a whole number >= 10, at most "
-                           f"{MAX_KDE_SAMPLES}")
-#: ``--kde-draw``: when those samples are drawn.
-KdeDraw = _robot_option("kde_draw", str, "kde posterior: shared (each sound's samples drawn once, "
-                        "reused by every touch) or fresh (Algorithm 2 as written: new samples for "
-                        "every touch, from the run's seed)")
-#: ``--simulate-draw``: the samples of paper-active's simulated touches (not yet wired into
-#: ``kbcli adapt`` / ``kbcli run``).
-SimulateDraw = _robot_option("simulate_draw", str, "kde posterior with paper-active: the samples "
-                             "of the simulated touches; shared (each sound's samples drawn once "
-                             "per run, reused by every simulated touch: faster, not the paper's "
-                             "text) or fresh (new samples for each)", default="as --kde-draw")
-#: ``--kde-sampler``: what draws samples of p(action | sound).
-KdeSampler = _robot_option("kde_sampler", str, "What draws actions from p(action | sound) for "
-                           "--kde-draw fresh, --random-actions model and paper-active's candidates: "
-                           "model (the model's own rejection sampler: exact, ~250 ms per 10,000 "
-                           "draws) or raster (the model's raster: a cell by p(sound | cell), then a "
-                           "point in it; ~1 ms)")
-#: ``--kde-beyond``: what the KDE posterior knows beyond the working area.
-KdeBeyond = _robot_option("kde_beyond", str, "kde posterior: the pad beyond the working area is "
-                          "silent (silence's samples cover it as far as a hypothesis can move a "
-                          "touch back) or unknown (no samples there: without a floor a silent "
-                          "touch mapped there rules its hypothesis out)")
-#: ``--kde-floor``: the uniform floor of each KDE term.
-KdeFloor = _robot_option("kde_floor", float, "kde posterior: weight in [0, 1) of the uniform floor "
-                         "mixed into each KDE term; 0: none (Eq. 7 as written: a displacement no "
-                         "sample supports is ruled out)", default="0.001, the outlier rate")
-#: ``--ml-ties``: ties of the maximum-likelihood cell.
-MlTies = _robot_option("ml_ties", str, "Which of several equally probable cells is the maximum-"
-                       "likelihood one (read by --estimator ml, active, paper-active and --stop-ml): "
-                       "first (the lowest grid index: the prior box's corner on a flat posterior) "
-                       "or random (uniformly among the tied cells, seeded: no positional bias)")
-#: ``--stop-ml``: the paper's stopping rule.
-StopMl = _robot_option("stop_ml", float, "The paper's stopping rule: stop when the most probable "
-                       "cell of the posterior holds at least this probability, > 0", default="off")
-#: ``--stop-mass``: ours.
-StopMass = _robot_option("stop_mass", float, "Our stopping rule: stop when this fraction (0-1) of "
-                         "the posterior lies within 1 px of the estimate; 0: off (the paper's rule "
-                         "alone)")
-#: ``--random-actions``: where the random strategy touches.
-RandomActions = _robot_option("random_actions", str, "Where strategy random touches: area "
-                              "(uniform over the working area) or model (a sound uniform over the "
-                              "model's sounds, then an action from p(action | sound): the paper's "
-                              "random selection of samples)")
-#: ``--candidates``: candidate actions per decision.
-Candidates = _robot_option("candidates", int, "Candidate actions per decision of active, "
-                           "paper-active (sampled from the model) and infogain, a whole number "
-                           f">= 1, at most {MAX_CANDIDATES}")
-#: ``--active-keep``: the most confusing candidates simulated.
-ActiveKeep = _robot_option("active_keep", int, "Most confusing candidates active and "
-                           "paper-active keep and simulate, a whole number >= 1, at most "
-                           f"{MAX_CANDIDATES}")
-
-
 #: ``--replicates``: bootstrap replicates of each claim that differs (kbcli report, bench verdicts).
 Replicates = Annotated[int, _opt(
     "--replicates", min=0, max=10000,
@@ -381,36 +273,30 @@ Replicates = Annotated[int, _opt(
          "differs, to state how likely the paper's verdict is if the effect is ours; 0: none.")]
 
 
-#: The Typer type of each flag of :data:`PAPER_FLAGS`.
-_PAPER_TYPES = {"kde_samples": KdeSamples, "kde_draw": KdeDraw, "simulate_draw": SimulateDraw,
-                "kde_sampler": KdeSampler, "kde_beyond": KdeBeyond,
-                "kde_floor": KdeFloor, "ml_ties": MlTies, "stop_ml": StopMl,
-                "stop_mass": StopMass, "random_actions": RandomActions,
-                "candidates": Candidates, "active_keep": ActiveKeep}
+def with_flags(group: str, flags: Mapping[str, Any]) -> Callable[[Callable], Callable]:
+    """Give a command the options ``flags`` (parameter name to its Typer type; each None when
+    not given), declared once.
 
-
-def with_paper_flags(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """Give a command the flags of :data:`PAPER_FLAGS`, declared here once.
-
-    ``fn`` declares a parameter ``paper_flags`` where the flags go in its ``--help``; it receives
-    them there as one dict (flag name to value, None where not given).
+    The command declares a parameter ``group`` where the options go in its ``--help``; it receives
+    them there as one dict (parameter name to value).
     """
-    sig = inspect.signature(fn, eval_str=True)
-    params = []
-    for p in sig.parameters.values():
-        if p.name != "paper_flags":
-            params.append(p)
-            continue
-        params += [inspect.Parameter(name, p.kind, default=None,
-                                     annotation=kind) for name, kind in _PAPER_TYPES.items()]
+    def deco(fn: Callable[..., Any]) -> Callable[..., Any]:
+        sig = inspect.signature(fn, eval_str=True)
+        params = []
+        for p in sig.parameters.values():
+            params += [p] if p.name != group else [
+                inspect.Parameter(name, p.kind, default=None, annotation=kind)
+                for name, kind in flags.items()]
 
-    @functools.wraps(fn)
-    def wrapper(**kwargs: Any) -> Any:
-        flags = {name: kwargs.pop(name, None) for name in PAPER_FLAGS}
-        return fn(**kwargs, paper_flags=flags)
+        @functools.wraps(fn)
+        def wrapper(**kwargs: Any) -> Any:
+            given = {name: kwargs.pop(name, None) for name in flags}
+            return fn(**kwargs, **{group: given})
 
-    wrapper.__signature__ = sig.replace(parameters=params)  # type: ignore[attr-defined]
-    return wrapper
+        wrapper.__signature__ = sig.replace(parameters=params)  # type: ignore[attr-defined]
+        return wrapper
+
+    return deco
 
 
 def max_steps_option(help: str, optional: bool = True, **kw: Any) -> Any:
@@ -441,11 +327,5 @@ def detector_option(default_note: str = "binomial: Eq. 4-6 with the upper tail o
         "--detector", help=f"Failure detector: {', '.join(names_of('detector'))} ({default_note}).")]
 
 
-def _figure() -> Any:
-    from kbcli.cli.app import FIGURE_HELP
-
-    return output_option(FIGURE_HELP)
-
-
 #: ``-o/--output`` of a plot command: a figure, its format by the suffix.
-Figure = _figure()
+Figure = output_option("Figure to write: .png, .pdf or .svg (the suffix picks the format).")

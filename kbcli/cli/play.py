@@ -12,7 +12,7 @@ import typer
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import check_io, command, figure_output, note_arm, out, plot_app
-from kbcli.cli.show import busy, progress
+from kbcli.cli.show import busy, drain
 from kbcli.core.instrument.audio import SAMPLE_RATE, to_pcm16
 from kbcli.core.instrument.melody import DEFAULT_MELODY, MAX_BEATS, MAX_NOTES, parse_melody
 from kbcli.errors import ConfigError
@@ -83,23 +83,32 @@ def play_cmd(
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene") if scene is not None else None
     if wav is not None:
-        longest = wav_seconds_bound(melody, keyboard_stage.load(model_art), steps)
-        if longest > MAX_WAV_SECONDS:
-            raise ConfigError(
-                f"--wav: {steps} notes of this melody may last up to {longest:,.0f} s, more than "
-                f"the {MAX_WAV_SECONDS:g} s a WAV may hold: play fewer --steps or shorter notes")
+        _check_wav(melody, keyboard_stage.load(model_art), steps)
     session = stage.Session(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed)
     note_arm(cfg.arm, cfg.mode)
-    for _ in progress(session, cfg.steps, "playing"):
-        pass
+    drain(session, cfg.steps, "playing")
     art = session.artifact()
     samples, also = None, []
     if wav is not None:
         samples = stage.heard_audio(art, session.keyboard.features, sample_rate=SAMPLE_RATE)
         also = [(wav, wav_bytes(samples, SAMPLE_RATE))]
     write_artifact(art, output, also=also)  # both files or neither
-    a = art.attrs
+    _report_play(art.attrs, output)
+    if samples is not None:
+        out.print(f"wrote {wav}: {len(samples) / SAMPLE_RATE:.1f} s of what the robot heard")
 
+
+def _check_wav(melody: str, keyboard, steps: int) -> None:
+    """Refuse, before playing, a ``--wav`` that could outgrow :data:`MAX_WAV_SECONDS`."""
+    longest = wav_seconds_bound(melody, keyboard, steps)
+    if longest > MAX_WAV_SECONDS:
+        raise ConfigError(
+            f"--wav: {steps} notes of this melody may last up to {longest:,.0f} s, more than "
+            f"the {MAX_WAV_SECONDS:g} s a WAV may hold: play fewer --steps or shorter notes")
+
+
+def _report_play(a: dict, output: Path) -> None:
+    """The history written: its actions, NO_MATCHes and the failure rates around the move."""
     def rate(v: float | None) -> str:
         return "n/a" if v is None else f"{v:.3f}"
 
@@ -110,8 +119,6 @@ def play_cmd(
     else:
         msg += f"; failure rate {rate(a['failure_rate_before'])}"
     out.print(msg)
-    if samples is not None:
-        out.print(f"wrote {wav}: {len(samples) / SAMPLE_RATE:.1f} s of what the robot heard")
 
 
 @command(plot_app, name="play")

@@ -6,13 +6,11 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
-from rich.table import Table
 
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, out
 from kbcli.cli.record import show_table
-from kbcli.cli.show import busy, interactive
+from kbcli.cli.show import busy, table, wide
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact
 from kbcli.io.atomic import atomic_folder
@@ -112,7 +110,6 @@ def report_cmd(
               "--own-model": own_model}
     check_io(inputs, Output(output, "report folder", folder=True))
     check_report_folder(output, force, inputs)
-    from kbcli.viz import report as viz  # (matplotlib: seconds)
     art = read_artifact(evaluation, ("evaluation", "model_quality"))
     if art.kind == "model_quality":
         _quality_report(art, evaluation, output, fmt)
@@ -122,6 +119,17 @@ def report_cmd(
     own = read_artifact(own_model, ("evaluation",)) if own_model else None
     with busy("judging the paper's claims (and replicating those that differ)"):
         rep = stage.build(art, ablations=ladders, own=own, replicates=replicates)
+    _write_report(rep, art, inputs, output, fmt)
+    for c in rep.claims:
+        out.print(f"  [{c.verdict}] {c.paper} -- {c.method}: {c.measured}", markup=False,
+                  soft_wrap=True)
+
+
+def _write_report(rep, art, inputs: dict, output: Path, fmt: str) -> None:
+    """Draw the report's figures in ``fmt`` and write them with its README.md into ``output``
+    (aside, then moved into place)."""
+    from kbcli.viz import report as viz  # (matplotlib: seconds)
+
     names = {f.name: str(Path(f.name).with_suffix("." + fmt)) for f in rep.figures}
     check_io(inputs,
              Output(output, "report folder", folder=True, files=("README.md", *names.values())))
@@ -138,9 +146,6 @@ def report_cmd(
                 viz.plot_error(art, path, fig.name.removeprefix("fig7_error_").removesuffix(".png"))
         _write_text(tmp / "README.md", readme)
     out.print(f"wrote {output}/: README.md and {len(rep.figures)} figures ({fmt})")
-    for c in rep.claims:
-        out.print(f"  [{c.verdict}] {c.paper} -- {c.method}: {c.measured}", markup=False,
-                  soft_wrap=True)
 
 
 def _quality_report(art, source: Path, output: Path, fmt: str) -> None:
@@ -208,16 +213,9 @@ def bench_verdicts_cmd(
             tables = bench.evaluation_tables(art, own, ladders, replicates=replicates)
     if timing_text is not None:
         tables += [t for t in bench.timings_table(timing_text) if t.rows]
-    con = out if interactive() else Console(width=max(out.width, 160), highlight=False)
-    for t in tables:
-        _show(con, t)
-
-
-def _show(con: Console, t) -> None:
-    """One result table (:class:`kbcli.bench.verdicts.ResultTable`) printed, and kept for --json."""
-    table = Table(title=t.title, title_justify="left")
-    for c in t.columns:
-        table.add_column(c, overflow="fold")
-    for r in t.rows:
-        table.add_row(*(r.get(c, "") for c in t.columns))
-    show_table(con, table)
+    con = wide(160)
+    for t in tables:  # (each a kbcli.bench.verdicts.ResultTable)
+        shown = table(t.title, t.columns, t.columns, overflow="fold")
+        for r in t.rows:
+            shown.add_row(*(r.get(c, "") for c in t.columns))
+        show_table(con, shown)

@@ -19,8 +19,9 @@ from kbcli.cli.app import (
     out,
     plot_app,
 )
+from kbcli.cli.paper_flags import robot_given, with_paper_flags
 from kbcli.cli.repair import check_model_out, write_repaired
-from kbcli.cli.show import busy, progress
+from kbcli.cli.show import busy, drain
 from kbcli.core.adaptation.config import refuse_inactive
 from kbcli.core.config import refused_option
 from kbcli.core.detection.detectors import MAX_N_LT, MAX_N_ST, DetectorConfig
@@ -49,7 +50,7 @@ def _pct(v: float | None) -> str:
 
 
 @command(name="run")
-@opts.with_paper_flags
+@with_paper_flags
 def run_cmd(
     model: opts.model_option("Model artifact (kind 'model'), e.g. data/default-model.h5."),
     scene: Annotated[Path, typer.Option("--scene", help="Scene artifact (kbcli perturb): where the keyboard moves.")],
@@ -92,21 +93,40 @@ def run_cmd(
     model_art = read_artifact(model, "model")
     scene_art = read_artifact(scene, "scene")
     scene_family = family is None  # like adapt: estimate what the scene moved (rigid: an angle)
-    if scene_family:
-        family = scene_art.config.get("family", "translation")
-    given = {"estimator": estimator, "repair": repair, **(paper_flags or {})}
-    try:
-        adapt = AdaptConfig.flat(strategy=strategy, posterior=posterior, family=family, mode=mode,
-                                 reach_noise=reach_noise, arm=load_arm(arm), stop=True,
-                                 **{k: v for k, v in given.items() if v is not None})
-    except ConfigError as exc:
-        raise refused_option(exc, opts.robot_given(given), "run") from None
-    refuse_inactive(adapt.robot, opts.robot_given(given), "run")
+    family = scene_art.config.get("family", "translation") if scene_family else family
+    adapt = _adapt_config({"strategy": strategy, "posterior": posterior, "family": family,
+                           "mode": mode, "reach_noise": reach_noise, "arm": load_arm(arm)},
+                          {"estimator": estimator, "repair": repair, **(paper_flags or {})})
     cfg = stage.LoopConfig(
         melody=melody, steps=steps, perturb_at=perturb_at, max_adapt_steps=max_adapt_steps,
         detector=DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold),
         adapt=adapt)
     session = stage.LoopSession(cfg, model_art, scene_art, rng=np.random.default_rng(seed), seed=seed)
+    art = _live(session, cfg)
+    write_artifact(art, output)
+    if scene_family and family != DEFAULT_FAMILY:  # (said once the inputs passed every check)
+        note_default("family", family, "the scene's (--family to choose)")
+    _report_loop(art.attrs, output)
+    if model_out is not None:
+        adaptations = repair_stage.session_adaptations(session.steps, session.model)
+        write_repaired(model_art, session.model, adaptations, model_out, "run")
+
+
+def _adapt_config(flags: dict, given: dict) -> AdaptConfig:
+    """The loop's adapter, stopping at the rules: the run's ``flags`` and the robot options
+    ``given`` (those not None); an option the method does not read is refused, naming its flag."""
+    try:
+        adapt = AdaptConfig.flat(**flags, stop=True,
+                                 **{k: v for k, v in given.items() if v is not None})
+    except ConfigError as exc:
+        raise refused_option(exc, robot_given(given), "run") from None
+    refuse_inactive(adapt.robot, robot_given(given), "run")
+    return adapt
+
+
+def _live(session, cfg: stage.LoopConfig):
+    """The closed loop's artifact, once run behind a progress bar of its play touches that names
+    each adaptation touch as it comes."""
     note_arm(cfg.adapt.arm, cfg.adapt.mode)
     adapting = [0]
 
@@ -116,18 +136,9 @@ def run_cmd(
         adapting[0] += 1
         return f"adapting (touch {adapting[0]}); play touches"
 
-    for _ in progress(session, cfg.steps, "playing, touches",
-                      advance=lambda s: 1 if s.phase == PLAY else 0, describe=describe):
-        pass
-    art = session.artifact()
-    write_artifact(art, output)
-    if scene_family and family != DEFAULT_FAMILY:  # (said once the inputs passed every check)
-        note_default("family", family, "the scene's (--family to choose)")
-    _report_loop(art.attrs, output)
-    if model_out is not None:
-        write_repaired(model_art, session.model,
-                       repair_stage.session_adaptations(session.steps, session.model), model_out,
-                       "run")
+    drain(session, cfg.steps, "playing, touches", advance=lambda s: 1 if s.phase == PLAY else 0,
+          describe=describe)
+    return session.artifact()
 
 
 def _report_loop(a: dict, output: Path) -> None:

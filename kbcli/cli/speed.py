@@ -80,9 +80,9 @@ def bench_speed_cmd(
         t.add_row(r.posterior, f"{r.setup_ms:.0f}", f"{r.touch_ms:.1f}", f"{r.per_touch_ms:.1f}",
                   f"{r.per_touch_cpu_ms:.1f}", f"{r.per_touch_ms / base:.2f}x")
     show_table(con, t)
-    con.print(f"{timing_note()}. Targets (issue 26): paper-active + kde <= {bench.TARGET_MS:g} CPU ms per touch "
-              f"(met by: {_met(rows, bench.TARGET_MS)}); kde within 3x of likelihood, set-up "
-              f"included")
+    con.print(f"{timing_note()}. Targets (issue 26): paper-active + kde <= {bench.TARGET_MS:g} "
+              f"CPU ms per touch (met by: {_met(rows, bench.TARGET_MS)}); kde within 3x of "
+              "likelihood, set-up included")
 
 
 def _met(rows, target: float) -> str:
