@@ -234,12 +234,8 @@ def plot_adapt_cmd(
 def _kde_speed_table(bench, model_path: Path | None, learned, steps: int, seed: int,
                      con: Console) -> None:
     """Print the KDE step's speed on the learned model (the issue's target: <= 5 ms per step)."""
-    from kbcli.io.paths import default_model_path
-    from kbcli.stages.models import load_model
-
     if learned is None:
-        model_path = default_model_path()
-        learned = load_model(read_artifact(model_path, "model"))
+        model_path, _, learned, _ = opts.read_model(None)
     r = bench.kde_speed(learned, steps=steps, seed=seed)
     k, lk = r["kde_ms"], r["likelihood_ms"]
     t = table(f"one adaptation step on {model_path} ({r['grid_cells']:,} grid cells, {steps} "
@@ -333,15 +329,11 @@ def _bench_model(model: Path | None, layout: str | None) -> tuple:
     one) and the layout (the model's; a different ``--layout`` is refused)."""
     if model is None:
         return None, None, None, layout
-    from kbcli.stages import keyboard as keyboard_stage
-    from kbcli.stages.models import load_model
-
-    model_art = read_artifact(model, "model")
-    kb = keyboard_stage.load(model_art)
+    _, model_art, learned, kb = opts.read_model(model)
     if layout is not None and layout != kb.layout:
         raise ConfigError(f"--layout {layout} but the model {model} was learned on a "
                           f"{kb.layout} keyboard")
-    return load_model(model_art), model_art, kb, kb.layout
+    return learned, model_art, kb, kb.layout
 
 
 def _section_table(bench, cfg, sec: str, sec_rows: list[dict], title: str, bnd) -> Table:

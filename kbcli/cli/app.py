@@ -1,4 +1,4 @@
-"""The Typer application, shared option types and the error boundary.
+"""The Typer application, its consoles, the error boundary and the checks of a command's paths.
 
 The CLI only parses, calls stages and reports. Domain errors (:class:`KbcliError`) become one line
 on stderr and exit 1, and so do OS errors (a full disk: the path and the cause); usage errors keep

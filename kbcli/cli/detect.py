@@ -158,11 +158,8 @@ def _model_rate(model: Path | None, p_pre: float | None, rng) -> tuple:
         return None, None, 0.01 if p_pre is None else p_pre, ""
     from kbcli.core.instrument.melody import DEFAULT_MELODY, parse_melody
     from kbcli.core.playing.play import expected_failure_rate
-    from kbcli.stages import keyboard as keyboard_stage
-    from kbcli.stages.models import load_model
 
-    model_art = read_artifact(model, "model")
-    m, kb = load_model(model_art), keyboard_stage.load(model_art)
+    _, _, m, kb = opts.read_model(model)
     if p_pre is not None:
         return m, kb, p_pre, ""
     measured = float(expected_failure_rate(

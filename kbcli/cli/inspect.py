@@ -10,6 +10,7 @@ import typer
 from rich.table import Table
 
 from kbcli.cli.app import command, out
+from kbcli.cli.show import table
 from kbcli.core.adaptation.config import SLOTS, option_names, shown
 from kbcli.core.options import flat_view
 from kbcli.errors import ArtifactError
@@ -34,9 +35,7 @@ def inspect_cmd(
     for key in ("kind", "schema_version", "kbcli_version", "seed", "sha256"):
         t.add_row(key, str(d[key]))
     out.print(t)
-    cfg = Table(title="config", show_header=True)
-    cfg.add_column("key")
-    cfg.add_column("value")
+    cfg = table("config", ("key", "value"), left=2, title_justify="center")
     hidden: list[str] = []
     for k, v in _flatten(d["config"], hidden=hidden):
         cfg.add_row(k, json.dumps(v))
@@ -46,21 +45,15 @@ def inspect_cmd(
         out.print(f"{len(hidden)} robot options the method does not read (its posterior, "
                   "estimator, family, strategy and stopping rules) are not shown; --json prints "
                   "every recorded one")
-    prov = Table(title="provenance (inputs, recursively)")
-    prov.add_column("role")
-    prov.add_column("kind")
-    prov.add_column("file")
-    prov.add_column("sha256")
+    prov = table("provenance (inputs, recursively)", ("role", "kind", "file", "sha256"), left=4,
+                 title_justify="center")
     rows = list(provenance_chain(d["inputs"]))
     for depth, role, r in rows:
         prov.add_row("  " * depth + role, str(r.get("kind")), str(r.get("file")), str(r.get("sha256")))
     if not rows:
         prov.add_row("(none)", "", "", "")
     out.print(prov)
-    ds = Table(title="datasets")
-    ds.add_column("name")
-    ds.add_column("shape")
-    ds.add_column("dtype")
+    ds = table("datasets", ("name", "shape", "dtype"), left=3, title_justify="center")
     for name, info in sorted(d["datasets"].items()):
         ds.add_row(name, " x ".join(map(str, info["shape"])) or "scalar", info["dtype"])
     out.print(ds)
@@ -72,9 +65,7 @@ def _print_summary(d: dict, hidden: list) -> None:
     """The summary attributes (the options the method does not read added to ``hidden``), and a
     repaired model's lineage apart."""
     if d["attrs"]:
-        at = Table(title="summary", show_header=True)
-        at.add_column("key")
-        at.add_column("value")
+        at = table("summary", ("key", "value"), left=2, title_justify="center")
         attrs = {k: v for k, v in d["attrs"].items() if k != "lineage"}
         for k, v in _flatten(_unread_resolved(d["config"], attrs, hidden), hidden=hidden):
             at.add_row(k, json.dumps(v) if not isinstance(v, str) else v)
@@ -85,9 +76,9 @@ def _print_summary(d: dict, hidden: list) -> None:
 
 def _print_lineage(lineage: list) -> None:
     """A repaired model's generations (``kbcli adapt/run --repair --model-out``), oldest first."""
-    t = Table(title="lineage (repaired by adaptations; the parent of each generation)")
-    for col in ("gen", "source", "parent", "parent sha256", "absorbed", "skipped", "shifts (dx, dy)"):
-        t.add_column(col)
+    t = table("lineage (repaired by adaptations; the parent of each generation)",
+              ("gen", "source", "parent", "parent sha256", "absorbed", "skipped", "shifts (dx, dy)"),
+              left=7, title_justify="center")
     for i, g in enumerate(lineage, 1):
         shifts = "; ".join(f"{s[0]:+.2f}, {s[1]:+.2f}" for s in g.get("shifts", []))
         t.add_row(str(i), str(g.get("source")), str(g.get("parent_file")),

@@ -292,7 +292,7 @@ def bench_layouts_cmd(
     adaptation tables, each target beside the measured figure, the settings),
     <layout>.png and results.json. Long: hours at the default settings (make reproduce-layouts).
     """
-    from kbcli.bench.layouts import LayoutsConfig, Pipeline
+    from kbcli.bench.layouts import LayoutsConfig, Pipeline, targets
 
     opts.check_counts(("--seeds", seeds, opts.MAX_SEEDS),
                       ("--experiments", experiments, MAX_EXPERIMENTS))
@@ -311,15 +311,9 @@ def bench_layouts_cmd(
     total = pipe.plan_adapt()
     drain(pipe.adapt(), total, "adaptation runs")
     folder = pipe.report()
-    met = [t["met"] for res in pipe.results.values() for t in _targets(cfg, res)]
+    met = [t["met"] for res in pipe.results.values() for t in targets(cfg, res)]
     out.print(f"wrote {folder}/README.md, {len(cfg.layouts)} figures and results.json: "
               f"{sum(met)} of {len(met)} targets met")
-
-
-def _targets(cfg, res):
-    from kbcli.bench.layouts import targets
-
-    return targets(cfg, res)
 
 
 @command(bench_app, name="arm")

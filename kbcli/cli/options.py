@@ -78,6 +78,19 @@ def model_option(help: str = "Model artifact (.h5, kind 'model').", optional: bo
     return Annotated[Path | None if optional else Path, _opt("--model", help=help, **kw)]
 
 
+def read_model(path: Path | None) -> tuple[Path, Any, Any, Any]:
+    """The model artifact at ``path`` (None: the embedded default model): its path, the artifact,
+    its fitted model and its keyboard."""
+    from kbcli.io.artifact import read_artifact
+    from kbcli.io.paths import default_model_path
+    from kbcli.stages import keyboard as keyboard_stage
+    from kbcli.stages.models import load_model
+
+    path = default_model_path() if path is None else Path(path)
+    art = read_artifact(path, "model")
+    return path, art, load_model(art), keyboard_stage.load(art)
+
+
 def keyboard_option(help: str = "Keyboard artifact (.h5) to learn.", optional: bool = False) -> Any:
     """``--keyboard``: a keyboard artifact read."""
     return Annotated[Path | None if optional else Path, _opt("--keyboard", help=help)]

@@ -6,7 +6,6 @@ from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, command
 from kbcli.cli.record import show_table
 from kbcli.cli.show import table, ticker, wide
-from kbcli.io.artifact import read_artifact
 from kbcli.stages.config import MAX_ADAPT_STEPS, MAX_EXPERIMENTS
 
 
@@ -29,15 +28,10 @@ def bench_robust_cmd(
     included); then the CPU time of one translation step of the posterior alone.
     """
     from kbcli.bench import robust as bench
-    from kbcli.io.paths import default_model_path
-    from kbcli.stages import keyboard as keyboard_stage
-    from kbcli.stages.models import load_model
 
     opts.check_counts(("--experiments", experiments, MAX_EXPERIMENTS),
                       ("--max-steps", max_steps, MAX_ADAPT_STEPS))
-    model = default_model_path() if model is None else model
-    art = read_artifact(model, "model")
-    m, kb = load_model(art), keyboard_stage.load(art)
+    model, _, m, kb = opts.read_model(model)
     strategies = tuple(strategy) if strategy else bench.STRATEGIES
     total = len(bench.SETTINGS) * 3 * len(strategies) * len(bench.POSTERIORS) * experiments
     with ticker(total, "adaptations") as tick:

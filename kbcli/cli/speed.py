@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, command
 from kbcli.cli.record import show_table, timing_note
 from kbcli.cli.show import busy, table, wide
-from kbcli.io.artifact import read_artifact
 from kbcli.stages.config import MAX_ADAPT_STEPS
 
 #: Repeats of each measure at most.
@@ -47,14 +44,9 @@ def bench_speed_cmd(
     """
     from kbcli.bench import speed as bench
     from kbcli.core.adaptation.config import AdapterConfig
-    from kbcli.io.paths import default_model_path
-    from kbcli.stages import keyboard as keyboard_stage
-    from kbcli.stages.models import load_model
 
     opts.check_counts(("--repeats", repeats, MAX_REPEATS), ("--touches", touches, MAX_ADAPT_STEPS))
-    path = default_model_path() if model is None else Path(model)
-    art = read_artifact(path, "model")
-    learned, kb = load_model(art), keyboard_stage.load(art)
+    path, art, learned, kb = opts.read_model(model)
     con = wide(160)
     with busy("timing per touch"):
         rows = [bench.touch_times(learned, kb, cfg, name, runs=repeats, touches=touches,
