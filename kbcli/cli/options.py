@@ -238,27 +238,23 @@ def arm_option(default: str | None = None, optional: bool = False, files: bool =
                                                            show_default=_shown(default))]
 
 
-#: What ``--reach-noise`` means, the same words in every command.
-REACH_NOISE_HELP = ("Extra landing scatter of the arm (standard deviation, px) on top of the arm "
-                    "preset's own errors; in dynamics mode, motor noise.")
-
-
 def reach_noise_option(default: str | None = None) -> Any:
-    """``--reach-noise`` (None: the config's, named in ``default``)."""
-    return Annotated[float | None if default else float,
-                     _opt("--reach-noise", help=REACH_NOISE_HELP, show_default=_shown(default))]
+    """``--reach-noise`` (None: the config's, named in ``default``), the same words in every
+    command."""
+    return Annotated[float | None if default else float, _opt(
+        "--reach-noise", help="Extra landing scatter of the arm (standard deviation, px) on top of "
+        "the arm preset's own errors; in dynamics mode, motor noise.", show_default=_shown(default))]
 
 
 ReachNoise = reach_noise_option()
 
-MODEL_BLUR_HELP = (
-    "Override: fix the blur (px, 0-50) of the model's key edges. Not given, the robust posterior "
-    "learns it from the touches (translation: it weighs 0, 1, 2.5 and 5 px and twice a weak "
-    "model's own boundary error; rigid: 0 px; recorded in the run as robust_blurs); the plain "
-    "(robust = false) and kde posteriors soften a learned model's map by 1 px, the exact one's by 0.")
 #: ``--model-blur``: fix the blur of the model's key edges (None: the posterior's own).
-ModelBlur = Annotated[float | None, _opt("--model-blur", help=MODEL_BLUR_HELP,
-                                         show_default="learned from the touches")]
+ModelBlur = Annotated[float | None, _opt(
+    "--model-blur", help="Override: fix the blur (px, 0-50) of the model's key edges. Not given, "
+    "the robust posterior learns it from the touches (translation: it weighs 0, 1, 2.5 and 5 px "
+    "and twice a weak model's own boundary error; rigid: 0 px; recorded in the run as "
+    "robust_blurs); the plain (robust = false) and kde posteriors soften a learned model's map by "
+    "1 px, the exact one's by 0.", show_default="learned from the touches")]
 #: ``--repair``: the repaired belief (issue 42).
 Repair = Annotated[bool | None, _opt(
     "--repair/--no-repair", help="Adapt with the model repaired by the touches: a joint belief over "

@@ -59,30 +59,28 @@ the artifact first.
 
 
 def _listen(socket_path: Path | None, host: str, port: int | None) -> tuple[socket.socket, str]:
-    if socket_path is not None:
-        from kbcli.errors import KbcliError
+    """A socket listening for one robot (a Unix socket at ``socket_path``, else TCP on
+    ``host:port``) and where, as said on stderr."""
+    from kbcli.errors import KbcliError
 
+    if socket_path is not None:
         if socket_path.exists() or socket_path.is_symlink():
             raise KbcliError(f"{socket_path}: already exists (a file or a socket in use); remove "
                              f"it or choose another --socket path")
-        srv = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        try:
-            srv.bind(str(socket_path))
-        except OSError as exc:
-            srv.close()
-            raise KbcliError(f"{socket_path}: cannot listen ({exc.strerror})") from None
-        srv.listen(1)
-        return srv, f"unix:{socket_path}"
-    srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        srv, address = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM), str(socket_path)
+        refusal = f"{socket_path}: cannot listen"
+    else:
+        srv, address = socket.socket(socket.AF_INET, socket.SOCK_STREAM), (host, port)
+        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        refusal = f"cannot listen on {host}:{port}"
     try:
-        srv.bind((host, port))
+        srv.bind(address)
     except OSError as exc:
         srv.close()
-        from kbcli.errors import KbcliError
-
-        raise KbcliError(f"cannot listen on {host}:{port} ({exc.strerror})") from None
+        raise KbcliError(f"{refusal} ({exc.strerror})") from None
     srv.listen(1)
+    if socket_path is not None:
+        return srv, f"unix:{socket_path}"
     return srv, f"tcp:{host}:{srv.getsockname()[1]}"
 
 
