@@ -96,7 +96,13 @@ def test_other_methods_are_cut_where_a_known_label_starts():
                             "underpowered": "0"})
 
 
-def test_bench_verdicts_writes_a_result_file_that_regenerates_identically(tmp_path, runner):
+def test_bench_verdicts_writes_a_result_file_that_regenerates_identically(tmp_path, runner,
+                                                                         monkeypatch):
+    """Two runs write the same tables and the same page (the machine's load, which the page
+    prints beside the machine, held still: it is the one thing a rerun may change)."""
+    from kbcli.cli import record
+
+    monkeypatch.setattr(record.os, "getloadavg", lambda: (1.5, 1.0, 0.5))
     (tmp_path / "timings.txt").write_text(TIMINGS)
     pages, tables = [], []
     for i in range(2):
@@ -234,3 +240,23 @@ def test_the_sweep_names_the_budget_where_learning_levels_off(tmp_path, runner):
         mine = {int(m["budget"]): m["boundary_error"] for m in art.attrs["models"].values()
                 if str(m["exploration"]) == row["exploration"]}
         assert int(row["budget"]) == verdicts.plateau_budget(list(mine), list(mine.values()))
+
+
+def test_bench_verdicts_judges_each_difference_on_a_rung_of_the_inputs(tmp_path, runner):
+    """--rung adds "What the evaluation's inputs change": every claim that differs, judged on the
+    rung (here the evaluation itself: nothing changes, and every verdict stays *differs*)."""
+    out = tmp_path / "reproduce.json"
+    golden = str(GOLDEN / "evaluation.h5")
+    r = runner.invoke(app, ["bench", "--json", str(out), "verdicts", golden, "--rung", golden,
+                            *FEW_REPLICATES])
+    assert r.exit_code == 0, r.output
+    tables = {t["title"].split(" (")[0]: t for t in json.loads(out.read_text())["tables"]}
+    table = tables["What the evaluation's inputs change"]
+    art = stage.upgrade(read_artifact(GOLDEN / "evaluation.h5", ("evaluation",)))
+    differs = {c.paper for c in stage.claims(art) if c.verdict == "differs" and c.mode}
+    assert {row["claim"] for row in table["rows"]} == differs
+    assert {row["verdict"] for row in table["rows"]} == {"differs"}
+    assert {row["what the rung changes"] for row in table["rows"]} == \
+        {"nothing in its recorded inputs"}
+    bad = runner.invoke(app, ["bench", "verdicts", golden, "--rung", str(tmp_path / "no.h5")])
+    one_line_error(bad, "no.h5")

@@ -508,3 +508,34 @@ def test_the_floor_departure_reads_a_recorded_none_as_the_outlier_rate(robot, ex
     from kbcli.stages.report.departures import _no_kde, by_parts
 
     assert expected in by_parts("floor", _no_kde)(robot, None)
+
+
+def test_a_rung_on_the_inputs_says_which_input_flips_a_claim():
+    """The small claim differs on the main evaluation; on a rung with 3 px of reach noise it
+    agrees, on a rung with another model it still differs: the section names what each rung
+    changes (computed from the artifacts), and "What reproduces" names the rung that flips it."""
+    from kbcli.stages.report import inputs
+
+    bad, good = [1e-7, 1e-3, 1e-6], [1e-9] * 3
+    main = _evaluation({**PAPER_LIKE, "small": bad})
+    main.inputs = {"model": {"file": "model.h5", "sha256": "a" * 64}}
+    noisy = _evaluation({**PAPER_LIKE, "small": good})
+    noisy.inputs, noisy.path = dict(main.inputs), "noise.h5"
+    noisy.config["reach_noise"] = {"ideal": 3.0}
+    other = _evaluation({**PAPER_LIKE, "small": bad})
+    other.inputs, other.path = {"model": {"file": "own.h5", "sha256": "b" * 64}}, "own.h5"
+    claims = stage.claims(main)
+    rows = inputs.judged(claims, main, [noisy, other], replicates=0)
+    small = {r.rung: r for r in rows if r.claim.startswith("small displacements")}
+    assert small["noise.h5"].verdict == "agrees" and small["noise.h5"].flips
+    assert small["noise.h5"].changes == "reach noise (ideal) 0 px -> 3 px"
+    assert small["own.h5"].verdict == "differs" and not small["own.h5"].flips
+    assert small["own.h5"].changes.startswith("model model.h5 (sha256 aaaa")
+    # only claims that differ on the main evaluation are judged on the rungs
+    assert {r.claim for r in rows} == {c.paper for c in claims if c.verdict == "differs"}
+    text = stage.build(main, rungs=[noisy, other], replicates=0).readme
+    assert "## What the evaluation's inputs change" in text
+    reproduces = text.split("## What reproduces")[1].split("\n## ")[0]
+    row = next(r for r in reproduces.splitlines() if "small displacements" in r)
+    assert "it agrees on an input rung: reach noise (ideal) 0 px -> 3 px (noise.h5)" in row
+    assert "What the evaluation's inputs change" not in stage.build(main, replicates=0).readme

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from kbcli.stages import quality
 from kbcli.stages import report as stage
 from kbcli.stages.artifact import Artifact
-from kbcli.stages.report import readings, reproduces, runs
+from kbcli.stages.report import inputs, readings, reproduces, runs
 from kbcli.stages.report.departures import departures
 from kbcli.stages.report.readings import as_verdicts
 from kbcli.stages.report.readme import power_texts
@@ -122,11 +122,13 @@ EXPLAIN_COLUMNS = ("claim", "verdict along the ladder", "what flips it")
 
 def evaluation_tables(art: Artifact, own: Artifact | None = None,
                       ladders: Sequence[Artifact] = (), *,
-                      replicates: int = reproduces.REPLICATES) -> list[ResultTable]:
+                      replicates: int = reproduces.REPLICATES,
+                      rungs: Sequence[Artifact] = ()) -> list[ResultTable]:
     """Every table of an evaluation's verdicts, in the order the results page shows them: what
     reproduces, what ran, the verdict counts, the claims (and on the other methods), what
-    explains each difference (with ``ladders``), the judging rules, the departures, the runs that
-    ruled out the truth and the stopping rules."""
+    explains each difference (with ``ladders``), what the evaluation's inputs change (with
+    ``rungs`` or ``own``), the judging rules, the departures, the runs that ruled out the truth
+    and the stopping rules."""
     art = stage.upgrade(art)
     claims = stage.claims(art, own)
     labels = other_labels(art)
@@ -137,13 +139,19 @@ def evaluation_tables(art: Artifact, own: Artifact | None = None,
         from kbcli.stages.report.ablation import explained as ladder_rows
 
         explained = ladder_rows(claims, ladders, texts)
+    on_inputs = [*rungs, *([own] if own is not None else [])]
+    rung_rows = inputs.judged(claims, art, on_inputs, replicates=replicates)
     tables = [ResultTable("What reproduces", reproduces.COLUMNS,
-                          tuple(reproduces.rows(claims, explained, power))),
+                          tuple(reproduces.rows(claims, explained, power, rung_rows))),
               evaluation_table(art, own), verdict_counts(claims, labels),
               claim_table(claims, labels)]
     tables += [t for t in (others_table(claims, labels),) if t.rows]
     if ladders:
         tables.append(explain_table(claims, ladders, explained))
+    if rung_rows:
+        tables.append(ResultTable("What the evaluation's inputs change (each claim that differs, "
+                                  "judged where the model or the reach noise is another)",
+                                  inputs.COLUMNS, tuple(r.row() for r in rung_rows)))
     tables += [judging_table(), departures_table(art), *runs_tables(art)]
     return tables
 

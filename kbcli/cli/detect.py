@@ -117,17 +117,15 @@ def bench_detect_cmd(
     cfg = bench.BenchConfig(
         p_pre=p_pre, p_post=posts, streams=streams, tune_actions=tune_actions, horizon=horizon,
         fa_target=fa_target, n_lt=n_lt, n_st=n_st,
-        detectors=tuple(d.strip() for d in detectors.split(",") if d.strip()),
-    )
+        detectors=tuple(d.strip() for d in detectors.split(",") if d.strip()))
     if any(d in bench.RIVER for d in cfg.detectors):
         bench._river()  # fail early with a clear message if river is missing
     if note:
         err.print(note)
-    n_groups = len(posts) if posts is not None else len(cfg.categories)
+    total = len(cfg.detectors) * (1 + len(posts if posts is not None else cfg.categories))
     t0 = time.perf_counter()
     res = None
-    for _, partial in progress(bench.run(cfg, rng=rng, model=m, keyboard=kb),
-                               len(cfg.detectors) * (1 + n_groups), "benchmark"):
+    for _, partial in progress(bench.run(cfg, rng=rng, model=m, keyboard=kb), total, "benchmark"):
         res = partial
     elapsed = time.perf_counter() - t0
     _show_results(bench, res, cfg)

@@ -83,6 +83,11 @@ def report_cmd(
         help="Evaluation of the same protocol with the robot's own learned model (make "
              "reproduce-own-model): the Sect. IV-C claims are judged on it too, beside the "
              "main evaluation's model.")] = None,
+    rung: Annotated[list[Path] | None, typer.Option(
+        help="Evaluation of the same protocol and judged method with another input (make "
+             "reproduce-reach-noise: 3 px of reach noise): adds 'What the evaluation's inputs "
+             "change', each claim that differs judged on it. Repeatable; --own-model is one "
+             "too (the model).")] = None,
     replicates: opts.Replicates = REPLICATES,
     force: Annotated[bool, typer.Option(
         "--force", help="Write into an OUTPUT folder that holds other files and is not a "
@@ -102,12 +107,13 @@ def report_cmd(
     report (files of its own there are kept; the command's inputs may lie there), else --force;
     --ablations ABL.h5 adds the section "What
     explains each difference"; --own-model OWN.h5 judges the Sect. IV-C claims on that evaluation
-    too. Prints each claim's verdict.
+    too; --rung RUNG.h5 (and --own-model) adds "What the evaluation's inputs change". Prints each
+    claim's verdict.
     """
     if fmt not in FIGURE_FORMATS:
         raise ConfigError(f"--format must be one of {', '.join(FIGURE_FORMATS)}, got {fmt!r}")
     inputs = {"EVALUATION": evaluation, **_repeated("--ablations", ablations),
-              "--own-model": own_model}
+              "--own-model": own_model, **_repeated("--rung", rung)}
     check_io(inputs, Output(output, "report folder", folder=True))
     check_report_folder(output, force, inputs)
     art = read_artifact(evaluation, ("evaluation", "model_quality"))
@@ -117,17 +123,15 @@ def report_cmd(
     art = stage.upgrade(art)
     ladders = [read_artifact(p, ("evaluation",)) for p in ablations or ()]
     own = read_artifact(own_model, ("evaluation",)) if own_model else None
+    rungs = [read_artifact(p, ("evaluation",)) for p in rung or ()]
     with busy("judging the paper's claims (and replicating those that differ)"):
-        rep = stage.build(art, ablations=ladders, own=own, replicates=replicates)
+        rep = stage.build(art, ablations=ladders, own=own, replicates=replicates, rungs=rungs)
     _write_report(rep, art, inputs, output, fmt)
-    for c in rep.claims:
-        out.print(f"  [{c.verdict}] {c.paper} -- {c.method}: {c.measured}", markup=False,
-                  soft_wrap=True)
 
 
 def _write_report(rep, art, inputs: dict, output: Path, fmt: str) -> None:
     """Draw the report's figures in ``fmt`` and write them with its README.md into ``output``
-    (aside, then moved into place)."""
+    (aside, then moved into place); print each claim's verdict."""
     from kbcli.viz import report as viz  # (matplotlib: seconds)
 
     names = {f.name: str(Path(f.name).with_suffix("." + fmt)) for f in rep.figures}
@@ -146,6 +150,9 @@ def _write_report(rep, art, inputs: dict, output: Path, fmt: str) -> None:
                 viz.plot_error(art, path, fig.name.removeprefix("fig7_error_").removesuffix(".png"))
         _write_text(tmp / "README.md", readme)
     out.print(f"wrote {output}/: README.md and {len(rep.figures)} figures ({fmt})")
+    for c in rep.claims:
+        out.print(f"  [{c.verdict}] {c.paper} -- {c.method}: {c.measured}", markup=False,
+                  soft_wrap=True)
 
 
 def _quality_report(art, source: Path, output: Path, fmt: str) -> None:
@@ -181,6 +188,10 @@ def bench_verdicts_cmd(
         help="The ablation ladder's evaluation (make reproduce-ablations): what explains each "
              "claim that differs, as kbcli report --ablations writes it (repeat it for a ladder "
              "run one mode at a time).")] = None,
+    rung: Annotated[list[Path] | None, typer.Option(
+        help="Evaluation of the same protocol and judged method with another input (make "
+             "reproduce-reach-noise: 3 px of reach noise): each claim that differs judged on it, "
+             "as kbcli report --rung does. Repeatable; --own-model is one too (the model).")] = None,
     replicates: opts.Replicates = REPLICATES,
 ) -> None:
     """Print the verdicts of an evaluation or a model-quality sweep as tables, with stage timings.
@@ -188,19 +199,21 @@ def bench_verdicts_cmd(
     Reads EVALUATION (kind 'evaluation': the paper's claims judged as kbcli report judges them,
     with the smallest p-value each one measured; kind 'model_quality': the paper's explanation
     tested and every model's advantage); with --ablations, what explains each claim that differs;
-    with --timings, the wall time of each stage. Writes
+    with --rung (and --own-model), each claim that differs judged on an evaluation with another
+    input; with --timings, the wall time of each stage. Writes
     nothing (kbcli bench --json FILE verdicts ... keeps the tables: the documentation's results
     pages are generated from benchmarks/results/reproduce.json and model-quality.json).
     """
     from kbcli.bench import verdicts as bench
 
     inputs = {"EVALUATION": evaluation, "--timings": timings, "--own-model": own_model,
-              **_repeated("--ablations", ablations)}
+              **_repeated("--ablations", ablations), **_repeated("--rung", rung)}
     check_io(inputs)
     timing_text = timings.read_text(encoding="utf-8") if timings is not None else None  # first
     art = read_artifact(evaluation, ("evaluation", "model_quality"))
     if art.kind == "model_quality":
-        for flag, given in (("--own-model", own_model), ("--ablations", ablations)):
+        for flag, given in (("--own-model", own_model), ("--ablations", ablations),
+                            ("--rung", rung)):
             if given:
                 raise ConfigError(f"{flag} reads an evaluation's claims; EVALUATION is a "
                                   "model-quality sweep")
@@ -209,8 +222,10 @@ def bench_verdicts_cmd(
     else:
         own = read_artifact(own_model, ("evaluation",)) if own_model else None
         ladders = [read_artifact(p, ("evaluation",)) for p in ablations or ()]
+        rungs = [read_artifact(p, ("evaluation",)) for p in rung or ()]
         with busy("judging the paper's claims (and replicating those that differ)"):
-            tables = bench.evaluation_tables(art, own, ladders, replicates=replicates)
+            tables = bench.evaluation_tables(art, own, ladders, replicates=replicates,
+                                             rungs=rungs)
     if timing_text is not None:
         tables += [t for t in bench.timings_table(timing_text) if t.rows]
     con = wide(160)

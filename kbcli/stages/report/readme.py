@@ -11,6 +11,8 @@ from kbcli.stages.report.ablation import explain, explained
 from kbcli.stages.report.captions import figures
 from kbcli.stages.report.departures import departures_table
 from kbcli.stages.report.effects import EFFECT_LEVEL
+from kbcli.stages.report.inputs import judged as judged_on_rungs
+from kbcli.stages.report.inputs import section as rungs_section
 from kbcli.stages.report.paper import claims
 from kbcli.stages.report.power import REPLICATES
 from kbcli.stages.report.readings import as_text, as_verdicts
@@ -41,12 +43,15 @@ from kbcli.stages.report.tables import (
 
 
 def build(art: Artifact, ablations: Artifact | Sequence[Artifact] | None = None,
-          own: Artifact | None = None, *, replicates: int = REPLICATES) -> Report:
+          own: Artifact | None = None, *, replicates: int = REPLICATES,
+          rungs: Sequence[Artifact] = ()) -> Report:
     """The report of an evaluation artifact: README text, claims and figures; with
     ``ablations`` (an evaluation of the ablation ladder, ``pipelines/ablations.toml``, or several:
     one per mode) also the
     section "What explains each difference"; with ``own`` (the protocol evaluated with the robot's
-    own learned model) the Sect. IV-C claims on that model too, beside those on ``art``'s.
+    own learned model) the Sect. IV-C claims on that model too, beside those on ``art``'s;
+    with ``rungs`` (the protocol evaluated with another input, e.g. reach noise) or ``own``, the
+    section "What the evaluation's inputs change" (:mod:`.inputs`).
     ``replicates``: bootstrap replicates per differing claim for its replication statement
     (:mod:`.power`; 0: none)."""
     art = upgrade(art)
@@ -57,8 +62,11 @@ def build(art: Artifact, ablations: Artifact | Sequence[Artifact] | None = None,
     texts = power_texts(cl, power)
     explained_rows = explained(cl, ablations, texts) if ablations else []
     why = explain(cl, ablations, texts) if ablations else []
-    lines = [*_header(art), "", *reproduces_table(cl, explained_rows, power),
+    on_inputs = [*rungs, *([own] if own is not None else [])]
+    rung_rows = judged_on_rungs(cl, art, on_inputs, replicates=replicates)
+    lines = [*_header(art), "", *reproduces_table(cl, explained_rows, power, rung_rows),
              *_claims_section(cl), "", _how_judged(), "", *judging_table(), *why,
+             *(rungs_section(rung_rows) if on_inputs else []),
              *departures_table(art), *runs_sections(art), *_methods_section(art),
              *_figures_section(figs), *_ablation_section(art)]
     for m in art.attrs["modes"]:
