@@ -6,6 +6,9 @@ The help of an option that names a registered part (posterior, estimator, transf
 strategy, layout, model class, detector, arm preset, sim mode) lists the valid names, read from
 the part's registry through :func:`names_of` and :func:`describe_of`. Option names, defaults and
 behaviour are the commands' own: a bad name is refused by the stage's config (one line, exit 1).
+A group of options a command takes together (a config's fields) comes in as one dict through
+:func:`with_flags`; what an option's text means is read here too (:func:`comma_list`,
+:func:`check_counts`, :func:`read_model`).
 """
 
 from __future__ import annotations
