@@ -537,5 +537,22 @@ def test_a_rung_on_the_inputs_says_which_input_flips_a_claim():
     assert "## What the evaluation's inputs change" in text
     reproduces = text.split("## What reproduces")[1].split("\n## ")[0]
     row = next(r for r in reproduces.splitlines() if "small displacements" in r)
-    assert "it agrees on an input rung: reach noise (ideal) 0 px -> 3 px (noise.h5)" in row
+    assert "it agrees on an input rung: reach noise (ideal) 0 px -> 3 px: agrees (noise.h5)" in row
     assert "What the evaluation's inputs change" not in stage.build(main, replicates=0).readme
+
+
+def test_a_rung_flips_a_claim_at_the_papers_sample_size_not_by_its_own_lower_power():
+    """A rung run with fewer experiments may agree where its replicates at the paper's 50 runs do
+    not: that is the smaller sample's power, not a flip."""
+    from kbcli.stages.report.inputs import InputRung
+    from kbcli.stages.report.power import Replication
+
+    weak = InputRung("large", "noise.h5", "reach noise (ideal) 0 px -> 3 px", 10, "agrees",
+                     Replication(agree=3, replicates=100, runs=50))
+    assert not weak.flips
+    assert weak.said() == ("reach noise (ideal) 0 px -> 3 px: agrees at 10 runs per cell, 3 of "
+                           "100 replicates agree at the paper's 50")
+    strong = InputRung("large", "noise.h5", "x", 10, "differs",
+                       Replication(agree=80, replicates=100, runs=50))
+    assert strong.flips
+    assert InputRung("large", "noise.h5", "x", 10, "agrees", None).flips

@@ -12,7 +12,10 @@ Every claim the main evaluation marks *differs* is judged on each rung that meas
 same rule (:func:`.paper.claim_rules`), and replicated at the paper's sample size (:mod:`.power`),
 so a rung run with fewer experiments is read on the same footing as the main evaluation. What a
 rung changes is computed from the two artifacts (the model's sha256, each mode's arm preset and
-reach noise), never written by hand. A rung *flips* a claim when the claim agrees on it.
+reach noise), never written by hand. A rung *flips* a claim when the claim agrees on it at the
+paper's sample size: in most of its replicates at 50 runs per parametrization (on its own verdict
+only when no replicate was drawn), so a rung run with fewer experiments cannot flip a claim by its
+lower power alone.
 """
 
 from __future__ import annotations
@@ -43,7 +46,18 @@ class InputRung:
 
     @property
     def flips(self) -> bool:
+        """The claim agrees on this rung at the paper's sample size (most replicates agree)."""
+        if self.replicated is not None:
+            return self.replicated.share >= 0.5
         return self.verdict == "agrees"
+
+    def said(self) -> str:
+        """The rung's verdict in a few words: ``'reach noise ...: agrees at 10 runs per cell, 0
+        of 100 replicates at the paper's 50'``."""
+        rep = self.replicated
+        at = (f" at {self.runs} runs per cell, {rep.agree} of {rep.replicates} replicates agree "
+              f"at the paper's {rep.runs}" if rep is not None else "")
+        return f"{self.changes}: {self.verdict}{at}"
 
     def row(self) -> dict[str, str]:
         rep = self.replicated
@@ -64,11 +78,13 @@ def inputs_of(art: Artifact) -> dict[str, str]:
     return out
 
 
-def changes(main: Artifact, rung: Artifact) -> list[str]:
+def changes(main: Artifact, rung: Artifact, mode: str | None = None) -> list[str]:
     """Each input of ``rung`` that differs from ``main``'s, as ``'name a -> b'`` (modes that only
-    one of them evaluates are left out: a claim is judged on its own mode)."""
+    one of them evaluates are left out; with ``mode``, those of the other modes too: a claim is
+    judged on its own mode)."""
     a, b = inputs_of(main), inputs_of(rung)
-    return [f"{k} {a[k]} -> {b[k]}" for k in b if k in a and a[k] != b[k]]
+    return [f"{k} {a[k]} -> {b[k]}" for k in b if k in a and a[k] != b[k]
+            and (mode is None or "(" not in k or k.endswith(f"({mode})"))]
 
 
 def judged_on(claim: Claim, main: Artifact, rung: Artifact, *,
@@ -83,7 +99,7 @@ def judged_on(claim: Claim, main: Artifact, rung: Artifact, *,
     verdict = rule(claim.method, claim.strategy)[1]
     rep = (replication(rung, lambda r: claim_rules(r).get(claim.paper), claim.mode, claim.method,
                        claim.strategy, replicates=replicates) if replicates > 0 else None)
-    return InputRung(claim.paper, rung.path or "a rung", "; ".join(changes(main, rung))
+    return InputRung(claim.paper, rung.path or "a rung", "; ".join(changes(main, rung, claim.mode))
                      or "nothing in its recorded inputs", int(rung.config["experiments"]),
                      verdict, rep)
 
@@ -111,9 +127,8 @@ def why(claim: Claim, rows: Sequence[InputRung]) -> str | None:
         return None
     flips = [r for r in mine if r.flips]
     if flips:
-        return "it agrees on an input rung: " + "; ".join(f"{r.changes} ({r.rung})" for r in flips)
-    return ("no input rung flips it (" + "; ".join(f"{r.changes}: {r.verdict}" for r in mine)
-            + ")")
+        return ("it agrees on an input rung: " + "; ".join(f"{r.said()} ({r.rung})" for r in flips))
+    return "no input rung flips it (" + "; ".join(r.said() for r in mine) + ")"
 
 
 def section(rows: Sequence[InputRung]) -> list[str]:
