@@ -41,9 +41,13 @@ about 0.6). The scale ``s`` and the outlier rate ``eps`` are unknowns on a small
 online with the shift (:class:`~kbcli.core.adaptation.posteriors.likelihood.robust.RobustPosterior` holds the accumulated
 log-likelihood per value), so the evidence picks how far to trust the model, region by region.
 
-The strategies plan with the same predictive (:func:`repair_outcome`): a candidate's predictive at
-each hypothesis is its repaired map's, so a spot already touched promises little, and the model's
-uncertain regions promise what they can really tell.
+The strategies plan with the repaired belief's posterior over the shift and the model's locally
+blurred map (:func:`repair_outcome`: where the model has few samples its map is blurred, so its
+uncertain regions promise only what they can tell); a spot already touched ``k`` times promises
+``1 / (k + 1)`` of its information, as the repaired map there is mostly those touches' counts. The
+counts themselves do not steer the plan: a touch's label is as noisy as the arm that made it, and
+planning by them leads an arm that does not feel exactly where it landed astray (``kbcli bench
+repair`` measures it).
 """
 
 from __future__ import annotations
@@ -56,6 +60,7 @@ from scipy.ndimage import gaussian_filter
 from scipy.spatial import cKDTree
 from sklearn.base import clone
 
+from kbcli.core.adaptation.config import REDUNDANCY_FACTOR, own_boundary_error
 from kbcli.core.adaptation.grid import HypothesisGrid
 from kbcli.core.adaptation.posteriors.likelihood.robust import (
     Nuisance,
@@ -64,6 +69,7 @@ from kbcli.core.adaptation.posteriors.likelihood.robust import (
     raw_prob,
 )
 from kbcli.core.adaptation.posteriors.likelihood.term import inverse_coords
+from kbcli.core.adaptation.posteriors.posterior import Posterior
 from kbcli.core.adaptation.strategies import entropy_rows, outcome_distribution
 from kbcli.core.model.table import LikelihoodTable
 
@@ -296,43 +302,52 @@ class RepairBelief:
         Accumulated log-likelihood per (scale, outlier) value and hypothesis.
     rmap : RepairMap
     touches : Touches
+    radius : float
+        Planning: a candidate within this many px of ``k`` earlier touches promises
+        ``1 / (k + 1)`` of its information (0: no discount).
     """
 
-    __slots__ = ("posterior", "rmap", "touches")
+    __slots__ = ("posterior", "rmap", "touches", "radius")
 
     def __init__(self, posterior: RobustPosterior, rmap: RepairMap,
-                 touches: Touches | None = None) -> None:
+                 touches: Touches | None = None, radius: float = 0.0) -> None:
         self.posterior = posterior
         self.rmap = rmap
         self.touches = Touches() if touches is None else touches
+        self.radius = float(radius)
 
     @classmethod
     def start(cls, grid: HypothesisGrid, rmap: RepairMap, scales=(DEFAULT_SCALE,),
-              outliers=DEFAULT_OUTLIERS, eta: float = 1.0) -> RepairBelief:
+              outliers=DEFAULT_OUTLIERS, eta: float = 1.0, radius: float = 0.0) -> RepairBelief:
         """The flat prior over the grid and the nuisance values."""
-        return cls(RobustPosterior(grid, Nuisance.build(scales, outliers), eta=eta), rmap)
+        return cls(RobustPosterior(grid, Nuisance.build(scales, outliers), eta=eta), rmap,
+                   radius=radius)
 
     @classmethod
     def for_model(cls, grid: HypothesisGrid, table: LikelihoodTable, model, cfg) -> RepairBelief:
         """The flat prior for ``model`` (rasterised as ``table``) and an adapter config ``cfg``
         (its likelihood posterior's ``repair_kernel``, ``repair_scale``, ``repair_blur``,
         ``robust_outliers``: None reads the defaults, and the model's own landing scatter for the
-        blur)."""
-        cfg = cfg.posterior
-        width = DEFAULT_KERNEL if cfg.repair_kernel is None else float(cfg.repair_kernel)
-        blur = (float(getattr(model, "reach_sd_", 0.0)) if cfg.repair_blur is None
-                else float(cfg.repair_blur))
-        scale = DEFAULT_SCALE if cfg.repair_scale is None else float(cfg.repair_scale)
+        blur); the planning radius is ``REDUNDANCY_FACTOR`` times the model's own
+        cross-validated boundary error (the robust posterior's default spot)."""
+        opts = cfg.posterior
+        width = DEFAULT_KERNEL if opts.repair_kernel is None else float(opts.repair_kernel)
+        blur = (float(getattr(model, "reach_sd_", 0.0)) if opts.repair_blur is None
+                else float(opts.repair_blur))
+        scale = DEFAULT_SCALE if opts.repair_scale is None else float(opts.repair_scale)
         rmap = repair_map(table, getattr(model, "actions_", None), width, blur)
-        return cls.start(grid, rmap, (scale,), cfg.robust_outliers or DEFAULT_OUTLIERS)
+        berr = own_boundary_error(getattr(model, "reliability_", None))
+        return cls.start(grid, rmap, (scale,), opts.robust_outliers or DEFAULT_OUTLIERS,
+                         radius=0.0 if berr is None else REDUNDANCY_FACTOR * berr)
 
     def update(self, point: np.ndarray, cls: int) -> RepairBelief:
         """Absorb a touch read at ``point`` that sounded ``cls``."""
         post = self.posterior
         terms = repair_terms(post.grid, self.rmap, self.touches, point, cls, post.nuisance)
-        return RepairBelief(post.update(terms), self.rmap, self.touches.add(point, cls))
+        return RepairBelief(post.update(terms), self.rmap, self.touches.add(point, cls),
+                            self.radius)
 
-    def marginal(self):
+    def marginal(self) -> Posterior:
         return self.posterior.marginal()
 
     def outcome(self, table: LikelihoodTable, hyp: np.ndarray, weights: np.ndarray,
@@ -349,12 +364,16 @@ class RepairBelief:
 
 def repair_outcome(belief: RepairBelief, table: LikelihoodTable, hyp: np.ndarray,
                    weights: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The posterior predictive of each action's outcome under the repaired belief, and the
-    expected conditional entropy (as :func:`kbcli.core.adaptation.strategies.outcome_distribution`).
+    """The predictive of each action's outcome the strategies plan with under the repaired
+    belief, and the expected conditional entropy (as
+    :func:`kbcli.core.adaptation.strategies.outcome_distribution`).
 
-    At hypothesis h the outcome of action a follows its repaired map,
-    ``(kappa q(. | a - h) + N(a)) / (kappa + N)``, ``q`` read from ``table`` (the belief's
-    planning table, floor included) and the counts ``N`` of the touches near ``a``.
+    At hypothesis h (weighted by the repaired belief) the outcome of action a follows the
+    model's map locally blurred, ``q(. | a - h)`` read from ``table`` (the belief's planning
+    table, floor included); an action within ``belief.radius`` of ``k`` earlier touches keeps
+    ``1 / (k + 1)`` of its information ``H[pred] - cond`` (the repaired map there is mostly
+    those touches' counts, the same at every hypothesis). The counts themselves do not enter the
+    plan (module docstring).
 
     Parameters
     ----------
@@ -368,28 +387,13 @@ def repair_outcome(belief: RepairBelief, table: LikelihoodTable, hyp: np.ndarray
     pred : (M, C) ndarray
     cond : (M,) ndarray
     """
-    rmap = belief.rmap
-    c = table.n_classes
-    pred, cond = outcome_distribution(table, "translation", hyp, weights, actions,
-                                      np.zeros(2))
-    cnt = belief.touches.counts(actions, c, rmap.width)
-    n = cnt.sum(axis=1)
-    near = np.flatnonzero(n > 1e-3)
-    if len(near) == 0:
+    pred, cond = outcome_distribution(table, "translation", hyp, weights, actions, np.zeros(2))
+    pts, r = belief.touches.points, belief.radius
+    if r <= 0 or len(pts) == 0:
         return pred, cond
-    a = actions[near]
-    x = a[None, :, 0] - hyp[:, 0, None]
-    y = a[None, :, 1] - hyp[:, 1, None]
-    kappa = rmap.confidence(x, y).astype(np.float64)  # (K, m)
-    prior = table.prob_all(x, y)  # (K, m, C), floor included
-    eps = table.eps
-    # the floor stays outside the counts: (1 - eps) (kappa q + N) / (kappa + N) + eps / C
-    q = (prior - eps / c) / (1 - eps)
-    p = (kappa[..., None] * q + cnt[near][None]) / (kappa + n[near][None])[..., None]
-    p = (1 - eps) * p + eps / c
-    pred[near] = np.einsum("k,kmc->mc", weights, p)
-    cond[near] = np.einsum("k,km->m", weights, entropy_rows(p))
-    return pred, cond
+    near = (((actions[:, None, :] - pts[None, :, :]) ** 2).sum(axis=2) <= r * r).sum(axis=1)
+    h = entropy_rows(pred)
+    return pred, h - (h - cond) / (1 + near)
 
 
 def absorb(model, points: np.ndarray, classes: np.ndarray, shift: np.ndarray):
