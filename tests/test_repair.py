@@ -24,6 +24,7 @@ from kbcli.core.adaptation.repair import (
     repair_terms,
     repaired_map,
 )
+from kbcli.core.adaptation.strategies import entropy_rows
 from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
 from kbcli.core.model import accuracy as scoring
 from kbcli.core.model.base import ExactModel
@@ -140,6 +141,30 @@ def test_belief_finds_the_shift_of_a_two_key_instrument():
     marg = belief.marginal().marginals()[1]  # over dx
     assert np.argmax(marg) == list(small_grid().dx).index(1.0)
     assert marg.max() > 0.9
+
+
+def test_planning_keeps_one_over_k_plus_one_of_a_touched_spots_information():
+    """The plan reads the model's map at the belief's hypotheses; a candidate within the radius
+    of k earlier touches keeps 1 / (k + 1) of its information, the others all of it."""
+    table = two_keys(10)
+    grid = small_grid()
+    belief = RepairBelief.start(grid, flat_map(table, 1.0, 1.0), (0.0,), (0.001,), radius=2.0)
+    hyp = grid.params(np.arange(grid.size))
+    w = np.full(grid.size, 1.0 / grid.size)
+    actions = np.array([[10.0, 2.0], [15.0, 2.0]])
+    def gain(b):
+        pred, cond = b.outcome(table, hyp, w, actions)
+        return pred, entropy_rows(pred) - cond
+
+    pred0, gain0 = gain(belief)
+    once = belief.update(np.array([10.5, 2.0]), 2)  # within 2 px of the first candidate only
+    pred1, gain1 = gain(once)
+    assert np.allclose(pred1, pred0)
+    assert gain0[0] > 0.1
+    assert gain1[0] == pytest.approx(gain0[0] / 2)
+    assert gain1[1] == pytest.approx(gain0[1])
+    twice = once.update(np.array([9.5, 2.0]), 1)
+    assert gain(twice)[1][0] == pytest.approx(gain0[0] / 3)
 
 
 def test_belief_rejects_a_rotating_grid():

@@ -110,6 +110,31 @@ def session_adaptations(steps, model) -> list[Adaptation]:
     return out
 
 
+def absorbed(kept: list[Adaptation], d: int) -> tuple[np.ndarray, ...]:
+    """The touches of known sounds of the ``kept`` adaptations, mapped back into the model's
+    reference frame by each one's estimate: felt (n, 2), aims (n, 2), heard (n, d), classes
+    (n,)."""
+    parts = [(a, a.classes >= 0) for a in kept]
+    felt = np.vstack([np.empty((0, 2))] + [a.felt[k] - a.shift for a, k in parts])
+    aims = np.vstack([np.empty((0, 2))] + [a.aims[k] - a.shift for a, k in parts])
+    heard = np.vstack([np.empty((0, d))] + [a.perceived[k] for a, k in parts])
+    classes = np.concatenate([np.empty(0, np.int64)] + [a.classes[k] for a, k in parts])
+    return felt, aims, heard, classes
+
+
+def generation(parent: Artifact, adaptations: list[Adaptation], kept: list[Adaptation],
+               absorbed: int, source: str, absorb_radius: float) -> dict:
+    """The lineage entry of one repair: the parent's sha256 and file, the touches absorbed, the
+    adaptations (and the skipped ones), the shifts the kept ones were mapped back by, every
+    adaptation's credible radius and the radius they were kept under."""
+    return {"parent_sha256": parent.sha256, "parent_file": ref(parent)["file"],
+            "source": source, "absorbed": int(absorbed),
+            "adaptations": len(adaptations), "skipped": len(adaptations) - len(kept),
+            "shifts": [[float(v) for v in a.shift] for a in kept],
+            "credible_radius_90": [float(a.radius) for a in adaptations],
+            "absorb_radius": float(absorb_radius)}
+
+
 def repaired_model(parent: Artifact, model, adaptations: list[Adaptation], *,
                    source: str, absorb_radius: float = ABSORB_RADIUS) -> tuple[Artifact, dict]:
     """The repaired model artifact, and a summary (touches absorbed, adaptations skipped).
@@ -134,12 +159,7 @@ def repaired_model(parent: Artifact, model, adaptations: list[Adaptation], *,
         raise ConfigError("the exact model has nothing to repair: --model-out needs a learned "
                           "model")
     kept = [a for a in adaptations if a.radius <= absorb_radius]
-    parts = [(a, a.classes >= 0) for a in kept]
-    felt = np.vstack([np.empty((0, 2))] + [a.felt[k] - a.shift for a, k in parts])
-    aims = np.vstack([np.empty((0, 2))] + [a.aims[k] - a.shift for a, k in parts])
-    d = np.asarray(model.class_features_).shape[1]
-    heard = np.vstack([np.empty((0, d))] + [a.perceived[k] for a, k in parts])
-    classes = np.concatenate([np.empty(0, np.int64)] + [a.classes[k] for a, k in parts])
+    felt, aims, heard, classes = absorbed(kept, np.asarray(model.class_features_).shape[1])
     fitted = absorb(model, felt, classes, np.zeros(2))
     rng = np.random.default_rng(np.random.SeedSequence(0, spawn_key=(REPAIR_KEY,)))
     feats = np.asarray(fitted.class_features_, float)[fitted.labels_]
@@ -148,13 +168,8 @@ def repaired_model(parent: Artifact, model, adaptations: list[Adaptation], *,
     pred, true = scoring.key_maps(calibrated, kb, EVAL_STEP)
     acc = scoring.accuracy_from_maps(pred, true)
     berr = scoring.boundary_error(pred, true, EVAL_STEP)
-    generation = {"parent_sha256": parent.sha256, "parent_file": ref(parent)["file"],
-                  "source": source, "absorbed": int(len(classes)),
-                  "adaptations": len(adaptations), "skipped": len(adaptations) - len(kept),
-                  "shifts": [[float(v) for v in a.shift] for a in kept],
-                  "credible_radius_90": [float(a.radius) for a in adaptations],
-                  "absorb_radius": float(absorb_radius)}
-    lineage = [*list(parent.attrs.get("lineage") or []), generation]
+    lineage = [*list(parent.attrs.get("lineage") or []),
+               generation(parent, adaptations, kept, len(classes), source, absorb_radius)]
     data = copy.deepcopy(parent.data)
     samples = data.get("samples", {})
     for key, extra in (("actions", aims), ("landed", felt), ("perceived", heard)):

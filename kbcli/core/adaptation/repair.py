@@ -41,178 +41,42 @@ about 0.6). The scale ``s`` and the outlier rate ``eps`` are unknowns on a small
 online with the shift (:class:`~kbcli.core.adaptation.posteriors.likelihood.robust.RobustPosterior` holds the accumulated
 log-likelihood per value), so the evidence picks how far to trust the model, region by region.
 
-The strategies plan with the same predictive (:func:`repair_outcome`): a candidate's predictive at
-each hypothesis is its repaired map's, so a spot already touched promises little, and the model's
-uncertain regions promise what they can really tell.
+The strategies plan with the repaired belief's posterior over the shift and the model's locally
+blurred map (:func:`repair_outcome`: where the model has few samples its map is blurred, so its
+uncertain regions promise only what they can tell); a spot already touched ``k`` times promises
+``1 / (k + 1)`` of its information, as the repaired map there is mostly those touches' counts. The
+counts themselves do not steer the plan: a touch's label is as noisy as the arm that made it, and
+planning by them leads an arm that does not feel exactly where it landed astray (``kbcli bench
+repair`` measures it).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import gaussian_filter
-from scipy.spatial import cKDTree
 from sklearn.base import clone
 
+from kbcli.core.adaptation.config import REDUNDANCY_FACTOR, own_boundary_error
 from kbcli.core.adaptation.grid import HypothesisGrid
 from kbcli.core.adaptation.posteriors.likelihood.robust import (
     Nuisance,
     RobustPosterior,
-    blurred_map,
-    raw_prob,
 )
 from kbcli.core.adaptation.posteriors.likelihood.term import inverse_coords
+from kbcli.core.adaptation.posteriors.posterior import Posterior
+from kbcli.core.adaptation.repair_prior import (
+    DEFAULT_KERNEL,
+    DEFAULT_SCALE,
+    RepairMap,
+    kernel,
+    repair_map,
+)
 from kbcli.core.adaptation.strategies import entropy_rows, outcome_distribution
 from kbcli.core.model.table import LikelihoodTable
 
-#: Default scale ``s`` of the local blur ``sigma(x) = s d(x)``: about ``1 / sqrt(3)``, the std of an
-#: edge uniform in the gap between two samples of different sounds, read at the gap's middle.
-DEFAULT_SCALE = 0.6
 #: Default outlier rates (marginalised).
 DEFAULT_OUTLIERS = (0.001, 0.02, 0.1)
-#: Blur levels (px) the local blur interpolates between; wider local blurs are clipped to the last.
-LEVELS = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
-#: Kernel width ``w`` (px) of a touch's (and a training sample's) count.
-DEFAULT_KERNEL = 10.0
-#: Confidence floor: the weight of the model's prior where it has no sample nearby.
-KAPPA_FLOOR = 0.2
-#: A model without training samples (the exact model) is trusted with this weight everywhere.
-KAPPA_EXACT = 1e9
-#: Cell of the planning maps, px.
-PLAN_STEP = 1.0
-
-
-def kernel(d2: np.ndarray, width: float) -> np.ndarray:
-    """The count kernel ``exp(-d^2 / (2 w^2))`` of squared distances ``d2`` (px^2)."""
-    return np.exp(-0.5 * np.asarray(d2, float) / (width * width))
-
-
-@dataclass(frozen=True)
-class RepairMap:
-    """What the repaired belief reads of a model, built once per model raster.
-
-    Attributes
-    ----------
-    table : LikelihoodTable
-        The model's raster (reference frame).
-    distance : (H, W) float32 ndarray
-        Distance (px) of every raster cell to the model's nearest training sample (inf: none).
-    kappa : (H, W) float32 ndarray
-        The local confidence ``kappa(x)``: training samples counted with the kernel, plus the
-        floor.
-    width : float
-        Kernel width ``w``, px.
-    """
-
-    table: LikelihoodTable
-    distance: np.ndarray
-    kappa: np.ndarray
-    width: float
-    floor_blur: float = 0.0
-    _plans: dict = field(default_factory=dict, compare=False, repr=False)
-
-    @classmethod
-    def build(cls, table: LikelihoodTable, samples: np.ndarray | None,
-              width: float = DEFAULT_KERNEL, floor: float = KAPPA_FLOOR,
-              floor_blur: float = 0.0) -> RepairMap:
-        """The repair map of ``table`` for a model whose training samples are at ``samples``
-        ((n, 2) px, reference frame; None or empty: a model without samples, trusted fully)."""
-        h, w = table.shape
-        if samples is None or len(samples) == 0:
-            dist = np.zeros((h, w), np.float32)
-            kappa = np.full((h, w), KAPPA_EXACT, np.float32)
-            return cls(table, dist, kappa, float(width), float(floor_blur))
-        pts = np.asarray(samples, float).reshape(-1, 2)
-        ys = table.origin[1] + table.step * np.arange(h)
-        xs = table.origin[0] + table.step * np.arange(w)
-        gx, gy = np.meshgrid(xs, ys)
-        dist, _ = cKDTree(pts).query(np.column_stack([gx.ravel(), gy.ravel()]))
-        dist = dist.reshape(h, w).astype(np.float32)
-        # the samples splatted on the raster and smoothed: a Gaussian filter of a unit impulse
-        # peaks at 1 / (2 pi sig^2) (sig in cells), so scaling by that counts a sample as 1 at its
-        # own cell
-        counts = np.zeros((h, w))
-        col = np.clip(np.rint((pts[:, 0] - table.origin[0]) / table.step).astype(int), 0, w - 1)
-        row = np.clip(np.rint((pts[:, 1] - table.origin[1]) / table.step).astype(int), 0, h - 1)
-        np.add.at(counts, (row, col), 1.0)
-        sig = width / table.step
-        kappa = gaussian_filter(counts, sig, mode="constant", truncate=4.0) * (2 * math.pi * sig**2)
-        return cls(table, dist, (kappa + floor).astype(np.float32), float(width),
-                   float(floor_blur))
-
-    def _read(self, grid_x: np.ndarray, grid_y: np.ndarray, raster: np.ndarray,
-              outside: float) -> np.ndarray:
-        row, col, inside = self.table._index(grid_x, grid_y)
-        v = raster[row, col]
-        return np.where(inside, v, np.float32(outside)) if not inside.all() else v
-
-    def confidence(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """``kappa`` at coordinates (broadcast); outside the raster the model's silence is sure."""
-        return self._read(x, y, self.kappa, KAPPA_EXACT)
-
-    def local_sigma(self, x: np.ndarray, y: np.ndarray, scale: float) -> np.ndarray:
-        """``sigma(x) = hypot(g, scale d(x))`` (px) at coordinates (``g``: ``floor_blur``),
-        clipped to the widest level."""
-        g = np.float32(self.floor_blur)
-        if scale == 0.0:
-            return np.full(np.broadcast(x, y).shape, g, np.float32)
-        d = self._read(x, y, self.distance, 0.0)
-        return np.minimum(np.hypot(np.float32(scale) * d, g), np.float32(LEVELS[-1]))
-
-    def prob(self, x: np.ndarray, y: np.ndarray, cls: int, scale: float) -> np.ndarray:
-        """``q_s(cls | x)``: the model's map locally blurred by ``sigma(x) = scale d(x)``, read at
-        coordinates (broadcast), linearly interpolated between the blur levels ``LEVELS``."""
-        sig = self.local_sigma(x, y, scale)
-        shape = np.broadcast(x, y).shape
-        if not sig.any():
-            return np.broadcast_to(raw_prob(self.table, x, y, cls), shape)
-        lv = np.asarray(LEVELS, np.float32)
-        j = np.clip(np.searchsorted(lv, sig, side="right") - 1, 0, len(lv) - 2)
-        frac = (sig - lv[j]) / (lv[j + 1] - lv[j])
-        out = np.zeros(shape, np.float32)
-        xb, yb = np.broadcast_arrays(x, y)
-        for k in np.unique(j):
-            for level, wt in ((k, 1.0 - frac), (k + 1, frac)):
-                sel = j == k
-                m = blurred_map(self.table, float(lv[level]))
-                out[sel] += (wt[sel] * raw_prob(m, xb[sel], yb[sel], cls)).astype(np.float32)
-        return out
-
-    def planning_table(self, scale: float, eps: float) -> LikelihoodTable:
-        """The model's map locally blurred at ``scale``, floored at ``eps``, on ``PLAN_STEP`` px
-        cells: what the strategies read a hypothesis' prior predictive from. Cached."""
-        key = (round(float(scale), 6), round(float(eps), 9))
-        if key not in self._plans:
-            t = self.table
-            x0 = t.origin[0]
-            y0 = t.origin[1]
-            h, w = t.shape
-            k = max(1, int(round(PLAN_STEP / t.step)))
-            xs = x0 + t.step * np.arange(0, w, k)
-            ys = y0 + t.step * np.arange(0, h, k)
-            gx, gy = np.meshgrid(xs, ys)
-            probs = np.stack([self.prob(gx, gy, c, scale) for c in range(t.n_classes)], axis=-1)
-            probs /= np.maximum(probs.sum(axis=-1, keepdims=True), 1e-12)
-            self._plans[key] = LikelihoodTable(np.array([x0, y0]), t.step * k, t.n_classes,
-                                               float(eps), probs=probs.astype(np.float32))
-        return self._plans[key]
-
-
-def repair_map(table: LikelihoodTable, samples: np.ndarray | None, width: float,
-               floor_blur: float) -> RepairMap:
-    """:meth:`RepairMap.build` for ``table``, cached on it (every adaptation sharing a table
-    shares its repair map)."""
-    cache = getattr(table, "_repair_cache", None)
-    if cache is None:
-        cache = {}
-        object.__setattr__(table, "_repair_cache", cache)
-    key = (round(float(width), 6), round(float(floor_blur), 6),
-           None if samples is None else len(samples))
-    if key not in cache:
-        cache[key] = RepairMap.build(table, samples, width, floor_blur=floor_blur)
-    return cache[key]
 
 
 @dataclass(frozen=True)
@@ -296,43 +160,52 @@ class RepairBelief:
         Accumulated log-likelihood per (scale, outlier) value and hypothesis.
     rmap : RepairMap
     touches : Touches
+    radius : float
+        Planning: a candidate within this many px of ``k`` earlier touches promises
+        ``1 / (k + 1)`` of its information (0: no discount).
     """
 
-    __slots__ = ("posterior", "rmap", "touches")
+    __slots__ = ("posterior", "rmap", "touches", "radius")
 
     def __init__(self, posterior: RobustPosterior, rmap: RepairMap,
-                 touches: Touches | None = None) -> None:
+                 touches: Touches | None = None, radius: float = 0.0) -> None:
         self.posterior = posterior
         self.rmap = rmap
         self.touches = Touches() if touches is None else touches
+        self.radius = float(radius)
 
     @classmethod
     def start(cls, grid: HypothesisGrid, rmap: RepairMap, scales=(DEFAULT_SCALE,),
-              outliers=DEFAULT_OUTLIERS, eta: float = 1.0) -> RepairBelief:
+              outliers=DEFAULT_OUTLIERS, eta: float = 1.0, radius: float = 0.0) -> RepairBelief:
         """The flat prior over the grid and the nuisance values."""
-        return cls(RobustPosterior(grid, Nuisance.build(scales, outliers), eta=eta), rmap)
+        return cls(RobustPosterior(grid, Nuisance.build(scales, outliers), eta=eta), rmap,
+                   radius=radius)
 
     @classmethod
     def for_model(cls, grid: HypothesisGrid, table: LikelihoodTable, model, cfg) -> RepairBelief:
         """The flat prior for ``model`` (rasterised as ``table``) and an adapter config ``cfg``
         (its likelihood posterior's ``repair_kernel``, ``repair_scale``, ``repair_blur``,
         ``robust_outliers``: None reads the defaults, and the model's own landing scatter for the
-        blur)."""
-        cfg = cfg.posterior
-        width = DEFAULT_KERNEL if cfg.repair_kernel is None else float(cfg.repair_kernel)
-        blur = (float(getattr(model, "reach_sd_", 0.0)) if cfg.repair_blur is None
-                else float(cfg.repair_blur))
-        scale = DEFAULT_SCALE if cfg.repair_scale is None else float(cfg.repair_scale)
+        blur); the planning radius is ``REDUNDANCY_FACTOR`` times the model's own
+        cross-validated boundary error (the robust posterior's default spot)."""
+        opts = cfg.posterior
+        width = DEFAULT_KERNEL if opts.repair_kernel is None else float(opts.repair_kernel)
+        blur = (float(getattr(model, "reach_sd_", 0.0)) if opts.repair_blur is None
+                else float(opts.repair_blur))
+        scale = DEFAULT_SCALE if opts.repair_scale is None else float(opts.repair_scale)
         rmap = repair_map(table, getattr(model, "actions_", None), width, blur)
-        return cls.start(grid, rmap, (scale,), cfg.robust_outliers or DEFAULT_OUTLIERS)
+        berr = own_boundary_error(getattr(model, "reliability_", None))
+        return cls.start(grid, rmap, (scale,), opts.robust_outliers or DEFAULT_OUTLIERS,
+                         radius=0.0 if berr is None else REDUNDANCY_FACTOR * berr)
 
     def update(self, point: np.ndarray, cls: int) -> RepairBelief:
         """Absorb a touch read at ``point`` that sounded ``cls``."""
         post = self.posterior
         terms = repair_terms(post.grid, self.rmap, self.touches, point, cls, post.nuisance)
-        return RepairBelief(post.update(terms), self.rmap, self.touches.add(point, cls))
+        return RepairBelief(post.update(terms), self.rmap, self.touches.add(point, cls),
+                            self.radius)
 
-    def marginal(self):
+    def marginal(self) -> Posterior:
         return self.posterior.marginal()
 
     def outcome(self, table: LikelihoodTable, hyp: np.ndarray, weights: np.ndarray,
@@ -349,12 +222,16 @@ class RepairBelief:
 
 def repair_outcome(belief: RepairBelief, table: LikelihoodTable, hyp: np.ndarray,
                    weights: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The posterior predictive of each action's outcome under the repaired belief, and the
-    expected conditional entropy (as :func:`kbcli.core.adaptation.strategies.outcome_distribution`).
+    """The predictive of each action's outcome the strategies plan with under the repaired
+    belief, and the expected conditional entropy (as
+    :func:`kbcli.core.adaptation.strategies.outcome_distribution`).
 
-    At hypothesis h the outcome of action a follows its repaired map,
-    ``(kappa q(. | a - h) + N(a)) / (kappa + N)``, ``q`` read from ``table`` (the belief's
-    planning table, floor included) and the counts ``N`` of the touches near ``a``.
+    At hypothesis h (weighted by the repaired belief) the outcome of action a follows the
+    model's map locally blurred, ``q(. | a - h)`` read from ``table`` (the belief's planning
+    table, floor included); an action within ``belief.radius`` of ``k`` earlier touches keeps
+    ``1 / (k + 1)`` of its information ``H[pred] - cond`` (the repaired map there is mostly
+    those touches' counts, the same at every hypothesis). The counts themselves do not enter the
+    plan (module docstring).
 
     Parameters
     ----------
@@ -368,28 +245,13 @@ def repair_outcome(belief: RepairBelief, table: LikelihoodTable, hyp: np.ndarray
     pred : (M, C) ndarray
     cond : (M,) ndarray
     """
-    rmap = belief.rmap
-    c = table.n_classes
-    pred, cond = outcome_distribution(table, "translation", hyp, weights, actions,
-                                      np.zeros(2))
-    cnt = belief.touches.counts(actions, c, rmap.width)
-    n = cnt.sum(axis=1)
-    near = np.flatnonzero(n > 1e-3)
-    if len(near) == 0:
+    pred, cond = outcome_distribution(table, "translation", hyp, weights, actions, np.zeros(2))
+    pts, r = belief.touches.points, belief.radius
+    if r <= 0 or len(pts) == 0:
         return pred, cond
-    a = actions[near]
-    x = a[None, :, 0] - hyp[:, 0, None]
-    y = a[None, :, 1] - hyp[:, 1, None]
-    kappa = rmap.confidence(x, y).astype(np.float64)  # (K, m)
-    prior = table.prob_all(x, y)  # (K, m, C), floor included
-    eps = table.eps
-    # the floor stays outside the counts: (1 - eps) (kappa q + N) / (kappa + N) + eps / C
-    q = (prior - eps / c) / (1 - eps)
-    p = (kappa[..., None] * q + cnt[near][None]) / (kappa + n[near][None])[..., None]
-    p = (1 - eps) * p + eps / c
-    pred[near] = np.einsum("k,kmc->mc", weights, p)
-    cond[near] = np.einsum("k,km->m", weights, entropy_rows(p))
-    return pred, cond
+    near = (((actions[:, None, :] - pts[None, :, :]) ** 2).sum(axis=2) <= r * r).sum(axis=1)
+    h = entropy_rows(pred)
+    return pred, h - (h - cond) / (1 + near)
 
 
 def absorb(model, points: np.ndarray, classes: np.ndarray, shift: np.ndarray):
