@@ -218,9 +218,8 @@ class Pipeline:
             kb_art = read_artifact(self.out / "keyboards" / f"{name}.h5", "keyboard")
             if path.is_file():
                 old = read_artifact(path, "model")
-                if old.config == {**lc.to_dict(), "keyboard": kb_art.config,
-                                  "curve_step": learn_stage.CURVE_STEP,
-                                  "eval_step": learn_stage.EVAL_STEP} and old.seed == self.cfg.seed:
+                if old.config == learn_stage.model_config(lc, kb_art.config) and \
+                        old.seed == self.cfg.seed:
                     res.model_path, res.model_attrs = str(path), dict(old.attrs)
                     yield name
                     continue
