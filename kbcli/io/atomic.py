@@ -49,7 +49,8 @@ def _folder(path: Path) -> Path:
     return path.parent if str(path.parent) else Path(".")
 
 
-def _alive(pid: int) -> bool:
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (another user's counts as running)."""
     if pid == os.getpid():
         return True
     try:
@@ -69,7 +70,7 @@ def clean_stale(path: str | os.PathLike) -> list[Path]:
     pattern = str(_folder(path) / f".{glob.escape(path.name)}{TMP_MARK}*")
     for name in glob.glob(pattern):
         m = _PID.match(Path(name).name[len(path.name) + 1:])
-        if m is None or _alive(int(m.group(1))):
+        if m is None or alive(int(m.group(1))):
             continue
         if _remove(name):
             removed.append(Path(name))

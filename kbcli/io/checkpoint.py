@@ -23,7 +23,7 @@ import h5py
 import numpy as np
 
 from kbcli.errors import KbcliError
-from kbcli.io.artifact import hdf5_image
+from kbcli.io.artifact import hdf5_image, read_group
 from kbcli.io.atomic import describe_os_error, write_bytes
 
 CHECKPOINT_FORMAT = 1
@@ -63,18 +63,6 @@ def _write_tree(group: h5py.Group, data: dict[str, Any]) -> None:
             group.create_dataset(name, data=arr.astype(object), dtype=h5py.string_dtype("utf-8"))
         else:
             group.create_dataset(name, data=arr)
-
-
-def _read_tree(group: h5py.Group) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for name, node in group.items():
-        if isinstance(node, h5py.Group):
-            out[name] = _read_tree(node)
-        elif h5py.check_string_dtype(node.dtype) is not None:
-            out[name] = np.asarray(node.asstr()[()], dtype=str)
-        else:
-            out[name] = node[()]
-    return out
 
 
 def _diff(old: dict, new: dict, prefix: str = "") -> list[str]:
@@ -154,7 +142,7 @@ class Checkpoint:
         for part in sorted(self.folder.glob("part-*.h5")):
             try:
                 with h5py.File(part, "r") as f:
-                    done.update((int(name), _read_tree(node)) for name, node in f.items())
+                    done.update((int(name), read_group(node)) for name, node in f.items())
             except (OSError, ValueError, KeyError) as exc:
                 raise KbcliError(f"{part}: unreadable checkpoint part ({exc}); delete it") from None
             self._parts = max(self._parts, int(part.stem.split("-")[1]))

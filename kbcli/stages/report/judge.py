@@ -25,6 +25,7 @@ from kbcli.stages.report.source import (
     pct,
     physical_mode,
     played,
+    readings,
     robot,
 )
 
@@ -220,14 +221,6 @@ def _best_p(art: Artifact, mode: str, method: str, category: str, strategy: str,
     return best
 
 
-def _readings(art: Artifact, method: str):
-    """``(estimator, sfx)`` of each reading of a method's runs: its own estimator (``sfx`` empty),
-    then the other ones, read from the same runs."""
-    own = robot(art, method).get("estimator", "?")
-    yield own, ""
-    yield from ((est, sfx) for est, sfx in (("ml", "_ml"), ("mean", "_mean")) if est != own)
-
-
 def large_why(art: Artifact, mode: str) -> str:
     """A measured account of the large-displacement claim: representation, estimator, strategy.
 
@@ -241,7 +234,7 @@ def large_why(art: Artifact, mode: str) -> str:
     judged_sig = None
     for x in methods_of(art):
         posterior = robot(art, x).get("posterior", "?")
-        for (est, sfx), s in ((r, s) for r in _readings(art, x) for s in compared(art, x)):
+        for (est, sfx), s in ((r, s) for r in readings(art, x) for s in compared(art, x)):
             best = _best_p(art, mode, x, "large", s, sfx)
             if best is None:
                 continue
