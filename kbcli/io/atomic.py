@@ -14,7 +14,6 @@ temporary file is removed.
 from __future__ import annotations
 
 import contextlib
-import errno as _errno
 import glob
 import os
 import re
@@ -31,12 +30,6 @@ from kbcli.io.paths import check_replaceable
 #: What every kbcli temporary file or folder has in its name.
 TMP_MARK = ".kbcli-tmp-"
 _PID = re.compile(re.escape(TMP_MARK) + r"(\d+)-")
-
-#: Errors that describe the machine, not kbcli: reported in one line, never as a traceback.
-DISK_ERRNOS = frozenset({_errno.ENOSPC, _errno.EDQUOT, _errno.EROFS, _errno.EIO, _errno.EACCES,
-                         _errno.EPERM, _errno.EFBIG, _errno.ENOENT, _errno.ENOTDIR, _errno.EISDIR,
-                         _errno.ENAMETOOLONG, _errno.EMFILE, _errno.ENFILE, _errno.EXDEV,
-                         _errno.ENXIO, _errno.ESTALE})
 
 
 def describe_os_error(exc: OSError) -> str:

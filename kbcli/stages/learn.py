@@ -57,7 +57,6 @@ from kbcli.stages.models import exact_artifact
 
 CURVE_STEP = 2.0  # px, grid of the learning curve's accuracy
 EVAL_STEP = 1.0  # px, grid of the final accuracy and boundary error
-TARGET_ACCURACY = 0.99
 LEVELS = (0.97, 0.99)  # accuracies whose first crossing the artifact records
 #: Spawn key of the generator that assigns samples to cross-validation folds.
 RELIABILITY_KEY = 9
