@@ -210,7 +210,7 @@ def test_posterior_panels_say_what_they_do_with_the_angle(capture, tmp_path, rig
 def _check_animator(anim: Animator, kb) -> None:
     # the keys in the plots' colours
     if kb is not None:
-        faces = anim.keys.get_facecolors()[:, :3]
+        faces = anim.pad.keys.get_facecolors()[:, :3]
         np.testing.assert_allclose(faces, key_colours(kb.n_keys)[:, :3], atol=1e-6)
     # the pad's legend outside every axes (it covers no touch) and inside the figure
     anim.canvas.draw()

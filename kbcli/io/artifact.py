@@ -166,11 +166,12 @@ def write_artifact(art: Artifact, path: str | os.PathLike,
     return digest
 
 
-def _read_group(group: h5py.Group) -> dict[str, Any]:
+def read_group(group: h5py.Group) -> dict[str, Any]:
+    """A group's datasets (text as str arrays) and sub-groups, as nested dicts."""
     out: dict[str, Any] = {}
     for name, node in group.items():
         if isinstance(node, h5py.Group):
-            out[name] = _read_group(node)
+            out[name] = read_group(node)
         elif node.dtype.kind == "O" or h5py.check_string_dtype(node.dtype) is not None:
             out[name] = np.asarray(node.asstr()[()], dtype=str)
         else:
@@ -283,7 +284,7 @@ def read_artifact(path: str | os.PathLike, kind: str | tuple[str, ...] | None = 
                 kind=got,
                 config=_json_attr(f, "config", path, required=True),
                 seed=None if seed < 0 else seed,
-                data=_read_group(f),
+                data=read_group(f),
                 attrs=_json_attr(f, "attrs", path),
                 inputs=_json_attr(f, "inputs", path),
                 schema_version=version,

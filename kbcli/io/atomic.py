@@ -14,7 +14,6 @@ temporary file is removed.
 from __future__ import annotations
 
 import contextlib
-import errno as _errno
 import glob
 import os
 import re
@@ -32,12 +31,6 @@ from kbcli.io.paths import check_replaceable
 TMP_MARK = ".kbcli-tmp-"
 _PID = re.compile(re.escape(TMP_MARK) + r"(\d+)-")
 
-#: Errors that describe the machine, not kbcli: reported in one line, never as a traceback.
-DISK_ERRNOS = frozenset({_errno.ENOSPC, _errno.EDQUOT, _errno.EROFS, _errno.EIO, _errno.EACCES,
-                         _errno.EPERM, _errno.EFBIG, _errno.ENOENT, _errno.ENOTDIR, _errno.EISDIR,
-                         _errno.ENAMETOOLONG, _errno.EMFILE, _errno.ENFILE, _errno.EXDEV,
-                         _errno.ENXIO, _errno.ESTALE})
-
 
 def describe_os_error(exc: OSError) -> str:
     """The cause of an OS error in a few words: ``No space left on device``."""
@@ -49,7 +42,8 @@ def _folder(path: Path) -> Path:
     return path.parent if str(path.parent) else Path(".")
 
 
-def _alive(pid: int) -> bool:
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (another user's counts as running)."""
     if pid == os.getpid():
         return True
     try:
@@ -69,15 +63,10 @@ def clean_stale(path: str | os.PathLike) -> list[Path]:
     pattern = str(_folder(path) / f".{glob.escape(path.name)}{TMP_MARK}*")
     for name in glob.glob(pattern):
         m = _PID.match(Path(name).name[len(path.name) + 1:])
-        if m is None or _alive(int(m.group(1))):
+        if m is None or alive(int(m.group(1))):
             continue
-        stale = Path(name)
-        with contextlib.suppress(OSError):
-            if stale.is_dir() and not stale.is_symlink():
-                shutil.rmtree(stale)
-            else:
-                stale.unlink()
-            removed.append(stale)
+        if _remove(name):
+            removed.append(Path(name))
     return removed
 
 
@@ -85,12 +74,16 @@ def _prefix(path: Path) -> str:
     return f".{path.name}{TMP_MARK}{os.getpid()}-"
 
 
-def _remove(tmp: str | os.PathLike) -> None:
-    with contextlib.suppress(OSError):
+def _remove(tmp: str | os.PathLike) -> bool:
+    """Remove a file or a folder (not a link's target); whether it was removed."""
+    try:
         if os.path.isdir(tmp) and not os.path.islink(tmp):
             shutil.rmtree(tmp)
         else:
             os.unlink(tmp)
+    except OSError:
+        return False
+    return True
 
 
 @contextlib.contextmanager
@@ -232,42 +225,53 @@ def atomic_folder(path: str | os.PathLike, *, owned: Sequence[str] = ()) -> Iter
         The folder cannot be created, or an OS error while writing, naming ``path`` and the cause.
     """
     path = Path(path)
-    folder = _folder(path)
     clean_stale(path)
     tmp: Path | None = None
     try:
-        try:
-            with _signals_deferred():  # a SIGTERM between mkdtemp and the assignment orphans tmp
-                tmp = Path(tempfile.mkdtemp(prefix=_prefix(path), dir=folder))
-        except OSError as exc:
-            raise KbcliError(f"{path}: cannot create the folder in {folder} "
-                             f"({describe_os_error(exc)})") from None
+        with _signals_deferred():  # a SIGTERM between mkdtemp and the assignment orphans tmp
+            tmp = Path(tempfile.mkdtemp(prefix=_prefix(path), dir=_folder(path)))
         yield tmp
-        names = sorted(os.listdir(tmp), key=lambda n: (n == "README.md", n))
-        for name in names:
-            _fsync(str(tmp / name))
-        if not path.exists():
-            os.chmod(tmp, 0o755)  # (mkdtemp makes it 0700)
-            os.rename(tmp, path)
-        else:
-            for name in names:
-                os.replace(tmp / name, path / name)
-            keep = set(names)
-            for pattern in owned:
-                for old in path.glob(pattern):
-                    if old.name not in keep and old.is_file():
-                        with contextlib.suppress(OSError):
-                            old.unlink()
-            _remove(tmp)
+        _move_in(tmp, path, owned)
     except BaseException as exc:
-        if tmp is None:
+        if tmp is not None:
+            _remove(tmp)
+        error = _folder_error(exc, tmp, path)
+        if error is None:
             raise
-        _remove(tmp)
-        if isinstance(exc, OSError) and exc.errno is not None:
-            where = path / Path(exc.filename).name if exc.filename is not None and \
-                str(exc.filename).startswith(str(tmp)) else path
-            raise write_error(where, exc) from None
-        if isinstance(exc, KbcliError) and str(tmp) in str(exc):  # name the file, not its draft
-            raise type(exc)(str(exc).replace(str(tmp), str(path))) from None
-        raise
-    _sync_folder(folder)
+        raise error from None
+    _sync_folder(_folder(path))
+
+
+def _move_in(tmp: Path, path: Path, owned: Sequence[str]) -> None:
+    """The files of the filled folder ``tmp`` into ``path`` (see :func:`atomic_folder`)."""
+    names = sorted(os.listdir(tmp), key=lambda n: (n == "README.md", n))
+    for name in names:
+        _fsync(str(tmp / name))
+    if not path.exists():
+        os.chmod(tmp, 0o755)  # (mkdtemp makes it 0700)
+        os.rename(tmp, path)
+        return
+    for name in names:
+        os.replace(tmp / name, path / name)
+    for pattern in owned:
+        for old in path.glob(pattern):
+            if old.name not in names and old.is_file():
+                with contextlib.suppress(OSError):
+                    old.unlink()
+    _remove(tmp)
+
+
+def _folder_error(exc: BaseException, tmp: Path | None, path: Path) -> KbcliError | None:
+    """The one-line error for ``exc``, raised while making (``tmp`` None), filling or moving the
+    temporary folder ``tmp`` of ``path``: naming ``path`` and the file in it, never ``tmp``; None:
+    ``exc`` is not an error of the writing (raise it as it is)."""
+    if tmp is None:
+        return KbcliError(f"{path}: cannot create the folder in {_folder(path)} "
+                          f"({describe_os_error(exc)})") if isinstance(exc, OSError) else None
+    if isinstance(exc, OSError) and exc.errno is not None:
+        where = path / Path(exc.filename).name if exc.filename is not None and \
+            str(exc.filename).startswith(str(tmp)) else path
+        return write_error(where, exc)
+    if isinstance(exc, KbcliError) and str(tmp) in str(exc):  # name the file, not its draft
+        return type(exc)(str(exc).replace(str(tmp), str(path)))
+    return None

@@ -23,7 +23,7 @@ import h5py
 import numpy as np
 
 from kbcli.errors import KbcliError
-from kbcli.io.artifact import hdf5_image
+from kbcli.io.artifact import hdf5_image, read_group
 from kbcli.io.atomic import describe_os_error, write_bytes
 
 CHECKPOINT_FORMAT = 1
@@ -63,18 +63,6 @@ def _write_tree(group: h5py.Group, data: dict[str, Any]) -> None:
             group.create_dataset(name, data=arr.astype(object), dtype=h5py.string_dtype("utf-8"))
         else:
             group.create_dataset(name, data=arr)
-
-
-def _read_tree(group: h5py.Group) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for name, node in group.items():
-        if isinstance(node, h5py.Group):
-            out[name] = _read_tree(node)
-        elif h5py.check_string_dtype(node.dtype) is not None:
-            out[name] = np.asarray(node.asstr()[()], dtype=str)
-        else:
-            out[name] = node[()]
-    return out
 
 
 def _diff(old: dict, new: dict, prefix: str = "") -> list[str]:
@@ -149,6 +137,23 @@ class Checkpoint:
             if self.folder.exists() and not self.folder.is_dir():
                 raise KbcliError(f"{self.folder}: exists and is not a checkpoint folder")
             return {}
+        self._check_meta(resume)
+        done: dict[int, dict] = {}
+        for part in sorted(self.folder.glob("part-*.h5")):
+            try:
+                with h5py.File(part, "r") as f:
+                    done.update((int(name), read_group(node)) for name, node in f.items())
+            except (OSError, ValueError, KeyError) as exc:
+                raise KbcliError(f"{part}: unreadable checkpoint part ({exc}); delete it") from None
+            self._parts = max(self._parts, int(part.stem.split("-")[1]))
+        for stale in self.folder.glob(".*.tmp"):
+            with contextlib.suppress(OSError):
+                stale.unlink()
+        return done
+
+    def _check_meta(self, resume: bool) -> None:
+        """KbcliError unless ``meta.json`` is readable, ``resume`` is asked and the checkpoint was
+        made with this fingerprint (see :meth:`load`)."""
         try:
             meta = json.loads((self.folder / "meta.json").read_text(encoding="utf-8"))
         except (OSError, ValueError) as exc:
@@ -165,19 +170,6 @@ class Checkpoint:
                 f"{self.folder} was made with a different config ({', '.join(fields)} differ): "
                 "refusing to resume; rerun with the same config or delete the checkpoint"
             )
-        done: dict[int, dict] = {}
-        for part in sorted(self.folder.glob("part-*.h5")):
-            try:
-                with h5py.File(part, "r") as f:
-                    for name, node in f.items():
-                        done[int(name)] = _read_tree(node)
-            except (OSError, ValueError, KeyError) as exc:
-                raise KbcliError(f"{part}: unreadable checkpoint part ({exc}); delete it") from None
-            self._parts = max(self._parts, int(part.stem.split("-")[1]))
-        for stale in self.folder.glob(".*.tmp"):
-            with contextlib.suppress(OSError):
-                stale.unlink()
-        return done
 
     def start(self) -> None:
         """Create the folder and its ``meta.json`` (atomically) if they do not exist yet."""

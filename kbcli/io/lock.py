@@ -13,6 +13,7 @@ import os
 from pathlib import Path
 
 from kbcli.errors import KbcliError
+from kbcli.io.atomic import alive
 
 LOCK_SUFFIX = ".kbcli-lock"
 
@@ -36,16 +37,6 @@ def _holder(lock: Path) -> int | None:
         return None
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:
-        return True
-    return True
-
-
 def acquire(path: str | os.PathLike) -> Path | None:
     """Take the lock of output ``path``; returns its lock file (None when the folder cannot hold
     one: a read-only folder, which the command refuses anyway).
@@ -64,7 +55,7 @@ def acquire(path: str | os.PathLike) -> Path | None:
             fd = os.open(lock, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         except FileExistsError:
             pid = _holder(lock)
-            if pid is not None and pid != os.getpid() and _alive(pid):
+            if pid is not None and pid != os.getpid() and alive(pid):
                 raise KbcliError(f"{path}: another kbcli (pid {pid}) is writing it; wait for it to "
                                  f"finish or choose another output name") from None
             if pid is None and _young(lock):

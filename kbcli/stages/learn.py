@@ -57,7 +57,6 @@ from kbcli.stages.models import exact_artifact
 
 CURVE_STEP = 2.0  # px, grid of the learning curve's accuracy
 EVAL_STEP = 1.0  # px, grid of the final accuracy and boundary error
-TARGET_ACCURACY = 0.99
 LEVELS = (0.97, 0.99)  # accuracies whose first crossing the artifact records
 #: Spawn key of the generator that assigns samples to cross-validation folds.
 RELIABILITY_KEY = 9
@@ -220,7 +219,6 @@ class Learning:
         ex = self.exploration
         if len(ex.targets) < self.cfg.budget:
             raise RuntimeError("learning is not finished: iterate to the end first")
-        kb = self.keyboard
         phase = on_phase or (lambda text: None)
         if self.cfg.model_class == AUTO:
             phase("choosing the model class (5-fold cross-validation of each)")
@@ -229,33 +227,21 @@ class Learning:
         phase(f"cross-validating and calibrating the {model_class} model (5 folds)")
         model, rel = self.reliability(model_class)
         phase("scoring the model against the keyboard")
-        pred, true = scoring.key_maps(model, kb, EVAL_STEP)
-        acc = scoring.accuracy_from_maps(pred, true)
-        berr = scoring.boundary_error(pred, true, EVAL_STEP)
-        curve_acc = np.asarray(self.curve_accuracy, float)
-        curve_n = np.asarray(self.curve_reaches, np.int64)
-        first = {level: reaches_to(level, curve_n, curve_acc, acc, len(ex.targets))
-                 for level in LEVELS}
-        samples = {
-            "actions": ex.targets,
-            "landed": ex.landed,
-            "perceived": ex.perceived,
-        }
+        pred, scores = self._scores(model)
+        samples = {"actions": ex.targets, "landed": ex.landed, "perceived": ex.perceived}
         if self._starts:
             samples["start_angles"] = np.vstack(self._starts)
-        origin, _ = grid_points(kb.area, EVAL_STEP)
+        origin, _ = grid_points(self.keyboard.area, EVAL_STEP)
         return Artifact(
             kind="model",
-            config={**self.cfg.to_dict(), "keyboard": kb.config.to_dict(),
-                    "curve_step": CURVE_STEP, "eval_step": EVAL_STEP,
-                    # the class that reads model/...; under auto, the one chosen
-                    "model_class": model_class,
-                    **({"model_class_requested": AUTO} if sel is not None else {})},
+            config=model_config(self.cfg, self.keyboard.config.to_dict(),
+                                None if sel is None else model_class),
             seed=self.seed,
             data={
                 "samples": samples,
                 "model": model.to_arrays(),
-                "curve": {"reaches": curve_n, "accuracy": curve_acc},
+                "curve": {"reaches": np.asarray(self.curve_reaches, np.int64),
+                          "accuracy": np.asarray(self.curve_accuracy, float)},
                 "evaluation": {"predicted_keys": pred.astype(np.int16), "origin": origin,
                                "step": np.float64(EVAL_STEP)},
             },
@@ -263,21 +249,42 @@ class Learning:
                 "strategy": self.cfg.strategy,
                 "model_class": model_class,
                 **({"model_selection": sel.to_dict()} if sel is not None else {}),
-                "layout": kb.layout,
+                "layout": self.keyboard.layout,
                 "mode": self.cfg.sim.mode,
                 "n_reaches": int(len(ex.targets)),
                 "n_classes": int(model.n_classes),
                 **({"n_boundary_lines": int(len(model.lines_))} if hasattr(model, "lines_")
                    else {}),
                 "reach_sd_px": float(model.reach_sd_),
-                "accuracy": acc,
-                "boundary_error_px": berr,
-                "reaches_to_97": first[0.97],
-                "reaches_to_99": first[0.99],
+                **scores,
                 "reliability": rel.to_dict(),
             },
             inputs={"keyboard": ref(self.keyboard_art)},
         )
+
+    def _scores(self, model) -> tuple[np.ndarray, dict]:
+        """The key ``model`` predicts in each :data:`EVAL_STEP` px cell, and its scores against
+        the keyboard: ``accuracy``, ``boundary_error_px``, ``reaches_to_97`` and ``reaches_to_99``
+        (:func:`reaches_to` on the learning curve)."""
+        pred, true = scoring.key_maps(model, self.keyboard, EVAL_STEP)
+        acc = scoring.accuracy_from_maps(pred, true)
+        first = {level: reaches_to(level, np.asarray(self.curve_reaches, np.int64),
+                                   np.asarray(self.curve_accuracy, float), acc,
+                                   len(self.exploration.targets)) for level in LEVELS}
+        return pred, {"accuracy": acc,
+                      "boundary_error_px": scoring.boundary_error(pred, true, EVAL_STEP),
+                      "reaches_to_97": first[0.97], "reaches_to_99": first[0.99]}
+
+
+def model_config(cfg: LearnConfig, keyboard: dict, chosen: str | None = None) -> dict:
+    """The config a ``model`` artifact records: ``cfg``, the keyboard's config and the scoring
+    grids; under ``auto``, the class ``chosen`` as ``model_class`` (the class that reads
+    ``model/...``) and ``model_class_requested = "auto"``."""
+    out = {**cfg.to_dict(), "keyboard": keyboard, "curve_step": CURVE_STEP,
+           "eval_step": EVAL_STEP}
+    if chosen is not None:
+        out.update(model_class=chosen, model_class_requested=AUTO)
+    return out
 
 
 def reaches_to(level: float, reaches: np.ndarray, accuracy: np.ndarray, final: float,

@@ -176,6 +176,32 @@ def _reject_constant(name: str) -> float:
     raise MessageError(f"{name} is not a number JSON allows")
 
 
+def _json_object(text: str) -> dict:
+    """A message line as a JSON object; MessageError otherwise."""
+    try:
+        msg = json.loads(text, parse_constant=_reject_constant, parse_int=_parse_int)
+    except json.JSONDecodeError as exc:
+        raise MessageError(f"not JSON ({exc.msg} at column {exc.colno})") from None
+    except RecursionError:  # "[[[[..." within MAX_LINE: json recurses per level
+        raise MessageError("not JSON this side reads: nested too deeply") from None
+    if not isinstance(msg, dict):
+        raise MessageError(f"a message is a JSON object, got {type(msg).__name__}")
+    return msg
+
+
+def _check_fields(msg: dict) -> str:
+    """The message's ``op`` (``observe`` when left out); MessageError for an unknown op or a field
+    the op does not take."""
+    op = msg.get("op", "observe")
+    if op not in FIELDS:
+        raise MessageError(f"unknown op {op!r}; valid: {', '.join(FIELDS)}")
+    unknown = sorted(set(msg) - set(FIELDS[op]))
+    if unknown:
+        raise MessageError(f"unknown field(s) {', '.join(unknown)} for op {op!r}; "
+                           f"valid: {', '.join(FIELDS[op])}")
+    return op
+
+
 class Session:
     """One adaptation with an external robot: JSON messages in, replies out.
 
@@ -243,8 +269,12 @@ class Session:
             "entropy": float(ad.entropy()),
             "mass": float(ad.mass_near_estimate()),
             "done": bool(self.done()),
-            "action": None if self.pending is None else [float(v) for v in self.pending],
+            "action": self._action(),
         }
+
+    def _action(self) -> list[float] | None:
+        """The pending action as JSON (None once ``max_steps`` touches were observed)."""
+        return None if self.pending is None else [float(v) for v in self.pending]
 
     def hello(self) -> dict:
         """The first line kbcli sends."""
@@ -257,35 +287,19 @@ class Session:
     # -- messages ----------------------------------------------------------------------------------
     def handle(self, line: str | bytes) -> dict | None:
         """The reply to one message line (None for a blank line)."""
-        msg_id = None
+        msg: dict = {}
         try:
             text = line.decode("utf-8") if isinstance(line, bytes) else line
             if not text.strip():
                 return None
-            try:
-                msg = json.loads(text, parse_constant=_reject_constant, parse_int=_parse_int)
-            except json.JSONDecodeError as exc:
-                raise MessageError(f"not JSON ({exc.msg} at column {exc.colno})") from None
-            except RecursionError:  # "[[[[..." within MAX_LINE: json recurses per level
-                raise MessageError("not JSON this side reads: nested too deeply") from None
-            if not isinstance(msg, dict):
-                raise MessageError(f"a message is a JSON object, got {type(msg).__name__}")
-            msg_id = msg.get("id")
-            op = msg.get("op", "observe")
-            if op not in FIELDS:
-                raise MessageError(f"unknown op {op!r}; valid: {', '.join(FIELDS)}")
-            unknown = sorted(set(msg) - set(FIELDS[op]))
-            if unknown:
-                raise MessageError(f"unknown field(s) {', '.join(unknown)} for op {op!r}; "
-                                   f"valid: {', '.join(FIELDS[op])}")
-            reply = getattr(self, f"_op_{op}")(msg)
+            msg = _json_object(text)
+            reply = getattr(self, f"_op_{_check_fields(msg)}")(msg)
         except UnicodeDecodeError:
-            reply = self.error_reply("a message must be UTF-8 text", None)
+            return self.error_reply("a message must be UTF-8 text", None)
         except (MessageError, KbcliError) as exc:
-            reply = self.error_reply(str(exc), msg_id)
-        else:
-            if msg_id is not None:
-                reply["id"] = msg_id
+            return self.error_reply(str(exc), msg.get("id"))
+        if msg.get("id") is not None:
+            reply["id"] = msg["id"]
         return reply
 
     def error_reply(self, text: str, msg_id=None) -> dict:
@@ -297,8 +311,7 @@ class Session:
         return out
 
     def _op_suggest(self, msg: dict) -> dict:
-        return {"type": "suggestion", "step": self.steps,
-                "action": None if self.pending is None else [float(v) for v in self.pending]}
+        return {"type": "suggestion", "step": self.steps, "action": self._action()}
 
     def _op_state(self, msg: dict) -> dict:
         return {"type": "state", **self._state()}

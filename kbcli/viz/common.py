@@ -15,7 +15,7 @@ from matplotlib.patches import Circle, Polygon
 from matplotlib.path import Path
 
 from kbcli.core.instrument.keyboard import Keyboard
-from kbcli.core.instrument.transforms import FAMILIES
+from kbcli.core.instrument.transforms import FAMILIES, apply
 from kbcli.io.atomic import write_bytes
 from kbcli.io.paths import figure_format
 from kbcli.viz.palette import key_colours
@@ -36,6 +36,22 @@ def angle_note(family: str | None, world_family: str | None) -> str:
     if rotates(family):
         return "angle marginalised"
     return "angle not estimated" if rotates(world_family) else ""
+
+
+def moved_outlines(polys: list[np.ndarray], family: str, params: np.ndarray,
+                   centre: np.ndarray) -> list[np.ndarray]:
+    """Key outlines ``polys`` moved by the transform ``params`` of ``family`` (rotation about
+    ``centre``), any layout."""
+    flat = apply(family, params, np.vstack(polys), np.asarray(centre, float))
+    return np.split(flat, np.cumsum([len(p) for p in polys])[:-1])
+
+
+def running_mean(x: np.ndarray, window: int) -> np.ndarray:
+    """The mean of the last ``window`` values of ``x`` at each point (fewer at the start)."""
+    c = np.concatenate([[0.0], np.cumsum(x)])
+    i = np.arange(1, len(x) + 1)
+    lo = np.maximum(i - window, 0)
+    return (c[i] - c[lo]) / np.maximum(i - lo, 1)
 
 
 def save(fig: Figure, path: str | os.PathLike, dpi: int = 110) -> None:

@@ -23,7 +23,7 @@ from matplotlib.patches import Patch, Polygon
 from kbcli.core.instrument import transforms
 from kbcli.core.instrument.keyboard import Keyboard
 from kbcli.core.playing.loop import adaptation_blocks
-from kbcli.viz.common import draw_keyboard, place_labels, save
+from kbcli.viz.common import draw_keyboard, moved_outlines, place_labels, running_mean, save
 from kbcli.viz.palette import BELIEF, TRUTH
 
 PLAY, ADAPT = 0, 1
@@ -67,14 +67,6 @@ def _counts(phase: np.ndarray, result: np.ndarray, attrs: dict) -> dict[str, tup
     return {k: (int((ok & m).sum()), int(m.sum())) for k, m in out.items()}
 
 
-def _key_polygons(kb: Keyboard, family: str, params: np.ndarray) -> list[np.ndarray]:
-    """The outline of every key moved by ``params`` (rotation about the keyboard centre), any
-    layout."""
-    polys = kb.key_outlines()
-    moved = transforms.apply(family, params, np.vstack(polys), np.asarray(kb.centre, float))
-    return np.split(moved, np.cumsum([len(p) for p in polys])[:-1])
-
-
 def _pose(d: dict) -> tuple[str, np.ndarray]:
     """(family, params) of a pose given as a dict of named parameters (absent ones are 0)."""
     fam = transforms.family_for({"dx": 0.0, "dy": 0.0, **d})
@@ -105,11 +97,7 @@ def _success_panel(ax, t: np.ndarray, phase: np.ndarray, result: np.ndarray, att
     """Top left: the running success, each NO_MATCH, the adaptations, the move, the detection."""
     play = phase == PLAY
     ok = 1.0 - result[play]
-    c = np.concatenate([[0.0], np.cumsum(ok)])
-    i = np.arange(1, len(ok) + 1)
-    lo = np.maximum(i - window, 0)
-    running = (c[i] - c[lo]) / np.maximum(i - lo, 1)
-    ax.plot(*_gaps(t[play], running), lw=1.4, color="tab:blue",
+    ax.plot(*_gaps(t[play], running_mean(ok, window)), lw=1.4, color="tab:blue",
             label=f"success (mean of the last {window} notes)")
     miss = t[play][ok == 0]
     ax.plot(miss, np.full(len(miss), -0.05), ls="", marker="|", color="crimson", ms=9,
@@ -185,16 +173,16 @@ def _keyboard_panel(ax3, kb: Keyboard, steps: dict, phase: np.ndarray, attrs: di
     is, and the adaptation touches; the keys (both poses) and the touches fill the panel. Returns
     the touch labels' points and texts, and every touch (for :func:`place_labels`)."""
     fam, params = _pose(attrs.get("truth") or {})
-    moved_keys = _key_polygons(kb, fam, params)
+    moved_keys = moved_outlines(kb.key_outlines(), fam, params, kb.centre)
     for poly in moved_keys:
         ax3.add_patch(Polygon(poly, closed=True, fill=False, zorder=2, **TRUTH))
-    shown = [np.vstack(moved_keys), np.vstack(_key_polygons(kb, "translation", np.zeros(2)))]
+    shown = [np.vstack(moved_keys), np.vstack(moved_outlines(kb.key_outlines(), "translation", np.zeros(2), kb.centre))]
     handles = [Patch(facecolor="0.85", edgecolor="0.4", label="where the robot learned it"),
                Line2D([], [], **TRUTH, label="where it is: " + _named(attrs.get("truth") or {}))]
     corr = attrs.get("correction") or {}
     if attrs.get("detected_at") is not None and corr:
         cf, cp = _pose(corr)
-        for poly in _key_polygons(kb, cf, cp):
+        for poly in moved_outlines(kb.key_outlines(), cf, cp, kb.centre):
             ax3.add_patch(Polygon(poly, closed=True, fill=False, zorder=3, **BELIEF))
         handles.append(Line2D([], [], **BELIEF,
                               label="where the robot believes it is: " + _named(corr)))

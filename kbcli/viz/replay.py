@@ -47,6 +47,17 @@ class Replay:
     def n(self) -> int:
         return len(self.landed)
 
+    def belief_at(self, k: int) -> np.ndarray:
+        """The robot's belief after ``k`` touches (before the first: no displacement)."""
+        if k == 0:
+            return np.zeros(len(transforms.FAMILIES.get(self.family).params))
+        return self.belief[k - 1]
+
+    def moved_at(self, k: int) -> bool:
+        """Whether the keyboard is at its true (moved) pose after ``k`` touches (a closed loop's
+        first ``perturbed_at`` touches are at the reference pose)."""
+        return self.kind != "closed_loop" or k > (self.attrs.get("perturbed_at") or 0)
+
 
 
 # -- the arm ---------------------------------------------------------------------------------------

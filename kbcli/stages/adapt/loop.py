@@ -89,23 +89,15 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
         The true displacement in ``world_family`` parameters (default: ``cfg.robot.family``).
     rng : numpy.random.Generator
         Split into the robot's and the world's generators.
-    table : LikelihoodTable, optional
-        A prebuilt :func:`kbcli.core.adaptation.loop.build_table` for ``model`` (rasterise once, reuse).
     snapshot_steps : tuple of int
         Steps (0: the prior) at which to keep the posterior.
-    samples : ActionSamples, optional
-        The ``kde`` posterior's per-class samples (:func:`kbcli.core.adaptation.loop.build_samples`), shared
-        across experiments; default: drawn per run.
-    play : PlayCheck, optional
+    table, samples : LikelihoodTable, ActionSamples, optional
+        The model raster (:func:`build_shared_table`) and the ``kde`` posterior's per-class
+        samples (:func:`build_shared_samples`), shared across experiments; default: made per run.
+    play, play_pool, reference_rng : PlayCheck, ActionSamples, Generator, optional
         Also measure the playing success (adds ``play_before``, ``play_unadapted``,
-        ``play_adapted``, each a float, NaN when not measured), from a third child of ``rng``.
-    play_pool : ActionSamples, optional
-        Per-class draws of p(action | sound) the replays resample (default: the model samples).
-    reference_rng : numpy.random.Generator, optional
-        Generator of the reference replays (``play.reference``: before the displacement and
-        unadapted), which do not depend on the adaptation; default: children of the same third
-        child of ``rng`` as the adapted replay (the evaluation gives them a seed without method
-        and strategy, so they measure the same whichever experiment runs them).
+        ``play_adapted``, each a float, NaN when not measured), from a third child of ``rng``,
+        resampling ``play_pool`` (default: the model samples), see :func:`_play_after`.
     on_step : callable, optional
         Called with the step number after each observation (a progress bar).
     timings : dict, optional
@@ -117,17 +109,10 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     Returns
     -------
     dict of ndarrays, per step t = 1..T (T = ``max_steps``, fewer when ``cfg.stop`` ends early)
-        ``actions`` (T, 2), ``landed`` (T, 2) where the robot felt it landed, ``true_landed``
-        (T, 2) where it did (world side), ``perceived`` (T, D), ``classes`` (T,),
-        ``estimates`` (T, P) maximum-likelihood cell, ``means`` (T, P) posterior mean,
-        ``errors`` (T,) px error of the estimate (``cfg.robot.estimator``) vs truth, ``ml_errors`` (T,),
-        ``angle_errors`` (T,) deg, ``entropy`` (T,) nats, ``ml_prob`` (T,), ``mass`` (T,),
-        ``stop`` (T,) bool, ``step_ms`` (T,); ``truth_logratio`` (T,) the log of the posterior at
-        the truth over its maximum (:meth:`~kbcli.core.adaptation.posteriors.posterior.Posterior.log_ratio_at`; world
-        side, for the evaluation); ``joint_angles`` (T, 2) the arm's pose after each
-        touch (dynamics mode); ``snapshot_steps`` (S,), ``snapshots`` (S, ny, nx)
-        log translation marginals, ``snapshot_angles`` (S, A) angle marginals (rigid); ``dx``,
-        ``dy``, ``angles`` grid axes.
+        The records (:meth:`~kbcli.stages.adapt.record.Recorder.arrays`), with ``true_landed``
+        (T, 2) where the finger did land and ``truth_logratio`` (T,) the log of the posterior at
+        the truth over its maximum (:meth:`~kbcli.core.adaptation.posteriors.posterior.Posterior.log_ratio_at`),
+        both world side, for the evaluation.
     """
     world_family = cfg.robot.family if world_family is None else world_family
     truth = np.asarray(true_params, float)
@@ -135,11 +120,7 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     adapter = _prepared(cfg, model, robot_rng, table, samples, timings, keep)
     touch = _Touches(World(keyboard, make_reacher(cfg.sim_config()), truth, world_family),
                      world_rng)
-    rec = Recorder(adapter, [s for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps])
-    ratios = _run(cfg, adapter, touch, rec, truth, world_family, on_step)
-    out = rec.arrays()
-    out["truth_logratio"] = ratios
-    out["true_landed"] = np.asarray(touch.true_landed, float).reshape(-1, 2)
+    out = _run(cfg, adapter, touch, truth, world_family, snapshot_steps, on_step)
     if play is not None:
         res = _play_after(cfg, model, keyboard, truth, world_family, out, play,
                           rng=rng.spawn(1)[0], pool=play_pool, reference_rng=reference_rng)
@@ -147,11 +128,14 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
     return out
 
 
-def _run(cfg: AdaptConfig, adapter: Adapter, touch: _Touches, rec: Recorder, truth: np.ndarray,
-         world_family: str, on_step: Callable[[int], None] | None) -> np.ndarray:
+def _run(cfg: AdaptConfig, adapter: Adapter, touch: _Touches, truth: np.ndarray,
+         world_family: str, snapshot_steps: tuple[int, ...],
+         on_step: Callable[[int], None] | None) -> dict[str, np.ndarray]:
     """Adapt for ``cfg.max_steps`` touches (or to the stop), recording each step with its errors
-    against the truth in ``rec``; returns (T,) the log of the posterior at the truth over its
-    maximum after each step (world side: only the evaluation reads it)."""
+    against the truth; returns the records (:meth:`Recorder.arrays`) with, world side (only the
+    evaluation reads them), ``truth_logratio``: the log of the posterior at the truth over its
+    maximum after each step, and ``true_landed``."""
+    rec = Recorder(adapter, [s for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps])
     truth_robot = _as_family(truth, world_family, cfg.robot.family)
     ratios = []
     for st in adapt(adapter, touch, cfg.max_steps, use_landed=cfg.feedback == "landed",
@@ -162,7 +146,8 @@ def _run(cfg: AdaptConfig, adapter: Adapter, touch: _Touches, rec: Recorder, tru
         ratios.append(adapter.posterior.log_ratio_at(truth_robot))
         if on_step is not None:
             on_step(st.t)
-    return np.asarray(ratios, float)
+    return {**rec.arrays(), "truth_logratio": np.asarray(ratios, float),
+            "true_landed": np.asarray(touch.true_landed, float).reshape(-1, 2)}
 
 
 def _prepared(cfg: AdaptConfig, model, rng: np.random.Generator, table, samples,
@@ -206,8 +191,11 @@ def _play_after(cfg: AdaptConfig, model, keyboard: Keyboard, truth: np.ndarray,
                 rng: np.random.Generator, pool: ActionSamples | None,
                 reference_rng: np.random.Generator | None = None) -> dict[str, float]:
     """:func:`play_success` around an adaptation whose records are ``out``, corrected by its final
-    estimate (``cfg.robot.estimator``'s) in the world's parameters; the reference replays from
-    ``reference_rng`` when given."""
+    estimate (``cfg.robot.estimator``'s) in the world's parameters. The reference replays
+    (``play.reference``: before the displacement and unadapted), which do not depend on the
+    adaptation, from ``reference_rng`` when given (the evaluation gives them a seed without method
+    and strategy, so they measure the same whichever experiment runs them); else from children of
+    ``rng``, as the adapted replay."""
     final = ESTIMATORS.get(cfg.robot.estimator).final(out)
     if world_family != cfg.robot.family:  # correct in the world's parameters
         final = _as_family(final, cfg.robot.family, world_family)

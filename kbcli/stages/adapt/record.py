@@ -71,7 +71,15 @@ class Recorder:
             self.snapshot(st.t)
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The records as arrays (see :func:`experiment`'s Returns)."""
+        """The records as arrays, per step t = 1..T: ``actions`` (T, 2), ``landed`` (T, 2) where
+        the robot felt it landed, ``perceived`` (T, D), ``classes`` (T,), ``estimates`` (T, P)
+        maximum-likelihood cell, ``means`` (T, P) posterior mean, ``errors`` (T,) px error of the
+        estimate (the robot's estimator) vs the truth, ``ml_errors`` (T,), ``angle_errors`` (T,)
+        deg, ``entropy`` (T,) nats, ``ml_prob`` (T,), ``mass`` (T,), ``stop`` (T,) bool,
+        ``step_ms`` (T,); ``joint_angles`` (T, 2) the arm's pose after each touch (dynamics mode);
+        ``snapshot_steps`` (S,), ``snapshots`` (S, ny, nx) log translation marginals,
+        ``snapshot_angles`` (S, A) angle marginals (rigid); ``dx``, ``dy``, ``angles`` grid
+        axes; and what the posterior resolved from the model."""
         g = self.adapter.grid
         d = int(np.shape(self.adapter.model.class_features_)[1])
         out = {k: np.asarray(v) for k, v in self.rec.items()}

@@ -30,8 +30,8 @@ Each experiment is seeded by ``SeedSequence(seed, spawn_key=...)`` with a key ma
 category, parametrization, method, strategy and repetition, so a result depends neither on the
 worker that ran it nor on which modes or methods were selected.
 
-This package holds the config (:mod:`.config`, :mod:`.methods`), plans the experiments
-(:func:`plan`, :mod:`.planning`), runs one in a worker (:func:`setup`, :func:`run_experiment`,
+This package holds the config (:mod:`.config`, :mod:`.categories`, :mod:`.methods`), plans the
+experiments (:func:`plan`, :mod:`.planning`), runs one in a worker (:func:`setup`, :func:`run_experiment`,
 :mod:`.worker`) and assembles the results into the ``evaluation`` artifact (:func:`assemble`,
 :mod:`.assembly`) with :mod:`kbcli.core.adaptation.stats`: RMSE against observations per category, method
 and strategy (Fig. 7), observations to each error threshold, tie-corrected Mann-Whitney U p-values
@@ -46,13 +46,8 @@ from __future__ import annotations
 
 from kbcli.stages.artifact import Artifact
 from kbcli.stages.evaluate.assembly import assemble
-from kbcli.stages.evaluate.config import (
-    Category,
-    EvaluateConfig,
-    _paper_categories,
-    adapt_config,
-    resolved_methods,
-)
+from kbcli.stages.evaluate.categories import Category, _paper_categories
+from kbcli.stages.evaluate.config import EvaluateConfig, adapt_config, resolved_methods
 from kbcli.stages.evaluate.methods import (
     DEFAULT_STRATEGIES,
     KBCLI_METHOD,

@@ -35,10 +35,6 @@ PAPER_METHOD = {"description": "the paper's text: product of KDEs (Eq. 7-8) with
                 "kde_sampler": "raster", "kde_beyond": "silent", "kde_floor": 0.0, "estimator": "ml",
                 "ml_ties": "random", "random_actions": "model", "stop_ml": 0.02, "stop_mass": 0.0,
                 "model_blur": 0.0}
-#: The ``paper`` method before issue 26 (seeded as ``paper`` was: the same numbers).
-PAPER_V1_METHOD = {"description": "the paper method before issue 26", "seeds_of": "paper",
-                   "strategies": ["random", "active"], "posterior": "kde", "kde_beyond": "unknown",
-                   "estimator": "ml", "model_blur": 0.0}
 #: Ours: the adapter's defaults, every strategy.
 KBCLI_METHOD = {"description": "kbcli's best: the adapter's defaults", "strategies":
                 ["random", "active", "infogain"]}

@@ -25,6 +25,7 @@ from kbcli.stages.report.source import (
     pct,
     physical_mode,
     played,
+    readings,
     robot,
 )
 
@@ -39,43 +40,50 @@ def _tested(art: Artifact, mode: str, method: str, category: str, strategy: str,
     return art.array("thresholds"), art.attrs["baseline"], cur, pvs[strategy]
 
 
+def _thresholds(tested: tuple, strategy: str, sfx: str = ""):
+    """Each threshold of a tested cell as ``(px, p-value, statistic, informative)``: informative
+    when the strategy or the baseline reaches it in half the runs or more."""
+    thr, base, cur, pv = tested
+    for j, t in enumerate(thr):
+        reached = max(cur[strategy][f"reached{sfx}"][j], cur[base][f"reached{sfx}"][j])
+        yield t, pv[f"pvalue{sfx}"][j], pv[f"statistic{sfx}"][j], not reached < 0.5
+
+
+def _sorted_thresholds(tested: tuple, strategy: str, upto: float, bound: float, min_p: float,
+                       sfx: str) -> tuple[list[str], ...]:
+    """The thresholds up to ``upto`` px as texts, sorted: p < bound in the strategy's favour, not,
+    not but underpowered (the smallest attainable p, ``min_p``, is not below ``bound``),
+    uninformative."""
+    ok, bad, weak, skipped = [], [], [], []
+    for t, p, stat, informative in _thresholds(tested, strategy, sfx):
+        if t > upto:
+            continue
+        if not informative:
+            skipped.append(f"{t:g} px")
+            continue
+        txt = f"{t:g} px (p={fmt_p(p)})"
+        (ok if p < bound and stat < 0 else weak if min_p >= bound else bad).append(txt)
+    return ok, bad, weak, skipped
+
+
 def significance(art: Artifact, mode: str, method: str, category: str, strategy: str,
-                  upto: float, bound: float, sfx: str = "") -> tuple[str, str]:
+                 upto: float, bound: float, sfx: str = "") -> tuple[str, str]:
     """(measured text, verdict) of 'p < bound up to `upto` px' for one strategy."""
     tested = _tested(art, mode, method, category, strategy, sfx)
     if tested is None:
         return "not evaluated", "not measured"
-    thr, base, cur, pv = tested
-    min_p = float(pv.get("min_pvalue", 0.0))
-    ok, bad, weak, skipped = [], [], [], []
-    for j, t in enumerate(thr):
-        if t > upto:
-            continue
-        if max(cur[strategy][f"reached{sfx}"][j], cur[base][f"reached{sfx}"][j]) < 0.5:
-            skipped.append(f"{t:g} px")
-            continue
-        p, stat = pv[f"pvalue{sfx}"][j], pv[f"statistic{sfx}"][j]
-        txt = f"{t:g} px (p={fmt_p(p)})"
-        if p < bound and stat < 0:
-            ok.append(txt)
-        elif min_p >= bound:
-            weak.append(txt)
-        else:
-            bad.append(txt)
-    parts = []
-    if ok:
-        parts.append(f"p < {bound:g} at " + ", ".join(ok))
-    if bad:
-        parts.append("not at " + ", ".join(bad))
-    if weak:
-        parts.append(f"not at {', '.join(weak)}: too few runs to show p < {bound:g} (the "
-                     f"smallest exact p-value of these sample sizes is {fmt_p(min_p)})")
-    if skipped:
-        parts.append("uninformative (neither reaches it in half the runs): " + ", ".join(skipped))
+    min_p = float(tested[3].get("min_pvalue", 0.0))
+    ok, bad, weak, skipped = _sorted_thresholds(tested, strategy, upto, bound, min_p, sfx)
+    parts = [f"p < {bound:g} at " + ", ".join(ok) if ok else "",
+             "not at " + ", ".join(bad) if bad else "",
+             f"not at {', '.join(weak)}: too few runs to show p < {bound:g} (the smallest exact "
+             f"p-value of these sample sizes is {fmt_p(min_p)})" if weak else "",
+             "uninformative (neither reaches it in half the runs): " + ", ".join(skipped)
+             if skipped else ""]
+    text = "; ".join(x for x in parts if x)
     if not ok and not bad and not weak:
-        return "; ".join(parts) or f"no threshold <= {upto:g} px", "not measured"
-    verdict = "differs" if bad else "underpowered" if weak else "agrees"
-    return "; ".join(parts), verdict
+        return text or f"no threshold <= {upto:g} px", "not measured"
+    return text, "differs" if bad else "underpowered" if weak else "agrees"
 
 
 def not_significant(art: Artifact, mode: str, method: str, category: str,
@@ -86,16 +94,13 @@ def not_significant(art: Artifact, mode: str, method: str, category: str,
     tested = _tested(art, mode, method, category, strategy, sfx)
     if tested is None:
         return "not evaluated", "not measured"
-    thr, base, cur, pv = tested
+    pv = tested[3]
     faster, slower = [], []
     informative = 0
-    for j, t in enumerate(thr):
-        if max(cur[strategy][f"reached{sfx}"][j], cur[base][f"reached{sfx}"][j]) < 0.5:
-            continue
-        informative += 1
-        if pv[f"pvalue{sfx}"][j] < NOT_SIGNIFICANT:
-            txt = f"{t:g} px (p={fmt_p(pv[f'pvalue{sfx}'][j])})"
-            (faster if pv[f"statistic{sfx}"][j] < 0 else slower).append(txt)
+    for t, p, stat, useful in _thresholds(tested, strategy, sfx):
+        informative += useful
+        if useful and p < NOT_SIGNIFICANT:
+            (faster if stat < 0 else slower).append(f"{t:g} px (p={fmt_p(p)})")
     if not informative:
         return "no informative threshold", "not measured"
     sig = faster + (slower if two_sided else [])
@@ -208,15 +213,10 @@ def _best_p(art: Artifact, mode: str, method: str, category: str, strategy: str,
     tested = _tested(art, mode, method, category, strategy, sfx)
     if tested is None:
         return None
-    thr, base, cur, pv = tested
     best = None
-    for j, t in enumerate(thr):
-        if max(cur[strategy][f"reached{sfx}"][j], cur[base][f"reached{sfx}"][j]) < 0.5:
-            continue
-        p = float(pv[f"pvalue{sfx}"][j])
-        if pv[f"statistic{sfx}"][j] >= 0:
-            p = 1.0  # not in the strategy's favour
-        if best is None or p < best[0]:
+    for t, p, stat, informative in _thresholds(tested, strategy, sfx):
+        p = 1.0 if stat >= 0 else float(p)  # 1: not in the strategy's favour
+        if informative and (best is None or p < best[0]):
             best = (p, float(t))
     return best
 
@@ -230,36 +230,35 @@ def large_why(art: Artifact, mode: str) -> str:
     judged = art.attrs["judged"]
     if "large" not in art.attrs["categories"]:
         return ""
-    base = art.attrs["baseline"]
     sig, calm = [], []
     judged_sig = None
     for x in methods_of(art):
-        r = robot(art, x)
-        for est, sfx in ((r.get("estimator", "?"), ""), ("ml", "_ml"), ("mean", "_mean")):
-            if sfx and est == r.get("estimator"):
+        posterior = robot(art, x).get("posterior", "?")
+        for (est, sfx), s in ((r, s) for r in readings(art, x) for s in compared(art, x)):
+            best = _best_p(art, mode, x, "large", s, sfx)
+            if best is None:
                 continue
-            for s in compared(art, x):
-                best = _best_p(art, mode, x, "large", s, sfx)
-                if best is None:
-                    continue
-                label = (f"{x} ({r.get('posterior', '?')} posterior, {est} estimate"
-                         + (", same runs" if sfx else "") + f", {s})")
-                txt = f"{label}: p={fmt_p(best[0])} at {best[1]:g} px"
-                (sig if best[0] < NOT_SIGNIFICANT else calm).append(txt)
-                if x == judged and not sfx and STRATEGIES.trait(s, "paper", False):
-                    judged_sig = best[0] < NOT_SIGNIFICANT
+            same = ", same runs" if sfx else ""
+            (sig if best[0] < NOT_SIGNIFICANT else calm).append(
+                f"{x} ({posterior} posterior, {est} estimate{same}, {s}): p={fmt_p(best[0])} at "
+                f"{best[1]:g} px")
+            if x == judged and not sfx and STRATEGIES.trait(s, "paper", False):
+                judged_sig = best[0] < NOT_SIGNIFICANT
     if not sig and not calm:
         return ""
-    text = (f"Large displacements, {mode} mode, each variant's smallest p-value against {base} "
-            f"over the informative thresholds: separated (p < {NOT_SIGNIFICANT:g}): "
-            + ("; ".join(sig) or "none") + ". Not separated: " + ("; ".join(calm) or "none"))
+    return (f"Large displacements, {mode} mode, each variant's smallest p-value against "
+            f"{art.attrs['baseline']} over the informative thresholds: separated "
+            f"(p < {NOT_SIGNIFICANT:g}): " + ("; ".join(sig) or "none") + ". Not separated: "
+            + ("; ".join(calm) or "none") + _large_moral(judged, judged_sig, bool(sig)))
+
+
+def _large_moral(judged: str, judged_sig: bool | None, any_sig: bool) -> str:
+    """What the large-displacement account says of the judged method's own reading."""
     if judged_sig is True:
-        text += (f". So the paper's own representation, estimator and strategy (`{judged}`) "
-                 "already separate active from random here: the difference from the paper's "
-                 "'not very significant' lies in neither of them")
-    elif judged_sig is False and sig:
-        text += (f". So `{judged}` does not separate active from random here; the variants that "
-                 "do are listed above: what they change from it is what matters")
-    return text
-
-
+        return (f". So the paper's own representation, estimator and strategy (`{judged}`) "
+                "already separate active from random here: the difference from the paper's "
+                "'not very significant' lies in neither of them")
+    if judged_sig is False and any_sig:
+        return (f". So `{judged}` does not separate active from random here; the variants that "
+                "do are listed above: what they change from it is what matters")
+    return ""

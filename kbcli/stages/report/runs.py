@@ -73,14 +73,6 @@ def excluded(art: Artifact) -> list[dict[str, str]] | None:
     return out
 
 
-def excluded_total(art: Artifact, method: str | None = None) -> int | None:
-    """Runs (of ``method``, default all) that ruled the truth out; None when not recorded."""
-    rows = excluded(art)
-    if rows is None:
-        return None
-    return sum(int(r["truth ruled out"]) for r in rows if method in (None, r["method"]))
-
-
 def final_errors(art: Artifact) -> list[dict[str, str]] | None:
     """Per mode, method, category and strategy: the RMSE over runs of the error after the last
     touch and the largest final error (px); None when the evaluation holds no per-run errors."""

@@ -209,6 +209,13 @@ def robot(art: Artifact, method: str) -> dict:
     return {}
 
 
+def readings(art: Artifact, method: str) -> list[tuple[str, str]]:
+    """``(estimator, sfx)`` of each reading of a method's runs: its own estimator (``sfx`` empty),
+    then the other ones, from the same runs (the records ending in ``sfx``)."""
+    own = robot(art, method).get("estimator", "?")
+    return [(own, "")] + [(e, f"_{e}") for e in ("ml", "mean") if e != own]
+
+
 def short(art: Artifact, method: str) -> str:
     r = robot(art, method)
     parts = [f"{k} {r[k]}" for k in ("posterior", "estimator") if k in r]

@@ -16,6 +16,7 @@ from kbcli.stages.report.source import (
     methods_of,
     ordered,
     played,
+    readings,
     robot,
 )
 
@@ -191,9 +192,7 @@ def ablation_table(art: Artifact, mode: str, category: str = "large") -> list[st
         if cur is None:
             continue
         r = robot(art, x)
-        ests = [(r.get("estimator", "?"), "")] + [(e, f"_{e}") for e in ("ml", "mean")
-                                                  if e != r.get("estimator")]
-        for est, sfx in ests:
+        for est, sfx in readings(art, x):
             if sfx and f"rmse{sfx}" not in cur[base]:
                 continue
             label = x if not sfx else f"{x} (same runs)"
