@@ -17,7 +17,7 @@ interface, whatever the class:
 - ``to_arrays() -> dict`` and ``from_arrays(dict)``: storage as plain arrays, never pickle.
 
 Registered (:data:`MODEL_CLASSES`, a :class:`~kbcli.core.registry.Registry`; every learned class
-is a scikit-learn estimator deriving from :class:`~kbcli.core.model.base.ModelBase`):
+is a scikit-learn estimator deriving from :class:`~kbcli.core.model.pairwise.ModelBase`):
 
 ``lines`` (:class:`~kbcli.core.model.lines.LearnedModel`)
     Keys bounded by straight lines shared across keys: exact and sample-efficient for polygon keys

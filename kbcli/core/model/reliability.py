@@ -55,7 +55,7 @@ measure 0.006-0.022), hence the one-standard-error margin. The Brier score, boun
 ruled by the rare confident miss as the log-likelihood is. Neither weight uses the keyboard: only
 the samples and the working area.
 
-Any learned model class works (a scikit-learn estimator, :class:`~kbcli.core.model.base.ModelBase`):
+Any learned model class works (a scikit-learn estimator, :class:`~kbcli.core.model.pairwise.ModelBase`):
 the fold models are ``clone(model).set_params(**fit_params).fit(...)``. A class may expose
 ``calibration_grid()`` (a dict of parameter name -> candidate values read at prediction time,
 applied with ``set_params`` on a copy of the fitted model) and ``fit_grid()`` (parameters of the
