@@ -40,11 +40,8 @@ from kbcli.core.adaptation.config import AdapterConfig, learning_rate, redundanc
 from kbcli.core.adaptation.estimators import ESTIMATORS
 from kbcli.core.adaptation.posteriors import Observation
 from kbcli.core.adaptation.posteriors.kde.samples import ActionSamples
-from kbcli.core.adaptation.posteriors.likelihood.robust import (
-    RobustPosterior,
-    blurred_map,
-    planning_table,
-)
+from kbcli.core.adaptation.posteriors.likelihood.blur import blurred_map, planning_table
+from kbcli.core.adaptation.posteriors.likelihood.robust import RobustPosterior
 from kbcli.core.adaptation.posteriors.posterior import Posterior
 from kbcli.core.adaptation.repair import RepairBelief, absorb
 from kbcli.core.adaptation.setup import build_table, hypothesis_grid, spot_count
