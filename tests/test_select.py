@@ -154,7 +154,7 @@ def test_auto_rechooses_its_explorer_every_reselect_reaches(monkeypatch):
     RESELECT (here the choice is made to say svc), recorded with the reach count; the choice draws
     nothing from the exploration's generator (the reaches before it are a forest run's), and a
     named class is never re-chosen."""
-    from kbcli.core.model import explore
+    from kbcli.core.model.explore import loop as explore
     from kbcli.core.model.svc import SVCModel
 
     asked = []
