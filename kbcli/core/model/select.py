@@ -6,7 +6,7 @@ on hex; pairwise SVMs (``svc``) bend around round pads. The robot does not know 
 must never be told by the simulator's ground truth, so it asks its own samples: with ``K``-fold
 cross-validation (the same folds for every candidate; each fold's model fitted on the other folds),
 each candidate class is scored by its **held-out mislabel rate**, every held-out touch weighted by
-the area it stands for (:func:`kbcli.core.model.reliability._area_weights`: active exploration puts most
+the area it stands for (:func:`kbcli.core.model.heldout.area_weights`: active exploration puts most
 touches near boundaries, and the weights make them describe the working area as a uniform grid
 would).
 
@@ -35,13 +35,8 @@ import numpy as np
 
 from kbcli.core.config import Record
 from kbcli.core.model.classes import AUTO, fit_model, learned_classes
-from kbcli.core.model.reliability import (
-    FOLDS,
-    _area_weights,
-    _class_map,
-    _fold_ids,
-    _held_out_probs,
-)
+from kbcli.core.model.heldout import area_weights, class_map, fold_ids, held_out_probs
+from kbcli.core.model.reliability import FOLDS
 from kbcli.errors import ConfigError
 
 #: The classes ``auto`` chooses between, in the order :func:`prefer` tests them.
@@ -180,13 +175,13 @@ def held_out_wrong(names: tuple[str, ...], actions: np.ndarray, perceived: np.nd
     x = np.asarray(actions, float).reshape(-1, 2)
     s = np.asarray(perceived, float).reshape(len(x), -1)
     k = int(min(folds, len(x)))
-    fold = _fold_ids(len(x), k, rng)
+    fold = fold_ids(len(x), k, rng)
     out, weights = {}, np.zeros(len(x))
     for name in names:
         own = (params or {}).get(name, {})
         full = fit_model(name, x, s, match_threshold=match_threshold, area=area, **own)
         labels = full.classify(s)
-        weights = _area_weights(x) * (labels >= 0)
+        weights = area_weights(x) * (labels >= 0)
         wrong = np.zeros(len(x))
         for f in range(k):
             test = fold == f
@@ -194,8 +189,8 @@ def held_out_wrong(names: tuple[str, ...], actions: np.ndarray, perceived: np.nd
                 continue
             m = fit_model(name, x[~test], s[~test], match_threshold=match_threshold, area=area,
                           **own)
-            cmap = _class_map(m.class_features_, full.class_features_, match_threshold)
-            p = _held_out_probs(m, x[test], cmap, full.n_classes)
+            cmap = class_map(m.class_features_, full.class_features_, match_threshold)
+            p = held_out_probs(m, x[test], cmap, full.n_classes)
             wrong[test] = p.argmax(axis=1) != labels[test]
         out[name] = wrong
     return out, weights
