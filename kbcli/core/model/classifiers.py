@@ -238,7 +238,7 @@ class ForestModel(SklearnModel):
         As every class (:class:`~kbcli.core.model.pairwise.ModelBase`).
     n_estimators : int
         Trees (exploration refits a 60-tree forest every batch,
-        :data:`kbcli.core.model.select.EXPLORE_PARAMS`).
+        :func:`kbcli.core.model.select.explore_params`).
     n_directions : int
         Directions the trees split along: x, y and ``n_directions - 2`` oblique projections
         (``n_directions`` >= 2; directions evenly spaced in [0, pi), x and y among them when

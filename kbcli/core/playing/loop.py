@@ -3,7 +3,7 @@
 The robot plays its melody with Algorithm 1 (:func:`kbcli.core.playing.play.play`), feeding every MATCH /
 NO_MATCH result to an online failure detector (Sect. III-C, :class:`kbcli.core.detection.detectors.Detector`).
 When the detector fires, the robot stops playing and adapts (Sect. III-D/E,
-:class:`kbcli.core.adaptation.loop.Adapter`): it touches where its strategy says until the stopping rule holds
+:class:`kbcli.core.adaptation.adapter.Adapter`): it touches where its strategy says until the stopping rule holds
 (or a step budget runs out), and takes the estimate ``theta`` of the transform. It then resumes
 playing with *corrected* actions: an action ``a`` drawn from its (reference-pose) model for a note
 is sent as ``T_theta(a)`` (Eq. 3: the key that was under ``a`` is now under ``T(a)``). The detector
@@ -119,7 +119,7 @@ def closed_loop(
     max_adapt_steps : int
         At most this many touches per adaptation.
     table : LikelihoodTable, optional
-        A prebuilt model table for the adapter (see :func:`kbcli.core.adaptation.loop.build_table`).
+        A prebuilt model table for the adapter (see :func:`kbcli.core.adaptation.setup.build_table`).
 
     Yields
     ------

@@ -228,7 +228,7 @@ def replay(model, melody: Melody, touch: Touch, *, rng: np.random.Generator, n_n
     sampler : callable, optional
         ``sampler(cls, n, rng) -> (n, 2)`` draws from p(action | sound) (Algorithm 1, line 10);
         default ``model.sample_actions``. A pool of draws made once per class, resampled (e.g.
-        :meth:`kbcli.core.adaptation.posteriors.posterior.ActionSamples.draw`), saves the model's rejection sampling in
+        :meth:`kbcli.core.adaptation.posteriors.kde.samples.ActionSamples.draw`), saves the model's rejection sampling in
         repeated replays.
 
     Returns

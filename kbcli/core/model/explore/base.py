@@ -65,7 +65,7 @@ class ExploreConfig(Config):
     model_class : str
         The model fitted to the samples (:data:`kbcli.core.model.classes.MODEL_CLASSES`): the
         ``active`` strategy bisects its boundary bands, whatever the class. ``auto``: the
-        exploration starts with :data:`kbcli.core.model.select.EXPLORE_CLASS` and re-chooses the class
+        exploration starts with :func:`kbcli.core.model.select.explore_class` and re-chooses the class
         it refits every :data:`kbcli.core.model.select.RESELECT` reaches
         (:func:`kbcli.core.model.select.explore_choice`); the final class is chosen by cross-validation
         once the samples are in (:func:`kbcli.core.model.select.choose`).

@@ -42,7 +42,7 @@ and Dunson 2019, "Robust Bayesian inference via coarsening"; Grünwald and van O
 rate below 1 repairs Bayes under misspecification): the first touches count almost in full, and
 however many follow, the posterior is never sharper than about ``alpha`` touches' worth, which a
 wrong model cannot turn into certainty. ``alpha`` is resolved from the model's own cross-validated
-boundary error ``b`` (:func:`kbcli.core.adaptation.loop.learning_rate`) through the rate ``eta`` reached at
+boundary error ``b`` (:func:`kbcli.core.adaptation.config.learning_rate`) through the rate ``eta`` reached at
 ``HORIZON`` (30) touches, ``eta = min(1, (TEMPER_PX / b)^2)`` — the share of a ``b``-wide patch of
 the model that a ``TEMPER_PX``-wide one is, as if touches within ``b`` of each other repeated one
 observation — so ``alpha = HORIZON eta / (1 - eta)``. A model that knows its edges to 1.5 px or
