@@ -25,7 +25,7 @@ The model-based ones work for hard (exact) and soft (learned) models alike
 
 from __future__ import annotations
 
-from kbcli.core.adaptation.strategies.base import STRATEGIES, Context, StrategyFn
+from kbcli.core.adaptation.strategies.base import STRATEGIES, Context
 
 # isort: split
 # registration order is the order ``--help`` and error messages list the strategies in
@@ -39,18 +39,10 @@ from kbcli.core.adaptation.strategies import paper_active as _paper  # noqa: F40
 
 # isort: split
 from kbcli.core.adaptation.strategies import infogain as _infogain  # noqa: F401
-from kbcli.core.adaptation.strategies.candidates import (
-    boundary_candidates,
-    model_actions,
-    uniform_actions,
-)
 from kbcli.core.adaptation.strategies.predictive import (
     entropy_rows,
     information_gain,
-    inverse_points,
     outcome_distribution,
 )
 
-__all__ = ["STRATEGIES", "Context", "StrategyFn", "boundary_candidates", "entropy_rows",
-           "information_gain", "inverse_points", "model_actions", "outcome_distribution",
-           "uniform_actions"]
+__all__ = ["STRATEGIES", "Context", "entropy_rows", "information_gain", "outcome_distribution"]

@@ -25,7 +25,7 @@ class RandomOptions(Options):
     Parameters
     ----------
     random_actions : str
-        ``area`` (uniform over the working area, the historical baseline) or ``model`` (a sound
+        ``area`` (uniform over the working area, the baseline) or ``model`` (a sound
         uniform over the model's sounds, then an action from p(action | sound), drawn as the
         adapter's ``kde_sampler`` says: the paper's "random selection of samples").
     """

@@ -26,7 +26,6 @@ from kbcli.core.detection.detectors.base import (
     DETECTORS,
     MAX_N_LT,
     MAX_N_ST,
-    Bank,
     DetectorConfig,
     make_bank,
 )
@@ -48,5 +47,5 @@ from kbcli.core.detection.detectors.online import (
     run_batch,
 )
 
-__all__ = ["DETECTORS", "MAX_N_LT", "MAX_N_ST", "RESULTS", "Bank", "Detector", "DetectorConfig",
+__all__ = ["DETECTORS", "MAX_N_LT", "MAX_N_ST", "RESULTS", "Detector", "DetectorConfig",
            "binomial_tail_table", "detect_stream", "first_crossing", "make_bank", "run_batch"]

@@ -23,7 +23,6 @@ from kbcli.core.model.explore.base import (
     MAX_COVER_POINTS,
     STRATEGIES,
     ExploreConfig,
-    Strategy,
     check_cover,
 )
 
@@ -37,7 +36,7 @@ from kbcli.core.model.explore import balanced as _balanced  # noqa: F401  regist
 # isort: split
 from kbcli.core.model.explore import random as _random  # noqa: F401  registers "random"
 from kbcli.core.model.explore.cover import farthest_points, hex_lattice
-from kbcli.core.model.explore.loop import Exploration, ExploreStep, Touch
+from kbcli.core.model.explore.loop import Exploration, ExploreStep
 
 __all__ = ["MAX_COVER_POINTS", "STRATEGIES", "Exploration", "ExploreConfig", "ExploreStep",
-           "Strategy", "Touch", "check_cover", "farthest_points", "hex_lattice"]
+           "check_cover", "farthest_points", "hex_lattice"]
