@@ -20,7 +20,7 @@ from kbcli.core.model.explore import (
     hex_lattice,
 )
 from kbcli.core.model.lines import LearnedModel
-from kbcli.core.model.pieces import convex_hull, separating_line
+from kbcli.core.model.separation import convex_hull, separating_line
 from kbcli.core.model.sounds import discover_classes
 from kbcli.errors import ArtifactError, ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact

@@ -14,7 +14,7 @@ from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
 
 from kbcli.core.instrument.keyboard import Keyboard, KeyboardConfig
-from kbcli.core.model.base import ExactModel, ModelBase
+from kbcli.core.model.base import ExactModel
 from kbcli.core.model.classes import (
     MODEL_CLASSES,
     learned_classes,
@@ -22,6 +22,7 @@ from kbcli.core.model.classes import (
     model_class_of,
 )
 from kbcli.core.model.lines import LearnedModel
+from kbcli.core.model.pairwise import ModelBase
 from kbcli.core.model.reliability import expected_calibration_error
 from kbcli.core.model.svc import SVCModel
 from kbcli.errors import ConfigError

@@ -464,7 +464,7 @@ def test_one_wrong_edge_is_not_asked_again_and_again():
 
 
 def test_distance_weights_give_held_out_touches_the_areas_distance_profile():
-    from kbcli.core.model.reliability import _distance_weights
+    from kbcli.core.model.heldout import distance_weights as _distance_weights
 
     rng = np.random.default_rng(3)
     # pairs of samples 2 px apart, every pair far from the others: a held-out touch whose partner

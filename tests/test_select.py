@@ -5,12 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kbcli.core.model.classes import check_choice
+from kbcli.core.model.classes import check_choice, ranked
 from kbcli.core.model.classifiers import ForestModel
 from kbcli.core.model.explore import Exploration, ExploreConfig
 from kbcli.core.model.select import (
-    CANDIDATES,
-    EXPLORE_CLASS,
     RESELECT,
     SWITCH_Z,
     Selection,
@@ -22,6 +20,8 @@ from kbcli.core.model.select import (
 )
 from kbcli.errors import ConfigError
 
+#: the classes ``auto`` chooses between and the one it starts exploring with, as the classes declare
+CANDIDATES, EXPLORE_CLASS = ranked("auto"), ranked("explores")[0]
 AREA = (150.0, 200.0, 650.0, 500.0)
 G = np.stack(np.meshgrid(np.arange(160.0, 650.0, 12.0), np.arange(210.0, 500.0, 12.0)),
              -1).reshape(-1, 2)
@@ -154,7 +154,7 @@ def test_auto_rechooses_its_explorer_every_reselect_reaches(monkeypatch):
     RESELECT (here the choice is made to say svc), recorded with the reach count; the choice draws
     nothing from the exploration's generator (the reaches before it are a forest run's), and a
     named class is never re-chosen."""
-    from kbcli.core.model import explore
+    from kbcli.core.model.explore import loop as explore
     from kbcli.core.model.svc import SVCModel
 
     asked = []
@@ -194,3 +194,15 @@ def test_balanced_exploration_covers_early_and_then_seeks_boundaries():
                                                       np.arange(205.0, 500.0, 5.0)), -1)
                                  .reshape(-1, 2))[0]
     assert d.max() < 40.0  # 150 reaches leave no hole wider than a key
+
+
+def test_auto_reads_its_candidates_from_what_the_classes_declare():
+    """A class joins ``auto``'s candidates by declaring its place (``ModelClass.auto``), a
+    plug-in's included; none is named in the selection code."""
+    from kbcli.core.model.classes import MODEL_CLASSES, ModelClass
+    from kbcli.core.model.classifiers import KNNModel
+
+    assert ranked("auto") == ("forest", "forest-xy", "svc", "lines", "knn")
+    with MODEL_CLASSES.temporarily("knn-late", ModelClass(lambda: KNNModel, auto=9, explores=9)):
+        assert ranked("auto")[-1] == "knn-late" and ranked("explores")[-1] == "knn-late"
+    assert "knn-late" not in ranked("auto")

@@ -256,12 +256,12 @@ def test_active_keeps_the_most_confusing_then_simulates_the_best_hypothesis(monk
     (H(0.5) = 0.69) but, simulated under the best hypothesis h1, settles the posterior on h1
     (entropy ~0) where S2 leaves h1 and h4 (0.67 nats). W tells nothing. Active keeps the
     ``active_keep`` most confusing candidates, then picks the lowest simulated entropy."""
-    import kbcli.core.adaptation.strategies as strategies
+    from kbcli.core.adaptation.strategies import active, infogain
 
     ad, hyp, w = _four_hypotheses()
     s1, s2, wasted = _find(hyp, "abbb"), _find(hyp, "aabb"), _find(hyp, "aaaa")
     fixed = np.array([s2, wasted, s1])
-    monkeypatch.setattr(strategies, "uniform_actions", lambda area, n, rng: fixed.copy())
+    monkeypatch.setattr(active, "uniform_actions", lambda area, n, rng: fixed.copy())
     pred, _ = outcome_distribution(TABLE, "translation", hyp, w, fixed, KB.centre)
     conf = entropy_rows(pred)
     assert conf[0] > conf[2] > conf[1]  # S2 most confusing, then S1, W nothing
@@ -271,7 +271,8 @@ def test_active_keeps_the_most_confusing_then_simulates_the_best_hypothesis(monk
     ad.cfg = AdapterConfig(strategy="active", prior_halfwidth=10.0, active_keep=3)
     assert np.array_equal(ad.propose(), s1)
     # infogain, on the same posterior, values S2's even split above S1
-    monkeypatch.setattr(strategies, "boundary_candidates",
+    monkeypatch.setattr(infogain, "uniform_actions", lambda area, n, rng: fixed.copy())
+    monkeypatch.setattr(infogain, "boundary_candidates",
                         lambda ctx, ne, nc, hyp, w, rng: np.empty((0, 2)))
     ad.cfg = AdapterConfig(strategy="infogain", prior_halfwidth=10.0)
     ad._strategy = STRATEGIES.get("infogain")

@@ -2,7 +2,7 @@
 
 Contract: an :class:`~kbcli.core.adaptation.adapter.Adapter`, made from a model and an
 :class:`~kbcli.core.adaptation.config.AdapterConfig`, keeps a posterior over the transform
-(:mod:`~kbcli.core.adaptation.transforms`) on a hypothesis grid
+(:mod:`~kbcli.core.instrument.transforms`) on a hypothesis grid
 (:mod:`~kbcli.core.adaptation.grid`), suggests the next touch by its strategy
 (:mod:`~kbcli.core.adaptation.strategies`), multiplies in each observed touch by its kind of
 posterior (:mod:`~kbcli.core.adaptation.posteriors`: the likelihood, robust or not, and the

@@ -12,22 +12,12 @@ Choices
 - The robot uses the landed finger position it *feels* (proprioception, ``felt_position``) as the
   point of the observation; ``action`` is where it aimed. When it only knows its aim (no
   ``felt_position``), set ``blur`` to the reach noise: the model raster is blurred by it.
-- The model is not trusted blindly (``robust = True``, the default with the likelihood
-  posterior): its boundary blur and an outlier rate are unknowns marginalised online on a small
-  grid (:mod:`kbcli.core.adaptation.posteriors.likelihood.robust`), so a poor model's wrong edges widen the posterior instead of
-  dragging the estimate away, and the strategies plan with the map as blurred as the touches say
-  it is. ``model_blur`` (px) fixes the blur instead of learning it (an override). With
-  ``robust = False`` the map is read as it is, a learned model's softened by ``model_blur``
-  (default 1 px) and floored at ``outlier``: the historical posterior, kept for comparison.
-- The first decision on the flat prior is the most expensive (resampling the full grid); later
-  ones work on the shrinking support of the posterior.
-- The estimate is the posterior mean (``estimator = "mean"``, the RMSE-optimal choice) or the
-  maximum-likelihood cell (``"ml"``, the paper's); ties of that cell go to the lowest grid index
-  (``ml_ties = "first"``) or to one of the tied cells at random (``"random"``, seeded).
-- Stopping rules (:meth:`Adapter.should_stop`): the paper's, the probability of the
-  maximum-likelihood cell above ``stop_ml`` (off by default: at 0.5 px a well-pinned posterior still
-  spreads over a few cells); and ours, the posterior mass within ``stop_radius`` px (and
-  ``stop_angle`` degrees) of the estimate at least ``stop_mass``.
+- The belief is the plain posterior, the robust one (the model's boundary blur and outlier rate
+  marginalised online, :mod:`~kbcli.core.adaptation.posteriors.likelihood.robust`) or the
+  repaired one (:mod:`~kbcli.core.adaptation.repair`), as :class:`AdapterConfig` says; the
+  strategies plan with the map as that belief sees it (:meth:`Adapter.planning_table`).
+- The estimate is read by the config's estimator (:mod:`~kbcli.core.adaptation.estimators`);
+  the stopping rules are :meth:`Adapter.should_stop`'s.
 """
 
 from __future__ import annotations
@@ -38,20 +28,18 @@ import numpy as np
 
 from kbcli.core.adaptation.config import AdapterConfig, learning_rate, redundancy_radius
 from kbcli.core.adaptation.estimators import ESTIMATORS
+from kbcli.core.adaptation.inputs import check_action, check_heard, check_point
 from kbcli.core.adaptation.posteriors import Observation
 from kbcli.core.adaptation.posteriors.kde.samples import ActionSamples
-from kbcli.core.adaptation.posteriors.likelihood.robust import (
-    RobustPosterior,
-    blurred_map,
-    planning_table,
-)
+from kbcli.core.adaptation.posteriors.likelihood.blur import blurred_map, planning_table
+from kbcli.core.adaptation.posteriors.likelihood.robust import RobustPosterior
 from kbcli.core.adaptation.posteriors.posterior import Posterior
 from kbcli.core.adaptation.repair import RepairBelief, absorb
 from kbcli.core.adaptation.setup import build_table, hypothesis_grid, spot_count
 from kbcli.core.adaptation.strategies import STRATEGIES, Context
 from kbcli.core.model.sounds import UNKNOWN
 from kbcli.core.model.table import LikelihoodTable
-from kbcli.errors import ConfigError, ObservationError
+from kbcli.errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -120,7 +108,7 @@ class Adapter:
         self.grid = hypothesis_grid(cfg, self.area, centre)
         self.table = build_table(model, cfg, self.area) if table is None else table
         # the adapter's own generators, by name (spawning does not move ``rng``'s stream, so the
-        # historical options draw exactly as before): ties of the ML cell, and fresh KDE samples
+        # options that use neither draw the same): ties of the ML cell, and fresh KDE samples
         self.kind = cfg.kind  #: the kind of posterior (:data:`~.posteriors.POSTERIORS`)
         own = dict(zip(("ties", "kde"), rng.spawn(2), strict=True)) \
             if cfg.ml_ties == "random" or self.kind.draws_fresh(cfg) else {}
@@ -219,18 +207,15 @@ class Adapter:
     def simulate(self, action: np.ndarray, cls: int) -> np.ndarray:
         """The log term a touch read at ``action`` that gave ``cls`` would multiply the posterior
         by (this adapter's kind of posterior, plain, reading :attr:`simulation_samples`)."""
-        obs = Observation(self.grid, self.table, self.model, self.cfg, self.simulation_samples,
-                          np.asarray(action, float).reshape(2), int(cls))
-        return self.kind.term(obs)[0]
+        return self.kind.term(self._observation(action, cls, self.simulation_samples))[0]
 
     def simulate_many(self, actions: np.ndarray, classes: np.ndarray) -> np.ndarray:
         """``(k, *grid.shape)``: :meth:`simulate` of ``k`` touches (``actions`` (k, 2),
         ``classes`` (k,)), the same numbers as one call each in turn, computed together when the
         kind of posterior can (its ``terms``)."""
-        obs = [Observation(self.grid, self.table, self.model, self.cfg, self.simulation_samples,
-                           np.asarray(a, float).reshape(2), int(c))
-               for a, c in zip(np.asarray(actions, float).reshape(-1, 2),
-                               np.asarray(classes).reshape(-1), strict=True)]
+        pairs = zip(np.asarray(actions, float).reshape(-1, 2), np.asarray(classes).reshape(-1),
+                    strict=True)
+        obs = [self._observation(a, c, self.simulation_samples) for a, c in pairs]
         many = getattr(self.kind, "terms", None)
         if many is not None:
             return many(obs)
@@ -302,7 +287,7 @@ class Adapter:
             is left unchanged.
         """
         a = self.check_action(action, "action")
-        point = a if felt_position is None else _point(felt_position, "felt_position")
+        point = a if felt_position is None else check_point(felt_position, "felt_position")
         h = self.check_heard(heard)
         cls = int(self.model.classify(h.reshape(1, -1))[0])
         self.observe_class(point, cls)
@@ -310,40 +295,18 @@ class Adapter:
         return cls
 
     def check_action(self, action, name: str = "action") -> np.ndarray:
-        """``action`` as a (2,) array inside the working area; raises :class:`ObservationError`."""
-        a = _point(action, name)
-        x0, y0, x1, y1 = self.area
-        tol = 1e-9 * max(1.0, abs(x1 - x0), abs(y1 - y0))
-        if not (x0 - tol <= a[0] <= x1 + tol and y0 - tol <= a[1] <= y1 + tol):
-            raise ObservationError(f"{name} ({a[0]:g}, {a[1]:g}) is outside the working area "
-                                   f"({x0:g}, {y0:g})-({x1:g}, {y1:g})")
-        return a
+        """``action`` as a (2,) array inside the working area (:func:`~.inputs.check_action`)."""
+        return check_action(action, self.area, name)
 
     def check_heard(self, heard) -> np.ndarray:
-        """``heard`` as a (D,) float array (all NaN: silence); raises :class:`ObservationError`."""
-        d = int(np.shape(self.model.class_features_)[1])
-        if heard is None:
-            return np.full(d, np.nan)
-        try:
-            h = np.asarray(heard, dtype=float).reshape(-1)
-        except (TypeError, ValueError):
-            raise ObservationError(f"heard features must be {d} numbers or null (silence), got "
-                                   f"{heard!r}") from None
-        if h.shape != (d,):
-            raise ObservationError(f"heard features must be {d} numbers (or null for silence), "
-                                   f"got {h.size}")
-        nan = np.isnan(h)
-        if (nan.any() and not nan.all()) or np.isinf(h).any():
-            raise ObservationError(f"heard features must be all finite (or all missing for "
-                                   f"silence), got {h.tolist()}")
-        return h
+        """``heard`` as a (D,) float array, all NaN for silence (:func:`~.inputs.check_heard`)."""
+        return check_heard(heard, int(np.shape(self.model.class_features_)[1]))
 
     def observe_class(self, action: np.ndarray, cls: int) -> None:
         """Update the posterior with an already classified observation (Eq. 8)."""
         if cls == UNKNOWN:
             return
-        obs = Observation(self.grid, self.table, self.model, self.cfg, self.samples,
-                          np.asarray(action, float).reshape(2), int(cls))
+        obs = self._observation(action, cls, self.samples)
         if self.repair is not None:
             self.points.append(obs.action)
             self.repair = self.repair.update(obs.action, obs.cls)
@@ -356,6 +319,11 @@ class Adapter:
         if bandwidth is not None:
             self.bandwidths.append(bandwidth)
         self.posterior = self.posterior.update(term)
+
+    def _observation(self, action: np.ndarray, cls: int, samples) -> Observation:
+        """A touch read at ``action`` (2,) that gave ``cls``, its terms reading ``samples``."""
+        return Observation(self.grid, self.table, self.model, self.cfg, samples,
+                           np.asarray(action, float).reshape(2), int(cls))
 
     def _observe_robust(self, obs: Observation) -> None:
         """The robust posterior's update: the kind's terms under every nuisance value, the
@@ -423,14 +391,3 @@ class Adapter:
         return (self.max_steps is not None and self.touches >= self.max_steps) or \
             self.should_stop()
 
-
-def _point(v, name: str) -> np.ndarray:
-    """``v`` as a finite (2,) float array; raises :class:`ObservationError`."""
-    try:
-        p = np.asarray(v, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise ObservationError(f"{name} must be two numbers (x, y in pad px), got {v!r}") from None
-    if p.shape != (2,) or not np.isfinite(p).all():
-        raise ObservationError(f"{name} must be two finite numbers (x, y in pad px), got "
-                               f"{np.asarray(v).tolist() if p.size < 8 else f'{p.size} values'}")
-    return p

@@ -17,7 +17,7 @@ interface, whatever the class:
 - ``to_arrays() -> dict`` and ``from_arrays(dict)``: storage as plain arrays, never pickle.
 
 Registered (:data:`MODEL_CLASSES`, a :class:`~kbcli.core.registry.Registry`; every learned class
-is a scikit-learn estimator deriving from :class:`~kbcli.core.model.base.ModelBase`):
+is a scikit-learn estimator deriving from :class:`~kbcli.core.model.pairwise.ModelBase`):
 
 ``lines`` (:class:`~kbcli.core.model.lines.LearnedModel`)
     Keys bounded by straight lines shared across keys: exact and sample-efficient for polygon keys
@@ -51,7 +51,7 @@ estimate, a calibration) has one place to hook in.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -81,10 +81,22 @@ class ModelClass:
     learned : bool
         Fitted to exploration samples (``fit``, ``to_arrays`` / ``from_arrays``); False for the
         exact model, built from the keyboard.
+    auto : int or None
+        Its place in ``--model-class auto``'s order of preference (:func:`ranked`; None: ``auto``
+        never chooses it).
+    explores : int or None
+        Its place among the classes ``auto`` explores with (the first is the one it starts with;
+        None: ``auto`` never explores with it).
+    explore_params : mapping
+        Its parameters while it is refitted during an exploration and ``auto``'s
+        cross-validation, where they differ from the final model's (a lighter forest).
     """
 
     estimator: Callable[[], type]
     learned: bool = True
+    auto: int | None = None
+    explores: int | None = None
+    explore_params: Mapping[str, Any] = field(default_factory=dict)
 
     @property
     def params(self) -> tuple[str, ...]:
@@ -140,16 +152,23 @@ def _exact() -> type:
     return ExactModel
 
 
-MODEL_CLASSES.register("lines", ModelClass(_lines),
+#: Parameters of a forest while it is refitted after every batch of an exploration and by
+#: ``auto``'s cross-validation: 60 trees instead of the final model's 120 (twice as fast a fit).
+_LIGHT_FOREST = {"n_estimators": 60}
+
+MODEL_CLASSES.register("lines", ModelClass(_lines, auto=3),
                        summary="straight key edges shared across keys (polygon keys)")
-MODEL_CLASSES.register("svc", ModelClass(_svc), summary="scikit-learn SVMs per pair of "
-                       "neighbouring sounds, linear or RBF (any key shape)")
-MODEL_CLASSES.register("forest", ModelClass(_forest), summary="scikit-learn random forest on the "
-                       "coordinates and oblique projections (any key shape)")
-MODEL_CLASSES.register("forest-xy", ModelClass(_forest_xy), summary="scikit-learn random forest "
-                       "on the two coordinates only (keys with horizontal and vertical edges)")
-MODEL_CLASSES.register("knn", ModelClass(_knn), summary="scikit-learn k nearest samples, "
-                       "distance-weighted votes (any key shape)")
+MODEL_CLASSES.register("svc", ModelClass(_svc, auto=2, explores=1), summary="scikit-learn SVMs "
+                       "per pair of neighbouring sounds, linear or RBF (any key shape)")
+MODEL_CLASSES.register("forest", ModelClass(_forest, auto=0, explores=0,
+                                            explore_params=_LIGHT_FOREST),
+                       summary="scikit-learn random forest on the coordinates and oblique "
+                       "projections (any key shape)")
+MODEL_CLASSES.register("forest-xy", ModelClass(_forest_xy, auto=1, explore_params=_LIGHT_FOREST),
+                       summary="scikit-learn random forest on the two coordinates only (keys "
+                       "with horizontal and vertical edges)")
+MODEL_CLASSES.register("knn", ModelClass(_knn, auto=4), summary="scikit-learn k nearest "
+                       "samples, distance-weighted votes (any key shape)")
 MODEL_CLASSES.register(EXACT, ModelClass(_exact, learned=False),
                        summary="the keyboard's own geometry (not learned)")
 
@@ -157,6 +176,14 @@ MODEL_CLASSES.register(EXACT, ModelClass(_exact, learned=False),
 def learned_classes() -> tuple[str, ...]:
     """The model classes fitted to exploration samples (valid ``--model-class`` values)."""
     return tuple(n for n, mc in MODEL_CLASSES.items() if mc.learned)
+
+
+def ranked(capability: str) -> tuple[str, ...]:
+    """The learned classes that declare a place in ``capability`` (``"auto"``, ``"explores"``:
+    :class:`ModelClass`), in that order (ties by name)."""
+    places = [(getattr(mc, capability), n) for n, mc in MODEL_CLASSES.items()
+              if mc.learned and getattr(mc, capability) is not None]
+    return tuple(n for _, n in sorted(places))
 
 
 def check_learned(name: str) -> str:

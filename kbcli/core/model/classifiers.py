@@ -42,7 +42,7 @@ Storage without pickle: :meth:`SklearnModel.to_arrays` keeps the samples, their 
 hyper-parameters (``random_state`` included); :meth:`SklearnModel.from_arrays` refits the
 classifier, which is deterministic for a fixed ``random_state`` and ``n_jobs = 1``. Sampling
 p(action | sound), the raster and the confusion factor are the base's
-(:class:`~kbcli.core.model.base.ModelBase`), from :meth:`SklearnModel.predict_proba`.
+(:class:`~kbcli.core.model.pairwise.ModelBase`), from :meth:`SklearnModel.predict_proba`.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ import warnings
 import numpy as np
 from scipy.spatial import cKDTree
 
-from kbcli.core.model.base import DEFAULT_AREA, ModelBase
+from kbcli.core.model.pairwise import DEFAULT_AREA, ModelBase
 from kbcli.errors import ConfigError
 
 SITE_GRID = 2.0  # px, grid on which boundary sites are looked for
@@ -235,10 +235,10 @@ class ForestModel(SklearnModel):
     Parameters
     ----------
     match_threshold, area
-        As every class (:class:`~kbcli.core.model.base.ModelBase`).
+        As every class (:class:`~kbcli.core.model.pairwise.ModelBase`).
     n_estimators : int
         Trees (exploration refits a 60-tree forest every batch,
-        :data:`kbcli.core.model.select.EXPLORE_PARAMS`).
+        :func:`kbcli.core.model.select.explore_params`).
     n_directions : int
         Directions the trees split along: x, y and ``n_directions - 2`` oblique projections
         (``n_directions`` >= 2; directions evenly spaced in [0, pi), x and y among them when
@@ -325,7 +325,7 @@ class KNNModel(SklearnModel):
     Parameters
     ----------
     match_threshold, area
-        As every class (:class:`~kbcli.core.model.base.ModelBase`).
+        As every class (:class:`~kbcli.core.model.pairwise.ModelBase`).
     n_neighbors : int
         Neighbours that vote.
     sharpen : float

@@ -41,7 +41,7 @@ simulator's key ids) the model
 
 Step 1 is :mod:`kbcli.core.model.sounds`, the pieces and shared lines :mod:`kbcli.core.model.pieces`, the
 bands :mod:`kbcli.core.model.boundaries`, and the pairwise contests with step 3 the base class
-:class:`~kbcli.core.model.base.ModelBase` (shared with the ``svc`` class). The estimator is a
+:class:`~kbcli.core.model.pairwise.ModelBase` (shared with the ``svc`` class). The estimator is a
 scikit-learn one (``fit`` returns ``self``, fitted attributes end in ``_``, predicting before
 fitting raises, ``get_params`` / ``set_params`` / ``clone``) and round-trips exactly through
 :meth:`LearnedModel.to_arrays` / :meth:`LearnedModel.from_arrays` (the fitted lines are stored, not
@@ -55,7 +55,7 @@ from scipy.spatial import cKDTree
 from scipy.special import log_ndtr
 
 from kbcli.core.model import boundaries
-from kbcli.core.model.base import DEFAULT_AREA, ModelBase
+from kbcli.core.model.pairwise import DEFAULT_AREA, ModelBase
 from kbcli.core.model.pieces import fit_pieces, line_sides
 from kbcli.core.model.sounds import prepare_samples
 from kbcli.errors import ConfigError
@@ -109,7 +109,7 @@ class LearnedModel(ModelBase):
     Parameters
     ----------
     match_threshold, area
-        As every class (:class:`~kbcli.core.model.base.ModelBase`).
+        As every class (:class:`~kbcli.core.model.pairwise.ModelBase`).
     n_neighbors : int
         Samples looked at around an action to find the sounds it could make.
     min_sd, max_sd : float
@@ -141,7 +141,7 @@ class LearnedModel(ModelBase):
     Attributes
     ----------
     class_features_, actions_, labels_, reach_sd_
-        As every class (:class:`~kbcli.core.model.base.ModelBase`).
+        As every class (:class:`~kbcli.core.model.pairwise.ModelBase`).
     edges_, edge_piece_, piece_pair_, piece_line_, piece_sign_ : ndarray
         The boundary pieces, as :func:`~kbcli.core.model.pieces.fit_pieces` returns them (``edges``,
         ``edge_piece``, ``pairs``, ``group``, ``sign``): the straddling edges (sample indices),
@@ -241,7 +241,7 @@ class LearnedModel(ModelBase):
             self.actions_, self.edges_, self.edge_piece_, self.piece_line_, self.lines_)
         nc = len(self.class_features_)
         pcode = self.piece_pair_[:, 0] * nc + self.piece_pair_[:, 1]
-        #: pair code -> its pieces (the contests of :class:`~kbcli.core.model.base.ModelBase`)
+        #: pair code -> its pieces (the contests of :class:`~kbcli.core.model.pairwise.ModelBase`)
         self._pairs = {int(c): np.flatnonzero(pcode == c) for c in np.unique(pcode)}
         # with several pieces, one sound of the pair is "inside" (a key within silence's L around
         # a corner): it must be on its side of every piece, the other of any one

@@ -14,107 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from kbcli.core.model.separation import separating_line
 from kbcli.core.model.sounds import straddling_edges
-
-
-def convex_hull(p: np.ndarray) -> np.ndarray:
-    """Vertices of the convex hull of 2-D points, counter-clockwise (Andrew's monotone chain)."""
-    pts = np.unique(np.asarray(p, float), axis=0)  # sorted by x, then y
-    if len(pts) <= 2:
-        return pts
-
-    def half(seq: np.ndarray) -> list[np.ndarray]:
-        h: list[np.ndarray] = []
-        for q in seq:  # a few points per boundary piece
-            while len(h) >= 2 and (
-                (h[-1][0] - h[-2][0]) * (q[1] - h[-2][1])
-                - (h[-1][1] - h[-2][1]) * (q[0] - h[-2][0]) <= 0
-            ):
-                h.pop()
-            h.append(q)
-        return h
-
-    lower, upper = half(pts), half(pts[::-1])
-    return np.array(lower[:-1] + upper[:-1])
-
-
-def _closest_to_segments(p: np.ndarray, hull: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For each point, the nearest point of a convex polygon's boundary (vertices or edges).
-
-    Returns
-    -------
-    dist : (n,) ndarray
-    foot : (n, 2) ndarray
-    """
-    a = hull
-    b = np.roll(hull, -1, axis=0) if len(hull) > 1 else hull
-    ab = b - a  # (e, 2)
-    ll = np.maximum(np.sum(ab * ab, axis=1), 1e-300)
-    t = np.clip(np.einsum("ned,ed->ne", p[:, None, :] - a[None], ab) / ll, 0.0, 1.0)
-    foot = a[None] + t[..., None] * ab[None]  # (n, e, 2)
-    d = np.hypot(*(p[:, None, :] - foot).transpose(2, 0, 1))
-    k = np.argmin(d, axis=1)
-    r = np.arange(len(p))
-    return d[r, k], foot[r, k]
-
-
-def separating_line(a: np.ndarray, b: np.ndarray, tol: float = 0.0) -> tuple[np.ndarray, bool]:
-    """Max-margin line between points ``a`` (its positive side) and ``b``.
-
-    For separable sets it is the perpendicular bisector of the closest pair of points of their
-    convex hulls (the hard-margin linear SVM, solved exactly in 2-D). With a label-noise tolerance
-    ``tol`` > 0 (px), sets that no line separates get a soft-margin line (logistic regression),
-    which counts as separating when every point on its wrong side is within ``tol`` of it: labels
-    flipped near a boundary by an arm that does not feel exactly where it touched then give one
-    straight boundary, not a splinter of pieces.
-
-    Returns
-    -------
-    line : (3,) ndarray
-        (nx, ny, c), unit normal towards ``a``: signed distance ``n . x - c``.
-    separable : bool
-        Whether the line puts every point of ``a`` and ``b`` strictly on its own side.
-    """
-    ha, hb = convex_hull(a), convex_hull(b)
-    da, fa = _closest_to_segments(ha, hb)  # a's vertices to b's hull
-    db, fb = _closest_to_segments(hb, ha)
-    if da.min() <= db.min():
-        i = int(np.argmin(da))
-        p, q = ha[i], fa[i]
-    else:
-        i = int(np.argmin(db))
-        p, q = fb[i], hb[i]
-    w = p - q
-    nw = float(np.hypot(*w))
-    if nw < 1e-12:  # touching or overlapping: fall back to the direction between the means
-        w = a.mean(axis=0) - b.mean(axis=0)
-        nw = max(float(np.hypot(*w)), 1e-12)
-        p, q = a.mean(axis=0), b.mean(axis=0)
-    n = w / nw
-    c = float(n @ (p + q) / 2)
-    separable = bool((a @ n - c > 0).all() and (b @ n - c < 0).all())
-    if separable or tol <= 0:
-        return np.array([n[0], n[1], c]), separable
-    n, c = _soft_line(a, b)
-    separable = bool((a @ n - c > -tol).all() and (b @ n - c < tol).all())
-    return np.array([n[0], n[1], c]), separable
-
-
-def _soft_line(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
-    """Unit normal (towards ``a``) and offset of a logistic-regression line between two point
-    sets that overlap (deterministic: lbfgs, centred and scaled coordinates)."""
-    from sklearn.linear_model import LogisticRegression
-
-    pts = np.vstack([a, b])
-    mu = pts.mean(axis=0)
-    scale = max(float(pts.std()), 1e-9)
-    y = np.r_[np.ones(len(a)), np.zeros(len(b))]
-    clf = LogisticRegression(C=10.0).fit((pts - mu) / scale, y)
-    w = clf.coef_[0] / scale
-    nw = max(float(np.hypot(*w)), 1e-12)
-    n = w / nw
-    c = float(n @ mu - clf.intercept_[0] / nw)
-    return n, c
 
 
 def split_pieces(x: np.ndarray, e: np.ndarray, depth: int = 0,
@@ -174,24 +75,13 @@ def merge_pieces(
     npc = len(piece_rows)
     side_a = [np.unique(e[r, 0]) for r in piece_rows]  # sample indices on the lower class's side
     side_b = [np.unique(e[r, 1]) for r in piece_rows]
-    centre = np.array([x[np.r_[a, b]].mean(axis=0) for a, b in zip(side_a, side_b, strict=True)])
-    centre = centre.reshape(-1, 2)
-    n, c = lines[:, :2], lines[:, 2]
-    cos = n @ n.T
-    off = np.abs(centre @ n.T - c[None, :])  # off[q, p]: piece q's centre from piece p's line
-    p_i, q_i = np.triu_indices(npc, 1)
-    ok = (np.abs(cos[p_i, q_i]) >= np.cos(max_angle)) & (off[q_i, p_i] < max_offset) & (
-        off[p_i, q_i] < max_offset
-    )
-    p_i, q_i = p_i[ok], q_i[ok]
-    order = np.argsort(off[q_i, p_i] + off[p_i, q_i], kind="stable")
+    p_i, q_i, cos = _merge_candidates(x, side_a, side_b, lines, max_angle, max_offset)
     root = np.arange(npc)
     sign = np.ones(npc)
     members = {p: [p] for p in range(npc)}
     pts = {p: (side_a[p], side_b[p]) for p in range(npc)}
     glines = {p: lines[p].copy() for p in range(npc)}
-    for k in order:  # a loop over candidate merges (a few per piece)
-        p, q = int(p_i[k]), int(q_i[k])
+    for p, q in zip(p_i.tolist(), q_i.tolist(), strict=True):  # candidate merges, closest first
         rp, rq = int(root[p]), int(root[q])
         if rp == rq:
             continue
@@ -212,13 +102,38 @@ def merge_pieces(
         pts[rp] = (a, b)
         glines[rp] = line
         del pts[rq], glines[rq]
+    group, group_lines = _numbered(root, glines)
+    return group, sign, group_lines
+
+
+def _merge_candidates(x: np.ndarray, side_a: list[np.ndarray], side_b: list[np.ndarray],
+                      lines: np.ndarray, max_angle: float,
+                      max_offset: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pairs of pieces (p < q) whose lines are within ``max_angle`` rad and ``max_offset`` px
+    of each other, closest first, and the cosines between all the pieces' lines (P, P)."""
+    centre = np.array([x[np.r_[a, b]].mean(axis=0) for a, b in zip(side_a, side_b, strict=True)])
+    centre = centre.reshape(-1, 2)
+    n, c = lines[:, :2], lines[:, 2]
+    cos = n @ n.T
+    off = np.abs(centre @ n.T - c[None, :])  # off[q, p]: piece q's centre from piece p's line
+    p_i, q_i = np.triu_indices(len(side_a), 1)
+    ok = (np.abs(cos[p_i, q_i]) >= np.cos(max_angle)) & (off[q_i, p_i] < max_offset) & (
+        off[p_i, q_i] < max_offset
+    )
+    p_i, q_i = p_i[ok], q_i[ok]
+    order = np.argsort(off[q_i, p_i] + off[p_i, q_i], kind="stable")
+    return p_i[order], q_i[order], cos
+
+
+def _numbered(root: np.ndarray, glines: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(group of each piece, (G, 3) group lines), the groups numbered by their first piece, so the
+    layout does not depend on merge order."""
     roots, group = np.unique(root, return_inverse=True)
-    # number groups by their first piece, so the layout does not depend on merge order
     first = np.array([np.flatnonzero(group == g)[0] for g in range(len(roots))], dtype=np.int64)
     rank = np.empty(len(roots), dtype=np.int64)
     rank[np.argsort(first)] = np.arange(len(roots))
     group_lines = np.array([glines[int(r)] for r in roots])[np.argsort(first)]
-    return rank[group], sign, group_lines.reshape(-1, 3)
+    return rank[group], group_lines.reshape(-1, 3)
 
 
 def line_sides(
@@ -261,36 +176,11 @@ def absorb_pieces(
         p = int(p)
         rows = np.flatnonzero(edge_piece == p)
         strong = np.array(sorted(sets))
-        ln = np.array([glines[g] for g in strong])
-        a, b = x[e[rows, 0]], x[e[rows, 1]]
-        va, vb = a @ ln[:, :2].T - ln[:, 2], b @ ln[:, :2].T - ln[:, 2]
-        mid = (a + b) / 2
-        t = mid @ np.column_stack([-ln[:, 1], ln[:, 0]]).T
-        span = np.array([_span(x, sets[g], glines[g]) for g in strong])
-        ok = (va * vb < 0) & (t >= span[:, 0] - reach) & (t <= span[:, 1] + reach)
-        if not ok.any(axis=1).all():
+        crossing = _crossings(x, e, rows, strong, glines, sets, reach)
+        if crossing is None:
             continue
-        dist = np.where(ok, np.abs(mid @ ln[:, :2].T - ln[:, 2]), np.inf)
-        choice = np.argmin(dist, axis=1)
-        orient = np.sign(va[np.arange(len(rows)), choice])
-        plan = {}
-        good = True
-        for k in np.unique(choice):
-            o = np.unique(orient[choice == k])
-            g = int(strong[k])
-            sel = rows[choice == k]
-            new_pos = e[sel, 0] if o[0] > 0 else e[sel, 1]
-            new_neg = e[sel, 1] if o[0] > 0 else e[sel, 0]
-            pa, na = np.union1d(sets[g][0], new_pos), np.union1d(sets[g][1], new_neg)
-            if len(o) != 1 or np.intersect1d(pa, na).size:
-                good = False
-                break
-            line, separable = separating_line(x[pa], x[na], tol)
-            if not separable:
-                good = False
-                break
-            plan[g] = (sel, float(o[0]), pa, na, line)
-        if not good:
+        plan = _absorb_plan(x, e, rows, *crossing, strong, sets, tol)
+        if plan is None:
             continue
         removed.add(p)
         for g, (sel, o, pa, na, line) in plan.items():
@@ -307,6 +197,47 @@ def absorb_pieces(
         edge_piece, np.array(pairs)[keep], list(np.asarray(group)[keep]),
         list(np.asarray(sign)[keep]), glines,
     )
+
+
+def _crossings(x: np.ndarray, e: np.ndarray, rows: np.ndarray, strong: np.ndarray, glines: list,
+               sets: dict, reach: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """For each straddling edge ``rows`` of a lone piece, the nearest shared line (index into
+    ``strong``) that crosses it within ``reach`` px of the line's samples, and the side (+-1) the
+    edge's lower-class end lies on; None when some edge is crossed by none."""
+    ln = np.array([glines[g] for g in strong])
+    a, b = x[e[rows, 0]], x[e[rows, 1]]
+    va, vb = a @ ln[:, :2].T - ln[:, 2], b @ ln[:, :2].T - ln[:, 2]
+    mid = (a + b) / 2
+    t = mid @ np.column_stack([-ln[:, 1], ln[:, 0]]).T
+    span = np.array([_span(x, sets[g], glines[g]) for g in strong])
+    ok = (va * vb < 0) & (t >= span[:, 0] - reach) & (t <= span[:, 1] + reach)
+    if not ok.any(axis=1).all():
+        return None
+    dist = np.where(ok, np.abs(mid @ ln[:, :2].T - ln[:, 2]), np.inf)
+    choice = np.argmin(dist, axis=1)
+    return choice, np.sign(va[np.arange(len(rows)), choice])
+
+
+def _absorb_plan(x: np.ndarray, e: np.ndarray, rows: np.ndarray, choice: np.ndarray,
+                 orient: np.ndarray, strong: np.ndarray, sets: dict, tol: float) -> dict | None:
+    """``{line: (edges, side, positive samples, negative samples, refitted line)}`` moving a lone
+    piece's edges onto the shared lines that cross them; None when a line would be crossed both
+    ways or would no longer separate its samples."""
+    plan = {}
+    for k in np.unique(choice):
+        o = np.unique(orient[choice == k])
+        g = int(strong[k])
+        sel = rows[choice == k]
+        new_pos = e[sel, 0] if o[0] > 0 else e[sel, 1]
+        new_neg = e[sel, 1] if o[0] > 0 else e[sel, 0]
+        pa, na = np.union1d(sets[g][0], new_pos), np.union1d(sets[g][1], new_neg)
+        if len(o) != 1 or np.intersect1d(pa, na).size:
+            return None
+        line, separable = separating_line(x[pa], x[na], tol)
+        if not separable:
+            return None
+        plan[g] = (sel, float(o[0]), pa, na, line)
+    return plan
 
 
 def _span(

@@ -32,30 +32,14 @@ paired difference; otherwise it keeps the model's own (:func:`choose_calibration
 probabilities match how often it is right is what lets the adapter weigh a touch by what it can
 really say.
 
-Held-out touches are harder than the points the model will be asked about, for two reasons.
-Active exploration puts most touches near boundaries: for the estimates, every held-out touch is
-weighted by the area it stands for (the squared distance to its 6th nearest sample, an inverse
-density), so they describe the working area as a uniform grid would (``kbcli bench reliability``
-prints them against the truth). And a held-out touch is further from the samples its fold's model
-was fitted on than a point of the pad is from the full model's samples: exploration spreads
-reaches apart (the active strategy's cover lattice), bisection puts a reach where the band was
-widest, and the fold leaves out a fifth of the samples. How well a boundary is known falls with
-that distance, so the likelihood of held-out touches chose label noise for models worse than the
-one it is applied to (ideal arm, 300 active reaches: ``noise_sd`` 6 px where 0 fits the full
-model, a calibration error of 0.05-0.06 against the simulator instead of 0.005-0.02, seeds 0-2).
-For the choice of calibration, every held-out touch is therefore weighted by the density ratio
-of that distance (importance weighting for a covariate shift): the share of the working area (a
-2 px grid) whose distance to the nearest sample falls in the same 4 px bin over the share of
-held-out touches in it. Even so a held-out touch is harder than a point of the pad at the same
-distance (the hole it leaves in an exploration's lattice is wider than any the full model has),
-and a few hundred of them are a noisy judge: chosen by the best held-out score alone, the
-calibration made the calibration error of 150- to 300-reach models worse than none in most cells
-(ideal arm, 300 active reaches: 0.049 at the median of nine seeds, where the uncalibrated models
-measure 0.006-0.022), hence the one-standard-error margin. The Brier score, bounded, is not
-ruled by the rare confident miss as the log-likelihood is. Neither weight uses the keyboard: only
-the samples and the working area.
+Held-out touches are harder than the points the model will be asked about: for the estimates
+every held-out touch is weighted by the area it stands for, and for the choice of calibration by
+the density ratio of its distance to the samples (:mod:`~kbcli.core.model.heldout`). Even so a
+held-out touch is harder than a point of the pad at the same distance, and a few hundred of them
+are a noisy judge, hence the one-standard-error margin (``docs/design-notes.md``). The Brier
+score, bounded, is not ruled by the rare confident miss as the log-likelihood is.
 
-Any learned model class works (a scikit-learn estimator, :class:`~kbcli.core.model.base.ModelBase`):
+Any learned model class works (a scikit-learn estimator, :class:`~kbcli.core.model.pairwise.ModelBase`):
 the fold models are ``clone(model).set_params(**fit_params).fit(...)``. A class may expose
 ``calibration_grid()`` (a dict of parameter name -> candidate values read at prediction time,
 applied with ``set_params`` on a copy of the fitted model) and ``fit_grid()`` (parameters of the
@@ -75,15 +59,19 @@ from sklearn.base import clone
 from kbcli.core.config import Record
 from kbcli.core.model.accuracy import boundary_error as _boundary_error
 from kbcli.core.model.base import grid_points
-from kbcli.core.model.sounds import classify_features
+from kbcli.core.model.heldout import (
+    area_weights,
+    class_map,
+    distance_weights,
+    fold_ids,
+    held_out_probs,
+)
 
 #: Folds of the cross-validation.
 FOLDS = 5
 #: Cell (px) of the grid on which fold boundaries are compared.
 BOUNDARY_STEP = 2.0
 ECE_BINS = 15
-#: Width (px) of the bins of the distance to the nearest sample for :func:`_distance_weights`.
-DISTANCE_BIN_PX = 4.0
 #: A calibration replaces the model's own (uncalibrated) settings only when it beats them on the
 #: held-out score by more than this many standard errors of the paired difference.
 SE_MARGIN = 1.0
@@ -103,64 +91,6 @@ class Reliability(Record):
     expected_error: float
 
 
-def _area_weights(x: np.ndarray, k: int = 6) -> np.ndarray:
-    """(n,) weights summing to one that make the samples stand for the working area evenly.
-
-    Active exploration puts most touches near boundaries; a held-out touch there is harder than a
-    random point of the pad. Weighting each sample by the area it stands for (the squared distance
-    to its ``k``-th nearest neighbour, an inverse density) removes that bias from the estimates.
-    """
-    from scipy.spatial import cKDTree
-
-    n = len(x)
-    if n <= k:
-        return np.full(n, 1.0 / max(n, 1))
-    d, _ = cKDTree(x).query(x, k=k + 1)
-    w = d[:, -1] ** 2
-    w = np.maximum(w, 1e-12)
-    return w / w.sum()
-
-
-def _distance_weights(x: np.ndarray, fold: np.ndarray, grid: np.ndarray,
-                      bin_px: float = DISTANCE_BIN_PX) -> np.ndarray:
-    """(n,) weights summing to one that give held-out touches the distance profile of the area.
-
-    Parameters
-    ----------
-    x : (n, 2) ndarray
-        The samples.
-    fold : (n,) int ndarray
-        Fold of each sample.
-    grid : (m, 2) ndarray
-        Points spread evenly over the working area.
-
-    Returns
-    -------
-    (n,) ndarray
-        For each sample, ``P_grid(d in b) / P_held(d in b)`` of the bin ``b`` of its distance to
-        the nearest sample of the other folds (bins ``bin_px`` wide), normalised; ``P_grid`` is
-        the share of grid points whose distance to the nearest sample (any fold) is in ``b``.
-        Equal weights when there is a single fold.
-    """
-    from scipy.spatial import cKDTree
-
-    n = len(x)
-    d = np.full(n, np.nan)
-    for f in np.unique(fold):
-        test = fold == f
-        if test.all():
-            return np.full(n, 1.0 / max(n, 1))
-        d[test] = cKDTree(x[~test]).query(x[test])[0]
-    dg = cKDTree(x).query(grid)[0]
-    bh, bg = (d // bin_px).astype(np.int64), (dg // bin_px).astype(np.int64)
-    nb = int(max(bh.max(), bg.max())) + 1
-    p_held = np.bincount(bh, minlength=nb) / n
-    p_grid = np.bincount(bg, minlength=nb) / len(dg)
-    w = p_grid[bh] / p_held[bh]
-    total = w.sum()
-    return w / total if total > 0 else np.full(n, 1.0 / n)
-
-
 def expected_calibration_error(probs: np.ndarray, hit: np.ndarray, bins: int = ECE_BINS,
                                weights: np.ndarray | None = None, debiased: bool = False) -> float:
     """Top-label expected calibration error.
@@ -178,7 +108,7 @@ def expected_calibration_error(probs: np.ndarray, hit: np.ndarray, bins: int = E
     debiased : bool
         For ``hit`` drawn once per prediction (0 or 1): a bin's ``|mean(hit) - mean(conf)|`` then
         carries the binomial noise of its few outcomes, which inflates the error of a perfectly
-        calibrated model (300 predictions in 15 bins: about 0.06). Take instead the square root
+        calibrated model. Take instead the square root
         of the plug-in squared gap less its sampling variance ``a_b (1 - a_b) / (n_b - 1)``,
         floored at 0 (the debiased estimator of Kumar, Liang and Ma 2019, "Verified uncertainty
         calibration"; ``n_b`` the bin's effective sample size under ``weights``).
@@ -212,26 +142,6 @@ def expected_calibration_error(probs: np.ndarray, hit: np.ndarray, bins: int = E
     return float((wb * np.sqrt(np.maximum((acc - c) ** 2 - var, 0.0))).sum() / total)
 
 
-def _fold_ids(n: int, folds: int, rng: np.random.Generator) -> np.ndarray:
-    return rng.permutation(np.arange(n) % folds)
-
-
-def _class_map(fold_features: np.ndarray, full_features: np.ndarray, threshold: float) -> np.ndarray:
-    """(C_fold,) the full model's class of each of a fold model's classes (-1: none matches)."""
-    out = classify_features(fold_features, full_features, threshold)
-    out[0] = 0  # silence is silence
-    return out
-
-
-def _held_out_probs(model, x: np.ndarray, cmap: np.ndarray, n_full: int) -> np.ndarray:
-    """(n, n_full) a fold model's predictions in the full model's classes."""
-    p = model.predict_proba(x)
-    out = np.zeros((len(x), n_full))
-    ok = cmap >= 0
-    np.add.at(out.T, cmap[ok], p[:, ok].T)
-    return out
-
-
 def _own_index(model, names: list[str], combos: list[tuple]) -> int:
     """Index in ``combos`` of ``model``'s own values of the parameters ``names`` (0 if absent)."""
     own = tuple(getattr(model, nm, None) for nm in names)
@@ -258,11 +168,7 @@ def choose_calibration(scores: np.ndarray, weights: np.ndarray,
     tuple of int
         Index of the candidate with the best weighted mean score among those that beat ``own``
         by more than ``margin`` standard errors of the paired difference (the same touches scored
-        twice), or ``own`` when none does. With 150-300 samples the held-out touches are few and
-        harder than the points the model is asked about (a held-out touch leaves a hole in its
-        fold's samples), so the best mean alone often picks a calibration that the model does not
-        need: measured against the simulator, at 150-300 reaches the plain choice made the weak
-        models' calibration error worse than none in most cells (``kbcli bench reliability``).
+        twice), or ``own`` when none does.
     """
     shape = scores.shape[:-1]
     b = scores.reshape(-1, scores.shape[-1])
@@ -315,7 +221,7 @@ def _cross_validate(full_model, x: np.ndarray, s: np.ndarray, fold: np.ndarray, 
         fp = dict(zip(fit_names, fc, strict=True))
         full_j = _refit(full_model, x, s, fp) if fp else full_model
         cv.fulls.append(full_j)
-        cmap_full = _class_map(full_j.class_features_, full_model.class_features_, thr)
+        cmap_full = class_map(full_j.class_features_, full_model.class_features_, thr)
         full_map = cmap_full[full_j.predict_class(flat)].reshape(pts.shape[:2])
         cv.boundary.append([])
         for f in range(k):
@@ -323,13 +229,25 @@ def _cross_validate(full_model, x: np.ndarray, s: np.ndarray, fold: np.ndarray, 
             if test.all() or not test.any():
                 continue
             m = _refit(full_model, x[~test], s[~test], fp)
-            cmap = _class_map(m.class_features_, full_model.class_features_, thr)
+            cmap = class_map(m.class_features_, full_model.class_features_, thr)
             fold_map = cmap[m.predict_class(flat)].reshape(pts.shape[:2])
             cv.boundary[j].append(_boundary_error(fold_map, full_map, BOUNDARY_STEP))
             for i, combo in enumerate(combos):
                 mc = _recalibrated(m, dict(zip(names, combo, strict=True)))
-                cv.held[j, i, test] = _held_out_probs(mc, x[test], cmap, c_full)
+                cv.held[j, i, test] = held_out_probs(mc, x[test], cmap, c_full)
     return cv
+
+
+def _choose(full_model, hk: np.ndarray, p_true: np.ndarray, wd: np.ndarray,
+            grids: tuple) -> tuple[int, int]:
+    """(fit candidate, prediction-time candidate) of the calibration to keep: the Brier score of
+    every held-out touch (``hk`` (F, P, n, C) held-out predictions, ``p_true`` (F, P, n) their
+    probability of the heard sound) weighted by ``wd`` (:func:`choose_calibration`)."""
+    (names, combos), (fit_names, fit_combos) = grids
+    wd = wd / wd.sum() if wd.sum() > 0 else wd
+    scores = (hk ** 2).sum(axis=-1) - 2 * p_true + 1  # (F, P, n_known) Brier of each touch
+    own = (_own_index(full_model, fit_names, fit_combos), _own_index(full_model, names, combos))
+    return choose_calibration(scores, wd, own)
 
 
 def assess(full_model, actions: np.ndarray, perceived: np.ndarray, *,
@@ -347,17 +265,14 @@ def assess(full_model, actions: np.ndarray, perceived: np.ndarray, *,
     rng : numpy.random.Generator
         Assigns samples to folds.
     calibrate : bool
-        Choose the calibration parameters by held-out Brier score, weighted for the distance to
-        the samples, when they beat the model's own by more than a standard error
-        (:func:`choose_calibration`; if the model has any): those
-        read at prediction time (``calibration_grid()``, set on a copy) and those of the fit
-        (``fit_grid()``, the model is refitted with the chosen values).
+        Choose the calibration parameters, if the model has any (:func:`choose_calibration`):
+        those read at prediction time (``calibration_grid()``, set on a copy) and those of the
+        fit (``fit_grid()``, the model is refitted with the chosen values).
 
     Returns
     -------
     model : ModelBase
-        ``full_model`` with the chosen calibration (a copy or a refit; ``full_model`` itself is
-        unchanged).
+        ``full_model`` with the chosen calibration (a copy or a refit; the original unchanged).
     reliability : Reliability
     """
     x = np.asarray(actions, float).reshape(-1, 2)
@@ -365,36 +280,31 @@ def assess(full_model, actions: np.ndarray, perceived: np.ndarray, *,
     n = len(x)
     labels = full_model.classify(s)
     k = int(min(folds, n))
-    names, combos = _grid(full_model, "calibration_grid", calibrate)
-    fit_names, fit_combos = _grid(full_model, "fit_grid", calibrate)
-    fold = _fold_ids(n, k, rng)
+    grids = (_grid(full_model, "calibration_grid", calibrate),
+             _grid(full_model, "fit_grid", calibrate))
+    (names, combos), (fit_names, fit_combos) = grids
+    fold = fold_ids(n, k, rng)
     _, pts = grid_points(tuple(float(v) for v in full_model.area), BOUNDARY_STEP)
     flat = pts.reshape(-1, 2)
-    cv = _cross_validate(full_model, x, s, fold, k, pts, ((names, combos), (fit_names, fit_combos)))
+    cv = _cross_validate(full_model, x, s, fold, k, pts, grids)
     known = labels >= 0
-    w = _area_weights(x)[known]
+    w = area_weights(x)[known]
     hk = cv.held[:, :, known, :]
     p_true = hk[:, :, np.arange(known.sum()), labels[known]]  # (F, P, n_known)
     nll = -(np.log(np.maximum(p_true, 1e-12)) @ w)  # (F, P)
-    wd = _distance_weights(x, fold, flat)[known]
-    wd = wd / wd.sum() if wd.sum() > 0 else wd
-    scores = (hk ** 2).sum(axis=-1) - 2 * p_true + 1  # (F, P, n_known) Brier of each touch
-    own = (_own_index(full_model, fit_names, fit_combos), _own_index(full_model, names, combos))
-    bj, bi = choose_calibration(scores, wd, own)
-    chosen = {**dict(zip(fit_names, fit_combos[bj], strict=True)),
-              **dict(zip(names, combos[bi], strict=True))}
-    model = _recalibrated(cv.fulls[bj], dict(zip(names, combos[bi], strict=True)))
-    hp = cv.held[bj, bi, known]
-    hit = hp.argmax(axis=1) == labels[known]
+    bj, bi = _choose(full_model, hk, p_true, distance_weights(x, fold, flat)[known], grids)
+    at_predict = dict(zip(names, combos[bi], strict=True))
+    chosen = {**dict(zip(fit_names, fit_combos[bj], strict=True)), **at_predict}
+    model = _recalibrated(cv.fulls[bj], at_predict)
+    hit = cv.held[bj, bi, known].argmax(axis=1) == labels[known]
     finite = [b for b in cv.boundary[bj] if np.isfinite(b)]
     rel = Reliability(
         folds=k,
         samples=n,
         cv_error=float(1.0 - hit @ w) if len(hit) else float("nan"),
         cv_log_loss=float(nll[bj, bi]),
-        cv_ece=expected_calibration_error(hp, hit.astype(float), weights=w, debiased=True)
-        if len(hit)
-        else float("nan"),
+        cv_ece=expected_calibration_error(cv.held[bj, bi, known], hit.astype(float), weights=w,
+                                          debiased=True) if len(hit) else float("nan"),
         boundary_error=float(np.mean(finite)) if finite else float("inf"),
         calibration={nm: float(v) for nm, v in chosen.items()},
         expected_error=float(1.0 - model.predict_proba(flat).max(axis=1).mean()),

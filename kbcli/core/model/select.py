@@ -6,22 +6,23 @@ on hex; pairwise SVMs (``svc``) bend around round pads. The robot does not know 
 must never be told by the simulator's ground truth, so it asks its own samples: with ``K``-fold
 cross-validation (the same folds for every candidate; each fold's model fitted on the other folds),
 each candidate class is scored by its **held-out mislabel rate**, every held-out touch weighted by
-the area it stands for (:func:`kbcli.core.model.reliability._area_weights`: active exploration puts most
+the area it stands for (:func:`kbcli.core.model.heldout.area_weights`: active exploration puts most
 touches near boundaries, and the weights make them describe the working area as a uniform grid
 would).
 
 The held-out rates of two classes differ by a few touches out of hundreds, so the lowest rate is a
 noisy choice. The choice is therefore a sequence of paired tests
-(:func:`prefer`): the classes are taken in :data:`CANDIDATES` order, and a class replaces the one
+(:func:`prefer`): the classes are taken in the order they declare (``ModelClass.auto``,
+:func:`kbcli.core.model.classes.ranked`), and a class replaces the one
 kept so far only when its held-out mislabel rate is lower by more than :data:`SWITCH_Z` standard
 errors of the paired, area-weighted difference (the same touches held out for both). The forest
 on the coordinates alone (``forest-xy``) is tested right after the oblique forest (what these tests
 chose on each layout: ``docs/design-notes.md``, Model classes).
 
 Exploration needs a model while it explores, before the choice can be made: under ``auto`` it
-starts with :data:`EXPLORE_CLASS` (``forest``: fast to refit, any key shape), and every
-:data:`RESELECT` reaches (but at the end) it re-chooses the class it explores with among
-:data:`EXPLORE_CANDIDATES` by the same cross-validation on the samples so far
+starts with the first class that declares it explores (``ModelClass.explores``: the forest, fast
+to refit, any key shape), and every :data:`RESELECT` reaches (but at the end) it re-chooses the
+class it explores with among those by the same cross-validation on the samples so far
 (:func:`explore_choice`): the class that predicts the samples best also places the boundary bands
 best, so its bisections are worth more. The final model is refitted with the
 chosen class on every sample (:func:`choose`).
@@ -34,34 +35,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from kbcli.core.config import Record
-from kbcli.core.model.classes import AUTO, fit_model, learned_classes
-from kbcli.core.model.reliability import (
-    FOLDS,
-    _area_weights,
-    _class_map,
-    _fold_ids,
-    _held_out_probs,
-)
+from kbcli.core.model.classes import AUTO, MODEL_CLASSES, fit_model, learned_classes, ranked
+from kbcli.core.model.heldout import area_weights, class_map, fold_ids, held_out_probs
+from kbcli.core.model.reliability import FOLDS
 from kbcli.errors import ConfigError
 
-#: The classes ``auto`` chooses between, in the order :func:`prefer` tests them.
-CANDIDATES = ("forest", "forest-xy", "svc", "lines", "knn")
-#: The class ``auto`` starts exploring with (re-chosen every :data:`RESELECT` reaches).
-EXPLORE_CLASS = "forest"
 #: A class replaces the one kept so far when its held-out mislabel rate is lower by more than
 #: this many standard errors of the paired difference.
 SWITCH_Z = 2.0
-#: The classes ``auto`` may explore with (re-chosen every :data:`RESELECT` reaches).
-EXPLORE_CANDIDATES = ("forest", "svc")
 #: Reaches between two choices of the class ``auto`` explores with (a choice takes 2-3 s on 2
 #: cores at 200-800 samples: every 100 reaches doubled the time of a learn run of 800).
 RESELECT = 200
-#: Parameters of the model refitted after every batch of an exploration and by the
-#: cross-validation of :func:`explore_choice` and :func:`choose` where they differ from the final
-#: model's: a lighter forest (60 trees, 0.15 s a fit at 800 samples, twice as fast as the final
-#: model's 120).
-EXPLORE_PARAMS: dict[str, dict] = {"forest": {"n_estimators": 60},
-                                    "forest-xy": {"n_estimators": 60}}
 
 
 @dataclass(frozen=True)
@@ -93,29 +77,31 @@ class Selection(Record):
 
 def explore_class(name: str) -> str:
     """The class an exploration with model class ``name`` refits while it explores (first)."""
-    return EXPLORE_CLASS if name == AUTO else name
+    return ranked("explores")[0] if name == AUTO else name
 
 
 def explore_params(name: str) -> dict:
     """Keyword parameters of class ``name`` while it is refitted during an exploration."""
-    return dict(EXPLORE_PARAMS.get(name, {}))
+    return dict(MODEL_CLASSES.get(name).explore_params)
 
 
 def explore_choice(actions: np.ndarray, perceived: np.ndarray, *, match_threshold: float,
                    area: tuple[float, float, float, float],
-                   candidates: tuple[str, ...] = EXPLORE_CANDIDATES, folds: int = FOLDS) -> str:
-    """The class ``auto`` explores with next: the candidate :func:`prefer` keeps on the held-out
-    mislabels of the samples so far (each class with :data:`EXPLORE_PARAMS`).
+                   candidates: tuple[str, ...] | None = None, folds: int = FOLDS) -> str:
+    """The class ``auto`` explores with next: the candidate (default: the classes that declare
+    they explore) :func:`prefer` keeps on the held-out mislabels of the samples so far (each class
+    with its :func:`explore_params`).
 
     The folds come from a generator seeded with the number of samples, not from the
     exploration's: choosing draws nothing from it, so the reaches of every other class are
     unchanged and the choice is the same whoever asks.
     """
-    wrong, w = held_out_wrong(tuple(candidates), actions, perceived,
+    candidates = ranked("explores") if candidates is None else tuple(candidates)
+    wrong, w = held_out_wrong(candidates, actions, perceived,
                               match_threshold=match_threshold, area=area,
                               rng=np.random.default_rng(len(actions)), folds=folds,
-                              params=EXPLORE_PARAMS)
-    return prefer(tuple(candidates), wrong, w)
+                              params={n: explore_params(n) for n in candidates})
+    return prefer(candidates, wrong, w)
 
 
 def paired_z(worse: np.ndarray, better: np.ndarray, w: np.ndarray) -> float:
@@ -180,13 +166,13 @@ def held_out_wrong(names: tuple[str, ...], actions: np.ndarray, perceived: np.nd
     x = np.asarray(actions, float).reshape(-1, 2)
     s = np.asarray(perceived, float).reshape(len(x), -1)
     k = int(min(folds, len(x)))
-    fold = _fold_ids(len(x), k, rng)
+    fold = fold_ids(len(x), k, rng)
     out, weights = {}, np.zeros(len(x))
     for name in names:
         own = (params or {}).get(name, {})
         full = fit_model(name, x, s, match_threshold=match_threshold, area=area, **own)
         labels = full.classify(s)
-        weights = _area_weights(x) * (labels >= 0)
+        weights = area_weights(x) * (labels >= 0)
         wrong = np.zeros(len(x))
         for f in range(k):
             test = fold == f
@@ -194,8 +180,8 @@ def held_out_wrong(names: tuple[str, ...], actions: np.ndarray, perceived: np.nd
                 continue
             m = fit_model(name, x[~test], s[~test], match_threshold=match_threshold, area=area,
                           **own)
-            cmap = _class_map(m.class_features_, full.class_features_, match_threshold)
-            p = _held_out_probs(m, x[test], cmap, full.n_classes)
+            cmap = class_map(m.class_features_, full.class_features_, match_threshold)
+            p = held_out_probs(m, x[test], cmap, full.n_classes)
             wrong[test] = p.argmax(axis=1) != labels[test]
         out[name] = wrong
     return out, weights
@@ -219,31 +205,34 @@ def cv_errors(names: tuple[str, ...], actions: np.ndarray, perceived: np.ndarray
 
 def choose(actions: np.ndarray, perceived: np.ndarray, *, match_threshold: float,
            area: tuple[float, float, float, float], rng: np.random.Generator,
-           explored_with: str = EXPLORE_CLASS, candidates: tuple[str, ...] = CANDIDATES,
+           explored_with: str | None = None, candidates: tuple[str, ...] | None = None,
            folds: int = FOLDS) -> Selection:
-    """The candidate class :func:`prefer` keeps on the samples' held-out mislabels (each class
-    cross-validated with :data:`EXPLORE_PARAMS`: a forest of 60 trees stands for the final 120).
+    """The candidate class (default: the classes that declare a place in ``auto``'s order)
+    :func:`prefer` keeps on the samples' held-out mislabels (each class cross-validated with its
+    :func:`explore_params`: a lighter forest stands for the final one); ``explored_with``
+    defaults to the class ``auto`` starts exploring with.
 
     Raises
     ------
     ConfigError
         If a candidate is not a learned model class.
     """
+    candidates = ranked("auto") if candidates is None else tuple(candidates)
+    explored_with = explore_class(AUTO) if explored_with is None else explored_with
     valid = learned_classes()
     for name in candidates:
         if name not in valid:
             raise ConfigError(f"model class {name!r} is not learned from samples; valid: "
                               f"{', '.join(valid)}")
-    wrong, w = held_out_wrong(tuple(candidates), actions, perceived,
+    wrong, w = held_out_wrong(candidates, actions, perceived,
                               match_threshold=match_threshold, area=area, rng=rng, folds=folds,
-                              params=EXPLORE_PARAMS)
+                              params={n: explore_params(n) for n in candidates})
     total = max(float(w.sum()), 1e-300)
     err = {name: float((v * w).sum() / total) for name, v in wrong.items()}
-    return Selection(chosen=prefer(tuple(candidates), wrong, w), explored_with=explored_with, cv_error=err,
+    return Selection(chosen=prefer(candidates, wrong, w), explored_with=explored_with, cv_error=err,
                      folds=int(min(folds, len(np.asarray(actions).reshape(-1, 2)))))
 
 
-__all__ = ["CANDIDATES", "EXPLORE_CANDIDATES", "EXPLORE_CLASS", "EXPLORE_PARAMS", "RESELECT",
-           "SWITCH_Z", "Selection", "choose", "cv_errors", "explore_choice", "explore_class",
+__all__ = ["RESELECT", "SWITCH_Z", "Selection", "choose", "cv_errors", "explore_choice", "explore_class",
            "explore_params", "held_out_wrong",
            "paired_z", "prefer"]

@@ -50,7 +50,7 @@ Defaults: ``length_scale`` 25 px, ``C`` 1000, linear and circle pairs on (how th
 Storage without pickle: :meth:`SVCModel.to_arrays` keeps the samples, the classes and the
 hyper-parameters; :meth:`SVCModel.from_arrays` refits the machines, which is deterministic (libsvm's
 solver has no randomness when probabilities are not asked of it). The estimator is a scikit-learn
-one (:class:`~kbcli.core.model.base.ModelBase`: ``fit`` returns ``self``, fitted attributes end in ``_``,
+one (:class:`~kbcli.core.model.pairwise.ModelBase`: ``fit`` returns ``self``, fitted attributes end in ``_``,
 predicting before fitting raises, ``get_params`` / ``set_params`` / ``clone``); the candidates and
 their softmax are the base's, shared with the ``lines`` class.
 """
@@ -63,7 +63,7 @@ from scipy.spatial import cKDTree
 from scipy.special import log_ndtr
 from sklearn.svm import SVC
 
-from kbcli.core.model.base import DEFAULT_AREA, ModelBase
+from kbcli.core.model.pairwise import DEFAULT_AREA, ModelBase
 from kbcli.core.model.sounds import straddling_edges
 from kbcli.errors import ArtifactError, ConfigError
 
@@ -129,7 +129,7 @@ class SVCModel(ModelBase):
     Parameters
     ----------
     match_threshold, area
-        As every class (:class:`~kbcli.core.model.base.ModelBase`).
+        As every class (:class:`~kbcli.core.model.pairwise.ModelBase`).
     length_scale : float
         Length scale (px) of the RBF kernel: ``exp(-|a - b|^2 / (2 length_scale^2))``.
     C : float
@@ -151,7 +151,7 @@ class SVCModel(ModelBase):
     Attributes
     ----------
     class_features_, actions_, labels_, reach_sd_
-        As every class (:class:`~kbcli.core.model.base.ModelBase`).
+        As every class (:class:`~kbcli.core.model.pairwise.ModelBase`).
     pairs_ : (P, 2) int ndarray
         The neighbouring pairs of classes (lower first) that have a machine.
     edges_ : (m, 2) int ndarray
@@ -198,7 +198,7 @@ class SVCModel(ModelBase):
         self.edges_ = e[np.lexsort((e[:, 1], e[:, 0]))] if len(e) else e
         nc = len(self.class_features_)
         code = self.labels_[self.edges_[:, 0]] * nc + self.labels_[self.edges_[:, 1]]
-        #: pair code -> its machine (the contests of :class:`~kbcli.core.model.base.ModelBase`)
+        #: pair code -> its machine (the contests of :class:`~kbcli.core.model.pairwise.ModelBase`)
         self._pairs: dict[int, SVC] = {}
         self._support: dict[int, tuple[cKDTree, cKDTree, cKDTree]] = {}
         self._edge_code = code

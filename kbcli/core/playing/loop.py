@@ -3,7 +3,7 @@
 The robot plays its melody with Algorithm 1 (:func:`kbcli.core.playing.play.play`), feeding every MATCH /
 NO_MATCH result to an online failure detector (Sect. III-C, :class:`kbcli.core.detection.detectors.Detector`).
 When the detector fires, the robot stops playing and adapts (Sect. III-D/E,
-:class:`kbcli.core.adaptation.loop.Adapter`): it touches where its strategy says until the stopping rule holds
+:class:`kbcli.core.adaptation.adapter.Adapter`): it touches where its strategy says until the stopping rule holds
 (or a step budget runs out), and takes the estimate ``theta`` of the transform. It then resumes
 playing with *corrected* actions: an action ``a`` drawn from its (reference-pose) model for a note
 is sent as ``T_theta(a)`` (Eq. 3: the key that was under ``a`` is now under ``T(a)``). The detector
@@ -15,7 +15,7 @@ The robot's side only calls ``touch``; where the keyboard really is stays on the
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -119,7 +119,7 @@ def closed_loop(
     max_adapt_steps : int
         At most this many touches per adaptation.
     table : LikelihoodTable, optional
-        A prebuilt model table for the adapter (see :func:`kbcli.core.adaptation.loop.build_table`).
+        A prebuilt model table for the adapter (see :func:`kbcli.core.adaptation.setup.build_table`).
 
     Yields
     ------
@@ -131,47 +131,63 @@ def closed_loop(
         raise ConfigError(f"max_adapt_steps must be >= 1, got {max_adapt_steps}")
     x0, y0, x1, y1 = model.area
     centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
-    n_params = len(transforms.check_family(adapter.family))
-    correction = np.zeros(n_params)
+    correction = np.zeros(len(transforms.check_family(adapter.family)))
     det = Detector(detector)
-    t = 0
-    played = 0
+    t = played = 0
+    while played < play_steps:
+        fired, n = yield from _play_phase(model, melody, touch, det, adapter.family, correction,
+                                          centre, rng, t, play_steps - played)
+        t, played = t + n, played + n
+        if not fired:
+            break
+        ad = Adapter(model, adapter, rng=rng, centre=centre, table=table)
+        correction, n = yield from _adapt_phase(ad, touch, max_adapt_steps, correction, t)
+        t += n
+        det.reset()
+
+
+def _play_phase(model, melody: Melody, touch: Touch, det: Detector, family: str,
+                correction: np.ndarray, centre: np.ndarray, rng: np.random.Generator, t: int,
+                budget: int) -> Generator[LoopStep, None, tuple[bool, int]]:
+    """Play with corrected actions (``T_correction(a)``) until the detector fires or ``budget``
+    touches are played; yields their steps from number ``t`` and returns (fired, touches)."""
+    sent_actions: list[np.ndarray] = []
 
     def corrected_touch(actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        sent = transforms.apply(adapter.family, correction, np.asarray(actions, float).reshape(-1, 2), centre)
+        sent = transforms.apply(family, correction, np.asarray(actions, float).reshape(-1, 2), centre)
         sent_actions.append(sent[0])
         return touch(sent)
 
+    n = 0
+    for step in play(model, melody, corrected_touch, rng=rng):
+        fired = det.update(step.result)
+        yield LoopStep(t=t + n, phase=PLAY, action=sent_actions[-1], landed=step.landed,
+                       perceived=step.perceived, result=step.result, score=det.score,
+                       fired=fired, correction=correction.copy())
+        n += 1
+        if fired or n >= budget:
+            return fired, n
+    return False, n
+
+
+def _adapt_phase(ad: Adapter, touch: Touch, max_steps: int, correction: np.ndarray,
+                 t: int) -> Generator[LoopStep, None, tuple[np.ndarray, int]]:
+    """Adapt until the stopping rule holds or ``max_steps`` touches; yields their steps from
+    number ``t`` and returns (the correction the adaptation settled on, touches)."""
     def single_touch(action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         landed, heard = touch(np.asarray(action, float).reshape(1, 2))
         return landed[0], heard[0]
 
-    while played < play_steps:
-        sent_actions: list[np.ndarray] = []
-        player = play(model, melody, corrected_touch, rng=rng)
-        fired = False
-        for step in player:
-            fired = det.update(step.result)
-            yield LoopStep(t=t, phase=PLAY, action=sent_actions[-1], landed=step.landed,
-                           perceived=step.perceived, result=step.result, score=det.score,
-                           fired=fired, correction=correction.copy())
-            t += 1
-            played += 1
-            if fired or played >= play_steps:
-                break
-        if not fired:
-            break
-        ad = Adapter(model, adapter, rng=rng, centre=centre, table=table)
-        for s in adapt(ad, single_touch, max_adapt_steps, stop=True):
-            if s.stop or s.t == max_adapt_steps:
-                correction = np.asarray(s.estimate, float).copy()
-            yield LoopStep(t=t, phase=ADAPT, action=s.action, landed=s.landed,
-                           perceived=s.perceived, result=-1, score=float("nan"), fired=False,
-                           correction=correction.copy(), estimate=s.estimate,
-                           marginal=_log_marginal(ad))
-            t += 1
-        det.reset()
-
+    n = 0
+    for s in adapt(ad, single_touch, max_steps, stop=True):
+        if s.stop or s.t == max_steps:
+            correction = np.asarray(s.estimate, float).copy()
+        yield LoopStep(t=t + n, phase=ADAPT, action=s.action, landed=s.landed,
+                       perceived=s.perceived, result=-1, score=float("nan"), fired=False,
+                       correction=correction.copy(), estimate=s.estimate,
+                       marginal=_log_marginal(ad))
+        n += 1
+    return correction, n
 
 def _log_marginal(ad: Adapter) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(dx, dy, log translation marginal as float32) of an adapter's posterior."""

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from kbcli.core.instrument import transforms
 from kbcli.core.instrument.keyboard import match
 from kbcli.core.instrument.melody import Melody
 from kbcli.errors import ConfigError
@@ -227,7 +228,7 @@ def replay(model, melody: Melody, touch: Touch, *, rng: np.random.Generator, n_n
     sampler : callable, optional
         ``sampler(cls, n, rng) -> (n, 2)`` draws from p(action | sound) (Algorithm 1, line 10);
         default ``model.sample_actions``. A pool of draws made once per class, resampled (e.g.
-        :meth:`kbcli.core.adaptation.posteriors.posterior.ActionSamples.draw`), saves the model's rejection sampling in
+        :meth:`kbcli.core.adaptation.posteriors.kde.samples.ActionSamples.draw`), saves the model's rejection sampling in
         repeated replays.
 
     Returns
@@ -236,37 +237,62 @@ def replay(model, melody: Melody, touch: Touch, *, rng: np.random.Generator, n_n
         :data:`MATCH` (0) or :data:`NO_MATCH` (1) per touch; the success rate is
         ``mean(history == MATCH)``.
     """
-    from kbcli.core.instrument import transforms
-
     if n_notes < 1:
         raise ConfigError(f"n_notes must be >= 1, got {n_notes}")
     classes = note_classes(model, melody)
-    sounds = np.asarray(model.class_features_, float)[classes]
     if centre is None:
         x0, y0, x1, y1 = model.area
         centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
-    corr = None if correction is None else np.asarray(correction, float)
-    draw = model.sample_actions if sampler is None else sampler
-    queues: dict[int, list] = {}  # class -> [ok (k,) bool, next index]
-
-    def outcomes(cls: int) -> np.ndarray:
-        a = np.asarray(draw(cls, chunk, rng), float).reshape(-1, 2)
-        if corr is not None:
-            a = transforms.apply(family, corr, a, centre)
-        _, heard = touch(a)
-        m = match(np.asarray(heard, float).reshape(len(a), -1), sounds, model.match_threshold)
-        return (m >= 0) & (classes[np.maximum(m, 0)] == cls)
-
+    send = None if correction is None else \
+        _Corrected(family, np.asarray(correction, float), centre)
+    batches = _Batches(model, classes, touch, model.sample_actions if sampler is None else sampler,
+                       rng, chunk, send)
     history = np.empty(n_notes, dtype=np.int64)
     n = len(melody)
     target = 0
     for step in range(n_notes):
-        cls = int(classes[target])
-        q = queues.get(cls)
-        if q is None or q[1] >= len(q[0]):
-            q = queues[cls] = [outcomes(cls), 0]
-        ok = bool(q[0][q[1]])
-        q[1] += 1
+        ok = batches.next(int(classes[target]))
         history[step] = MATCH if ok else NO_MATCH
         target = (target + 1) % n if ok else 0
     return history
+
+
+@dataclass(frozen=True)
+class _Corrected:
+    """Actions sent as ``T_correction(a)`` (the robot's estimate of the displacement)."""
+
+    family: str
+    correction: np.ndarray
+    centre: np.ndarray
+
+    def __call__(self, actions: np.ndarray) -> np.ndarray:
+        return transforms.apply(self.family, self.correction, actions, self.centre)
+
+
+class _Batches:
+    """The outcomes of touches aimed at each sound class, ``chunk`` touched at once per class and
+    handed out in order (a class's next chunk is drawn when its outcomes run out)."""
+
+    def __init__(self, model, classes: np.ndarray, touch: Touch, draw, rng: np.random.Generator,
+                 chunk: int, send: Callable[[np.ndarray], np.ndarray] | None) -> None:
+        self.model, self.classes, self.touch, self.draw = model, classes, touch, draw
+        self.rng, self.chunk, self.send = rng, chunk, send
+        self.sounds = np.asarray(model.class_features_, float)[classes]
+        self.queues: dict[int, list] = {}  # class -> [ok (k,) bool, next index]
+
+    def _touch(self, cls: int) -> np.ndarray:
+        a = np.asarray(self.draw(cls, self.chunk, self.rng), float).reshape(-1, 2)
+        if self.send is not None:
+            a = self.send(a)
+        _, heard = self.touch(a)
+        m = match(np.asarray(heard, float).reshape(len(a), -1), self.sounds,
+                  self.model.match_threshold)
+        return (m >= 0) & (self.classes[np.maximum(m, 0)] == cls)
+
+    def next(self, cls: int) -> bool:
+        """Whether the next touch aimed at ``cls`` played it (MATCH)."""
+        q = self.queues.get(cls)
+        if q is None or q[1] >= len(q[0]):
+            q = self.queues[cls] = [self._touch(cls), 0]
+        q[1] += 1
+        return bool(q[0][q[1] - 1])

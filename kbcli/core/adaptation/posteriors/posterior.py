@@ -28,8 +28,8 @@ def log_normalise(logw: np.ndarray, axis: int | None = None) -> tuple[np.ndarray
     The one log-sum-exp of the adaptation (the posterior, ``active``'s simulated updates).
     Hand-written rather than ``scipy.special.logsumexp`` because the probabilities must be
     ``exp(logw - max) / sum`` exactly, as every stored artifact was computed: scipy's
-    ``exp(logw - lse)`` differs in the last bit, and it was 2.3x (1.3M cells) to 58x (32k cells)
-    slower on the posterior's hot path (measured with scipy 1.17 on this project's machine).
+    ``exp(logw - lse)`` differs in the last bit, and is slower on the posterior's hot path
+    (``docs/design-notes.md``).
 
     Parameters
     ----------

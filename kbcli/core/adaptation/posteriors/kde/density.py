@@ -9,8 +9,8 @@ direct sum in the tests), then mix with a floor (a uniform density
 over the prior with weight ``eps``; ``AdapterConfig.kde_floor``, 0 for none, :func:`floored_log`)
 and take the log. The samples of ``p(action | s)`` do not depend on the posterior, so they can be
 drawn once per sound class and reused (:class:`ActionSamples`; per run, or per model in the
-evaluation; ``kde_draw = "shared"``): a KDE step then costs a binning and two FFTs (a few ms)
-instead of thousands of model evaluations. Algorithm 2 as written draws them anew for every
+evaluation; ``kde_draw = "shared"``): a KDE step then costs a binning and two FFTs instead of
+thousands of model evaluations. Algorithm 2 as written draws them anew for every
 observation (``kde_draw = "fresh"``, :class:`kbcli.core.adaptation.posteriors.kde.samples.FreshSamples`).
 
 Bandwidth rule: Scott's ``sigma_hat * N^(-1/6)`` (d = 2) with Silverman's robust spread

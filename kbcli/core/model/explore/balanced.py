@@ -1,0 +1,53 @@
+"""``balanced``: boundary seeking and coverage weighed in one greedy rule, instead of
+``active``'s cover-then-bisect (not the default; why: ``docs/design-notes.md``, Model classes)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from kbcli.core.model.explore.base import STRATEGIES
+from kbcli.core.model.explore.cover import (
+    boundary_sites,
+    cover_candidates,
+    farthest_points,
+    hex_lattice,
+)
+
+
+@STRATEGIES.register("balanced", traits={"covers": True})
+def balanced_strategy(exploration, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Boundary seeking and coverage weighed in one rule, instead of ``active``'s
+    cover-then-bisect.
+
+    First a coarse hexagonal lattice (covering radius ``2 explore_radius``, about a quarter of
+    ``active``'s first reaches), so that every sound large enough is heard early. Then every batch
+    picks, greedily, the widest of two kinds of gap: a boundary site of the model (its band width
+    w, capped as ``active`` caps it) and a hole, a point of the working area at distance d from
+    every landing, worth ``2 d`` (a band as wide as the hole could hide there). A pick of width w
+    caps every site's width at ``w / 2 + distance`` and every hole's at ``2 distance``. Early the
+    holes are wide and coverage wins; as the pad fills, the widest bands take over, and a band
+    found late still competes with the holes left (no phase waits for another to finish).
+    """
+    taken, area, cfg = exploration.landed, exploration.area, exploration.cfg
+    if len(taken) == 0:
+        lattice = hex_lattice(area, 2 * cfg.explore_radius * np.sqrt(3), rng)
+        return farthest_points(lattice, np.empty((0, 2)), len(lattice))
+    tree = cKDTree(taken)
+    holes = cover_candidates(area, cfg.explore_radius / 5, rng)
+    hw = 2 * tree.query(holes)[0]
+    p, w = np.empty((0, 2)), np.empty(0)
+    model = exploration.model
+    if model is not None and model.n_classes >= 2:
+        p, w = boundary_sites(model, area, tree, rng)
+    pts = np.vstack([p, holes])
+    width = np.concatenate([w, hw])
+    is_hole = np.r_[np.zeros(len(p), bool), np.ones(len(holes), bool)]
+    picks = []
+    for _ in range(min(n, len(pts))):  # loop over picks; each is vectorized over the candidates
+        i = int(np.argmax(width))
+        picks.append(pts[i])
+        dist = np.hypot(*(pts - pts[i]).T)
+        width = np.where(is_hole, np.minimum(width, 2 * dist),
+                         np.minimum(width, width[i] / 2 + dist))
+    return np.array(picks)
