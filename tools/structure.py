@@ -119,11 +119,11 @@ def upward(g: dict[str, set[str]]) -> list[tuple[str, str]]:
                   if m != "kbcli" and layer(n) > layer(m) + 1e-9)
 
 
-def long_modules(limit: int = 500) -> list[tuple[str, int]]:
+def long_modules(limit: int = 400) -> list[tuple[str, int]]:
     return [(m, n) for m, p in modules().items() if (n := len(p.read_text().splitlines())) > limit]
 
 
-def long_functions(limit: int = 80) -> list[tuple[str, str, int]]:
+def long_functions(limit: int = 60) -> list[tuple[str, str, int]]:
     out = []
     for m, p in modules().items():
         for node in ast.walk(ast.parse(p.read_text())):
