@@ -102,7 +102,7 @@ class LearnConfig(Config):
     model_class : str
         The class of model fitted (a learned class of
         :data:`~kbcli.core.model.classes.MODEL_CLASSES`), or ``auto`` (the default): explore with
-        :data:`kbcli.core.model.select.EXPLORE_CLASS`, re-chosen every
+        :func:`kbcli.core.model.select.explore_class` (each class declares whether it joins), re-chosen every
         :data:`kbcli.core.model.select.RESELECT` reaches (:func:`kbcli.core.model.select.explore_choice`),
         then fit the class with the best cross-validated score on the samples
         (:func:`kbcli.core.model.select.choose`; never the simulator's truth).
