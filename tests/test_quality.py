@@ -31,11 +31,26 @@ displacements = [[3.0, -2.0]]
 """
 
 
-@pytest.fixture
-def small_kb(tmp_path):
-    path = tmp_path / "kb.h5"
+@pytest.fixture(scope="module")
+def small_kb(tmp_path_factory):
+    path = tmp_path_factory.mktemp("kb") / "kb.h5"
     write_artifact(keyboard_stage.run(KeyboardConfig(rows=2, cols=3)), path)
     return path
+
+
+@pytest.fixture(scope="module")
+def tiny_sweep(small_kb, tmp_path_factory):
+    """The TINY sweep run once through the CLI: (its command line without the output, the output,
+    the CLI result). Shared by the tests that check its artifact, its report, that a second run
+    gives the same numbers and that an interrupted run resumes to them."""
+    from typer.testing import CliRunner
+
+    tmp = tmp_path_factory.mktemp("tiny")
+    conf = tmp / "q.toml"
+    conf.write_text(TINY)
+    base = ["quality", "--config", str(conf), "--keyboard", str(small_kb)]
+    out = tmp / "q.h5"
+    return base, out, CliRunner().invoke(app, [*base, "-o", str(out)])
 
 
 def test_the_default_pipeline_config_is_valid():
@@ -183,12 +198,8 @@ def test_the_verdict_follows_the_data():
     assert stage.verdict(grows).startswith("contradicted")
 
 
-def test_a_tiny_sweep_runs_and_reports(runner, small_kb, tmp_path):
-    conf = tmp_path / "q.toml"
-    conf.write_text(TINY)
-    out = tmp_path / "q.h5"
-    args = ["quality", "--config", str(conf), "--keyboard", str(small_kb), "-o", str(out)]
-    r = runner.invoke(app, args)
+def test_a_tiny_sweep_runs_and_reports(runner, tiny_sweep, tmp_path):
+    base, out, r = tiny_sweep
     assert r.exit_code == 0, r.output
     assert "advantage over random" in r.output
     art = read_artifact(out, "model_quality")
@@ -200,9 +211,9 @@ def test_a_tiny_sweep_runs_and_reports(runner, small_kb, tmp_path):
     assert all(1 <= v <= 7 for v in ideal) and ideal == sorted(ideal, reverse=True)
     assert art.attrs["rows_resolved"][stage.IDEAL_ROW]["robot"]["strategy"]["name"] == "infogain"
     assert art.attrs["rows_resolved"]["infogain"]["robot"]["posterior"]["robust"] is True
-    assert not (tmp_path / "q.h5.ckpt").exists()
+    assert not out.with_name("q.h5.ckpt").exists()
     # same inputs and seed: the same numbers
-    r = runner.invoke(app, [*args[:-1], str(tmp_path / "again.h5")])
+    r = runner.invoke(app, [*base, "-o", str(tmp_path / "again.h5")])
     assert r.exit_code == 0, r.output
     np.testing.assert_array_equal(read_artifact(tmp_path / "again.h5").data["experiments"]["errors"],
                                   art.data["experiments"]["errors"])
@@ -216,15 +227,12 @@ def test_a_tiny_sweep_runs_and_reports(runner, small_kb, tmp_path):
 
 
 def test_an_interrupted_sweep_keeps_its_models_and_resumes_to_the_same_numbers(
-        runner, small_kb, tmp_path, monkeypatch):
+        runner, tiny_sweep, tmp_path, monkeypatch):
     """Ctrl-C during the adaptations: exit 130, no output, the learned models kept in the
     checkpoint and named in the message; --resume then gives the uninterrupted run's numbers."""
     from kbcli.cli import quality as cli_quality
 
-    conf = tmp_path / "q.toml"
-    conf.write_text(TINY)
-    base = ["quality", "--config", str(conf), "--keyboard", str(small_kb)]
-    r = runner.invoke(app, [*base, "-o", str(tmp_path / "whole.h5")])
+    base, whole, r = tiny_sweep  # the uninterrupted run
     assert r.exit_code == 0, r.output
     real = cli_quality.execute
 
@@ -245,7 +253,7 @@ def test_an_interrupted_sweep_keeps_its_models_and_resumes_to_the_same_numbers(
     assert r.exit_code == 0, r.output
     assert sorted(p.name for p in (tmp_path / "m").iterdir()) == ["random-120.h5", "random-40.h5"]
     np.testing.assert_array_equal(read_artifact(out).data["experiments"]["errors"],
-                                  read_artifact(tmp_path / "whole.h5").data["experiments"]["errors"])
+                                  read_artifact(whole).data["experiments"]["errors"])
     assert not (tmp_path / "q.h5.ckpt").exists()
 
 

@@ -189,10 +189,18 @@ def _fit(a, s, **params):
                         **params).fit(a, s)
 
 
-def test_reliability_estimates_match_the_measured_ones_on_random_exploration(random_samples):
+@pytest.fixture(scope="module")
+def assessed(random_samples):
+    """The model fitted on the random samples, and its assessment with seed 0: (full, model, rel)."""
     x, s = random_samples
     full = _fit(x, s)
-    model, rel = assess(full, x, s, rng=np.random.default_rng(0))
+    return (full, *assess(full, x, s, rng=np.random.default_rng(0)))
+
+
+def test_reliability_estimates_match_the_measured_ones_on_random_exploration(random_samples,
+                                                                              assessed):
+    x, s = random_samples
+    _, model, rel = assessed
     pred, true = scoring.key_maps(model, KB, 1.0)
     error_rate = 1 - scoring.accuracy_from_maps(pred, true)
     # the cross-validated mislabel rate estimates the error rate on the pad, and so does the one
@@ -231,10 +239,9 @@ def test_the_expected_mislabel_rate_is_not_fooled_by_touches_on_the_boundaries()
     assert abs(rel["expected_error"] - error_rate) < 0.04
 
 
-def test_calibration_is_chosen_from_the_grid_and_applied_to_a_copy(random_samples):
+def test_calibration_is_chosen_from_the_grid_and_applied_to_a_copy(random_samples, assessed):
     x, s = random_samples
-    full = _fit(x, s)
-    model, rel = assess(full, x, s, rng=np.random.default_rng(0))
+    full, model, rel = assessed
     grid = {**LearnedModel.calibration_grid(), **LearnedModel.fit_grid()}
     for k, v in rel.calibration.items():
         assert v in grid[k] and getattr(model, k) == v
