@@ -11,7 +11,7 @@ SEED   ?= 0
 
 JOBS   ?= 2
 
-.PHONY: help install demo test lint docs docs-serve docs-figures results results-peer results-reproduce results-quality results-default-model data data-files reproduce reproduce-ideal reproduce-earlier reproduce-ablations reproduce-own-model reproduce-reach-noise model-quality reproduce-layouts bench clean
+.PHONY: help install demo test lint docs docs-serve docs-figures results results-peer results-reproduce results-quality results-default-model data data-files reproduce reproduce-ideal reproduce-earlier reproduce-ablations reproduce-own-model reproduce-reach-noise model-quality reproduce-layouts bench fuzz clean
 
 help:
 	@echo "make demo        install, then run the main job on the embedded default model"
@@ -28,6 +28,7 @@ help:
 	@echo "make results-default-model  the paper's method and ours on the embedded default model"
 	@echo "make results-peer  kbcli's learner beside scikit-activeml's, 5 seeds (about 20 minutes on 2 cores)"
 	@echo "make bench       print the benchmark tables"
+	@echo "make fuzz        damaged artifacts, FUZZ=200 per kind (the suite tries 10)"
 	@echo "make docs        build the documentation site (site/index.html); make docs-serve serves it"
 
 $(STAMP): pyproject.toml
@@ -104,6 +105,12 @@ docs-figures: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check kbcli tests
+
+# Damaged artifacts, a longer sweep than the suite's 10 per kind: every reader and command must
+# fail in one line (exit 1) on FUZZ damaged copies of each golden artifact (minutes per 100).
+FUZZ ?= 200
+fuzz: $(STAMP)
+	KBCLI_DAMAGE_EXAMPLES=$(FUZZ) $(BIN)/pytest -q -n $(TEST_JOBS) tests/test_damaged_artifacts.py
 
 # The main job, as the robot lives it, on the embedded default model (learned in dynamics mode):
 # the keyboard moves mid-melody, the detector fires, the robot adapts and plays on.
