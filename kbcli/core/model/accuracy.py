@@ -2,19 +2,15 @@
 
 Two scores, both on a dense grid of cell centres over the keyboard's working area:
 
-- **accuracy**: the share of grid points whose sound the model predicts right. A model's class is
-  read as a key by matching its features to the keyboard's (Eq. 2, the keyboard's threshold);
-  class 0 is silence; a class that matches no key is wrong everywhere.
-- **boundary error** (px): the mean distance between the model's key edges and the true ones.
-  On the grid (cells of ``step`` px), an *edge cell* is a cell whose right or upper neighbour has
-  a different key. With P the predicted edge cells and T the true ones,
+- **accuracy**: the share of grid points whose sound the model predicts right (a model's class
+  read as a key by Eq. 2 matching; class 0 is silence; a class that matches no key is wrong).
+- **boundary error** (px): with P the model's edge cells (a cell whose right or upper neighbour
+  has a different key) and T the true ones,
 
       boundary_error = (sum_{p in P} d(p, T) + sum_{t in T} d(t, P)) / (|P| + |T|),
 
-  d(x, S) the Euclidean distance (px) from cell x to the nearest cell of S (the symmetric mean
-  boundary distance). A perfect map scores 0; a map whose straight edges all lie k px off scores
-  about k; a missing or spurious edge counts by how far it is from the nearest real one. It bounds
-  how precisely an adaptation that relies on the model can place the keyboard.
+  d(x, S) the distance (px) from cell x to the nearest cell of S: 0 for a perfect map, about k
+  for edges k px off.
 """
 
 from __future__ import annotations

@@ -1,51 +1,29 @@
 """Model classes of the instrument: one registry, one interface (``kbcli learn --model-class``).
 
 A model class is a learned model of p(sound | action) (paper Sect. III-A) that every other part of
-kbcli (the exploration, the adapter, its strategies, the play loop, the plots) uses through one
-interface, whatever the class:
+kbcli uses through one interface, whatever the class:
 
-- ``fit(actions (n, 2), perceived (n, D), targets=None) -> self``: learn from exploration samples
-  (where the finger landed, what was heard; NaN rows are silence);
+- ``fit(actions (n, 2), perceived (n, D), targets=None) -> self`` (NaN rows are silence);
 - ``predict_proba(points) -> (n, C)``, ``predict_class(points) -> (n,)``;
 - ``sample_actions(cls, n, rng) -> (n, 2)``: draws from p(action | sound) (Algorithm 2, line 3);
 - ``classify(perceived) -> (n,)``: Eq. 2 matching (0 silence, -1 unknown);
 - ``raster(step)``: :class:`~kbcli.core.model.base.ProbabilityRaster` over the working area;
-- ``boundary_sites(step, extend, phase) -> {"points", "width", ...}``: where the model places the
-  boundaries between sounds and how wide the band is that each could lie in (px): the predictive
-  uncertainty that the ``active`` exploration bisects;
+- ``boundary_sites(step, extend, phase) -> {"points", "width", ...}``: the boundaries between
+  sounds and the width (px) of the band each could lie in, which ``active`` exploration bisects;
 - attributes ``class_features_``, ``match_threshold``, ``area``, ``n_classes``, ``reach_sd_``;
 - ``to_arrays() -> dict`` and ``from_arrays(dict)``: storage as plain arrays, never pickle.
 
-Registered (:data:`MODEL_CLASSES`, a :class:`~kbcli.core.registry.Registry`; every learned class
-is a scikit-learn estimator deriving from :class:`~kbcli.core.model.pairwise.ModelBase`):
+Registered in :data:`MODEL_CLASSES`: ``lines`` (:class:`~kbcli.core.model.lines.LearnedModel`),
+``svc`` (:class:`~kbcli.core.model.svc.SVCModel`), ``forest``, ``forest-xy`` and ``knn``
+(:mod:`kbcli.core.model.classifiers`), each a scikit-learn estimator deriving from
+:class:`~kbcli.core.model.pairwise.ModelBase`; and ``exact``
+(:class:`~kbcli.core.model.base.ExactModel`), the keyboard's own geometry, not learned, whose
+``exact_map`` attribute is True (callers ask the attribute, never the class or its name).
 
-``lines`` (:class:`~kbcli.core.model.lines.LearnedModel`)
-    Keys bounded by straight lines shared across keys: exact and sample-efficient for polygon keys
-    (grid, hex, piano, polygons); it cannot bend around a round pad.
-``svc`` (:class:`~kbcli.core.model.svc.SVCModel`)
-    One scikit-learn support-vector machine per pair of neighbouring sounds (linear where a
-    straight line separates the pair's samples, RBF elsewhere), probabilities from the margin: any
-    key shape, curved boundaries included.
-
-``forest`` (:class:`~kbcli.core.model.classifiers.ForestModel`)
-    scikit-learn's random forest on the two coordinates and oblique projections: p is the share of
-    trees voting for a sound (any key shape; axis-aligned keys exactly).
-``forest-xy`` (:class:`~kbcli.core.model.classifiers.ForestXYModel`)
-    The same forest splitting on the two coordinates only: exact and sharper where every key edge
-    is horizontal or vertical (piano, grid); it staircases a slanted edge.
-``knn`` (:class:`~kbcli.core.model.classifiers.KNNModel`)
-    scikit-learn's k nearest samples, distance-weighted votes (any key shape).
-
-``exact`` (:class:`~kbcli.core.model.base.ExactModel`)
-    The keyboard's own geometry (calibration experiments, ``kbcli learn --strategy exact``): not
-    learned (``learned`` False), built from the keyboard, its ``exact_map`` attribute True (every
-    learned model's is False: callers ask the attribute, never the class or its name).
-
-Adding a class is registering a :class:`ModelClass` with ``MODEL_CLASSES.register(name, ...)``:
-a loader of the estimator class (imported lazily), which takes ``match_threshold``, ``area`` and
-its own keyword parameters and has ``from_arrays``. Fitting goes through :func:`fit_model`
-(``fit(actions, perceived)`` for every class), so anything that wraps every class (a reliability
-estimate, a calibration) has one place to hook in.
+Adding a class is registering a :class:`ModelClass` with ``MODEL_CLASSES.register(name, ...)``: a
+loader of the estimator class, which takes ``match_threshold``, ``area`` and its own keyword
+parameters and has ``from_arrays``. Fitting goes through :func:`fit_model`, the one place to hook
+in anything that wraps every class.
 """
 
 from __future__ import annotations

@@ -1,48 +1,26 @@
 """Model classes on plain scikit-learn classifiers: random forests (``forest``, ``forest-xy``) and
 k-NN (``knn``).
 
-M_INST = p(sound | action) from a general-purpose classifier fitted to the exploration samples
-(where the finger landed, what was heard), behind the same interface as the bespoke classes
-(:mod:`kbcli.core.model.lines`, :mod:`kbcli.core.model.svc`):
+M_INST = p(sound | action) from a general-purpose classifier, behind the same interface as the
+bespoke classes (:mod:`kbcli.core.model.lines`, :mod:`kbcli.core.model.svc`):
 
-1. **the sound classes** are found as every class finds them (:func:`~kbcli.core.model.sounds.
-   prepare_samples`: leader clustering with the Eq. 2 threshold; class 0 is silence);
-2. **p(sound | action)** is the classifier's ``predict_proba`` ``p`` in those classes,
-   sharpened (``p_c ** sharpen / sum_c' p_c' ** sharpen``) and then mixed with a uniform
-   ``floor``: two calibration parameters, which :func:`kbcli.core.model.reliability.assess` chooses by
-   held-out Brier score (:meth:`SklearnModel.calibration_grid`). ``sharpen`` > 1 undoes the
-   under-confidence of the forest's votes: with a deterministic instrument (ideal mode) the
-   sound is certain but within a sample spacing of a boundary, while the bootstrap spreads the
-   share of votes over a wider band around it. The forests' own ``sharpen`` is 2, which the
-   held-out choice keeps unless 4 or 8 beats it (``kbcli bench reliability``: see
-   :data:`FOREST_SHARPEN_GRID`); k-NN's is 1;
-
-   ``forest`` (:class:`ForestModel`)
-       scikit-learn's :class:`~sklearn.ensemble.RandomForestClassifier` (fully grown trees on
-       bootstrap samples, each split at the midpoint between the samples on either side): p is the
-       share of trees voting for a sound, which spreads across a boundary where the bootstrap
-       moves it (between sparse samples). The trees split on the two coordinates and
-       on ``n_directions - 2`` more projections ``x cos t + y sin t`` (t evenly spaced in [0, pi)):
-       axis-aligned splits alone fit the grid and the piano keys exactly but staircase a slanted
-       edge (hex, polygons); with oblique projections a split can follow it.
-   ``forest-xy`` (:class:`ForestXYModel`)
-       the same forest on the two coordinates only, for keys whose edges are all horizontal or
-       vertical (``auto`` chooses between the two by cross-validation).
-   ``knn`` (:class:`KNNModel`)
-       scikit-learn's :class:`~sklearn.neighbors.KNeighborsClassifier`, distance-weighted votes of
-       the ``n_neighbors`` nearest samples: any key shape, no fitting beyond the samples.
-
-3. **boundary sites** for active exploration (:meth:`SklearnModel.boundary_sites`): wherever the
-   predicted class changes between neighbouring cells of a 2 px grid over the working area (shifted
-   by ``phase``), with the width of the band the boundary is known to lie in there (the distance to
-   the nearest sample of either sound, summed), as the ``svc`` class does between its straddling
-   edges.
+1. **the sound classes** are found as every class finds them
+   (:func:`~kbcli.core.model.sounds.prepare_samples`; class 0 is silence);
+2. **p(sound | action)** is the classifier's ``predict_proba`` ``p``, sharpened
+   (``p_c ** sharpen / sum_c' p_c' ** sharpen``) and mixed with a uniform ``floor``, the two chosen
+   by held-out Brier score (:meth:`SklearnModel.calibration_grid`; :data:`FOREST_SHARPEN_GRID`).
+   ``forest`` (:class:`ForestModel`) is a random forest on the two coordinates and oblique
+   projections ``x cos t + y sin t``, so that a split can follow a slanted edge; ``forest-xy``
+   (:class:`ForestXYModel`) the same on the two coordinates only; ``knn`` (:class:`KNNModel`)
+   distance-weighted votes of the ``n_neighbors`` nearest samples;
+3. **boundary sites** for active exploration (:meth:`SklearnModel.boundary_sites`): where the
+   predicted class changes on a 2 px grid, with the width of the band the boundary is known to lie
+   in there.
 
 Storage without pickle: :meth:`SklearnModel.to_arrays` keeps the samples, their classes and the
-hyper-parameters (``random_state`` included); :meth:`SklearnModel.from_arrays` refits the
-classifier, which is deterministic for a fixed ``random_state`` and ``n_jobs = 1``. Sampling
-p(action | sound), the raster and the confusion factor are the base's
-(:class:`~kbcli.core.model.pairwise.ModelBase`), from :meth:`SklearnModel.predict_proba`.
+hyper-parameters (``random_state`` included); :meth:`SklearnModel.from_arrays` refits
+deterministically. Sampling, the raster and the confusion factor are the base's
+(:class:`~kbcli.core.model.pairwise.ModelBase`).
 """
 
 from __future__ import annotations

@@ -1,51 +1,27 @@
 """The ``lines`` model class: M_INST = p(sound, action) with straight boundaries, from exploration.
 
-The robot touches the pad at actions a_i (the fingertip positions it feels, proprioception) and
-hears sounds s_i (feature vectors, NaN for silence). From these alone (it never sees the
-simulator's key ids) the model
+The robot touches the pad at actions a_i (the fingertip positions it feels) and hears sounds s_i
+(feature vectors, NaN for silence); it never sees the simulator's key ids. The model
 
 1. **finds the sound classes** by leader clustering of the perceived features with the matching
-   threshold of Eq. 2: a sound further than the threshold (Manhattan) from every class found so far
-   opens a new class; classes whose mean sounds end up within the threshold are merged. Class 0 is
-   silence; the others are sorted by their features, so ids do not depend on the sample order.
-2. **models p(sound | action) with straight boundaries** (the keys are polygons):
+   threshold of Eq. 2 (:mod:`kbcli.core.model.sounds`); class 0 is silence, the others sorted by
+   their features;
+2. **models p(sound | action) with straight boundaries** (the keys are polygons): each pair of
+   sounds' straddling Delaunay edges get the max-margin line separating their ends, split into
+   pieces where no line does; pieces whose lines nearly coincide (``merge_angle``,
+   ``merge_offset``) are merged into shared lines (:mod:`kbcli.core.model.pieces`). At an action
+   a, the candidates are the classes of its ``n_neighbors`` nearest samples; a pair's contest is
+   ``p(a on i's side) = Phi(s / sigma)``, s the signed distance to the line and sigma the width of
+   the band between the two sides' hulls over sqrt(12) (:mod:`kbcli.core.model.boundaries`;
+   ``sd_scale``, ``min_sd``, ``max_sd``, ``noise_sd``). Each candidate's log-score sums log 2p over
+   its contests; p(sound | a) is their softmax, floored at ``floor``: the paper's *confusion
+   factor* (Sect. III-E). The landing scatter (``reach_sd_``) is estimated, not folded in;
+3. **samples actions for a sound**, p(action | sound) ~ p(sound | action) with p(action) uniform
+   over the working area (Algorithm 2, line 3), by rejection sampling.
 
-   - *straddling edges*: a Delaunay edge of the samples whose ends were heard as two different
-     sounds i < j crosses their boundary (edges with a third sound's sample in the circle on the
-     edge as diameter are dropped: they may cross that sound's region instead);
-   - *pieces*: the straddling edges of each pair (i, j) get the max-margin line separating their
-     two ends (the hard-margin linear SVM, solved exactly in 2-D as the perpendicular bisector of
-     the closest points of the two convex hulls); when no line separates them (silence around a
-     corner key bends) they are split by the direction in which they cross, recursively;
-   - *shared lines*: pieces whose lines nearly coincide (within ``merge_angle`` degrees and
-     ``merge_offset`` px) are merged, closest first, when one line still separates all their
-     samples (the edge between keys of one column continues across rows); a lone piece whose
-     edges are all crossed by shared lines is re-expressed with them (a corner key's L). One line
-     fitted to every sample along an edge is far better determined than per-pair lines;
-   - *probability*: at an action a (a finger position), the candidate sounds are the classes of
-     its ``n_neighbors`` nearest samples (one class: p is one-hot). For two candidates with a
-     boundary, s is the signed distance (px) of a to its piece's line and
-     ``p(a on i's side) = Phi(s / sigma)``, sigma the line's uncertainty at a: the width of the
-     band between the hulls of the samples on either side (where any separating line must pass),
-     over sqrt(12), growing beyond the samples, times ``sd_scale`` and clipped to [``min_sd``,
-     ``max_sd``], combined with the label noise ``noise_sd`` (``hypot``). A pair with
-     several pieces: of the pieces near a (within ``piece_reach`` px of the nearest), the sound
-     inside (a corner key; whichever explains the pair's samples better) must be on its side of
-     all, the other of any. Each candidate's log-score sums log 2p over its pairwise contests (log
-     space, ``log_ndtr``; the factor 2 makes an undecided contest neutral); p(sound | a) is their
-     softmax, floored at ``floor``. Its spread across a boundary is the paper's
-     *confusion factor* (Sect. III-E). The landing scatter of a reach is estimated
-     (``reach_sd_``) but not folded in: a caller that knows only where it aimed blurs by it.
-3. **samples actions for a sound**, p(action | sound) ~ p(sound | action) p(action) with p(action)
-   uniform over the working area (Bayes' rule; Algorithm 2, line 3), by rejection sampling.
-
-Step 1 is :mod:`kbcli.core.model.sounds`, the pieces and shared lines :mod:`kbcli.core.model.pieces`, the
-bands :mod:`kbcli.core.model.boundaries`, and the pairwise contests with step 3 the base class
-:class:`~kbcli.core.model.pairwise.ModelBase` (shared with the ``svc`` class). The estimator is a
-scikit-learn one (``fit`` returns ``self``, fitted attributes end in ``_``, predicting before
-fitting raises, ``get_params`` / ``set_params`` / ``clone``) and round-trips exactly through
-:meth:`LearnedModel.to_arrays` / :meth:`LearnedModel.from_arrays` (the fitted lines are stored, not
-refitted).
+The pairwise contests and step 3 are the base class :class:`~kbcli.core.model.pairwise.ModelBase`
+(shared with ``svc``): a scikit-learn estimator that round-trips exactly through
+:meth:`LearnedModel.to_arrays` / :meth:`LearnedModel.from_arrays` (the fitted lines are stored).
 """
 
 from __future__ import annotations
@@ -113,9 +89,7 @@ class LearnedModel(ModelBase):
     n_neighbors : int
         Samples looked at around an action to find the sounds it could make.
     min_sd, max_sd : float
-        Bounds (px) of a boundary line's uncertainty sigma_b in p(sound | action). A line known
-        only from samples 30 px apart is uncertain by about 9 px: the bound must not make it sure
-        (a 4 px bound made weak models confidently wrong, expected calibration error 0.10-0.19).
+        Bounds (px) of a boundary line's uncertainty sigma_b in p(sound | action).
     sd_scale : float
         Factor on every boundary's band-width uncertainty (calibration, see
         :mod:`kbcli.core.model.reliability`; 1: the band as it is).

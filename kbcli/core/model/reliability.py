@@ -1,50 +1,28 @@
 """How good a learned model is, estimated from its own samples; and its calibration.
 
-The robot cannot compare its model with the instrument (it never sees the keys), but it can ask
-how well the model predicts touches it has not been fitted on. With ``K``-fold cross-validation
-over the exploration samples (each fold's model fitted on the other folds), this module estimates
+The robot never sees the keys, but it can ask how well the model predicts touches it was not
+fitted on. With ``K``-fold cross-validation over the exploration samples this module estimates
 
-- ``cv_error``: the **mislabel rate of held-out touches**, the share of them whose sound is not
-  the one the fold's model finds most probable (it reads high for active exploration, whose touches
-  sit on the boundaries, where leaving one out moves the boundary);
+- ``cv_error``: the mislabel rate of held-out touches (high for active exploration, whose touches
+  sit on the boundaries);
 - ``cv_log_loss``: the mean ``-log p(heard sound | touch)`` of held-out touches (nats);
-- ``cv_ece``: the expected calibration error of the held-out predictions (15 equal-width bins of
-  the top probability: ``sum_b n_b / n |accuracy_b - confidence_b|``), debiased for the binomial
-  noise of a few hundred outcomes (:func:`expected_calibration_error`);
-- ``boundary_error``: the **cross-validated boundary error** (px): the symmetric mean distance
-  (:func:`kbcli.core.model.accuracy.boundary_error`) between the sound boundaries of each fold's model
-  and those of the model fitted on every sample, on a 2 px grid over the working area, averaged
-  over folds: how far the boundaries move when a fifth of the touches is left out, a stand-in for
-  how far they are from the truth;
-- ``expected_error``: the **mislabel rate the calibrated model expects on the pad**, one minus its
-  top probability averaged over a 2 px grid of the working area: right when the model is
-  calibrated (which the held-out touches check, as ``cv_ece``), and, unlike ``cv_error``, not
-  biased by where exploration put its touches (``kbcli bench reliability`` prints both against
-  the truth);
+- ``cv_ece``: the expected calibration error of the held-out predictions, debiased
+  (:func:`expected_calibration_error`);
+- ``boundary_error``: how far (px) the fold models' sound boundaries lie from the full model's
+  (:func:`kbcli.core.model.accuracy.boundary_error`, 2 px grid), a stand-in for the distance to the
+  truth;
+- ``expected_error``: the mislabel rate the calibrated model expects on the pad, one minus its top
+  probability averaged over a 2 px grid, not biased by where exploration put its touches;
 
-and **calibrates** p(sound | action): among a few values of the model's calibration parameters
-(for the line model: ``sd_scale`` on its boundary uncertainty, ``noise_sd`` for label noise near
-boundaries, ``floor`` spread evenly over all sounds; for ``forest``, ``forest-xy`` and ``knn``: ``sharpen``, an
-exponent on their votes, and ``floor``), it keeps those with the lowest held-out
-Brier score ``sum_c (p_c - [c = heard])^2`` (a proper scoring rule), weighted for the distance
-shift below, provided they beat the model's own settings by more than one standard error of the
-paired difference; otherwise it keeps the model's own (:func:`choose_calibration`). A model whose
-probabilities match how often it is right is what lets the adapter weigh a touch by what it can
-really say.
+and **calibrates** p(sound | action): among a few values of the class's calibration parameters it
+keeps those with the lowest held-out Brier score, weighted for the distance shift
+(:mod:`~kbcli.core.model.heldout`), when they beat the model's own settings by more than one
+standard error of the paired difference (:func:`choose_calibration`; why: ``docs/design-notes.md``).
 
-Held-out touches are harder than the points the model will be asked about: for the estimates
-every held-out touch is weighted by the area it stands for, and for the choice of calibration by
-the density ratio of its distance to the samples (:mod:`~kbcli.core.model.heldout`). Even so a
-held-out touch is harder than a point of the pad at the same distance, and a few hundred of them
-are a noisy judge, hence the one-standard-error margin (``docs/design-notes.md``). The Brier
-score, bounded, is not ruled by the rare confident miss as the log-likelihood is.
-
-Any learned model class works (a scikit-learn estimator, :class:`~kbcli.core.model.pairwise.ModelBase`):
-the fold models are ``clone(model).set_params(**fit_params).fit(...)``. A class may expose
-``calibration_grid()`` (a dict of parameter name -> candidate values read at prediction time,
-applied with ``set_params`` on a copy of the fitted model) and ``fit_grid()`` (parameters of the
-fit itself, such as the line model's label-noise tolerance: the model is refitted with each) — or
-neither (then only the reliability is estimated).
+Any learned model class works (fold models: ``clone(model).set_params(**fit_params).fit(...)``). A
+class may expose ``calibration_grid()`` (parameter name -> candidate values read at prediction
+time) and ``fit_grid()`` (parameters of the fit itself, refitted with each), or neither (then only
+the reliability is estimated).
 """
 
 from __future__ import annotations

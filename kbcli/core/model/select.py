@@ -1,31 +1,18 @@
 """``--model-class auto``: the model class chosen by its own cross-validated score.
 
-No class is best on every layout: straight lines shared across keys (``lines``) are exact on the
-grid; a random forest on oblique projections (``forest``) wins on the piano's axis-aligned keys and
-on hex; pairwise SVMs (``svc``) bend around round pads. The robot does not know the layout, and
-must never be told by the simulator's ground truth, so it asks its own samples: with ``K``-fold
-cross-validation (the same folds for every candidate; each fold's model fitted on the other folds),
-each candidate class is scored by its **held-out mislabel rate**, every held-out touch weighted by
-the area it stands for (:func:`kbcli.core.model.heldout.area_weights`: active exploration puts most
-touches near boundaries, and the weights make them describe the working area as a uniform grid
-would).
-
-The held-out rates of two classes differ by a few touches out of hundreds, so the lowest rate is a
-noisy choice. The choice is therefore a sequence of paired tests
+No class is best on every layout, and the robot must not be told the layout, so it asks its own
+samples: with ``K``-fold cross-validation (the same folds for every candidate) each candidate class
+is scored by its held-out mislabel rate, every held-out touch weighted by the area it stands for
+(:func:`kbcli.core.model.heldout.area_weights`). The choice is a sequence of paired tests
 (:func:`prefer`): the classes are taken in the order they declare (``ModelClass.auto``,
-:func:`kbcli.core.model.classes.ranked`), and a class replaces the one
-kept so far only when its held-out mislabel rate is lower by more than :data:`SWITCH_Z` standard
-errors of the paired, area-weighted difference (the same touches held out for both). The forest
-on the coordinates alone (``forest-xy``) is tested right after the oblique forest (what these tests
-chose on each layout: ``docs/design-notes.md``, Model classes).
+:func:`kbcli.core.model.classes.ranked`), and a class replaces the one kept so far only when its
+rate is lower by more than :data:`SWITCH_Z` standard errors of the paired, area-weighted
+difference (what it chose on each layout: ``docs/design-notes.md``, Model classes).
 
-Exploration needs a model while it explores, before the choice can be made: under ``auto`` it
-starts with the first class that declares it explores (``ModelClass.explores``: the forest, fast
-to refit, any key shape), and every :data:`RESELECT` reaches (but at the end) it re-chooses the
-class it explores with among those by the same cross-validation on the samples so far
-(:func:`explore_choice`): the class that predicts the samples best also places the boundary bands
-best, so its bisections are worth more. The final model is refitted with the
-chosen class on every sample (:func:`choose`).
+While exploring, under ``auto`` the model is of the first class that declares it explores
+(``ModelClass.explores``), re-chosen every :data:`RESELECT` reaches among those by the same
+cross-validation (:func:`explore_choice`). The final model is refitted with the chosen class on
+every sample (:func:`choose`).
 """
 
 from __future__ import annotations

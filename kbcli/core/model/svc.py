@@ -1,58 +1,32 @@
 """A general learned model of the instrument on scikit-learn: pairwise support-vector machines.
 
 M_INST = p(sound, action) for keys of any shape (the ``svc`` model class; ``lines``,
-:mod:`kbcli.core.model.lines`, assumes straight key edges). From the exploration samples alone (where
-the finger landed, what was heard), the model
+:mod:`kbcli.core.model.lines`, assumes straight key edges). From the exploration samples alone the
+model
 
-1. **finds the sound classes** as the ``lines`` model does (:func:`~kbcli.core.model.sounds.
-   discover_classes`: leader clustering of the perceived features with the Eq. 2 threshold; class 0
-   is silence);
-2. **finds the neighbouring sounds**: a Delaunay edge of the samples whose ends were heard as two
-   different sounds i < j crosses their boundary (:func:`~kbcli.core.model.sounds.straddling_edges`);
-3. **fits one scikit-learn** :class:`~sklearn.svm.SVC` **per pair of neighbouring sounds** on the
-   samples of the two sounds within ``local_radius`` px of their straddling edges: a hard-margin
-   *linear* machine when a straight line separates those samples (``linear_pairs``; a linear
-   program decides), else an RBF kernel of length scale ``length_scale`` px with a near-hard margin
-   ``C``. Two convex keys meet along a straight edge (hex keys, piano keys side by side, polygon
-   keys), and the max-margin line between their samples is that edge, straight to its ends: where
-   three keys meet, the straight pair boundaries cross in a sharp corner, which an RBF boundary
-   would round off over about a length scale. Where no line separates the pair's samples but a
-   circle does and one of the two sounds is an island in the other (at least :data:`ISLAND` of its
-   straddling edges are with it: a round pad in silence; ``circle_pairs``, the same linear program
-   on the features ``(u, v, u^2 + v^2)``), a hard-margin machine on those features: its boundary is
-   the circle midway between the samples inside and out. (A key at the edge of a hex keyboard
-   meets its neighbours too: circles there would not change the map but flatter the SVMs'
-   cross-validated score against the forest's, whose map is better, :mod:`kbcli.core.model.select`.)
-   Elsewhere (the silence around the keyboard, an L-shaped white key around a black key) the RBF
-   boundary bends with the keys.
-   Fitting pairs locally keeps each machine small (tens of support vectors), so predicting a
-   raster of the working area stays cheap;
-4. **reads probabilities off the margin**: at an action a whose ``n_neighbors`` nearest samples
-   were heard as several sounds, each pair (i, j) of them with a machine contests a: with f(a) its
-   decision value (+-1 on the margin's support vectors, the nearest samples on either side of the
-   boundary), ``p(a on j's side) = Phi(sqrt(3) f(a))``: the boundary is taken to lie anywhere in the
-   margin, uniformly (standard deviation 1 / sqrt(3) of the half-margin, as the ``lines`` model's
-   band width / sqrt(12)). A candidate's log-score sums its contests (``log_ndtr``); p(sound | a) is
-   their softmax. Where every neighbour was heard as one sound, that sound is certain. Far from the
-   samples a machine was fitted on (beyond half a length scale) its decision fades into the
-   nearest-sample rule: an RBF machine there only extrapolates its intercept, which would paint
-   blobs of a key into the silence around the keyboard (and a line would run on past its edge).
+1. **finds the sound classes** as ``lines`` does (:func:`~kbcli.core.model.sounds.discover_classes`;
+   class 0 is silence);
+2. **finds the neighbouring sounds**: Delaunay edges of the samples whose ends were heard as two
+   different sounds (:func:`~kbcli.core.model.sounds.straddling_edges`);
+3. **fits one** :class:`~sklearn.svm.SVC` **per pair of neighbouring sounds** on the pair's samples
+   within ``local_radius`` px of their straddling edges: a hard-margin *linear* machine when a line
+   separates them (``linear_pairs``), else, when a circle does and one sound is an island in the
+   other (:data:`ISLAND`; ``circle_pairs``), a hard-margin machine on ``(u, v, u^2 + v^2)``, else an
+   RBF kernel of length scale ``length_scale`` px with a near-hard margin ``C``;
+4. **reads probabilities off the margin**: each pair (i, j) among the sounds of an action's
+   ``n_neighbors`` nearest samples contests it with ``p(a on j's side) = Phi(sqrt(3) f(a))``, f the
+   decision value (the boundary taken as uniform within the margin); a candidate's log-score sums
+   its contests and p(sound | a) is their softmax. Where every neighbour was heard as one sound,
+   that sound is certain; beyond half a length scale from a machine's samples its decision fades
+   into the nearest-sample rule.
 
-Active exploration (:mod:`kbcli.core.model.explore`) reads the model's predictive uncertainty through
-:meth:`SVCModel.boundary_sites`: points on the predicted boundaries (where a pair's machine changes
-sign along its straddling edges, and where the predicted class changes on a 2 px grid), each with
-the width of the band the boundary is known to lie in there (the distance to the nearest sample of
-either sound, summed): a reach at the widest site bisects the widest band.
-
-Defaults: ``length_scale`` 25 px, ``C`` 1000, linear and circle pairs on (how they were chosen:
-``docs/design-notes.md``, Model classes).
+:meth:`SVCModel.boundary_sites` gives active exploration (:mod:`kbcli.core.model.explore`) points on
+the predicted boundaries, each with the width of the band the boundary is known to lie in. Defaults
+and how they were chosen: ``docs/design-notes.md``, Model classes.
 
 Storage without pickle: :meth:`SVCModel.to_arrays` keeps the samples, the classes and the
-hyper-parameters; :meth:`SVCModel.from_arrays` refits the machines, which is deterministic (libsvm's
-solver has no randomness when probabilities are not asked of it). The estimator is a scikit-learn
-one (:class:`~kbcli.core.model.pairwise.ModelBase`: ``fit`` returns ``self``, fitted attributes end in ``_``,
-predicting before fitting raises, ``get_params`` / ``set_params`` / ``clone``); the candidates and
-their softmax are the base's, shared with the ``lines`` class.
+hyper-parameters; :meth:`SVCModel.from_arrays` refits the machines deterministically. The estimator
+is a scikit-learn one (:class:`~kbcli.core.model.pairwise.ModelBase`).
 """
 
 from __future__ import annotations

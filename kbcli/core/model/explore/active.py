@@ -1,30 +1,19 @@
 """``active``: cover the working area, then bisect the widest boundary band.
 
-1. *Cover.* First a hexagonal lattice of spacing ``explore_radius * sqrt(3)`` (randomly shifted
-   and turned, visited in farthest-point order), whose covering radius is ``explore_radius``;
-   then, while some point of the working area is further than ``explore_radius`` from every
-   landing (near the area's border), the furthest such point. A sound region nobody has heard
-   holds an empty disc, so covering to radius r finds every region that contains a disc of
-   radius r (a 50 px key holds one of 25 px), with about area / (2.6 r^2) reaches.
-2. *Bisect the widest boundary band.* Every model class (:mod:`kbcli.core.model.classes`)
-   reports its predictive uncertainty as ``boundary_sites``: points on the boundaries it predicts
-   between sounds, each with the width (px) of the band the boundary could lie in there, where the
-   model cannot tell which sound an action makes (the paper's confusion factor, Sect. III-E:
-   p(i | a) is neither 0 nor 1 there). ``lines`` (:mod:`kbcli.core.model.lines`) places each
-   boundary on a straight line that must pass between the samples heard on either side, the band
-   between their hulls, with sites every 1 px along every boundary piece (and 25 px past its
-   ends); ``svc`` (:mod:`kbcli.core.model.svc`) puts its sites where its machines change sign, the
-   band between the nearest samples of either sound. The next target is the site with the widest
-   band (capped at twice the distance to the nearest landing: a reach already made there said what
-   it could). A batch is chosen greedily: after a pick of width w every site's width is capped at
+1. *Cover.* A hexagonal lattice of spacing ``explore_radius * sqrt(3)`` (randomly shifted and
+   turned, visited in farthest-point order), then, while some point of the working area is further
+   than ``explore_radius`` from every landing, the furthest such point: every sound region holding
+   a disc of radius ``explore_radius`` is heard.
+2. *Bisect the widest boundary band.* Every model class reports its predictive uncertainty as
+   ``boundary_sites`` (:mod:`kbcli.core.model.classes`): points on its predicted boundaries, each
+   with the width (px) of the band the boundary could lie in (the paper's confusion factor, Sect.
+   III-E). The next target is the site with the widest band, capped at twice the distance to the
+   nearest landing; a batch is chosen greedily, a pick of width w capping every site's width at
    w / 2 + its distance to the pick.
 
-Why: the misclassified area along a boundary is its band width integrated along it, so the most
-useful reach is where the band is widest; a reach in the middle of the band lands on one side or
-the other and halves the band there (bisection), and because one line is fitted to all the samples
-along an edge (and along edges that continue each other, across keys), a few bisections at the
-ends of a long edge pin it down everywhere. Random reaches spend most of the budget inside regions
-whose sound is already known (``kbcli bench learn`` compares the two).
+A reach in the middle of a band lands on one side or the other and halves it there, and the
+misclassified area along a boundary is its band width integrated along it (``kbcli bench learn``
+compares this with random reaches).
 """
 
 from __future__ import annotations
