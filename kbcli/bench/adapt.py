@@ -1,48 +1,27 @@
-"""Benchmark of the adaptation (issue 5; paper Sect. IV-A, IV-B): sample efficiency and speed.
+"""Benchmark of the adaptation (paper Sect. IV-A, IV-B): sample efficiency and speed.
 
-On a layout's default keyboard (the 4 x 8 grid of 50 px keys unless told otherwise), ``ideal`` mode, ``experiments`` runs per displacement
-category and strategy, each run ``max_steps`` observations. True displacements come from
-:func:`kbcli.stages.perturb.draw` (the same categories as ``kbcli perturb``: the largest per-axis
-displacement in (0, 10], (10, 20] or (20, 40] px; rigid draws also turn by up to 5 degrees); run
-``i`` of a category uses the same displacement and the same seed (``SeedSequence(seed).spawn(n)``)
-for every strategy (a paired design). The categories are :mod:`kbcli.stages.perturb`'s: the
-Euclidean norm of the translation in (0, 10], (10, 20] or (20, 40] px. Per strategy and category it
-reports the median observations until the error is below 4, 2, 1, 0.5 px (first step below; runs
-that never get there within T count as T + 1, and how many never do), the RMSE at steps 1, 2, 3, 5,
-10, 20, 40, the p-value of the Wilcoxon signed-rank test of those counts against ``random`` on the
-paired runs (:func:`kbcli.core.adaptation.stats.signed_rank_pvalues`; the smallest p-value ``n`` pairs can
-give is ``2 / 2^n``) and the median milliseconds per step (decision plus update).
-
-For the rigid family a threshold of ``t`` px also asks the angle to be within ``t / 2`` degrees
-(1 px and 0.5 degree, the issue's target): the counted error is ``max(px error, 2 * angle error)``.
+On a layout's default keyboard (``--layout``; the 4 x 8 grid of 50 px keys unless told otherwise)
+or a learned model's own, ``ideal`` mode, ``experiments`` runs per displacement category and
+strategy, each run ``max_steps`` observations. True displacements come from
+:func:`kbcli.stages.perturb.draw` (its size categories); run ``i`` of a category uses the same
+displacement and seed for every strategy (a paired design). Per strategy and category it reports
+the median observations until the error is below 4, 2, 1, 0.5 px (runs that never get there
+within T count as T + 1), the RMSE at steps 1, 2, 3, 5, 10, 20, 40, the Wilcoxon signed-rank
+p-value of those counts against ``random`` (:func:`kbcli.core.adaptation.stats.signed_rank_pvalues`)
+and the median milliseconds per step. For the rigid family a threshold of ``t`` px also asks the
+angle to be within ``t / 2`` degrees.
 
 Sections (``--section``):
 
-- ``exact``: the exact model, translation, no reach noise (estimator quality alone);
-- ``noise``: 2 px reach noise, the robot knowing only where it *aimed* (``feedback = aim``: its
-  likelihood is blurred by the noise); plus infogain knowing where it landed, for reference;
+- ``exact``: the exact model, translation, no reach noise;
+- ``noise``: 2 px reach noise, the robot knowing only where it *aimed* (``feedback = aim``); plus
+  infogain knowing where it landed;
 - ``rigid``: the rigid family (angles up to 5 degrees);
-- ``kde``: the paper's KDE posterior (Eq. 7) against the likelihood posterior; and, with a learned
-  model (``--model``, default ``data/default-model.h5`` when present), the speed of one KDE step
-  (:func:`kde_speed`: Algorithm 2's binning and FFT plus the posterior update, with the per-class
-  samples drawn once) against a likelihood step, in ms;
-- ``learned``: a learned model (``--model``, any model class), with its boundary error beside the
-  final error; its map softened by ``model_blur`` (default: 1 px, the adapter's default for learned
-  models) and, for reference, infogain on the unsoftened map;
+- ``kde``: the paper's KDE posterior (Eq. 7) against the likelihood posterior, and with a learned
+  model the speed of one KDE step against a likelihood step (:func:`kde_speed`);
+- ``learned``: a learned model (``--model``), its boundary error beside the final error, its map
+  softened by ``model_blur`` and, for reference, infogain on the unsoftened map;
 - ``learned-rigid``: the learned model with the rigid family.
-
-Every section runs on one keyboard: the default keyboard of ``layout`` (grid, hex, piano, pads,
-polygons; ``kbcli bench adapt --layout``), or the learned model's own keyboard.
-
-Measured before the size categories became Euclidean and the test paired (seed 0, 50 runs per row, shared 2-core machine; medians to < 1 px for small / medium /
-large): exact model, infogain 6 / 6 / 5 and active 7 / 7 / 6 observations, random 27 / 22 / 23 of 50
-runs never within 40; p <= 1e-13 at 1 px; about 0.7-1 ms per step. 2 px noise, aim-only: infogain
-RMSE at step 20 0.97 / 1.01 / 0.90 px (near the information limit of a 2 px-blurred edge; with
-landed feedback 0.41 / 0.29 / 0.36). Rigid: infogain 8 / 8 / 7, active 10 / 10 / 9 (to 1 px and 0.5
-deg), 27-34 ms per step. KDE posterior: infogain 6 / 6 / 5, about 5 ms per step. ``kbcli learn``'s
-default model (800 active reaches, 0.15 px boundary error): infogain 5 / 4 / 4 to < 2 px, final
-0.23 px. A 400-reach random model (4.15 px boundary error): infogain drifts to 14-16 px with the
-map unsoftened or softened by 1 px (worse than random, 4-5 px), 2.6 px softened by 4 px.
 """
 
 from __future__ import annotations

@@ -1,29 +1,22 @@
 """Benchmark of the failure detectors (Sect. III-C) against river's drift detectors.
 
-Streams of MATCH (0) / NO_MATCH (1) results are simulated as Bernoulli sequences: a pre-change
-failure rate ``p_pre`` (the learned model's failure rate, default 0.01), then, from a random step,
-a post-change rate. The post-change rate of each stream is that of the melody player
-(Algorithm 1) after a random displacement of the displacement category, computed with the true
-geometry (:func:`kbcli.core.playing.play.expected_failure_rate`), or given explicitly.
+Streams of MATCH (0) / NO_MATCH (1) results are Bernoulli sequences: a pre-change failure rate
+``p_pre``, then, from a random step, the post-change rate of the melody player after a random
+displacement of the category (:func:`kbcli.core.playing.play.expected_failure_rate`), or a given
+one.
 
-Every detector is first *tuned* on separate change-free streams: its threshold (ours) or its
-sensitivity parameter (river's: DDM ``drift_threshold``, FHDDM ``confidence_level``, ADWIN
-``delta``) is set to the most sensitive value whose false-alarm rate is at most ``fa_target`` per
-10,000 actions. The rate is estimated as alarms per action over the tuning streams, each stream
-stopped at its first alarm (a detector restarts after an alarm, so alarms form a renewal process
-and this is the alarm rate of a detector that runs forever). Then all detectors run, with restarts,
-on the same evaluation streams: false alarms are alarms before the change (per 10,000 pre-change
-actions); the delay is the number of post-change results seen at the first alarm after the change;
-a detection later than ``horizon`` results is missed. Delay percentiles count misses as infinite.
+Every detector is first *tuned* on change-free streams: its threshold (ours) or sensitivity
+parameter (DDM ``drift_threshold``, FHDDM ``confidence_level``, ADWIN ``delta``) is set to the most
+sensitive value whose false-alarm rate (alarms per action, each stream stopped at its first alarm)
+is at most ``fa_target`` per 10,000 actions. Then all detectors run, with restarts, on the same
+evaluation streams: false alarms per 10,000 pre-change actions, and the delay, the post-change
+results seen at the first alarm after the change (later than ``horizon``: missed, infinite in the
+percentiles).
 
-river (``pip install river``) is an optional dependency: it is imported only here. River's FHDDM
-flags a *drop* of the mean of its input (it was designed on prediction accuracy, although its
-docstring says 1 = error), so it is fed successes (1 = MATCH); DDM and ADWIN are fed failures.
-ADWIN runs with ``clock=1`` (it checks for a change after every value rather than every 32). With
-DDM's default ``warm_start`` of 30 and a failure rate of 0.01 the warm-up often holds no failure,
-its minimum standard deviation is then 0 and the first failure fires, so no ``drift_threshold``
-reaches 1 false alarm per 10,000 actions: DDM is tuned with warm-ups of 1, 2, 3, 5, 10 times ours
-(``n_lt + n_st``), the first one for which some ``drift_threshold`` reaches the target.
+river is an optional dependency, imported only here. Its FHDDM flags a drop of its input's mean,
+so it is fed successes (1 = MATCH); DDM and ADWIN are fed failures; ADWIN runs with ``clock=1``.
+DDM is tuned with warm-ups of 1, 2, 3, 5, 10 times ours (``n_lt + n_st``), the first for which some
+``drift_threshold`` reaches the target (its default warm-up of 30 often holds no failure at 0.01).
 """
 
 from __future__ import annotations

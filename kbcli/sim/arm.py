@@ -6,35 +6,23 @@ forearm's end. A reach to a target point on the pad:
 
 1. checks the target is inside the annular workspace ``|l1 - l2| <= r <= l1 + l2`` (targets outside
    raise :class:`~kbcli.errors.OutOfReachError`; they are never clipped);
-2. computes joint targets by analytic inverse kinematics (always the same elbow branch, q2 > 0);
-3. with ``reach_noise > 0``, adds motor set-point noise: a joint offset ``J^-1 e`` with
-   ``e ~ N(0, reach_noise^2 I)`` (J the arm Jacobian at the target), so that the fingertip scatters
-   isotropically by ``reach_noise`` px around the target;
-4. drives both joints with pymunk ``SimpleMotor`` constraints used as servos: every physics step
-   (``DT`` s) the motor rate is set by a proportional controller on the joint-angle error
-   (``rate = KP * error``, clipped to ``MAX_RATE``), the motor torque is bounded by ``MAX_TORQUE``;
-5. steps the physics until the fingertip settles (joint errors and speeds below tolerance, or
-   ``MAX_STEPS``) and returns where the fingertip actually is, read from the simulated bodies.
+2. computes joint targets by analytic inverse kinematics (always the elbow branch q2 > 0);
+3. with ``reach_noise > 0``, offsets the joint targets by ``J^-1 e``, ``e ~ N(0, reach_noise^2 I)``,
+   so that the fingertip scatters isotropically by ``reach_noise`` px around the target;
+4. drives both joints with pymunk ``SimpleMotor`` servos (``rate = KP * error``, clipped to
+   ``MAX_RATE``, torque bounded by ``MAX_TORQUE``), one physics step every ``DT`` s;
+5. steps until the fingertip settles (or ``MAX_STEPS``) and returns where it actually is.
 
 With an arm preset that has finite servo gains (``ArmConfig.kp``, :mod:`kbcli.sim.arms`), step 4
-is replaced by a torque-level PD servo ``tau = kp * e - kd * w`` (bounded by ``max_torque``,
-applied as body torques, the elbow's reaction on the upper arm included) against joint friction:
-the two ``SimpleMotor`` constraints are kept at rate 0 with ``max_force = friction``, the way
-pymunk models rotational friction, so a joint sticks once the servo torque no longer beats it and
-stops short of its target by up to ``friction / kp`` rad, on the side it came from. The servo
-drives the joints' *measured* angles (true + ``proprio_bias``) to their targets, so an encoder
-bias moves the landing; the reach ends when both joints are still, or after ``settle_time``.
-Where the robot feels it landed is the forward kinematics of its encoder readings at the end
+is a torque-level PD servo ``tau = kp * e - kd * w`` (bounded by ``max_torque``) against joint
+friction (the motors kept at rate 0 with ``max_force = friction``), driving the joints' *measured*
+angles (true + ``proprio_bias``) until both are still, or after ``settle_time``. Where the robot
+feels it landed is the forward kinematics of its encoder readings
 (:func:`kbcli.sim.kinematics.felt_positions`).
 
-Each reach starts from the pose the previous one ended in (a real arm does not teleport); the start
-joint angles of the last batch are kept in :attr:`DynamicsReacher.last_start_angles`, and
-:meth:`DynamicsReacher.reset` puts the arm back in a given pose, so a run is reproducible from its
-seed and its first pose. One pymunk ``Space`` is built once and reused for every reach.
-
-pymunk 7 API notes: ``Space.step``, ``Body.angle``/``angular_velocity``, ``Body.local_to_world``
-and ``SimpleMotor.rate``/``max_force`` are used; ``SimpleMotor(a, b, rate)`` keeps
-``a.angular_velocity - b.angular_velocity == rate``.
+Each reach starts from the pose the previous one ended in; the start joint angles of the last batch
+are kept in :attr:`DynamicsReacher.last_start_angles`, and :meth:`DynamicsReacher.reset` puts the
+arm back in a given pose, so a run is reproducible from its seed and its first pose.
 """
 
 from __future__ import annotations

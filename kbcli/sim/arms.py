@@ -1,33 +1,25 @@
 """Arm presets: how a simulated arm errs (its servo, its joints, its finger, its proprioception).
 
-A real arm does not land where it aims, and does not land where it *feels* it landed. An
-:class:`ArmConfig` describes four sources of error, each optional, and :data:`PRESETS` names three
-arms built from them (``kbcli ... --arm NAME`` or an ``[arm]`` TOML table with ``preset = NAME``
-and any field to override):
+An :class:`ArmConfig` describes four sources of error, each optional, and :data:`PRESETS` names
+three arms built from them (``--arm NAME``, or an ``[arm]`` TOML table with ``preset = NAME`` and
+any field to override):
 
 ``ideal``
-    No error at all: in ``ideal`` mode the finger lands on the target, in ``dynamics`` mode the
-    pymunk arm's velocity servo settles within about 0.01 px. The robot feels exactly where it
-    landed. This is the paper's idealised problem and kbcli's historical arm.
+    No error: the finger lands on the target (in ``dynamics`` mode within about 0.01 px) and the
+    robot feels exactly where it landed: the paper's idealised problem.
 ``servo``
-    Finite servo gains and joint friction (``dynamics`` mode): each joint is driven by a
-    torque-level PD controller ``tau = kp * e - kd * w`` (bounded by ``max_torque``) against a
-    Coulomb friction torque ``friction``; the joint sticks as soon as ``kp * |e|`` no longer
-    beats the friction, so it stops short of its target by up to ``friction / kp`` rad, on the side
-    it came from: the tracking error depends on the reach (where the arm came from, how far it
-    went). A reach also gives up after ``settle_time`` seconds. Perception stays exact.
+    Finite servo gains and joint friction (``dynamics`` mode): a torque-level PD controller
+    ``tau = kp * e - kd * w`` (bounded by ``max_torque``) against a Coulomb friction torque
+    ``friction``, so a joint stops short of its target by up to ``friction / kp`` rad, depending
+    on the reach; a reach gives up after ``settle_time`` seconds. Perception stays exact.
 ``realistic``
-    ``servo`` plus a finger of finite contact radius and imperfect proprioception: the pad
-    registers the touch at a point uniform in the finger's contact disc of ``finger_radius`` px
-    (near a boundary a fat finger can sound either key), and the joint encoders read
-    ``q + proprio_bias + N(0, proprio_noise^2)`` rad: the servo drives the *measured* angles to
-    their targets, and the robot feels the fingertip at the forward kinematics of the measured
-    angles. Where it feels it landed differs from where it landed by 1 to 3 px (median), so
-    feeling the landing no longer removes the error (``kbcli bench arm`` prints the
-    distributions).
+    ``servo`` plus a finger of contact radius ``finger_radius`` px (the pad registers a point
+    uniform in the disc) and encoders reading ``q + proprio_bias + N(0, proprio_noise^2)`` rad:
+    the robot feels the fingertip at the forward kinematics of the measured angles, 1 to 3 px
+    (median) from where it landed (``kbcli bench arm``).
 
-In ``ideal`` mode (no physics) the servo fields are ignored; the finger and the proprioception
-apply as in ``dynamics`` mode (the encoders then read the inverse kinematics of the landing point).
+In ``ideal`` mode the servo fields are ignored; the finger and the proprioception apply (the
+encoders then read the inverse kinematics of the landing point).
 """
 
 from __future__ import annotations

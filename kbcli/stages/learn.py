@@ -1,36 +1,25 @@
 """Stage ``learn``: learn the instrument model M_INST by exploration (paper Sect. III-A, ref. [11]).
 
-The simulated arm (``ideal`` or ``dynamics`` mode, :mod:`kbcli.sim`) reaches for targets chosen by
-an exploration strategy (:mod:`kbcli.core.model.explore`) on the pad where the keyboard lies at its
-reference pose; the robot hears what its finger played and fits a model of p(sound | action) of the
-chosen class (:mod:`kbcli.core.model.classes`: ``lines``, :class:`~kbcli.core.model.lines.LearnedModel`;
-``svc``, :class:`~kbcli.core.model.svc.SVCModel`; ``forest``, ``forest-xy`` and ``knn``,
-:mod:`kbcli.core.model.classifiers`) or, by default (``auto``), explores with the ``forest`` class (the
-class it refits re-chosen every 200 reaches among ``forest`` and ``svc``) and then fits the class
-that cross-validation on the samples prefers (:mod:`kbcli.core.model.select`; the artifact's config then names the class chosen, its
-``model_class_requested`` is ``auto``, and its attrs' ``model_selection`` hold every candidate's
-score). The ground truth (the keyboard) is
-used only to score the model: the learning curve (accuracy on a 2 px grid over the working area
-every ``curve_every`` reaches) and the final accuracy and boundary error on a 1 px grid
-(:mod:`kbcli.core.model.accuracy`).
+The simulated arm (:mod:`kbcli.sim`) reaches for targets chosen by an exploration strategy
+(:mod:`kbcli.core.model.explore`) on the pad where the keyboard lies at its reference pose; the
+robot hears what its finger played and fits a model of p(sound | action) of the chosen class
+(:mod:`kbcli.core.model.classes`) or, by default (``auto``), the class that cross-validation on the
+samples prefers (:mod:`kbcli.core.model.select`; the artifact's config then names the class
+chosen, ``model_class_requested`` is ``auto`` and the attrs' ``model_selection`` hold every
+candidate's score). The keyboard is used only to score the model: the learning curve (accuracy on
+a 2 px grid every ``curve_every`` reaches) and the final accuracy and boundary error on a 1 px grid
+(:mod:`kbcli.core.model.accuracy`). ``strategy = "exact"`` returns the exact-model artifact
+(:func:`kbcli.stages.models.exact_artifact`).
 
-``strategy = "exact"`` skips exploration and returns the exact-model artifact
-(:func:`kbcli.stages.models.exact_artifact`), for calibration experiments.
-
-The ``model`` artifact holds ``samples/actions`` (the reach targets), ``samples/landed`` (where the
-finger landed: what the model is fitted on), ``samples/perceived`` (NaN rows: silence) and, in
-``dynamics`` mode, ``samples/start_angles`` (the arm's joint angles before each reach); ``model/...``
-(the class's ``to_arrays``: plain arrays, never a pickle; the config's ``model_class`` says which
-class reads them), ``curve/{reaches,accuracy}`` and ``evaluation/predicted_keys`` (the key the model
-predicts in each 1 px cell of the working area, -1 silence, -2 a sound that is no key; row i is y,
-from ``evaluation/origin``). Its attrs hold the final ``accuracy``, ``boundary_error_px``,
-``reaches_to_97`` and ``reaches_to_99`` (first curve point at or above 97 % / 99 %; the whole
-budget when only the final model, of another class than the explorer's, gets there; or None), the
-``model_class``, ``n_classes`` and ``reliability``: what the model estimates of itself from its
-samples alone (cross-validated mislabel rate, log loss, calibration error and boundary error, and
-the calibration it chose; :mod:`kbcli.core.model.reliability`). The final model is calibrated that way.
-The fit time is measured by ``kbcli bench learn``, not stored: identical runs give identical files.
-Schema 3 (schema 2: ``lines`` only, calibrated; schema 1: ``lines``, uncalibrated).
+The ``model`` artifact (schema 3) holds ``samples/actions`` (the reach targets), ``samples/landed``
+(what the model is fitted on), ``samples/perceived`` (NaN rows: silence), in ``dynamics`` mode
+``samples/start_angles``; ``model/...`` (the class's ``to_arrays``), ``curve/{reaches,accuracy}``
+and ``evaluation/predicted_keys`` (the predicted key per 1 px cell, -1 silence, -2 no key; row i is
+y, from ``evaluation/origin``). Its attrs hold ``accuracy``, ``boundary_error_px``,
+``reaches_to_97`` and ``reaches_to_99`` (the first curve point at or above 97 % / 99 %, or None),
+``model_class``, ``n_classes`` and ``reliability`` (what the model estimates of itself, and the
+calibration it chose: :mod:`kbcli.core.model.reliability`). No time is stored: identical runs give
+identical files.
 """
 
 from __future__ import annotations

@@ -1,27 +1,16 @@
 """Animated replay of an adaptation (``run``) or a closed-loop session (``closed_loop``).
 
-One frame per touch (a closed loop of hundreds of touches keeps every adaptation touch and a
-subsample of the play touches). Left, the pad: the keyboard where it really is (filled keys in the
-plots' colours, :mod:`kbcli.viz.palette`; at its reference pose before the move of a closed loop;
-unknown for a session with a real robot, then the reference pose is shown in grey), the robot's
-current belief of where it is (dashed magenta outline, as in ``kbcli plot run``: the posterior
-estimate while adapting, the correction in force while playing), the arm (from the joint angles
-recorded per touch in dynamics mode; from inverse kinematics of the landing point in ideal mode),
-the touches so far and the sound heard at the current one; its legend below it, covering nothing.
-Top right: the posterior over the displacement (log scale over 30 nats, zooming in as it
-concentrates; the true displacement is the cyan cross; for a rigid move, the angle marginalised).
-Bottom right: the entropy and the error (or, without ground truth, the posterior mass near the
-estimate) of an adaptation; the success rate and the detector score of a closed loop.
+One frame per touch (a closed loop keeps every adaptation touch and a subsample of the play
+touches). Left, the pad: the keyboard where it really is (unknown for a real robot: the reference
+pose in grey), the robot's current belief of where it is (dashed magenta outline), the arm, the
+touches so far and the sound heard at the current one. Top right: the posterior over the
+displacement (log scale over 30 nats, the truth a cyan cross). Bottom right: the entropy and the
+error (or the posterior mass near the estimate) of an adaptation; the success rate and the
+detector score of a closed loop.
 
-Frames are made by :class:`matplotlib.animation.FuncAnimation` on one figure whose artists are
-updated in place, and written by :class:`~matplotlib.animation.PillowWriter` (GIF) or
-:class:`~matplotlib.animation.FFMpegWriter` (MP4, when ffmpeg is installed). For a GIF the static
-parts (axes, ticks, curves) are drawn once and each frame only redraws what moves on top of them
-(blitting, :class:`_BlitGifWriter`): a frame costs a few tens of milliseconds instead of a full
-redraw of the figure.
-
-Modules: :mod:`kbcli.viz.replay` (what is shown, which touches the frames show),
-:mod:`kbcli.viz.animator` (the figure, updated per frame), this one (the writers).
+Frames are written by :class:`~matplotlib.animation.PillowWriter` (GIF; the static parts drawn once
+and only what moves redrawn, :class:`_BlitGifWriter`) or :class:`~matplotlib.animation.FFMpegWriter`
+(MP4). What is shown: :mod:`kbcli.viz.replay`; the figure: :mod:`kbcli.viz.animator`.
 """
 
 from __future__ import annotations

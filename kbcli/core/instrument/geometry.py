@@ -1,27 +1,16 @@
 """Key shapes of an instrument: polygons or discs, and vectorized point location (Sect. III-A).
 
-Every layout (:mod:`kbcli.core.instrument.layouts`) turns its config into a :class:`KeyShapes`: one shape per
-key, at the keyboard's reference pose, in pad pixels. Everything that needs the geometry of the keys
-goes through this one interface (nothing else assumes square keys):
-
-- :meth:`KeyShapes.key_at` : (n, 2) points -> (n,) key index, -1 for silence (vectorized; a
-  bounding-box filter, then an even-odd crossing test per polygon, or a distance test per disc);
-- :meth:`KeyShapes.outlines` : the boundary of each key as a polygon (discs as 64-gons), for plots,
-  reach checks and the keyboard artifact;
-- :meth:`KeyShapes.label_points` : a point well inside each key (its "centre");
-- :meth:`KeyShapes.sample` : uniform draws inside one key (rejection from its bounding box);
-- :meth:`KeyShapes.grid_points` : an even grid of points inside each key (playing success);
-- :meth:`KeyShapes.contains` : (n,) whether each point is in one given key (each key on its own);
-- :attr:`KeyShapes.bounds` : the bounding box of all keys.
-
-Points on an edge shared by two polygon keys belong to the key on its right (vertical edge) or above
-it (horizontal edge): the half-open convention of a grid of cells, ``floor((x - x0) / size)``.
+Every layout (:mod:`kbcli.core.instrument.layouts`) turns its config into a :class:`KeyShapes`, one
+shape per key at the keyboard's reference pose, in pad pixels; everything that needs the keys'
+geometry goes through it (:meth:`~KeyShapes.key_at`, :meth:`~KeyShapes.outlines`,
+:meth:`~KeyShapes.label_points`, :meth:`~KeyShapes.sample`, :meth:`~KeyShapes.grid_points`,
+:meth:`~KeyShapes.contains`, :attr:`~KeyShapes.bounds`). Points on an edge shared by two polygon
+keys belong to the key on its right or above it, as in a grid of cells.
 
 The checks a layout's keys must pass (:func:`check_polygon`, :func:`check_overlaps`,
-:func:`check_in_pad`; shapely 2 for validity and exact intersection areas) raise
-:class:`~kbcli.errors.ConfigError` naming the key: vertices beyond :data:`MAX_COORD`, degenerate
-polygons (fewer than three distinct vertices, no area, crossing edges) and keys whose interiors
-overlap by more than :data:`OVERLAP_AREA` px^2.
+:func:`check_in_pad`, with shapely) raise :class:`~kbcli.errors.ConfigError` naming the key:
+vertices beyond :data:`MAX_COORD`, degenerate polygons and keys whose interiors overlap by more
+than :data:`OVERLAP_AREA` px^2.
 """
 
 from __future__ import annotations

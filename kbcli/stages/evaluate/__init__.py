@@ -2,42 +2,29 @@
 named *methods*.
 
 A **method** is a named table of adapt options plus the strategies it compares
-(``[evaluate.methods.NAME]`` in ``pipelines/paper.toml``):
+(``[evaluate.methods.NAME]`` in ``pipelines/paper.toml``): ``paper``, the paper's own method (the
+KDE posterior of Eq. 7-8, the maximum-likelihood estimate, the model as learned, strategies
+``random`` and ``active``); ``kbcli``, whatever :class:`kbcli.core.adaptation.loop.AdapterConfig`'s
+defaults are, strategies random, active and infogain; any other name, an ablation. Every option a
+method resolves to (defaults included, per mode and strategy) is recorded in the artifact
+(``attrs["methods"]``).
 
-- ``paper``: the paper's own method: the product of KDEs of Eq. 7-8 with Algorithm 2's sampling
-  (``posterior = "kde"``), the maximum-likelihood hypothesis as the estimate (``estimator = "ml"``),
-  the model as learned (``model_blur = 0``), strategies ``random`` (the baseline) and ``active``
-  (Sect. III-E; its candidates' confusion and simulated updates use the model's
-  ``p(sound | action)``, see :mod:`kbcli.core.adaptation.strategies`, while the posterior it reads and the
-  one that is updated are the KDE product);
-- ``kbcli``: our best choice: whatever :class:`kbcli.core.adaptation.loop.AdapterConfig`'s defaults are (the
-  likelihood posterior and the posterior mean today), strategies random, active and infogain. Its
-  TOML table names only the strategies, so changing kbcli's defaults changes what ``kbcli`` means;
-- any other name: an ablation (e.g. the paper's strategies and estimator on our posterior).
-
-Every option a method resolves to (defaults included, per mode and strategy) is recorded in the
-artifact (``attrs["methods"]``) and printed by the report.
-
-Fixed displacement parametrizations are grouped in size categories (:mod:`kbcli.stages.perturb`'s
-definition: the Euclidean norm of the translation in (0, 10], (10, 20] or (20, 40] px; keys are
-50 px). Each parametrization is adapted to ``experiments`` times (the paper: 50) by each method and
-strategy in each mode (``ideal``: the finger lands on its target; ``dynamics``: a simulated arm
-reaches for it). One experiment is one call of the adapt stage's ``experiment`` for ``max_steps``
-observations; it also replays the melody with Algorithm 1 (``play_notes`` touches) after adapting,
-with the final estimate as the correction, and, once per (mode, parametrization, repetition),
-before the displacement and after it without adaptation: playing success is measured, not derived.
-Each experiment is seeded by ``SeedSequence(seed, spawn_key=...)`` with a key made of its mode,
-category, parametrization, method, strategy and repetition, so a result depends neither on the
-worker that ran it nor on which modes or methods were selected.
+Fixed displacement parametrizations are grouped in size categories (:mod:`kbcli.stages.perturb`).
+Each is adapted to ``experiments`` times (the paper: 50) by each method and strategy in each mode
+(``ideal`` or ``dynamics``). One experiment is one call of the adapt stage's ``experiment`` for
+``max_steps`` observations, which also measures the playing success (Algorithm 1, ``play_notes``
+touches) after adapting and, once per (mode, parametrization, repetition), before the displacement
+and after it without adaptation. Each experiment is seeded by
+``SeedSequence(seed, spawn_key=...)`` from its mode, category, parametrization, method, strategy
+and repetition, so a result depends neither on the worker nor on which modes or methods were
+selected.
 
 This package holds the config (:mod:`.config`, :mod:`.categories`, :mod:`.methods`), plans the
-experiments (:func:`plan`, :mod:`.planning`), runs one in a worker (:func:`setup`, :func:`run_experiment`,
-:mod:`.worker`) and assembles the results into the ``evaluation`` artifact (:func:`assemble`,
-:mod:`.assembly`) with :mod:`kbcli.core.adaptation.stats`: RMSE against observations per category, method
-and strategy (Fig. 7), observations to each error threshold, tie-corrected Mann-Whitney U p-values
-against the baseline strategy of the same method (and the smallest p-value the design can give),
-entropy per step (Fig. 6), playing success, and one example run's posterior snapshots per method
-and strategy (Fig. 5). Execution (serial, local processes or Dask) and checkpoints are
+experiments (:func:`plan`, :mod:`.planning`), runs one in a worker (:func:`setup`,
+:func:`run_experiment`, :mod:`.worker`) and assembles the ``evaluation`` artifact (:func:`assemble`,
+:mod:`.assembly`): RMSE per step (Fig. 7), observations to each error threshold, Mann-Whitney U
+p-values against the method's baseline strategy, entropy per step (Fig. 6), playing success and
+one example run's posterior snapshots (Fig. 5). Execution and checkpoints are
 :mod:`kbcli.io.runner`'s job.
 """
 

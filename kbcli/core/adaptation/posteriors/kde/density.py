@@ -1,28 +1,18 @@
 """The KDE term of one observation (the paper's Eq. 7, Algorithm 2).
 
 Draw ``N`` actions ``a_i ~ p(action | s_t)`` from the model, map each onto ``a_t`` with
-``computeTransform`` (:func:`kbcli.core.instrument.transforms.translation_mapping`; for the rigid family, once
-per grid angle), bin the hypotheses linearly onto the grid and convolve with a Gaussian kernel by
-FFT (:func:`binned_kde`, ``scipy.fft``, O(G log G), the binned-KDE trick of fast KDE libraries;
-the kernel being separable, by 1-D FFTs along the rows, then the columns; checked against the
-direct sum in the tests), then mix with a floor (a uniform density
-over the prior with weight ``eps``; ``AdapterConfig.kde_floor``, 0 for none, :func:`floored_log`)
-and take the log. The samples of ``p(action | s)`` do not depend on the posterior, so they can be
-drawn once per sound class and reused (:class:`ActionSamples`; per run, or per model in the
-evaluation; ``kde_draw = "shared"``): a KDE step then costs a binning and two FFTs instead of
-thousands of model evaluations. Algorithm 2 as written draws them anew for every
-observation (``kde_draw = "fresh"``, :class:`kbcli.core.adaptation.posteriors.kde.samples.FreshSamples`).
+``computeTransform`` (:func:`kbcli.core.instrument.transforms.translation_mapping`; for the rigid
+family, once per grid angle), bin the hypotheses linearly onto the grid and convolve with a
+separable Gaussian kernel by FFT (:func:`binned_kde`), mix with a uniform floor of weight ``eps``
+(``kde_floor``, :func:`floored_log`) and take the log. The samples do not depend on the posterior,
+so they can be drawn once per sound class (:class:`ActionSamples`, ``kde_draw = "shared"``) or anew
+for every observation as Algorithm 2 writes (``"fresh"``,
+:class:`kbcli.core.adaptation.posteriors.kde.samples.FreshSamples`).
 
-Bandwidth rule: Scott's ``sigma_hat * N^(-1/6)`` (d = 2) with Silverman's robust spread
-``sigma_hat = min(std, IQR / 1.349)`` averaged over both axes of the sampled actions, clipped to
-``[resolution, max_bandwidth]`` (default 4 px: the rule over-smooths multi-modal samples such as
-silence, a ring around the keyboard). The angle axis is not smoothed: each angle slice is its own
-2-D KDE. With a uniform prior over actions, ``KDE_t`` is a sampled and smoothed version of the
-likelihood term (:mod:`kbcli.core.adaptation.posteriors.likelihood.term`), which the benchmark compares. One limitation is
-inherited from Algorithm 2: actions for a silence are drawn from the model's working area only (the
-actions the model knows, :mod:`kbcli.core.model.sampling`), so hypotheses that put the touch beyond
-it get the floor (without a floor: are ruled out), not the silence they would in fact give (the
-likelihood term knows the outside is silent).
+Bandwidth: Scott's ``sigma_hat * N^(-1/6)`` with Silverman's ``sigma_hat = min(std, IQR / 1.349)``
+averaged over both axes, clipped to ``[resolution, max_bandwidth]``; each angle slice is its own
+2-D KDE. As in Algorithm 2, actions for a silence are drawn from the model's working area only, so
+hypotheses that put the touch beyond it get the floor, not the silence they would in fact give.
 """
 
 from __future__ import annotations

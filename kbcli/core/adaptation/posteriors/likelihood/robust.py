@@ -1,55 +1,32 @@
 """A posterior that learns how far to trust the model: Eq. 8 with model error marginalised.
 
-The plain likelihood posterior (:mod:`kbcli.core.adaptation.posteriors.posterior`) reads ``p(s_t | T_h^-1(a_t))`` from
-the model as if the model were the instrument. A learned model is not: its boundaries can sit a few
-px off, a region can carry the wrong sound, and an arm that feels its landing imperfectly blurs
-both. Trusting such a model, the posterior multiplies in touches that contradict it, becomes
-overconfident and locks onto a wrong displacement; infogain makes it worse by seeking exactly the
-boundaries the model has wrong.
-
-Here the observation model has two unknowns, treated like the displacement itself:
+The plain likelihood posterior reads ``p(s_t | T_h^-1(a_t))`` from the model as if the model were
+the instrument. A learned model's boundaries can sit a few px off and a region can carry the wrong
+sound; trusting it, the posterior becomes overconfident and locks onto a wrong displacement. Here
+the observation model has two more unknowns, treated like the displacement itself:
 
 - a **boundary blur** ``sigma`` (px): the instrument is the model's map convolved with an isotropic
-  Gaussian of std ``sigma`` (its edges are known only to about ``sigma``);
-- an **outlier rate** ``eps``: a touch's sound is, with probability ``eps``, unrelated to the map
-  (uniform over the C sounds).
+  Gaussian of std ``sigma``;
+- an **outlier rate** ``eps``: with probability ``eps`` a touch's sound is uniform over the C
+  sounds.
 
 ``p(s | a, h, sigma, eps) = (1 - eps) [p_model * N(0, sigma^2)](s | T_h^-1 a) + eps / C``.
 
-Both live on a small grid (default ``sigma`` in {0, 1, 2.5, 5} px, ``eps`` in {0.001, 0.02, 0.1}),
-with a uniform prior, and are marginalised exactly, online: for every nuisance value ``k`` the
-posterior keeps the log-likelihood ``L_k(h) = sum_t log p(s_t | a_t, h, k)`` of every hypothesis
-(K arrays of the hypothesis grid), so
+Both live on a small grid (:data:`DEFAULT_BLURS`, :data:`DEFAULT_OUTLIERS`) with a uniform prior
+and are marginalised exactly, online: for every nuisance value ``k`` the posterior keeps
+``L_k(h) = sum_t log p(s_t | a_t, h, k)``, so
 
 ``p(h | D) = sum_k pi_k exp(L_k(h)) / Z`` and ``p(k | D) = pi_k sum_h exp(L_k(h)) / Z``.
 
-No knob is set by hand: the evidence picks the blur and the outlier rate. A sharp, correct model
-keeps its sharp component (a sharper likelihood earns more evidence when the touches agree with
-it, Occam's razor); when touches contradict the map, the weight moves to the blurred and
-outlier-tolerant components, and the posterior widens instead of locking on. The strategies plan
-with the model as the posterior currently believes it (:func:`planning_table`: the map blurred by
-the most probable ``sigma``, floored at the most probable ``eps``), so infogain stops chasing
-boundaries the touches say the model does not know.
+The strategies plan with the model as the posterior currently believes it (:func:`planning_table`:
+the map blurred by the most probable ``sigma``, floored at the most probable ``eps``).
 
-**A learning rate for a weak model (a coarsened, tempered posterior).** The blur and the outlier
-rate treat each touch's error as independent of the next one's. A learned model's is not: where its
-boundary sits 5 px off it is wrong for every touch there, and a weak model (100-200 reaches) is
-wrong in many places at once. Multiplied in at full weight, its touches make the posterior lock onto
-a wrong displacement, and infogain, planning with that posterior, drills at the spots where the
-model is wrong. After ``n`` touches the log-likelihood is therefore
-multiplied by a learning rate ``zeta_n = alpha / (alpha + n)`` (the *coarsened posterior* of Miller
-and Dunson 2019, "Robust Bayesian inference via coarsening"; Grünwald and van Ommen 2017 on why a
-rate below 1 repairs Bayes under misspecification): the first touches count almost in full, and
-however many follow, the posterior is never sharper than about ``alpha`` touches' worth, which a
-wrong model cannot turn into certainty. ``alpha`` is resolved from the model's own cross-validated
-boundary error ``b`` (:func:`kbcli.core.adaptation.config.learning_rate`) through the rate ``eta`` reached at
-``HORIZON`` (30) touches, ``eta = min(1, (TEMPER_PX / b)^2)`` — the share of a ``b``-wide patch of
-the model that a ``TEMPER_PX``-wide one is, as if touches within ``b`` of each other repeated one
-observation — so ``alpha = HORIZON eta / (1 - eta)``. A model that knows its edges to 1.5 px or
-better keeps ``eta = 1``: plain Bayes, untempered (``docs/design-notes.md``: why not a fixed rate).
-
-Cost: the model's map is blurred once per ``sigma`` level (:mod:`~kbcli.core.adaptation.posteriors.likelihood.blur`)
-and gathered for the whole hypothesis grid; each ``eps`` level is one ``log``.
+**A learning rate for a weak model.** After ``n`` touches the log-likelihood is multiplied by
+``zeta_n = alpha / (alpha + n)`` (the coarsened posterior of Miller and Dunson 2019), so the
+posterior is never sharper than about ``alpha`` touches' worth. ``alpha`` follows from the model's
+cross-validated boundary error ``b`` (:func:`kbcli.core.adaptation.config.learning_rate`) through
+the rate reached at ``HORIZON`` touches, ``eta = min(1, (TEMPER_PX / b)^2)``, as
+``alpha = HORIZON eta / (1 - eta)``; ``eta = 1`` is plain Bayes (why: ``docs/design-notes.md``).
 """
 
 from __future__ import annotations
