@@ -1,23 +1,13 @@
-"""Benchmark of the learned model's calibration and self-assessment (issue 9).
+"""Benchmark of the learned model's calibration and self-assessment.
 
 For each exploration strategy and reach budget, a model is learned on the default keyboard with
-the given arm and mode (``kbcli learn``'s stage, calibration included), then measured against the
-simulator on a 2 px grid over the working area:
-
-- **calibration**: the expected calibration error (15 bins of the top probability) of
-  p(sound | felt action) against the simulator's own p(key | felt action), drawn by Monte Carlo
-  (16 touches per grid point: the arm's proprioceptive noise and bias, its finger's contact disc;
-  :func:`kbcli.sim.keys_heard_when_felt`);
-- the model's accuracy and boundary error (:mod:`kbcli.core.model.accuracy`);
-
-beside what the model estimated of itself from its samples alone (:mod:`kbcli.core.model.reliability`:
-cross-validated calibration error and boundary error, and the mislabel rate its calibrated p expects
-on the pad). Pure: returns rows.
-
-One learning run is one draw: a model learned from 150 or 300 reaches depends on where those
-reaches landed, and its calibration error against the simulator varies by about +-0.015 from seed to
-seed. Every cell is therefore learned with several seeds (``seed``, ``seed + 1``, ...) and
-:func:`summarise` reports the median, beside the smallest and largest.
+the given arm and mode (``kbcli learn``'s stage), then measured against the simulator on a 2 px
+grid: the expected calibration error of p(sound | felt action) against the simulator's own
+p(key | felt action), drawn by Monte Carlo (:func:`kbcli.sim.keys_heard_when_felt`), the accuracy
+and the boundary error (:mod:`kbcli.core.model.accuracy`); beside what the model estimated of
+itself (:mod:`kbcli.core.model.reliability`). Every cell is learned with several seeds (``seed``,
+``seed + 1``, ...), one learning run being one draw, and :func:`summarise` reports the median
+beside the smallest and largest. Pure: returns rows.
 """
 
 from __future__ import annotations

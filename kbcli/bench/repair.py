@@ -1,25 +1,22 @@
-"""Benchmark of the adaptation that repairs the model (issue 42): weak models, and a lifelong robot.
+"""Benchmark of the adaptation that repairs the model: weak models, and a lifelong robot.
 
 **Side by side.** Weak models, as ``kbcli learn --strategy random --budget 250 --seed S`` learns
-them (seeds 1-3, the ideal arm in ideal mode and the realistic arm in dynamics mode: six models by
-default), each adapted to the same ``moves`` displacements (magnitudes evenly spread over 5-30 px,
-directions by the golden angle: :func:`moves`) with ``touches`` infogain touches, by three methods
-on the same seeds: ``plain`` (infogain, the robust posterior: kbcli's default), ``repair`` (the
-repaired belief, ``repair = true``: :mod:`kbcli.core.adaptation.repair`) and ``exact`` (infogain with the
-keyboard's own geometry, the reference). Per method: the median final error, the share of runs
-under 1 px, the median touches to *stay* under 1 px (the first touch after which every error is
-below 1 px; ``touches + 1`` when never), the runs made worse than ``plain`` by more than 0.5 px,
-the share of runs whose 90 % credible disc (:mod:`kbcli.core.adaptation.credible`) holds the truth, and the
-median wall-clock time of a touch (decision plus update); per model, the median final error.
+them (seeds 1-3, the ideal and the realistic arm), each adapted to the same ``moves``
+displacements (:func:`moves`) with ``touches`` infogain touches by three methods on the same seeds:
+``plain`` (the robust posterior, kbcli's default), ``repair`` (``repair = true``:
+:mod:`kbcli.core.adaptation.repair`) and ``exact`` (the keyboard's own geometry, the reference). Per
+method: the median final error, the share of runs under 1 px, the median touches to *stay* under
+1 px (``touches + 1`` when never), the runs made worse than ``plain`` by more than 0.5 px, the share
+of 90 % credible discs holding the truth (:mod:`kbcli.core.adaptation.credible`) and the median
+time of a touch; per model, the median final error.
 
-**Lifelong.** One weak model, the keyboard moved ``episodes`` times in a row (to the poses
-:func:`lifelong_moves` draws), the robot adapting with ``repair`` and carrying its repaired model
-(:func:`kbcli.stages.repair.repaired_model`) from episode to episode; beside it, the same moves
-adapted by ``plain`` with the model as learned. Per episode: the touches to stay under 1 px and
-the final error of both, and the carried model's boundary error against the keyboard (px, on a
-1 px grid) after the episode.
+**Lifelong.** One weak model, the keyboard moved ``episodes`` times in a row
+(:func:`lifelong_moves`), the robot adapting with ``repair`` and carrying its repaired model
+(:func:`kbcli.stages.repair.repaired_model`) from episode to episode, beside ``plain`` with the
+model as learned. Per episode: both methods' touches to stay under 1 px and final error, and the carried
+model's boundary error.
 
-Pure: returns rows; the CLI prints them and draws the lifelong plot.
+Pure: returns rows.
 """
 
 from __future__ import annotations

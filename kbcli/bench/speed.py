@@ -1,20 +1,13 @@
-"""Speed of the adaptation per touch, the targets of issue 26 (``kbcli bench speed``).
+"""Speed of the adaptation per touch (``kbcli bench speed``).
 
-Two measures, each the median of several repeats (one adaptation of ``touches`` touches each,
-its own seed), on the learned model, on one thread (``threadpoolctl``), wall-clock and CPU time
-(this process only; a shared machine inflates the wall clock more than the CPU time):
+Two measures, each the median of several repeats, on the learned model, on one thread, wall-clock
+and CPU time:
 
-- **per touch** (:func:`touch_times`): the robot's time of one touch, deciding plus updating plus
-  reading the estimate (the touch itself excluded), set-up excluded (the model raster is built
-  once): the paper's method (``paper-active`` with the KDE posterior, the options of the ``paper``
-  evaluation method: Algorithm 2's fresh samples from the model raster, for the real and the
-  simulated touches), the same with ``simulate_draw = "shared"`` (the simulated touches reuse one
-  set of samples per sound and adaptation: not the paper's text, an option) and kbcli's default
-  (``infogain`` with the likelihood posterior);
-- **as ``kbcli adapt`` runs it** (:func:`adapt_times`): loading the model and everything before
-  the first touch (set-up), then ``touches`` touches of ``infogain`` against the simulated world
-  with each posterior at its defaults, reported as set-up, median touch and the whole run over its
-  touches (set-up included), whose ratio kde / likelihood the issue bounds by 3.
+- **per touch** (:func:`touch_times`): deciding plus updating plus reading the estimate, set-up
+  excluded, for the paper's method (``paper-active`` with the KDE posterior, fresh samples), the
+  same with ``simulate_draw = "shared"``, and kbcli's default (``infogain``, likelihood posterior);
+- **as ``kbcli adapt`` runs it** (:func:`adapt_times`): set-up, median touch and the whole run of
+  ``touches`` infogain touches with each posterior at its defaults.
 
 Pure: returns rows.
 """

@@ -2,21 +2,18 @@
 
 An episode is one adaptation: at :meth:`~KeyboardAdaptEnv.reset` the keyboard moves by a hidden
 displacement; at each :meth:`~KeyboardAdaptEnv.step` the agent touches the pad at an action (pad
-px, inside the working area), the simulated arm reaches for it (:class:`kbcli.sim.World`), and the
-agent observes what the robot has: the class of the sound it heard (``model.classify``, Eq. 2: 0
-silence, -1 a sound the model does not know), where it felt its finger land, and the step. kbcli's
-own robot side, an :class:`~kbcli.core.adaptation.adapter.Adapter` fed with the same touches, keeps the
-posterior over the displacement (Eq. 8): with ``belief=True`` the agent observes it too, its
-estimate, error and entropy are in ``info``, the reward is read from it, and its stopping rule ends
-the episode (``terminated``). The environment writes none of the adaptation again: a step is the
-body of :func:`kbcli.core.adaptation.loop.adapt` with the agent's action in place of ``suggest()``.
+px, inside the working area), the simulated arm reaches for it, and the agent observes what the
+robot has: the class of the sound heard (Eq. 2: 0 silence, -1 unknown), where it felt its finger
+land, and the step. kbcli's own :class:`~kbcli.core.adaptation.adapter.Adapter`, fed the same
+touches, keeps the posterior (Eq. 8): with ``belief=True`` the agent observes it too, its estimate,
+error and entropy are in ``info``, the reward is read from it, and its stopping rule ends the
+episode. A step is the body of :func:`kbcli.core.adaptation.loop.adapt` with the agent's action in
+place of ``suggest()``.
 
 Randomness: ``reset(seed=s)`` seeds ``np_random`` as ``numpy.random.default_rng(s)``; each episode
-spawns three children of it, the robot's (kbcli's posterior; :class:`~kbcli.envs.StrategyAgent`
-plans with it), the world's (the touches) and the displacement's draw. The first two are the
-children ``kbcli adapt --seed s`` spawns, so a :class:`~kbcli.envs.StrategyAgent` gives its numbers
-bit for bit. A reset without a seed spawns the next children, so it is reproducible from
-``np_random`` (set ``env.unwrapped.np_random`` to replay an episode).
+spawns three children of it, the robot's, the world's and the displacement's. The first two are
+those ``kbcli adapt --seed s`` spawns, so a :class:`~kbcli.envs.StrategyAgent` gives its numbers bit
+for bit; a reset without a seed spawns the next children.
 """
 
 from __future__ import annotations

@@ -1,23 +1,18 @@
 """Run many independent experiments serially, on local processes or on a Dask cluster, with a
 checkpoint that survives interruption.
 
-The paper repeats each adaptation experiment 50 times per displacement (Sect. IV-B); each one is
-independent and seeded by its own child of ``numpy.random.SeedSequence(seed).spawn(n)``, so a result
-depends only on the experiment's index, never on which process ran it or in what order.
-
-A :class:`Job` names two module-level functions by ``"module:function"`` (so loky and Dask pickle a
-reference, not code):
+Each experiment is seeded by its own child of ``numpy.random.SeedSequence(seed).spawn(n)``, so a
+result depends only on its index. A :class:`Job` names two module-level functions by
+``"module:function"`` (so loky and Dask pickle a reference, not code):
 
 - ``setup(context) -> state``: built once per process and cached (e.g. the model and keyboard);
 - ``run(state, task) -> dict[str, ndarray]``: one experiment.
 
-:func:`execute` yields ``(index, result)`` as experiments finish, with one of three backends:
-serial (in this process), ``jobs=N`` local processes (joblib/loky) or ``scheduler="tcp://HOST:PORT"``
-(an existing ``dask.distributed`` cluster). Workers only compute and return results; the caller alone
-writes files. BLAS/OpenMP pools are limited to one thread while experiments run, in every backend, so
-floating-point results are bit-identical across backends.
-
-:class:`kbcli.io.checkpoint.Checkpoint` keeps the finished experiments, so a killed run resumes.
+:func:`execute` yields ``(index, result)`` as experiments finish: serially, on ``jobs=N`` local
+processes (joblib/loky) or on ``scheduler="tcp://HOST:PORT"`` (``dask.distributed``). Workers only
+compute; the caller alone writes files. BLAS/OpenMP pools are limited to one thread in every
+backend, so results are bit-identical across backends. :class:`kbcli.io.checkpoint.Checkpoint`
+keeps the finished experiments, so a killed run resumes.
 """
 
 from __future__ import annotations

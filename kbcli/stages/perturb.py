@@ -1,23 +1,16 @@
 """Stage ``perturb``: move the keyboard to a new pose (paper Sect. III-B, Eq. 3).
 
-A scene artifact (kind ``scene``) holds the keyboard, the transform family (``translation``: the
-paper's ``(dx, dy)``; ``rigid``: ``(angle, dx, dy)``, see :mod:`kbcli.core.instrument.transforms`) and the true
-parameters, given explicitly or drawn at random by category.
+A ``scene`` artifact holds the keyboard, the transform family (``translation``: ``(dx, dy)``;
+``rigid``: ``(angle, dx, dy)``, :mod:`kbcli.core.instrument.transforms`) and the true parameters,
+given or drawn at random by category. It is ground truth: only the simulated world and the
+evaluation read it, never the robot's side.
 
-Size categories (one definition for ``perturb``, the adapt benchmark and ``evaluate``): the paper's
-Sect. IV-B groups "displacements up to 10, 20 and 40 pixels". Here the size of a displacement is
-the **Euclidean norm of its translation**, ``sqrt(dx^2 + dy^2)`` (the rotation of a rigid move is
-not counted), and category ``small``, ``medium`` or ``large`` holds the sizes in (0, 10], (10, 20]
-or (20, 40] px (:data:`CATEGORIES`, :func:`size_category`), so the categories do not overlap. A
-random draw is uniform over the category's ring of the plane (uniform direction, density of the
-size proportional to it); a rigid draw also turns the keyboard by an angle uniform in [-5, 5]
-degrees about its centre.
-
-The scene is ground truth: only the simulated world (:class:`kbcli.sim.World`) and the evaluation
-read it, never the robot's side.
-
-A displacement that carries any key (points every 5 px along every key's outline) outside the arm's
-annular workspace is refused with :class:`~kbcli.errors.OutOfReachError`.
+Size categories (one definition for ``perturb``, the adapt benchmark and ``evaluate``; the paper's
+"displacements up to 10, 20 and 40 pixels"): ``small``, ``medium`` and ``large`` hold the
+translations whose Euclidean norm is in (0, 10], (10, 20] or (20, 40] px (:data:`CATEGORIES`,
+:func:`size_category`). A random draw is uniform over the category's ring; a rigid draw also turns
+the keyboard by an angle uniform in [-5, 5] degrees about its centre. A displacement that carries
+any key outside the arm's workspace is refused with :class:`~kbcli.errors.OutOfReachError`.
 """
 
 from __future__ import annotations

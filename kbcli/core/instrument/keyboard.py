@@ -1,22 +1,15 @@
 """The instrument: a virtual keyboard laid on a tactile pad (paper Sect. III-A, Fig. 2).
 
 Coordinates are pad pixels, x to the right and y up. The keys' shapes, pitches and tempi come from a
-*layout* (:mod:`kbcli.core.instrument.layouts`: ``grid``, the paper's square keys and the default; ``hex``,
-``piano``, ``pads`` and ``polygons``), placed with the keyboard's lower-left corner at ``origin`` at
-its *reference pose*. Outside the keys is silence (key index ``-1``). Each key plays a sound
-described by a D-dimensional feature vector; here D = 2: pitch (MIDI note number) and tempo (beats
-per minute). In the paper every key changes both; every two keys must sound further apart than the
-matching threshold (Eq. 2), or the robot could not tell them apart.
+*layout* (:mod:`kbcli.core.instrument.layouts`), placed with the keyboard's lower-left corner at
+``origin`` at its *reference pose*; outside the keys is silence (key ``-1``). Each key plays a
+sound of D = 2 features, pitch (MIDI note) and tempo (bpm); every two keys must sound further
+apart than the matching threshold (Eq. 2). Everything else reads the geometry through
+:class:`Keyboard`: nothing assumes square keys.
 
-Everything else reads the geometry through :class:`Keyboard` (``key_at``, ``key_outlines``,
-``key_centres``, ``sample_in_key``, ``key_grid_points``, ``bounds``, ``area``): nothing assumes
-square keys.
-
-A displaced keyboard is described by a transform of the pad (:mod:`kbcli.core.instrument.transforms`): the sound
-under finger position ``x`` is the reference sound under ``T^-1(x)``.
-
-Perception adds optional Gaussian noise to the features; matching a perceived sound to a list of
-known sounds uses the Manhattan distance with a threshold (Eq. 2, Algorithm 1).
+A displaced keyboard is a transform of the pad (:mod:`kbcli.core.instrument.transforms`): the sound
+under finger position ``x`` is the reference sound under ``T^-1(x)``. Perception adds optional
+Gaussian noise to the features; matching uses the Manhattan distance with a threshold (Eq. 2).
 """
 
 from __future__ import annotations

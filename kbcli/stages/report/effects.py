@@ -1,22 +1,16 @@
 """Effect sizes: how big a strategy's advantage over the baseline is, and whether it shrinks.
 
-The paper's Sect. IV-B says more than "significant": on medium displacements "the difference is
-not so big", and across the three categories the advantage shrinks as the displacement grows.
-Both are claims about the *size* of the effect, tested here on the observations each run needed
-to reach each error threshold (the counts the Mann-Whitney tests read):
+The paper's Sect. IV-B says that on medium displacements "the difference is not so big", and that
+the advantage shrinks as the displacement grows: claims about the *size* of the effect, tested on
+the observations each run needed to reach each error threshold:
 
 - the advantage at a threshold is the probability of superiority
-  ``A = P(strategy needs fewer) + P(tie) / 2`` over every (strategy run, baseline run) pair, the
-  Mann-Whitney U divided by ``n m`` (0.5: no advantage; 1: every strategy run faster than every
-  baseline run); at a fixed number of runs the Mann-Whitney p-value the paper reports is a
-  monotone function of it;
-- its variance is DeLong's (the structural components of the two independent samples), so the
-  difference of two categories' advantages (their experiments are independent) has a one-sided
-  normal test; a difference with zero variance (both saturated) is not smaller (p = 1).
+  ``A = P(strategy needs fewer) + P(tie) / 2``, the Mann-Whitney U over ``n m`` (0.5: none);
+- its variance is DeLong's, so the difference of two categories' advantages has a one-sided normal
+  test (zero variance, both saturated: p = 1).
 
-The counts come from the evaluation: ``samples_to_threshold`` of the method's estimator, or, for
-another estimator of the same runs (``_ml``, ``_mean``), recomputed from the per-step errors the
-artifact records.
+The counts are the method estimator's ``samples_to_threshold``, or for another estimator of the
+same runs (``_ml``, ``_mean``) recomputed from the per-step errors.
 """
 
 from __future__ import annotations
