@@ -1,13 +1,10 @@
-"""Benchmark of ``kbcli animate`` (issue 13): seconds to render a 40-touch adaptation.
+"""Benchmark of ``kbcli animate``: seconds to render a 40-touch adaptation.
 
-The target: a 40-touch run renders in 15 s or less on one core. The benchmark makes the run it
-renders: the embedded default model (or a given one) adapting to a (12, -7) px move in ``dynamics``
-mode (so the arm is drawn from recorded joint angles) for 40 touches, with the posterior stored at
-every step (``--snapshots all``: the worst case, the posterior panel changes in every frame); and a
-600-touch closed loop for the second row. Each is rendered ``repeats`` times to a GIF in a temporary
-folder; reported: frames, the median process CPU time (one core: matplotlib and Pillow draw and
-encode in one thread) and the median wall time of the rendering, which excludes the ~2 s of
-``kbcli`` start-up (time ``kbcli animate`` itself for that).
+The benchmark makes the run it renders: the embedded default model (or a given one) adapting to a
+(12, -7) px move in ``dynamics`` mode for 40 touches with the posterior stored at every step (the
+worst case), and a 600-touch closed loop. Each is rendered ``repeats`` times to a GIF; reported:
+frames, the median process CPU time and the median wall time of the rendering (``kbcli``'s start-up
+excluded).
 """
 
 from __future__ import annotations

@@ -1,20 +1,14 @@
-"""Benchmark of agents through the Gymnasium environment (issue 43): kbcli's strategies and any
-agent, side by side on the same task, seeds and scorer.
+"""Benchmark of agents through the Gymnasium environment: kbcli's strategies and any agent, side by
+side on the same task, seeds and scorer.
 
-Every agent (:func:`kbcli.envs.load_agent`: a strategy's name, or ``module:factory``) runs
-``experiments`` episodes per displacement category through ``kbcli/KeyboardAdapt-v0`` (or the
-dynamics one), each ``max_steps`` touches (``stop=False``, as ``kbcli bench adapt`` runs them),
-with ``belief=True`` so that an agent can read kbcli's posterior. The displacements and seeds are
-``kbcli bench adapt --section learned --model MODEL``'s (its :func:`~kbcli.bench.adapt.plan`; the
-``learned-rigid`` section's for the rigid family), run ``i`` of a category the same for every agent
-(a paired design), and the table is computed by its :func:`~kbcli.bench.adapt.summarize`: so in
-the ideal environment the built-in agents reproduce that benchmark's medians exactly. Episode
-``i`` starts from ``env.unwrapped.np_random = default_rng(seed_i)`` and
-``reset(options={"move": truth_i})``; an agent with ``reset(seed)`` gets a seed of its own per run,
-the same for every agent.
-
-:func:`step_cost` times one environment step against one ask/tell step (the target: at most 1.2
-times), both driven by the same strategy on the same model, displacements and seeds.
+Every agent (:func:`kbcli.envs.load_agent`) runs ``experiments`` episodes per displacement category
+through ``kbcli/KeyboardAdapt-v0`` (or the dynamics one), each ``max_steps`` touches, with
+``belief=True``. The displacements, seeds and table are ``kbcli bench adapt --section learned``'s
+(:func:`~kbcli.bench.adapt.plan`, :func:`~kbcli.bench.adapt.summarize`; ``learned-rigid`` for the
+rigid family), so in the ideal environment the built-in agents reproduce its medians exactly.
+Episode ``i`` starts from ``env.unwrapped.np_random = default_rng(seed_i)`` and
+``reset(options={"move": truth_i})``. :func:`step_cost` times one environment step against one
+ask/tell step.
 """
 
 from __future__ import annotations

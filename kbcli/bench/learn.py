@@ -1,17 +1,11 @@
 """Benchmark of learning the instrument model: sample efficiency and speed, per layout and class.
 
-For each layout (its default keyboard, :func:`bench_keyboard`; or a given keyboard), model class
-(:mod:`kbcli.core.model.classes`) and exploration strategy, the model is learned from ``seeds``
-seeds (``SeedSequence(seed).spawn(seeds)``; run ``i`` uses the same seed for every layout, class and
-strategy) up to the largest budget. Every ``resolution`` reaches and at each budget the model is
-scored on a grid of ``eval_step`` px (1 px: the grid of ``kbcli learn``'s final accuracy) over the
-working area (accuracy, :mod:`kbcli.core.model.accuracy`). Reported per row: the median accuracy at each
-budget, the median reaches until the accuracy first reaches 97 % and 99 % (runs that never do count
-as more than the largest budget), the median boundary error (px, on a 1 px grid) at
-``boundary_budget`` reaches and the median time of one fit on all the samples of the largest budget.
-Speed: the wall time of a whole ``learn`` stage run at ``boundary_budget`` reaches (the first
-seed, active strategy, first layout and class) and the ``dynamics`` simulator's reaches per second on
-one core.
+For each layout (:func:`bench_keyboard`, or a given keyboard), model class and exploration
+strategy, the model is learned from ``seeds`` seeds (run ``i`` with the same seed everywhere) up to
+the largest budget, scored on a grid of ``eval_step`` px every ``resolution`` reaches and at each
+budget. Reported per row: the median accuracy at each budget, the median reaches to 97 % and 99 %,
+the median boundary error at ``boundary_budget`` reaches and the median fit time; and the wall time
+of a ``learn`` stage run and the ``dynamics`` simulator's reaches per second.
 """
 
 from __future__ import annotations

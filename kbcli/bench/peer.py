@@ -1,19 +1,11 @@
-"""kbcli's learning against an established active learner, side by side (issue 27).
+"""kbcli's learning against an established active learner, side by side.
 
-The peer is scikit-activeml's pool-based uncertainty sampling around plain scikit-learn classifiers,
-with fixed hyper-parameters (:data:`PEERS`). Both learn the same keyboard (each layout's default,
-:func:`kbcli.bench.learn.bench_keyboard`) from the same simulator (``ideal`` mode), with the same
-seeds (``SeedSequence(seed).spawn(seeds)``; run ``i`` of every learner uses seed ``i``), and are scored
-by the same functions (:func:`kbcli.core.model.accuracy.accuracy_from_maps` and
-:func:`~kbcli.core.model.accuracy.boundary_error`, on a grid of ``eval_step`` px over the working area) at
-the same budgets of reaches.
-
-What each side knows: kbcli discovers its sound classes from what it hears; the peer is handed each
-touch's key (the heard features matched to the keyboard's, -1 for silence) and the list of all keys
-in advance, an advantage kbcli does not have. The peer's pool is ``pool`` actions uniform over the
-working area (kbcli's active exploration draws as many candidates); it starts from ``init`` random
-reaches and queries ``batch`` reaches per refit, as kbcli does.
-
+The peer is scikit-activeml's pool-based uncertainty sampling around plain scikit-learn
+classifiers (:data:`PEERS`). Both learn the same keyboard (:func:`kbcli.bench.learn.bench_keyboard`)
+from the same simulator with the same seeds, and are scored by the same functions
+(:mod:`kbcli.core.model.accuracy`, a grid of ``eval_step`` px) at the same budgets. The peer is
+handed each touch's key and the list of all keys in advance, which kbcli must discover; its pool is
+``pool`` uniform actions, it starts from ``init`` random reaches and queries ``batch`` per refit.
 scikit-activeml is an optional dependency (``pip install -e '.[bench]'``).
 """
 

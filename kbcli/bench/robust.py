@@ -1,16 +1,12 @@
-"""Benchmark of the robust posterior on a given model (issue 9): accuracy and cost per step.
+"""Benchmark of the robust posterior on a given model: accuracy and cost per step.
 
-For each reach setting (``ideal`` mode with the ideal arm: the paper's idealised problem; and
-``dynamics`` mode with the ``realistic`` arm), each strategy and each posterior (``robust``: the
-model's error marginalised, the default; ``plain``: the map read as the truth, softened by 1 px for
-a learned model, the historical default), ``experiments`` adaptations per displacement category
-(:func:`kbcli.stages.perturb.draw`), ``max_steps`` touches each. Run ``i`` of a category uses the
-same displacement and seed for every row (paired). Reported per row and category: the median
-touches until the error first drops below 1 px (``T + 1`` when never), the median and 90th
-percentile of the final error, the median wall-clock time of one step (decision plus update),
-and the run's whole CPU time (its setup and, in ``dynamics`` mode, the arm's reaching included)
-over its touches, which a loaded machine inflates less but a short run's setup dominates
-(:func:`step_time` times the posterior's step alone). Pure: returns rows.
+For each reach setting (``ideal`` mode with the ideal arm; ``dynamics`` mode with the ``realistic``
+arm), strategy and posterior (``robust``, the default; ``plain``, the map read as the truth,
+softened by 1 px for a learned model), ``experiments`` paired adaptations per displacement category
+(:func:`kbcli.stages.perturb.draw`), ``max_steps`` touches each. Reported per row and category: the
+median touches until the error first drops below 1 px (``T + 1`` when never), the median and 90th
+percentile of the final error, the median wall-clock time of one step and the run's whole CPU time
+over its touches (:func:`step_time` times the posterior's step alone). Pure: returns rows.
 """
 
 from __future__ import annotations

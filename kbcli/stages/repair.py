@@ -1,18 +1,14 @@
-"""The robot keeps what it learned (issue 42): a model artifact repaired by adaptations' touches.
+"""The robot keeps what it learned: a model artifact repaired by adaptations' touches.
 
-``kbcli adapt --repair --model-out`` and ``kbcli run --repair --model-out`` write, beside their
-run, a new ``model`` artifact: the input model refitted (:func:`kbcli.core.adaptation.repair.absorb`) with the
-touches of its adaptations, each mapped back into the model's reference frame by that
-adaptation's estimate, then calibrated and self-assessed again as ``kbcli learn`` does
-(:func:`kbcli.core.model.reliability.assess`), so the robot's next run starts from it. An adaptation
-whose posterior is not sure enough (its 90 % credible disc wider than ``absorb_radius`` px,
-:mod:`kbcli.core.adaptation.credible`) gives nothing: a belief that does not know where the keyboard is
-writes no labels.
+``kbcli adapt --repair --model-out`` and ``kbcli run --repair --model-out`` write, beside their run,
+a new ``model`` artifact: the input model refitted (:func:`kbcli.core.adaptation.repair.absorb`)
+with its adaptations' touches, mapped back into the model's frame by each adaptation's estimate,
+then calibrated and self-assessed again (:func:`kbcli.core.model.reliability.assess`). An
+adaptation whose 90 % credible disc is wider than ``absorb_radius`` px gives nothing.
 
-Lineage: the artifact's ``inputs`` hold its ``parent`` (the model it repaired, with its sha256,
-recursively) and the keyboard; its attrs ``lineage`` lists every generation (the parent's sha256,
-the touches absorbed, the shift they were mapped back by, the credible radius), the parent's own
-lineage first. A model without lineage (every model ``kbcli learn`` writes) is generation 0.
+Lineage: the artifact's ``inputs`` hold its ``parent`` (recursively) and the keyboard; its attrs
+``lineage`` list every generation (parent sha256, touches absorbed, shift, credible radius), the
+parent's first. A model ``kbcli learn`` writes is generation 0.
 """
 
 from __future__ import annotations

@@ -1,21 +1,14 @@
 """Playing a melody in a loop with the learned model (paper Sect. III-A, Algorithm 1).
 
-At each step the robot aims for the current melody note: it samples an action from its model's
-p(action | sound) for that note's sound class (Algorithm 1, line 10), reaches, and hears a sound. The
-heard sound is matched against the melody's sounds with the Manhattan distance and threshold of
-Eq. 2 (:func:`kbcli.core.instrument.keyboard.match`). If it is the sound of the note the robot aimed for, the
-step is a MATCH (history value 0) and the robot moves on to the next note, looping after the last
-(lines 4-6); otherwise it is a NO_MATCH (history value 1) and the robot restarts from note 0
-(lines 7-9).
+At each step the robot samples an action from its model's p(action | sound) for the current note
+(line 10), reaches, and hears a sound. A MATCH (history value 0) moves on to the next note, looping
+after the last (lines 4-6); a NO_MATCH (1) restarts from note 0 (lines 7-9). A MATCH means the
+heard sound matches (Eq. 2, :func:`kbcli.core.instrument.keyboard.match`) a melody note *with the
+aimed note's sound*: the paper's melody repeats notes, so Algorithm 1's best-matching index is
+ambiguous, and Sect. III-C counts an action as successful only if it produced the expected sound.
 
-Algorithm 1 as printed takes the best-matching melody note ``i`` and continues from ``i + 1``. The
-paper's example melody repeats notes (A and D twice), so that index is ambiguous; and Sect. III-C
-counts an action as successful only if it "ended up producing the expected sound perception".
-So here a MATCH means the heard sound matches (Eq. 2) a melody note *with the aimed note's sound*;
-hearing another note of the melody is a failure, like hearing silence or a note not in the melody.
-
-The robot side knows only its model, the melody and a ``touch`` callback (in the simulation
-:meth:`kbcli.sim.World.touch`): it never sees where the keyboard really is.
+The robot side knows only its model, the melody and a ``touch`` callback
+(:meth:`kbcli.sim.World.touch`): never where the keyboard really is.
 """
 
 from __future__ import annotations

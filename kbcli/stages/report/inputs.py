@@ -1,21 +1,14 @@
 """Rungs on the evaluation's inputs: each claim that differs, judged again where the robot is
 given something else, not told to reason otherwise.
 
-The ablation ladder (:mod:`.ablation`) changes the judged method's options. The paper's own
-explanation of its robot's results (Sect. IV-C) names two *inputs* instead: "the model learned with
-the iCub robot was not accurate enough" and "the dynamics of the action execution". A rung here is
-an evaluation of the same protocol in which the judged method keeps its name and options while an
-input changes: the model (``make reproduce-own-model``: the robot's own learned model) or the
-arm's landing scatter (``make reproduce-reach-noise``: ``pipelines/paper-reach-noise.toml``).
-
-Every claim the main evaluation marks *differs* is judged on each rung that measures it, with the
-same rule (:func:`.paper.claim_rules`), and replicated at the paper's sample size (:mod:`.power`),
-so a rung run with fewer experiments is read on the same footing as the main evaluation. What a
-rung changes is computed from the two artifacts (the model's sha256, each mode's arm preset and
-reach noise), never written by hand. A rung *flips* a claim when the claim agrees on it at the
-paper's sample size: in most of its replicates at 50 runs per parametrization (on its own verdict
-only when no replicate was drawn), so a rung run with fewer experiments cannot flip a claim by its
-lower power alone.
+The paper's explanation of its robot's results (Sect. IV-C) names two *inputs*: the learned model
+and the dynamics of the action. A rung here is an evaluation of the same protocol in which the
+judged method keeps its options while an input changes: the model (``make reproduce-own-model``)
+or the arm's landing scatter (``make reproduce-reach-noise``). Every claim the main evaluation
+marks *differs* is judged on each rung with the same rule (:func:`.paper.claim_rules`) and
+replicated at the paper's sample size (:mod:`.power`); a rung *flips* a claim when the claim agrees
+in most replicates (on its own verdict when none was drawn). What a rung changes is computed from
+the two artifacts, never written by hand.
 """
 
 from __future__ import annotations

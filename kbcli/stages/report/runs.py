@@ -1,19 +1,13 @@
 """What the runs say beside the claims: the stopping rules and the runs that ruled out the truth.
 
-- **Stopping** (Sect. III-D: "stop the process when it reaches a certain threshold"): every run of
-  the protocol takes ``max_steps`` touches, so that Fig. 7's curves have one length; each run
-  records at every step the probability of its maximum-likelihood cell (what the paper's rule
-  reads) and the posterior mass near its estimate (what ours reads), so both rules are applied
-  after the fact to every method, with the same thresholds: the paper's at the judged method's
-  ``stop_ml`` (:data:`PAPER_STOP_ML` when it sets none; the paper gives no number) and ours at
-  the adapter's default ``stop_mass`` within each method's ``stop_radius``. A rule that fires
-  early while the error is large is a rule the robot should not trust; the table shows both.
-- **The truth ruled out**: each run records, at every step, the log of the posterior at the true
-  displacement over its maximum (:meth:`kbcli.core.adaptation.posteriors.posterior.Posterior.log_ratio_at`, read on the
-  grid cells around the truth). A run *ruled the truth out* when that fell below
-  :data:`EXCLUDED` (1e-12 of the maximum) at any step: a method whose posterior can do that for
-  reasons other than the evidence (samples that stop where the model's working area stops) has
-  verdicts that depend on an artefact.
+- **Stopping** (Sect. III-D): every run takes ``max_steps`` touches and records at every step the
+  probability of its maximum-likelihood cell (the paper's rule) and the mass near its estimate
+  (ours), so both rules are applied after the fact to every method: the paper's at the judged
+  method's ``stop_ml`` (:data:`PAPER_STOP_ML` when it sets none), ours at the default
+  ``stop_mass`` within each method's ``stop_radius``.
+- **The truth ruled out**: a run whose posterior at the true displacement fell below
+  :data:`EXCLUDED` of its maximum at any step
+  (:meth:`kbcli.core.adaptation.posteriors.posterior.Posterior.log_ratio_at`).
 
 Pure: arrays from the artifact in, table rows (strings) out.
 """
