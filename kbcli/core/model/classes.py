@@ -28,8 +28,10 @@ in anything that wraps every class.
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -94,41 +96,18 @@ class ModelClass:
 MODEL_CLASSES: Registry[ModelClass] = Registry("model class")
 
 
-def _lines() -> type:
-    from kbcli.core.model.lines import LearnedModel
-
-    return LearnedModel
-
-
-def _svc() -> type:
-    from kbcli.core.model.svc import SVCModel
-
-    return SVCModel
+def _import(module: str, name: str) -> type:
+    """The class ``name`` of ``module``, imported on first use (a :class:`ModelClass` loader)."""
+    return getattr(importlib.import_module(module), name)
 
 
-def _forest() -> type:
-    from kbcli.core.model.classifiers import ForestModel
-
-    return ForestModel
-
-
-def _forest_xy() -> type:
-    from kbcli.core.model.classifiers import ForestXYModel
-
-    return ForestXYModel
-
-
-def _knn() -> type:
-    from kbcli.core.model.classifiers import KNNModel
-
-    return KNNModel
-
-
-def _exact() -> type:
-    from kbcli.core.model.base import ExactModel
-
-    return ExactModel
-
+_MODEL = "kbcli.core.model."
+_lines = partial(_import, _MODEL + "lines", "LearnedModel")
+_svc = partial(_import, _MODEL + "svc", "SVCModel")
+_forest = partial(_import, _MODEL + "classifiers", "ForestModel")
+_forest_xy = partial(_import, _MODEL + "classifiers", "ForestXYModel")
+_knn = partial(_import, _MODEL + "classifiers", "KNNModel")
+_exact = partial(_import, _MODEL + "base", "ExactModel")
 
 #: Parameters of a forest while it is refitted after every batch of an exploration and by
 #: ``auto``'s cross-validation: 60 trees instead of the final model's 120 (twice as fast a fit).
