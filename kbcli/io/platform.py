@@ -1,14 +1,10 @@
 """The platform that kbcli's numbers depend on to the last bit.
 
 Same inputs and seed give the same numbers on one platform, byte for byte. Across platforms they
-can differ in the last bit: numpy picks its SIMD kernels for the CPU it runs on (on an AVX-512
-machine ``np.sin``, ``np.arctan2`` and friends are vectorised approximations, elsewhere glibc's
-``libm``; ``exp`` and ``log`` have one kernel per vector width) and OpenBLAS picks a matrix kernel
-per CPU family. One ulp is nothing for an adaptation run, but a learning run in ``dynamics`` mode
-feeds 800 reaches of a pymunk arm back into where it reaches next, and grows that ulp into another
-(equally good) model. :func:`fingerprint` names what decides those bits; ``make data`` stores it
-beside the data (``data/platform.json``), and the rebuild test holds a rebuild to the stored bytes
-only on the platform that built them.
+can differ in the last bit (numpy's SIMD kernels and OpenBLAS's matrix kernels are chosen per CPU),
+and a learning run in ``dynamics`` mode grows that ulp into another model. :func:`fingerprint`
+names what decides those bits; ``make data`` stores it in ``data/platform.json``, and the rebuild
+test holds a rebuild to the stored bytes only on that platform.
 
 ``python -m kbcli.io.platform [-o FILE]`` prints it as JSON (or writes it atomically).
 """

@@ -1,16 +1,12 @@
 """Figure of one adaptation run: the posterior's evolution (the paper's Fig. 5) and the error and
 entropy curves (Figs. 6, 7 for a single experiment).
 
-Top row: the translation posterior (log scale over 30 nats below its maximum, with a colour bar;
-for the rigid family the angle summed out, each panel titled "angle marginalised"; a rigid move
-estimated as a translation: "angle not estimated") at the stored snapshot steps, the true
-displacement marked with a cross and the estimate (posterior mean) with a circle; the last panel zooms in on the
-estimate, wide enough to keep the truth and the posterior within 10 nats of its maximum in view
-(no zoom when that is nearly the whole panel: a wide posterior). Bottom: the translation error (px, log scale)
-with the 1 px level, the angle error (degrees, rigid runs, on its own axis) and the entropy (nats)
-against the observations, the stopping rule marked. One legend names every mark. A session with a
-robot in another process (``kbcli serve``) has no ground truth: no cross, and the error panel shows
-the robot's own confidence instead (the posterior mass near the estimate).
+Top row: the translation posterior (log scale over 30 nats; the angle summed out for the rigid
+family) at the stored snapshot steps, the truth a cross and the estimate a circle; the last panel
+zooms in on the estimate. Bottom: the translation error (px, log scale), the angle error (rigid
+runs) and the entropy against the observations, the stopping rule marked. Without ground truth
+(``kbcli serve``) there is no cross, and the error panel shows the posterior mass near the
+estimate.
 """
 
 from __future__ import annotations

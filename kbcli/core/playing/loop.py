@@ -1,16 +1,11 @@
 """The closed loop as the robot lives it: play, notice the failure, adapt, resume (paper Sect. III).
 
-The robot plays its melody with Algorithm 1 (:func:`kbcli.core.playing.play.play`), feeding every MATCH /
-NO_MATCH result to an online failure detector (Sect. III-C, :class:`kbcli.core.detection.detectors.Detector`).
-When the detector fires, the robot stops playing and adapts (Sect. III-D/E,
-:class:`kbcli.core.adaptation.adapter.Adapter`): it touches where its strategy says until the stopping rule holds
-(or a step budget runs out), and takes the estimate ``theta`` of the transform. It then resumes
-playing with *corrected* actions: an action ``a`` drawn from its (reference-pose) model for a note
-is sent as ``T_theta(a)`` (Eq. 3: the key that was under ``a`` is now under ``T(a)``). The detector
-restarts its warm-up, so a later move is noticed again, and a new adaptation starts again from the
-reference model.
-
-The robot's side only calls ``touch``; where the keyboard really is stays on the world's side.
+The robot plays its melody (:func:`kbcli.core.playing.play.play`), feeding every MATCH / NO_MATCH
+to an online failure detector (Sect. III-C). When it fires, the robot adapts (Sect. III-D/E,
+:class:`kbcli.core.adaptation.adapter.Adapter`) until the stopping rule holds or a step budget runs
+out, and resumes with *corrected* actions: an action ``a`` drawn from its reference-pose model is
+sent as ``T_theta(a)`` (Eq. 3). The detector restarts its warm-up, and a later adaptation starts
+again from the reference model. The robot's side only calls ``touch``.
 """
 
 from __future__ import annotations

@@ -28,11 +28,13 @@ class Dataset:
     Parameters
     ----------
     path : str
-        Slash path in the artifact, possibly with ``{placeholders}``.
+        Slash path in the artifact, possibly with ``{placeholders}`` expanded over a list in the
+        summary attributes (``{modes}`` over ``attrs["modes"]``).
     kinds : str
         Accepted numpy dtype kinds (``"f"``, ``"iu"``, ``"b"``, ``"U"``).
     shape : tuple of int or str
-        Axis lengths or symbols; its length is the expected ``ndim``.
+        Axis lengths (int), symbols shared by every dataset of the artifact (``"T"``) or ``"*"``
+        (any length); its length is the expected ``ndim``.
     optional : bool
         May be absent (checked when present).
     when : callable, optional

@@ -1,16 +1,11 @@
 """What explains each difference: the claims along an ablation ladder (``pipelines/ablations.toml``).
 
-The ladder is an evaluation whose methods, in the config's order, go from the paper's method to
-ours one factor at a time (each rung changes some options of the one before). For every claim the
-main report marks *differs*, :func:`explain` judges the same claim on every rung, with the same
-rule (:func:`kbcli.stages.report.paper.claim_rules`), and names the options whose change flips the
-verdict: the differences between the two rungs' resolved options, computed from the artifact,
-never written by hand. Each rung is judged on its last non-baseline strategy (``infogain`` on a
-rung that swaps ``active`` for it).
-
-The ladder may come as several evaluations of the same config, one per mode (``make
-reproduce-ablations MODE=ideal`` and ``MODE=dynamics``): each claim is explained by the first one
-that measures it.
+The ladder is an evaluation whose methods go from the paper's method to ours one factor at a time.
+For every claim the main report marks *differs*, :func:`explain` judges it on every rung with the
+same rule (:func:`kbcli.stages.report.paper.claim_rules`; a rung's last non-baseline strategy) and
+names the options whose change flips the verdict, computed from the artifact. A ladder run per
+mode (``make reproduce-ablations MODE=...``) comes as several evaluations: each claim is explained
+by the first that measures it.
 """
 
 from __future__ import annotations

@@ -1,16 +1,11 @@
 """How likely the paper's verdict is at the paper's sample size, if the effect is the one we measured.
 
-A claim that still *differs* after every reading and every rung of the ablation ladder needs a
-measured reason, or a statement of how strong the evidence against the paper is. The paper ran 50
-experiments per parametrization (Sect. IV-B). :func:`replication` draws replicates of our own
-experiment at that size, resampling the runs of each (category, parametrization, strategy) with
-replacement (a stratified bootstrap: each replicate is a plausible re-run of the protocol if the
-effect is the one we measured), recomputes the evaluation's summaries for each
+:func:`replication` draws replicates of our experiment at the paper's 50 runs per parametrization
+(Sect. IV-B), resampling the runs of each (category, parametrization, strategy) with replacement (a
+stratified bootstrap), recomputes the evaluation's summaries for each
 (:func:`kbcli.stages.evaluate.assembly.resummarise`) and judges the claim with its own rule. The
-share of replicates in which the claim *agrees* estimates the probability that a protocol like the
-paper's, run on our system, would have produced the paper's verdict: near 0, the difference is not
-chance at the paper's sample size; well above 0, the paper's verdict is within the noise of a
-50-run protocol, and the difference may be one of luck.
+share of replicates in which the claim *agrees* estimates the probability that the paper's
+protocol, run on our system, would give the paper's verdict: near 0, the difference is not chance.
 """
 
 from __future__ import annotations

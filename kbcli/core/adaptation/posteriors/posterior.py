@@ -1,16 +1,12 @@
 """The posterior over the keyboard's displacement: Eq. 8, the product of per-observation terms, on
 a hypothesis grid, in log space (paper Sect. III-D, Algorithm 2).
 
-The transform parameters live on a regular hypothesis grid (:mod:`kbcli.core.adaptation.grid`); the prior is
-uniform over it. The posterior (:class:`Posterior`, immutable: ``update`` returns a new one) holds the
-normalised log-probability of every cell; the product of Eq. 8 is a sum of per-observation log terms
-(the likelihood term, :mod:`kbcli.core.adaptation.posteriors.likelihood.term`, or the paper's KDE of Eq. 7,
-:mod:`kbcli.core.adaptation.posteriors.kde.density`; the kinds are registered in :mod:`kbcli.core.adaptation.posteriors`), exact on the grid
-(no resampling, no product sampling), normalised in log space (:func:`log_normalise`, the adaptation's one log-sum-exp).
-
-Estimates: the maximum-likelihood (maximum a posteriori under the flat prior) cell, the posterior
-mean (from the per-axis marginals), the entropy of the cell distribution in nats (``log G`` for the
-prior: it depends on the resolution, compare at equal grids), the mass within a radius.
+The prior is uniform over the hypothesis grid (:mod:`kbcli.core.adaptation.grid`). The posterior
+(:class:`Posterior`, immutable: ``update`` returns a new one) holds the normalised log-probability
+of every cell, a sum of per-observation log terms (the kinds registered in
+:mod:`kbcli.core.adaptation.posteriors`), exact on the grid and normalised by :func:`log_normalise`.
+Estimates: the maximum-likelihood cell, the posterior mean, the entropy in nats (``log G`` for the
+prior: compare at equal grids) and the mass within a radius.
 """
 
 from __future__ import annotations

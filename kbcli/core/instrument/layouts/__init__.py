@@ -1,19 +1,13 @@
 """Layouts of the instrument: a registry of how keys are shaped, placed and tuned (Sect. III-A).
 
-The paper's Reactable shows any virtual object; a layout turns the layout-specific part of a
-:class:`~kbcli.core.instrument.keyboard.KeyboardConfig` into the keys' shapes (:class:`KeyShapes`, in the
-keyboard's own frame, lower-left at (0, 0)), their pitches (MIDI) and tempi (bpm). Registered in
-:data:`LAYOUTS` (``kbcli keyboard --layout NAME``; ``LAYOUTS.get(name)``), one module each:
-
-- ``grid`` (:mod:`.grid`, the paper's Fig. 2): square keys;
-- ``hex`` (:mod:`.hexagonal`): a hexagonal isomorphic keyboard (Wicki-Hayden);
-- ``piano`` (:mod:`.piano`): white keys and narrower black keys;
-- ``pads`` (:mod:`.pads`): round pads with silence between them;
-- ``polygons`` (:mod:`.polygons`): explicit keys, rotated or irregular, from the TOML.
-
-A layout declares which config fields it uses and their defaults; the others must be left out. Its
-builder raises :class:`~kbcli.errors.ConfigError` naming the key or option at fault. Adding a layout
-is one module calling :func:`layout` (imported below).
+A layout turns the layout-specific part of a
+:class:`~kbcli.core.instrument.keyboard.KeyboardConfig` into the keys' shapes (:class:`KeyShapes`,
+in the keyboard's own frame, lower-left at (0, 0)), their pitches (MIDI) and tempi (bpm).
+Registered in :data:`LAYOUTS` (``kbcli keyboard --layout NAME``), one module each: ``grid`` (the
+paper's Fig. 2), ``hex``, ``piano``, ``pads`` and ``polygons``. A layout declares the config fields
+it uses and their defaults (the others must be left out); its builder raises
+:class:`~kbcli.errors.ConfigError` naming the key or option at fault. Adding a layout is one module
+calling :func:`layout` (imported below).
 """
 
 from __future__ import annotations

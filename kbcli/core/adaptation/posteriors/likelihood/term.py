@@ -1,16 +1,11 @@
 """The likelihood term of one observation (ours, the default posterior; paper Sect. III-D).
 
 ``log p_eps(s_t | T_h^-1(a_t))`` for every cell h of the hypothesis grid, read from a
-:class:`~kbcli.core.model.table.LikelihoodTable`. The points ``T_h^-1(a_t)`` over a translation grid form
-a flipped window of the raster, so the update is one vectorised gather (< 1 ms for 32k cells).
-
-A grid cell stands for a box of hypotheses, not a point: read at its centre, a thin feasible region
-between cell centres would leave every cell "violating" some touch and the posterior would settle
-confidently on a wrong cell. For the rigid family, where one angle step moves a far key by more
-than a raster cell, the term is therefore *cell-averaged*: the model's map of the heard class is
-blurred (in a window around the touched region) by the spread of ``T_h^-1(a_t)`` within one cell
-(:func:`cell_sigma`) and read on a raster of half the grid step. For translation at 0.5 px that
-spread (0.14 px) is below the raster cell and the map is read as it is.
+:class:`~kbcli.core.model.table.LikelihoodTable`: over a translation grid, one vectorised gather.
+For the rigid family, where one angle step moves a far key by more than a raster cell, the term is
+*cell-averaged* (a cell stands for a box of hypotheses, not a point): the map of the heard class is
+blurred by the spread of ``T_h^-1(a_t)`` within one cell (:func:`cell_sigma`) and read on a raster
+of half the grid step.
 """
 
 from __future__ import annotations
