@@ -37,6 +37,7 @@ from scipy.spatial import cKDTree
 from scipy.special import log_ndtr
 from sklearn.svm import SVC
 
+from kbcli.core.model.classifiers import class_distance, grid_boundary_sites
 from kbcli.core.model.pairwise import DEFAULT_AREA, ModelBase
 from kbcli.core.model.sounds import straddling_edges
 from kbcli.errors import ArtifactError, ConfigError
@@ -275,31 +276,11 @@ class SVCModel(ModelBase):
                         0.5)
         pts = a + np.clip(frac, 0.0, 1.0)[:, None] * (b - a)
         la, lb = self.labels_[e[:, 0]], self.labels_[e[:, 1]]
-        # and where the predicted class changes between neighbouring cells of a SITE_GRID px grid
-        # (shifted by ``phase``): the boundary between the straddling edges
-        gs = SITE_GRID
-        x0, y0, x1, y1 = (float(v) for v in self.area)
-        g = np.stack(np.meshgrid(np.arange(x0 + phase * gs, x1, gs),
-                                 np.arange(y0 + phase * gs, y1, gs)), -1)
-        cl = self.predict_class(g.reshape(-1, 2)).reshape(g.shape[:2])
-        iy, ix = np.nonzero(cl[:, 1:] != cl[:, :-1])
-        jy, jx = np.nonzero(cl[1:, :] != cl[:-1, :])
-        pts = np.vstack([pts, (g[iy, ix] + g[iy, ix + 1]) / 2, (g[jy, jx] + g[jy + 1, jx]) / 2])
-        cc = np.vstack([np.column_stack([cl[iy, ix], cl[iy, ix + 1]]),
-                        np.column_stack([cl[jy, jx], cl[jy + 1, jx]])])
-        la = np.r_[la, cc.min(axis=1)]
-        lb = np.r_[lb, cc.max(axis=1)]
-        width = self._class_distance(pts, la) + self._class_distance(pts, lb)
-        return {"points": pts, "width": width, "pair": np.column_stack([la, lb])}
-
-    def _class_distance(self, pts: np.ndarray, cls: np.ndarray) -> np.ndarray:
-        """(m,) distance from each point to the nearest sample of its class ``cls``."""
-        out = np.full(len(pts), np.inf)
-        for c in np.unique(cls):  # one tree per class present
-            sel = np.flatnonzero(cls == c)
-            mine = self.actions_[self.labels_ == c]
-            out[sel] = cKDTree(mine).query(pts[sel])[0]
-        return out
+        width = (class_distance(self.actions_, self.labels_, pts, la)
+                 + class_distance(self.actions_, self.labels_, pts, lb))
+        grid = grid_boundary_sites(self, phase, SITE_GRID)  # the boundary between the edges
+        return {"points": np.vstack([pts, grid["points"]]), "width": np.r_[width, grid["width"]],
+                "pair": np.vstack([np.column_stack([la, lb]), grid["pair"]])}
 
     # -- storage --------------------------------------------------------------------------------
     def to_arrays(self) -> dict[str, np.ndarray]:
