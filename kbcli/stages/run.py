@@ -193,8 +193,7 @@ class LoopSession:
             "adaptations": int(sum(1 for s in st if s.fired)),
             "adapt_touches": int((phase == ADAPT).sum()),
             "correction": {n: float(v) for n, v in zip(names, correction, strict=True)},
-            "truth": {n: float(v) for n, v in
-                      zip(transforms.FAMILIES.get(self.world_family).params, self.truth, strict=True)},
+            "truth": transforms.FAMILIES.get(self.world_family).as_dict(self.truth),
             "correction_error_px": err_px,
             # resolved from the model's own reliability when the config leaves it None
             "redundancy_radius": (redundancy_radius(self.model, self.cfg.adapt.adapter_config())

@@ -153,8 +153,7 @@ def run_attrs(res: dict[str, np.ndarray], acfg: AdapterConfig, *, truth: np.ndar
         "final_entropy": float(res["entropy"][-1]) if n else None,
         "estimate": None if final is None else
         {k: float(v) for k, v in zip(names, final, strict=True)},
-        "truth": None if truth is None else
-        {k: float(v) for k, v in zip(transforms.FAMILIES.get(wf).params, truth, strict=True)},
+        "truth": None if truth is None else transforms.FAMILIES.get(wf).as_dict(truth),
         "grid_cells": acfg.grid_cells,
         "median_step_ms": float(np.median(res["step_ms"])) if n else None,
         # resolved from the model's own reliability when the config leaves it None
