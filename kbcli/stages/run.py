@@ -1,15 +1,12 @@
 """Stage ``run``: the closed loop, play -> detect -> adapt -> resume (paper Sect. III, IV-C).
 
-The world (:class:`~kbcli.sim.World`) starts with the keyboard at its reference pose and moves it to
-the scene's pose after ``perturb_at`` touches, without telling the robot. The robot's side,
-:func:`kbcli.core.playing.loop.closed_loop`, only gets the world's ``touch``. The ``closed_loop`` artifact
-records every touch (phase, action, landed point, heard features, MATCH/NO_MATCH, detector score,
-the correction in force; schema 2 adds the arm's joint angles after each touch in dynamics mode
-``steps/joint_angles``, the adapter's estimate during adaptation ``steps/estimate`` (NaN while
-playing), and its posterior after each adaptation touch ``posterior/log_translation`` (the log of
-the translation marginal on the ``posterior/dx``, ``posterior/dy`` grid, at touches
-``posterior/touch``)) and summarises the success rate of playing before the perturbation, after
-it (until the robot adapted) and after adaptation.
+The world (:class:`~kbcli.sim.World`) moves the keyboard from its reference pose to the scene's
+after ``perturb_at`` touches, without telling the robot, whose side
+(:func:`kbcli.core.playing.loop.closed_loop`) only gets the world's ``touch``. The ``closed_loop``
+artifact records every touch (phase, action, landing, heard features, MATCH/NO_MATCH, detector
+score, correction; schema 2: ``steps/joint_angles``, ``steps/estimate`` and the posterior after
+each adaptation touch, ``posterior/...``) and the success rates before the move, after it until
+adapted, and after adaptation.
 """
 
 from __future__ import annotations

@@ -2,53 +2,30 @@
 
 A robot that is not kbcli's simulator (a real arm, MuJoCo, Gazebo) touches, listens and feels
 where it landed; kbcli decides where to touch next and keeps the posterior (the same
-:class:`~kbcli.core.adaptation.loop.Adapter` the ``adapt`` and ``run`` stages use). :class:`Session` is the
-protocol without the transport: one message in (a line of JSON), one reply out (a dict). The CLI
-(``kbcli serve``) moves the lines over stdin/stdout or a local socket and writes the session as an
-ordinary ``run`` artifact (:class:`kbcli.stages.adapt.Recorder`) after every touch; the truth being
-unknown, its errors are NaN.
+:class:`~kbcli.core.adaptation.loop.Adapter` the ``adapt`` and ``run`` stages use). :class:`Session`
+is the protocol without the transport: one message in (a line of JSON), one reply out (a dict).
+The CLI (``kbcli serve``) moves the lines over stdin/stdout or a local socket and writes the
+session as an ordinary ``run`` artifact (:class:`kbcli.stages.adapt.Recorder`) after every touch;
+the truth being unknown, its errors are NaN.
 
-Protocol 1 (one JSON object per line, UTF-8, each way)
-------------------------------------------------------
-kbcli speaks first::
-
-    {"type": "hello", "protocol": 1, "kbcli": "0.1.0", "features": ["pitch", "tempo"],
-     "area": [x0, y0, x1, y1], "family": "translation", "parameters": ["dx", "dy"],
-     "max_steps": 40, "step": 0, "action": [x, y], "estimate": {"dx": 0.0, "dy": 0.0},
-     "entropy": 10.4, "mass": 0.0, "done": false}
-
-The robot then sends, per touch (``op`` may be left out for an observation)::
+Protocol 1 (the whole schema: ``docs/tutorials/robot.md`` and ``kbcli serve --help``): kbcli
+speaks first (``"type": "hello"``, with the first ``action``); the robot sends per touch::
 
     {"op": "observe", "heard": [pitch, tempo] or null, "felt": [x, y] or null,
      "action": [x, y], "id": any}
 
-``heard``: the perceived features, null for silence (required). ``felt``: where the robot felt its
-finger land, in pad px: the point the posterior is updated at (optional: without it, the aim is used
-and ``--blur`` should be the reach noise; it must lie within :data:`FELT_MARGIN` of the area's
-larger side around the working area). ``action``: where it aimed (optional: the last suggested
-action; it must lie in the working area). ``id``: echoed in the reply. Heard features that match
-no sound of the model are refused (an error reply, nothing recorded, the touch budget untouched)
-unless the message says ``"insist": true``: then the touch is recorded with class -1 and does not
-move the posterior. kbcli answers::
+and kbcli answers::
 
     {"type": "step", "step": 1, "class": 13, "sound": "A4 106 bpm",
      "estimate": {"dx": 11.9, "dy": -7.1}, "entropy": 2.3, "mass": 0.81, "done": false,
      "action": [x, y]}
 
-``class``: the model's class of the heard sound (0 silence, -1 unknown: the touch is recorded but
-does not move the posterior). ``mass``: the posterior mass within ``stop_radius`` px of the
-estimate. ``done``: stop touching (the stopping rule holds, with ``--stop``, or ``max_steps``
-touches were observed). ``action``: where to touch next (null once ``max_steps`` touches were
-observed). Other messages: ``{"op": "suggest"}`` (the pending action again), ``{"op": "state"}``
-(estimate, entropy, mass, done, action: a ``state`` reply), ``{"op": "end"}`` (kbcli writes the
-artifact, replies ``{"type": "bye", "steps": n, "file": ...}`` and exits).
-
-A message line is at most :data:`MAX_LINE` bytes (64 KiB) and a whole number in it at most
-:data:`MAX_DIGITS` digits (an ``id`` included). A message kbcli cannot use (a longer line or number,
-not JSON, not an object, an unknown ``op`` or field, non-numeric or
-non-finite numbers, an action outside the working area, a ``felt`` position far outside it, heard
-features that match no sound, an observation beyond ``max_steps``) gets
-``{"type": "error", "error": "...", "id": ...}``; nothing is recorded for it and the session goes on.
+Other ops: ``suggest``, ``state`` and ``end`` (kbcli writes the artifact, replies ``bye`` and
+exits). A message kbcli cannot use (longer than :data:`MAX_LINE` bytes, a number of more than
+:data:`MAX_DIGITS` digits, an unknown op or field, an action outside the working area, a ``felt``
+position beyond :data:`FELT_MARGIN`, heard features that match no sound unless
+``"insist": true``, a touch beyond ``max_steps``) gets
+``{"type": "error", "error": "...", "id": ...}``; nothing is recorded and the session goes on.
 """
 
 from __future__ import annotations

@@ -1,17 +1,10 @@
 """The robot's model of the instrument, M_INST: p(sound, action) (paper Sect. III-A).
 
-Every model answers the same questions, so the adaptation can use the exact geometry (calibration
-experiments) or a model learned by exploration (what a real robot has) interchangeably:
-
-- ``class_features_`` : (C, D) features of each sound class; class 0 is silence (a NaN row);
-- ``predict_proba(points)`` : (n, C) p(sound class | action);
-- ``sample_actions(cls, n, rng)`` : (n, 2) draws from p(action | sound class) (Algorithm 2, line 3);
-- ``classify(perceived)`` : (n,) class of perceived features (Eq. 2 matching; 0 silence, -1 unknown);
-- ``raster(step)`` : a :class:`ProbabilityRaster` of ``predict_proba`` over the working area, which
-  the adaptation indexes instead of calling the model in its inner loop.
-
-This module holds the interface, the raster and the ``exact`` model; the learned classes derive
-from :class:`~kbcli.core.model.pairwise.ModelBase` (the pairwise contests they share).
+Every model answers the same questions (the interface: :mod:`kbcli.core.model.classes`), so the
+adaptation can use the exact geometry or a learned model interchangeably. This module holds the
+interface's raster (:class:`ProbabilityRaster`, which the adaptation indexes instead of calling
+the model in its inner loop) and the ``exact`` model; the learned classes derive from
+:class:`~kbcli.core.model.pairwise.ModelBase`.
 """
 
 from __future__ import annotations

@@ -1,17 +1,10 @@
 """Drawing actions from p(action | sound) (Algorithm 2, line 3; Algorithm 1's ``sampleAction``).
 
-Two sources, both with ``sample_actions(cls, n, rng) -> (n, 2)`` (the model's own signature, so
-either stands where a model's sampler is expected):
-
-- the model itself (``model.sample_actions``: rejection sampling, exact, slow for a learned model);
-- :class:`RasterSampler`: the model rasterised (a :class:`~kbcli.core.model.table.LikelihoodTable`,
-  no floor): a raster cell drawn with weight p(sound | cell) (the uniform prior over actions makes
-  p(action | sound) proportional to it), then a point uniform within the cell. It is the model's
-  p(action | sound) to within one raster cell.
-
-Silence is drawn like any sound over the raster (the model's working area, where it was learned);
-so is the model's own sampler. The KDE posterior's samples (shared, fresh, silent beyond the
-working area) are :mod:`kbcli.core.adaptation.posteriors.kde.samples`.
+Two sources with the model's own signature ``sample_actions(cls, n, rng) -> (n, 2)``: the model
+itself (rejection sampling, exact, slow for a learned model) and :class:`RasterSampler`, the model
+rasterised (no floor): a cell drawn with weight p(sound | cell), then a point uniform within it,
+exact to within one raster cell. Silence is drawn over the model's working area, as by the model's
+own sampler; the KDE posterior's samples are :mod:`kbcli.core.adaptation.posteriors.kde.samples`.
 """
 
 from __future__ import annotations

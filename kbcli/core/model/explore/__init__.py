@@ -1,20 +1,10 @@
 """Exploration: where to reach next to learn the instrument model (paper ref. [11]).
 
-The robot learns p(sound, action) by touching the pad and listening. A strategy proposes the next
-reach targets from what has been heard so far; :class:`Exploration`
+A strategy proposes the next reach targets from what has been heard so far; :class:`Exploration`
 (:mod:`~kbcli.core.model.explore.loop`) runs the loop (propose, touch, refit) as an iterator that
-yields one batch at a time.
-
-Strategies (registry :data:`STRATEGIES`, one signature, :data:`Strategy`:
-:mod:`~kbcli.core.model.explore.base`), one module each:
-
-``active`` (:mod:`~kbcli.core.model.explore.active`)
-    Cover the working area to ``explore_radius``, then bisect the model's widest boundary band.
-``balanced`` (:mod:`~kbcli.core.model.explore.balanced`)
-    Boundary seeking and coverage weighed in one greedy rule: a coarse cover first, then the
-    widest gap, a boundary band or an unexplored hole, whichever is wider.
-``random`` (:mod:`~kbcli.core.model.explore.random`)
-    Targets uniform over the working area: the baseline.
+yields one batch at a time. Strategies (:data:`STRATEGIES`, one signature, :data:`Strategy`), one
+module each: ``active`` (cover the working area, then bisect the widest boundary band),
+``balanced`` (coverage and boundary seeking in one greedy rule) and ``random`` (the baseline).
 """
 
 from __future__ import annotations

@@ -9,9 +9,8 @@ so they can be drawn once per sound class (:class:`ActionSamples`, ``kde_draw = 
 for every observation as Algorithm 2 writes (``"fresh"``,
 :class:`kbcli.core.adaptation.posteriors.kde.samples.FreshSamples`).
 
-Bandwidth: Scott's ``sigma_hat * N^(-1/6)`` with Silverman's ``sigma_hat = min(std, IQR / 1.349)``
-averaged over both axes, clipped to ``[resolution, max_bandwidth]``; each angle slice is its own
-2-D KDE. As in Algorithm 2, actions for a silence are drawn from the model's working area only, so
+The bandwidth: :func:`~kbcli.core.adaptation.posteriors.kde.samples.scott_bandwidth`; each angle
+slice is its own 2-D KDE. As in Algorithm 2, actions for a silence are drawn from the model's working area only, so
 hypotheses that put the touch beyond it get the floor, not the silence they would in fact give.
 """
 
