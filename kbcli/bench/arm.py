@@ -1,13 +1,10 @@
 """Benchmark of the arm presets: how far a reach lands from its target, and from where the robot
-feels it landed (issue 9).
+feels it landed.
 
 For each arm preset (:data:`kbcli.sim.arms.PRESETS`) and reach mode, the arm reaches ``reaches``
-targets uniform over the default keyboard's working area, one after the other (each reach starts
-where the last ended, so the tracking error sees realistic approach directions). Reported per
-preset and mode: the median and 95th percentile of the landing error ``|landed - target|`` and of
-``|felt - landed|`` (where the robot feels its finger against where it is), the contact scatter of
-the finger (``|contact - landed|``: where the pad hears the touch), and the simulated reaches per
-second. Pure: returns rows; the CLI prints them.
+targets uniform over the default keyboard's working area, one after the other. Reported per preset
+and mode: the median and 95th percentile of ``|landed - target|``, ``|felt - landed|`` and
+``|contact - landed|``, and the simulated reaches per second. Pure: returns rows.
 """
 
 from __future__ import annotations

@@ -4,11 +4,6 @@ Only this package imports pymunk (in :mod:`kbcli.sim.arm`, loaded when a ``dynam
 built). The rest of kbcli sees a reacher, ``reach(targets, rng) -> landed finger positions``
 (:func:`make_reacher` of a :class:`SimConfig`), and :class:`World`, which turns an action into
 what the robot hears. The world holds the ground truth; robot-side code only gets ``World.touch``.
-
-The package's modules: :mod:`~kbcli.sim.config` (:class:`SimConfig`), :mod:`~kbcli.sim.arms`
-(how an arm errs, the arm presets), :mod:`~kbcli.sim.modes` (the reach modes),
-:mod:`~kbcli.sim.kinematics`, :mod:`~kbcli.sim.reach` (the workspace),
-:mod:`~kbcli.sim.ideal` and :mod:`~kbcli.sim.arm` (the two reachers), :mod:`~kbcli.sim.world`.
 """
 
 from kbcli.sim.arms import PRESETS, ArmConfig, arm_config

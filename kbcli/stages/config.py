@@ -1,13 +1,9 @@
 """The config base of the stages' tables: :class:`kbcli.core.config.Config` whose validators may
 raise a whole sentence.
 
-A stage table is checked in two ways: its fields by their declared constraints (one line naming the
-table, the key and the accepted range, :func:`kbcli.core.config.describe_error`), and across fields
-or across tables (a method's strategies against the protocol's baseline, a displacement against its
-category's bounds) by validators that say what is wrong in their own words. Such a validator raises
-:class:`~kbcli.errors.ConfigError`; :class:`StageConfig` passes its message through as it is,
-instead of prefixing the key it was checked under (nested tables, :class:`Method` of the evaluation
-protocol, build their own message naming their full key).
+Fields are checked by their declared constraints (one line naming the table, the key and the
+accepted range, :func:`kbcli.core.config.describe_error`); checks across fields or tables raise
+:class:`~kbcli.errors.ConfigError`, whose message :class:`StageConfig` passes through as it is.
 """
 
 from __future__ import annotations

@@ -2,13 +2,10 @@
 its threshold, and the adaptation touches on the keyboard.
 
 Top left: success (running mean over ``window`` play touches), each NO_MATCH, the move, the
-detection and the adaptation (shaded); lines break across the adaptation, where nothing is played.
-Bottom left: the detector's score (log) with its threshold. Right: the keyboard at its reference
-pose (faded), where it really is (solid, dark; rotated for a rigid move) and where the robot
-believes it is after adapting (dashed, magenta, on top: where the two coincide the dark line shows
-between the dashes; styles of :mod:`kbcli.viz.palette`), with the adaptation touches numbered in
-order (labels that would overlap a touch or another label move aside, or are left out). The title
-gives the success rates exactly, with their counts.
+detection and the adaptation (shaded). Bottom left: the detector's score (log) with its threshold.
+Right: the keyboard at its reference pose (faded), where it really is (solid) and where the robot
+believes it is after adapting (dashed, magenta), with the adaptation touches numbered in order.
+The title gives the success rates exactly, with their counts.
 """
 
 from __future__ import annotations

@@ -1,13 +1,10 @@
 """Figure of a model artifact: the learned map beside the true layout, and the learning curve.
 
-Left: the key the model predicts in each 2 px cell (colours as in the true layout, silence white),
-its uncertainty (the confusion factor 1 - (p1 - p2), Sect. III-E) shaded dark with a colour bar,
-the fitted boundary lines thin, and the explored points (where the finger landed) as dots; cells
-whose predicted key is wrong are red; a legend names each. Middle: the true layout. Right: the
-learning curve (accuracy on a 2 px grid against reaches), with the 99 % level dashed and labelled.
-The model's own estimate of its reliability (cross-validated, :mod:`kbcli.core.model.reliability`)
-sits beside the measured values. An exact-model artifact shows its map and the layout, titled as
-such.
+Left: the key the model predicts in each 2 px cell, its uncertainty (the confusion factor
+1 - (p1 - p2), Sect. III-E) shaded, the fitted boundary lines, the explored points and the wrong
+cells in red. Middle: the true layout. Right: the learning curve, with the model's own estimate of
+its reliability (:mod:`kbcli.core.model.reliability`) beside the measured values. An exact-model
+artifact shows its map and the layout.
 """
 
 from __future__ import annotations

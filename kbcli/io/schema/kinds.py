@@ -1,9 +1,6 @@
-"""The table of schemas, :data:`SCHEMAS`: kind -> schema version -> :class:`Schema`.
-
-To extend it when you add a dataset, add a :class:`Dataset` line to the kind's current schema; when
-you bump a kind's version (:data:`kbcli.stages.artifact.SCHEMA_VERSIONS`), add a new entry and keep
-the old ones: a file is checked against the schema of the highest version not above its own. The
-arrays each model class stores are in one table, :data:`MODEL_ARRAYS`.
+"""The table of schemas, :data:`SCHEMAS`: kind -> schema version -> :class:`Schema` (how to extend
+it: :mod:`kbcli.io.schema`). The arrays each model class stores are in one table,
+:data:`MODEL_ARRAYS`.
 """
 
 from __future__ import annotations

@@ -1,13 +1,11 @@
 """The judging rules the paper does not state: kbcli's reading of each, and the plainest other.
 
-The paper states its claims in words and a few numbers ("p-value below 1e-5 for RMSE up to 10
-pixels", "not so big", "not very significant", "restoring its previous performance"). Turning a
-sentence into a verdict takes rules it does not state. :data:`READINGS` is the one list of them:
-the paper's words, the rule kbcli applies, and the plainest other reading; the report judges every
-claim under kbcli's rule and prints the verdict under each other reading that applies to it beside
-it (:class:`~kbcli.stages.report.source.Claim` ``readings``), so that no verdict rests on an
-unstated rule unseen. The section "Judging rules" and the departures table are generated from this
-list.
+The paper states its claims in words and a few numbers ("not so big", "restoring its previous
+performance"); turning a sentence into a verdict takes rules it does not state. :data:`READINGS` is
+the one list of them: the paper's words, kbcli's rule and the plainest other reading. The report
+judges every claim under kbcli's rule and prints the verdict under each other reading beside it
+(:class:`~kbcli.stages.report.source.Claim` ``readings``); the section "Judging rules" and the
+departures table are generated from this list.
 """
 
 from __future__ import annotations
