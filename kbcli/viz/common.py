@@ -11,7 +11,7 @@ import matplotlib
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.figure import Figure
-from matplotlib.patches import Circle, Polygon
+from matplotlib.patches import Circle, Polygon, Rectangle
 from matplotlib.path import Path
 
 from kbcli.core.instrument.keyboard import Keyboard
@@ -156,6 +156,17 @@ def key_labels(kb: Keyboard, ppu: float, offset=(0.0, 0.0)
                 where.append(xy)
                 break
     return out, np.array(where), fs
+
+
+def draw_layout(ax, kb: Keyboard, pad: float, area: bool = True) -> None:
+    """The keys, labelled, in the working area widened by ``pad`` px (dashed with ``area``)."""
+    x0, y0, x1, y1 = kb.area
+    ax.set_xlim(x0 - pad, x1 + pad)  # limits and aspect first: the labels are sized to the keys
+    ax.set_ylim(y0 - pad, y1 + pad)
+    ax.set_aspect("equal")
+    draw_keyboard(ax, kb)
+    if area:
+        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ls="--", ec="grey", lw=1))
 
 
 def draw_keyboard(ax, kb: Keyboard, *, labels: bool = True, alpha: float = 1.0,

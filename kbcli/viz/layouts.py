@@ -8,13 +8,12 @@ import os
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import ListedColormap
-from matplotlib.patches import Rectangle
 from matplotlib.ticker import FixedLocator, NullFormatter, ScalarFormatter
 
 from kbcli.core.model import accuracy as scoring
 from kbcli.core.model.base import grid_points
 from kbcli.stages.artifact import Artifact
-from kbcli.viz.common import draw_keyboard, save
+from kbcli.viz.common import draw_keyboard, draw_layout, save
 from kbcli.viz.palette import key_colours
 
 MAP_STEP = 2.0  # px
@@ -32,12 +31,7 @@ def _key_colours(n_keys: int) -> np.ndarray:
 def _layout_panel(ax, res) -> None:
     """Top left: the layout and its working area."""
     kb = res.keyboard
-    x0, y0, x1, y1 = kb.area
-    ax.set_xlim(x0 - 5, x1 + 5)  # limits and aspect first: the labels are sized to the keys
-    ax.set_ylim(y0 - 5, y1 + 5)
-    ax.set_aspect("equal")
-    draw_keyboard(ax, kb)
-    ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ls="--", ec="grey", lw=1))
+    draw_layout(ax, kb, 5)
     ax.set_title(f"{res.layout}: {kb.describe()}\nlabels: note, tempo (bpm); dashed: working area",
                  fontsize=9)
 

@@ -22,7 +22,7 @@ from kbcli.core.model import accuracy as scoring
 from kbcli.core.model.base import grid_points
 from kbcli.io.schema.rules import learned, model_class_of
 from kbcli.stages.artifact import Artifact
-from kbcli.viz.common import draw_keyboard, save
+from kbcli.viz.common import draw_layout, save
 from kbcli.viz.palette import key_colours
 
 MAP_STEP = 2.0  # px
@@ -151,11 +151,7 @@ def _map_panel(fig, ax, art: Artifact, model, kb: Keyboard) -> None:
 
 def _layout_panel(ax, kb: Keyboard) -> None:
     """Middle: the true layout."""
-    x0, y0, x1, y1 = kb.area
-    ax.set_xlim(x0, x1)  # limits and aspect first: the labels are sized to the keys
-    ax.set_ylim(y0, y1)
-    ax.set_aspect("equal")
-    draw_keyboard(ax, kb)
+    draw_layout(ax, kb, 0, area=False)
     ax.set_title(f"true layout ({kb.layout}): {kb.n_keys} keys (note, tempo)", fontsize=11)
     ax.set_xlabel("pad x (px)")
 
