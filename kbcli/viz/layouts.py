@@ -14,18 +14,12 @@ from kbcli.core.model import accuracy as scoring
 from kbcli.core.model.base import grid_points
 from kbcli.stages.artifact import Artifact
 from kbcli.viz.common import draw_keyboard, draw_layout, save
-from kbcli.viz.palette import key_colours
+from kbcli.viz.palette import map_colours
 
 MAP_STEP = 2.0  # px
 _STRATEGY_COLOURS = {"random": "tab:grey", "active": "tab:orange", "infogain": "tab:blue"}
 _CLASS_COLOURS = {"lines": "tab:green", "svc": "tab:purple"}
 _EXPLORATION_STYLES = {"active": "-"}  # any other exploration: dotted
-
-
-def _key_colours(n_keys: int) -> np.ndarray:
-    """RGBA per key index + 2: -2 (a sound that is no key) grey, -1 (silence) white, then the keys
-    in the colours :func:`draw_keyboard` gives them."""
-    return np.vstack([(0.6, 0.6, 0.6, 1.0), (1, 1, 1, 1), key_colours(n_keys)])
 
 
 def _layout_panel(ax, res) -> None:
@@ -47,7 +41,7 @@ def _map_panel(ax, kb, model_art: Artifact) -> None:
     keys = scoring.class_keys(model.class_features_, kb)[model.predict_class(flat)]
     keys = keys.reshape(pts.shape[:2])
     wrong = keys != kb.key_at(flat).reshape(pts.shape[:2])
-    colours = _key_colours(kb.n_keys)
+    colours = map_colours(kb.n_keys)
     ax.imshow(keys + 2, origin="lower", extent=(x0, x1, y0, y1), interpolation="nearest",
               cmap=ListedColormap(colours), vmin=-0.5, vmax=len(colours) - 0.5)
     red = np.zeros((*wrong.shape, 4))

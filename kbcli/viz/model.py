@@ -23,15 +23,9 @@ from kbcli.core.model.base import grid_points
 from kbcli.io.schema.rules import learned, model_class_of
 from kbcli.stages.artifact import Artifact
 from kbcli.viz.common import draw_layout, save
-from kbcli.viz.palette import key_colours
+from kbcli.viz.palette import map_colours
 
 MAP_STEP = 2.0  # px
-
-
-def _key_colours(kb: Keyboard) -> np.ndarray:
-    """RGBA per key index + 2: -2 (a sound that is no key) grey, -1 (silence) white, then the keys'
-    colours (:func:`kbcli.viz.palette.key_colours`, as in the true layout)."""
-    return np.vstack([(0.6, 0.6, 0.6, 1.0), (1, 1, 1, 1), *key_colours(kb.n_keys)])
 
 
 #: the shading of uncertainty: white (sure) to near black (a coin flip between two keys)
@@ -119,7 +113,7 @@ def _map_panel(fig, ax, art: Artifact, model, kb: Keyboard) -> None:
     x0, y0, x1, y1 = kb.area
     extent = (x0, x1, y0, y1)
     keys, confusion, wrong = _map(model, kb)
-    colours = _key_colours(kb)
+    colours = map_colours(kb.n_keys)
     ax.imshow(keys + 2, origin="lower", extent=extent, interpolation="nearest",
               cmap=ListedColormap(colours), vmin=-0.5, vmax=len(colours) - 0.5)
     shade = ax.imshow(confusion, origin="lower", extent=extent, interpolation="nearest",

@@ -57,3 +57,9 @@ def key_colours(n: int) -> np.ndarray:
     """(n, 4) RGBA colours of keys 0..n-1: pairwise distinct up to :data:`DISTINCT_KEYS` keys."""
     pal = _palette()
     return pal[np.arange(n) % len(pal)]
+
+
+def map_colours(n: int) -> np.ndarray:
+    """RGBA per key index + 2 of a predicted map: -2 (a sound that is no key) grey, -1 (silence)
+    white, then the keys' :func:`key_colours`."""
+    return np.vstack([(0.6, 0.6, 0.6, 1.0), (1, 1, 1, 1), key_colours(n)])
