@@ -6,9 +6,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from types import MappingProxyType
-from typing import Any, ClassVar
+from typing import Annotated, Any, ClassVar
 
-from pydantic import Field, InstanceOf, field_validator, model_validator
+from pydantic import AfterValidator, Field, InstanceOf, field_validator, model_validator
 
 from kbcli.core.adaptation.config import refuse_inactive
 from kbcli.core.config import (
@@ -44,6 +44,14 @@ def _tables(v: Any, build: Any, what: str) -> Any:
     if not v:
         raise ConfigError(f"evaluate.{what} must hold at least one table")
     return tuple(build(name, table) for name, table in v.items())
+
+
+def _descending(v: tuple) -> tuple:
+    return tuple(sorted(set(v), reverse=True))
+
+
+def _ascending(v: tuple) -> tuple:
+    return tuple(sorted(set(v)))
 
 
 def _unique(items: tuple, what: str) -> tuple:
@@ -127,13 +135,14 @@ class EvaluateConfig(StageConfig):
     methods: tuple[InstanceOf[Method], ...] = Field(default_factory=default_methods, min_length=1)
     judged: Name = "paper"
     baseline: Name = "random"
-    modes: Names = MODES.names()
-    family: Name = "translation"
+    modes: Annotated[Names, AfterValidator(check_modes)] = MODES.names()
+    family: Annotated[Name, AfterValidator(transforms.FAMILIES.check)] = "translation"
     max_steps: between(Whole, 1, MAX_ADAPT_STEPS) = 40
-    thresholds: tuple[Positive, ...] = Field((20.0, 15.0, 10.0, 8.0, 6.0, 4.0, 2.0, 1.0),
-                                             min_length=1)
+    thresholds: Annotated[tuple[Positive, ...], AfterValidator(_descending)] = Field(
+        (20.0, 15.0, 10.0, 8.0, 6.0, 4.0, 2.0, 1.0), min_length=1)
     example: Name = "small"
-    snapshot_steps: tuple[NonNegativeInt, ...] = (1, 2, 3, 5, 10, 20)
+    snapshot_steps: Annotated[tuple[NonNegativeInt, ...], AfterValidator(_ascending)] = (
+        1, 2, 3, 5, 10, 20)
     reach_noise: Mapping[str, ReachNoise] = Field(
         default_factory=lambda: {"ideal": 0.0, "dynamics": 2.0})
     arm: Mapping[str, Any] = Field(default_factory=lambda: {"ideal": "ideal", "dynamics": "ideal"})
@@ -161,26 +170,6 @@ class EvaluateConfig(StageConfig):
     @classmethod
     def _distinct(cls, v: tuple, info) -> tuple:
         return _unique(v, info.field_name)
-
-    @field_validator("modes")
-    @classmethod
-    def _modes(cls, v: tuple[str, ...]) -> tuple[str, ...]:
-        return check_modes(v)
-
-    @field_validator("family")
-    @classmethod
-    def _family(cls, v: str) -> str:
-        return transforms.FAMILIES.check(v)
-
-    @field_validator("thresholds")
-    @classmethod
-    def _thresholds(cls, v: tuple[float, ...]) -> tuple[float, ...]:
-        return tuple(sorted(set(v), reverse=True))
-
-    @field_validator("snapshot_steps")
-    @classmethod
-    def _snapshot_steps(cls, v: tuple[int, ...]) -> tuple[int, ...]:
-        return tuple(sorted(set(v)))
 
     @field_validator("reach_noise")
     @classmethod

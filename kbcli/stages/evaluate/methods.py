@@ -6,9 +6,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from types import MappingProxyType
-from typing import Any, ClassVar
+from typing import Annotated, Any, ClassVar
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import AfterValidator, Field, field_validator, model_validator
 
 from kbcli.core.adaptation.strategies import STRATEGIES
 from kbcli.core.config import Name, Names, each, member_of
@@ -92,8 +92,9 @@ class Method(StageConfig):
 
     name: Name
     strategies: Names
-    options: Mapping[str, Any] = Field(default_factory=dict)
-    modes: Names | None = None
+    options: Annotated[Mapping[str, Any], AfterValidator(lambda v: MappingProxyType(dict(v)))] = (
+        Field(default_factory=dict))
+    modes: Annotated[Names | None, AfterValidator(check_modes)] = None
     categories: Names | None = None
     description: Name = ""
     seeds_of: Name | None = None
@@ -115,16 +116,6 @@ class Method(StageConfig):
             if st not in known:
                 raise ValueError(f"unknown strategy {st!r}; valid: {', '.join(known)}")
         return v
-
-    @field_validator("modes")
-    @classmethod
-    def _modes(cls, v: tuple[str, ...] | None) -> tuple[str, ...] | None:
-        return check_modes(v)
-
-    @field_validator("options")
-    @classmethod
-    def _options(cls, v: Mapping[str, Any]) -> Mapping[str, Any]:
-        return MappingProxyType(dict(v))
 
     @model_validator(mode="after")
     def _not_per_experiment(self) -> Method:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from types import MappingProxyType
-from typing import Any
+from typing import Annotated, Any
 
-from pydantic import Field, ValidationInfo, field_validator, model_validator
+from pydantic import AfterValidator, Field, ValidationInfo, field_validator, model_validator
 
 from kbcli.core.adaptation.config import SLOTS, option_names, refuse_inactive
 from kbcli.core.config import (
@@ -107,7 +107,7 @@ class QualityConfig(Config):
     budgets: tuple[Budget, ...] = (100, 150, 200, 300, 400, 800, 1600)
     explorations: Names = ("active", "random")
     mode: ModeName = "dynamics"
-    arm: Any = "realistic"
+    arm: Annotated[Any, AfterValidator(lambda v: arm_config(v).to_dict())] = "realistic"
     reach_noise: ReachNoise = 0.0
     experiments: between(Whole, 1, MAX_EXPERIMENTS) = 8
     max_steps: between(Whole, 1, MAX_ADAPT_STEPS) = 30
@@ -138,11 +138,6 @@ class QualityConfig(Config):
             if e not in learn_strategies() or e == EXACT:
                 raise ValueError(f"unknown exploration {e!r}; valid: active, random")
         return v
-
-    @field_validator("arm")
-    @classmethod
-    def _resolved_arm(cls, v: Any) -> dict:
-        return arm_config(v).to_dict()
 
     @field_validator("categories", mode="before")
     @classmethod
