@@ -217,10 +217,9 @@ def tune_ours(cfg: det.DetectorConfig, x: np.ndarray, lengths: np.ndarray,
               target: float) -> tuple[float, float]:
     """Largest threshold with at most ``target`` false alarms per 10,000 actions on ``x``.
 
-    Thresholds are searched on the scores of a detector that never restarts (one pass): the first
-    crossing of a threshold is then the first alarm. A second alarm in the same stream (after a
-    restart and a new warm-up) is ignored, which is negligible at these rates. The returned rate is
-    then measured with restarts. Returns ``(threshold, rate)``.
+    Searched on the scores of a detector that never restarts (the first crossing is the first alarm;
+    a second alarm in a stream is ignored); the returned rate is measured with restarts. Returns
+    ``(threshold, rate)``.
     """
     scores, _ = det.run_batch(cfg, x, restart=False)
     below_end = np.arange(x.shape[1])[None, :] < np.asarray(lengths)[:, None]

@@ -150,13 +150,9 @@ def peer_run(cfg: PeerConfig, kb: Keyboard, name: str, seed: np.random.SeedSeque
 
 def kbcli_run(cfg: PeerConfig, kb: Keyboard, seed: np.random.SeedSequence
               ) -> dict[int, tuple[float, float]]:
-    """kbcli's default learner (``kbcli learn``: active exploration, ``--model-class auto``),
-    scored at each budget: the exploration refits the class ``auto`` explores with (re-chosen
-    every :data:`kbcli.core.model.select.RESELECT` reaches), and at each
-    budget the class is chosen by cross-validation on the samples so far
-    (:func:`kbcli.core.model.select.choose`, folds from a generator spawned off ``seed``) and fitted
-    to them (without the learn stage's calibration, which leaves the most probable sound alone
-    but for the ``lines`` class's label-noise tolerance)."""
+    """kbcli's default learner (``kbcli learn``: active exploration, ``--model-class auto``), scored
+    at each budget with the class chosen by cross-validation on the samples so far
+    (:func:`kbcli.core.model.select.choose`), without the learn stage's calibration."""
     rng = np.random.default_rng(seed)
     world = World(kb, make_reacher(SimConfig(mode="ideal")))
     ex = Exploration(ExploreConfig(budget=max(cfg.budgets), model_class=AUTO), world.touch,

@@ -40,11 +40,9 @@ def cap_jobs(jobs: int, option: str = "--jobs") -> tuple[int, str | None]:
 def children_deaf_to_ctrl_c() -> Iterator[None]:
     """Start worker processes inside this block: they never see Ctrl-C.
 
-    A terminal sends Ctrl-C (SIGINT) to the whole process group: each loky worker printed a
-    ``KeyboardInterrupt`` traceback of its own (even while still importing), beside the one line
-    of the parent, which stops them itself. SIGINT is blocked in this thread for the block, and a
-    blocked signal stays blocked across fork and exec: the workers start with it blocked, and keep
-    it so. A Ctrl-C that arrives during the block is delivered to this process just after it.
+    A terminal sends Ctrl-C to the whole process group, and the parent stops the workers itself.
+    SIGINT is blocked in this thread for the block, and a blocked signal stays blocked across fork
+    and exec; a Ctrl-C that arrives during the block is delivered to this process just after it.
     """
     if not hasattr(signal, "pthread_sigmask"):
         yield

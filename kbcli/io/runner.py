@@ -70,10 +70,9 @@ def resolve(name: str) -> Any:
 
 def _tune_malloc() -> None:
     """Undo a small ``MALLOC_TRIM_THRESHOLD_`` in this process (Dask's nanny sets 64 kB in its
-    workers). Setting it makes glibc stop adapting its mmap threshold, so every numpy temporary
-    above 128 kB is mmap'ed and unmapped again: the adapt experiment ran 1.9x slower in Dask
-    workers than in a plain process. Restores large thresholds with ``mallopt`` (glibc only;
-    elsewhere, or without the variable, nothing happens)."""
+    workers), which makes glibc mmap and unmap every numpy temporary above 128 kB: restores large
+    thresholds with ``mallopt`` (glibc only; elsewhere, or without the variable, nothing
+    happens)."""
     if not os.environ.get("MALLOC_TRIM_THRESHOLD_"):
         return
     import ctypes
@@ -96,13 +95,9 @@ def _state_for(setup: str, context: Any, key: str) -> Any:
 
 
 def no_leak_restarts() -> None:
-    """Tell loky (in this worker) not to take the per-process caches for a leak.
-
-    loky restarts a worker whose memory grew by more than 300 MB since its first task; the state a
-    worker keeps on purpose (model rasters, the robust posterior's blurred maps, about 0.5 GB a
-    model) would then be rebuilt again and again. Raised to 16 GB, the check still catches a real
-    runaway.
-    """
+    """Tell loky (in this worker) not to take the per-process caches for a leak: it restarts a
+    worker whose memory grew by 300 MB, and the model rasters and blurred maps a worker keeps on
+    purpose weigh about 0.5 GB a model. Raised to 16 GB, the check still catches a runaway."""
     with contextlib.suppress(ImportError, AttributeError):
         from joblib.externals.loky import process_executor
 
@@ -177,13 +172,8 @@ def _serial(job: Job, todo: list[int]) -> Iterator[tuple[int, dict]]:
 
 
 def quiet_joblib_cancel() -> None:
-    """Silence joblib's warning about cancelled tasks.
-
-    Stopped early (Ctrl-C, SIGTERM, an error), joblib cancels the running tasks and says so in a
-    warning of several lines; the one line the CLI prints already says what was kept. Its text
-    starts with whichever of "N tasks have been successfully executed but not used" and "N tasks
-    which were still being processed" applies, and always ends with the same advice.
-    """
+    """Silence joblib's warning of several lines about the tasks it cancels when stopped early
+    (Ctrl-C, SIGTERM, an error): the one line the CLI prints already says what was kept."""
     warnings.filterwarnings("ignore", message=r"(?s).*adjusting the input task iterator",
                             category=UserWarning)
 

@@ -57,12 +57,10 @@ def _wrap(a: float) -> float:
 def _chipmunk(reacher: DynamicsReacher):
     """(lib, upper, forearm, space) as chipmunk handles, or None when pymunk does not expose them.
 
-    The torque servo's loop reads four numbers, writes two and steps the space hundreds of times
-    per reach; through pymunk's properties (``TypingAttrMixing.__setattr__``, ``Space.step``'s
-    bookkeeping) that costs about twice the physics. The arm never adds, removes or collides
-    anything while it reaches, so ``cpSpaceStep`` does exactly what ``Space.step`` would.
-    ``pymunk._chipmunk_cffi`` and ``Body._body`` are private: a pymunk without them falls back to
-    the public API.
+    The servo loops step the space hundreds of times per reach, and pymunk's properties cost about
+    as much as the physics; the arm never adds, removes or collides anything while it reaches, so
+    ``cpSpaceStep`` does exactly what ``Space.step`` would. ``pymunk._chipmunk_cffi`` and
+    ``Body._body`` are private: a pymunk without them falls back to the public API.
     """
     try:
         from pymunk._chipmunk_cffi import lib

@@ -45,15 +45,11 @@ from kbcli.stages.report.tables import (
 def build(art: Artifact, ablations: Artifact | Sequence[Artifact] | None = None,
           own: Artifact | None = None, *, replicates: int = REPLICATES,
           rungs: Sequence[Artifact] = ()) -> Report:
-    """The report of an evaluation artifact: README text, claims and figures; with
-    ``ablations`` (an evaluation of the ablation ladder, ``pipelines/ablations.toml``, or several:
-    one per mode) also the
-    section "What explains each difference"; with ``own`` (the protocol evaluated with the robot's
-    own learned model) the Sect. IV-C claims on that model too, beside those on ``art``'s;
-    with ``rungs`` (the protocol evaluated with another input, e.g. reach noise) or ``own``, the
-    section "What the evaluation's inputs change" (:mod:`.inputs`).
-    ``replicates``: bootstrap replicates per differing claim for its replication statement
-    (:mod:`.power`; 0: none)."""
+    """The report of an evaluation artifact: README text, claims and figures; with ``ablations``
+    (the ablation ladder's evaluations, one per mode) also "What explains each difference"; with
+    ``own`` (the protocol with the robot's own model) its Sect. IV-C claims beside ``art``'s; with
+    ``rungs`` or ``own``, "What the evaluation's inputs change" (:mod:`.inputs`). ``replicates``:
+    bootstrap replicates per differing claim (:mod:`.power`; 0: none)."""
     art = upgrade(art)
     check(art)
     cl = claims(art, own)

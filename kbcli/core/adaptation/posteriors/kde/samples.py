@@ -26,13 +26,12 @@ MAX_BANDWIDTH, KERNEL_REACH = 4.0, 4.0
 
 
 def scott_bandwidth(samples: np.ndarray) -> float:
-    """Scott's rule for a 2-D sample, ``sigma_hat * n^(-1/6)``, with Silverman's robust spread.
+    """Scott's rule for a 2-D sample, ``sigma_hat * n^(-1/6)``, with Silverman's robust spread
+    ``sigma_hat = min(std, IQR / 1.349)`` averaged over both axes.
 
     The spread is ``samples.std(axis=0)`` and ``numpy.percentile(samples, [75, 25], axis=0)``
-    bit for bit, computed on a contiguous copy of each axis (:func:`_std_rows`,
-    :func:`_percentile_rows`: 2-3x faster; the KDE posterior's fresh draws need one per term).
-    When counting shows that the IQR cannot be the smaller spread (:func:`_iqr_exceeds`: a key's
-    samples, nearly uniform over a rectangle), the quartiles are not computed: the same number.
+    bit for bit (:func:`_std_rows`, :func:`_percentile_rows`); the quartiles are skipped where
+    counting shows the IQR cannot be the smaller spread (:func:`_iqr_exceeds`).
     """
     s = np.asarray(samples, float)
     n = len(s)
