@@ -13,8 +13,8 @@ time of a touch; per model, the median final error.
 **Lifelong.** One weak model, the keyboard moved ``episodes`` times in a row
 (:func:`lifelong_moves`), the robot adapting with ``repair`` and carrying its repaired model
 (:func:`kbcli.stages.repair.repaired_model`) from episode to episode, beside ``plain`` with the
-model as learned. Per episode: both methods' touches to stay under 1 px and final error, and the carried
-model's boundary error.
+model as learned. Per episode: both methods' touches to stay under 1 px and final error, and the
+carried model's boundary error.
 
 Pure: returns rows.
 """

@@ -279,11 +279,9 @@ class ForestModel(SklearnModel):
 class ForestXYModel(ForestModel):
     """:class:`ForestModel` whose trees split on the two coordinates only (``n_directions`` 2).
 
-    Axis-aligned splits are exact for keys whose edges are horizontal and vertical (the piano,
-    the grid): with oblique projections among the features, a tree spends some of its splits on
-    directions the keys do not have, and a boundary between sparse samples can come out slanted.
-    On slanted edges (hex, polygons) it staircases, and
-    ``auto``'s cross-validation keeps the oblique forest there (:mod:`kbcli.core.model.select`).
+    Exact for keys whose edges are horizontal and vertical (piano, grid), a staircase on slanted
+    edges, where ``auto``'s cross-validation keeps the oblique forest
+    (:mod:`kbcli.core.model.select`).
     """
 
     kind = "forest-xy"

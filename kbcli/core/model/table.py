@@ -29,10 +29,7 @@ TOP_K = 4
 
 def exact_map(model) -> bool:
     """Whether ``model`` knows its class map exactly (a cheap hard ``predict_class``, no
-    probabilities): its ``exact_map`` attribute.
-
-    Until every model class declares ``exact_map``, a model without the attribute falls back to
-    ``isinstance(model, ExactModel)`` (the same answer as before the attribute existed).
+    probabilities): its ``exact_map`` attribute, else ``isinstance(model, ExactModel)``.
     """
     return bool(getattr(model, "exact_map", isinstance(model, ExactModel)))
 

@@ -20,14 +20,10 @@ def balanced_strategy(exploration, n: int, rng: np.random.Generator) -> np.ndarr
     """Boundary seeking and coverage weighed in one rule, instead of ``active``'s
     cover-then-bisect.
 
-    First a coarse hexagonal lattice (covering radius ``2 explore_radius``, about a quarter of
-    ``active``'s first reaches), so that every sound large enough is heard early. Then every batch
-    picks, greedily, the widest of two kinds of gap: a boundary site of the model (its band width
-    w, capped as ``active`` caps it) and a hole, a point of the working area at distance d from
-    every landing, worth ``2 d`` (a band as wide as the hole could hide there). A pick of width w
-    caps every site's width at ``w / 2 + distance`` and every hole's at ``2 distance``. Early the
-    holes are wide and coverage wins; as the pad fills, the widest bands take over, and a band
-    found late still competes with the holes left (no phase waits for another to finish).
+    First a coarse hexagonal lattice (covering radius ``2 explore_radius``). Then every batch picks,
+    greedily, the widest gap: a boundary site of the model (its band width w, capped as ``active``
+    caps it) or a hole, a point at distance d from every landing, worth ``2 d``. A pick of width w
+    caps every site's width at ``w / 2 + distance`` and every hole's at ``2 distance``.
     """
     taken, area, cfg = exploration.landed, exploration.area, exploration.cfg
     if len(taken) == 0:

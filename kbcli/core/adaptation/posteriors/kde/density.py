@@ -10,8 +10,9 @@ for every observation as Algorithm 2 writes (``"fresh"``,
 :class:`kbcli.core.adaptation.posteriors.kde.samples.FreshSamples`).
 
 The bandwidth: :func:`~kbcli.core.adaptation.posteriors.kde.samples.scott_bandwidth`; each angle
-slice is its own 2-D KDE. As in Algorithm 2, actions for a silence are drawn from the model's working area only, so
-hypotheses that put the touch beyond it get the floor, not the silence they would in fact give.
+slice is its own 2-D KDE. As in Algorithm 2, actions for a silence are drawn from the model's
+working area only, so hypotheses that put the touch beyond it get the floor, not the silence they
+would in fact give.
 """
 
 from __future__ import annotations
