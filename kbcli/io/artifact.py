@@ -4,11 +4,7 @@ Root attributes: ``kind``, ``schema_version``, ``kbcli_version``, ``config`` (JS
 (-1 when none), ``inputs`` (JSON: the provenance chain), ``input_sha256.<role>`` for each direct
 input, and ``attrs`` (JSON metadata). Arrays are datasets (nested dicts are groups), written with
 ``track_times=False`` and only the standard gzip + shuffle filters, so identical inputs give
-identical bytes and ``h5dump`` reads every file.
-
-Writes are atomic: the file is built in memory, written to a temporary file in the destination
-folder, fsync'ed, then renamed with ``os.replace``; a crash or Ctrl-C never leaves a half-written
-file under the final name, and a full disk is one line, never an HDF5 traceback.
+identical bytes and ``h5dump`` reads every file. Writes are atomic (:mod:`kbcli.io.atomic`).
 """
 
 from __future__ import annotations

@@ -1,14 +1,10 @@
 """Atomic writes: a temporary file (or folder) beside the destination, then ``os.replace``.
 
-A crash, Ctrl-C or SIGTERM never leaves a half-written file under the final name; the final file is
-mode 0644 (a folder 0755). Temporary files are named recognisably,
-``.NAME.kbcli-tmp-PID-XXXXXXXX.SUFFIX``, so the next write of ``NAME`` removes those an earlier run
-left behind when it was killed (only those whose process is gone: a concurrent writer's are never
-touched).
-
-An operating-system error (a full disk, a read-only file system, an I/O error, a quota) becomes an
-:class:`~kbcli.errors.ArtifactError` naming the destination and the cause, on one line, and the
-temporary file is removed.
+A crash, Ctrl-C or SIGTERM never leaves a half-written file under the final name (mode 0644; a
+folder 0755). Temporary files are named ``.NAME.kbcli-tmp-PID-XXXXXXXX.SUFFIX``, so the next write
+of ``NAME`` removes those a killed run left (only those whose process is gone). An
+operating-system error becomes an :class:`~kbcli.errors.ArtifactError` naming the destination and
+the cause, on one line, and the temporary file is removed.
 """
 
 from __future__ import annotations

@@ -1,13 +1,10 @@
 """Output paths checked against input paths before any work: a user's input files are sacred.
 
-Every command calls :func:`check_outputs` first, with every file it reads (artifacts, TOML configs)
-and every path it would write (artifact, figure, WAV, report folder and the files it writes there,
-checkpoint folder). An output that is an input under another name (the same path, a symlink to it,
-a hard link to it, or a folder holding it that would be filled or removed) is refused with one line
-(:class:`~kbcli.errors.KbcliError`), so nothing is read, computed or written.
-
-Two paths are the same file when their resolved paths are equal (symlinks followed) or, for files
-that exist, when their ``(st_dev, st_ino)`` pairs are equal (hard links).
+Every command calls :func:`check_outputs` first, with every file it reads and every path it would
+write. An output that is an input under another name (the same path, a symlink or hard link to
+it, or a folder holding it that would be filled or removed) is refused with one line
+(:class:`~kbcli.errors.KbcliError`). Two paths are the same file when their resolved paths are
+equal or, for files that exist, their ``(st_dev, st_ino)`` pairs are.
 """
 
 from __future__ import annotations

@@ -1,12 +1,9 @@
 """Where a result came from: the code's git commit and whether its tree was clean, and the
 sha256 of every input artifact a command read.
 
-A result file (``benchmarks/results/*.json``, :mod:`kbcli.cli.record`) is worth only what its
-provenance says: a reviewer must be able to tell that the stored numbers are the current code's,
-made from the inputs they name. :func:`git_state` reads the checkout kbcli runs from (None outside
-a git checkout, or where git is missing); :func:`inputs` hashes the files a command line names,
-and for an artifact also lists the inputs it records (an evaluation's model), so the model a
-verdict rests on is named by its full sha256.
+:func:`git_state` reads the checkout kbcli runs from (None outside one, or without git);
+:func:`inputs` hashes the files a command line names and, for an artifact, lists the inputs it
+records, so the model a result file's verdict rests on is named by its sha256.
 """
 
 from __future__ import annotations

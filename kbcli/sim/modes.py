@@ -1,14 +1,9 @@
 """Reach modes: how the simulated arm gets its finger to a target.
 
-:data:`MODES` holds one :class:`SimMode` per mode; code asks the mode (``MODES.get(name)``) for
-its reacher and whether it simulates physics, and never branches on its name.
-
-``ideal``
-    The finger lands exactly on the target, plus Gaussian scatter of ``reach_noise`` px (the
-    paper's Sect. IV; :class:`kbcli.sim.ideal.IdealReacher`).
-``dynamics``
-    A pymunk two-link arm driven by motors (Sect. IV-C; :class:`kbcli.sim.arm.DynamicsReacher`).
-    pymunk is imported only when such a reacher is built.
+:data:`MODES` holds one :class:`SimMode` per mode, which code asks for its reacher and whether it
+simulates physics, never branching on its name: ``ideal``, the target plus Gaussian scatter of
+``reach_noise`` px (:class:`kbcli.sim.ideal.IdealReacher`), and ``dynamics``, a pymunk two-link
+arm (Sect. IV-C; :class:`kbcli.sim.arm.DynamicsReacher`, pymunk imported only then).
 """
 
 from __future__ import annotations

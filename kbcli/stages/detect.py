@@ -1,14 +1,11 @@
 """Stage ``detect``: run a failure detector online over a play history (paper Sect. III-C, Eq. 4-6).
 
 Feeds the history's MATCH (0) / NO_MATCH (1) results one at a time to a detector of
-:mod:`kbcli.core.detection.detectors` (the paper's binomial test by default) exactly as the robot would while
-playing, and records its score at every step and the steps where it fired. A detector resets after
-firing, so a long history can hold several firings. With the history's perturbation step it also
-reports the first firing after the perturbation (the detection), its delay and the false alarms
-before it.
-
-Delay convention: the number of post-perturbation results seen when the detector fires, so firing
-on the first action after the keyboard moved is a delay of 1.
+:mod:`kbcli.core.detection.detectors` (the paper's binomial test by default), as the robot would
+while playing, and records its score at every step and where it fired (it resets after firing).
+With the history's perturbation step it also reports the first firing after it, its delay (the
+post-perturbation results seen when it fires: 1 on the first action after the move) and the false
+alarms before it.
 """
 
 from __future__ import annotations

@@ -1,13 +1,11 @@
 """Stage ``play``: the robot plays a melody in a loop while the keyboard moves (Algorithm 1).
 
-The stage builds the simulated :class:`~kbcli.sim.World` from the model's keyboard at its reference
-pose; at step ``perturb_at`` it puts the keyboard at the scene's true pose. The robot's side,
-:func:`kbcli.core.playing.play.play`, only gets the world's ``touch``. The history artifact (kind
-``history``) records per step the action, landed point, perceived features, aimed melody note and
-the MATCH (0) / NO_MATCH (1) result, which :mod:`kbcli.stages.detect` reads (Sect. III-C).
-
-:class:`Session` is an iterator over the steps (the CLI wraps it in a progress bar); :func:`run`
-plays a whole session and returns its artifact.
+The simulated :class:`~kbcli.sim.World` holds the model's keyboard at its reference pose until step
+``perturb_at``, then at the scene's true pose; the robot's side
+(:func:`kbcli.core.playing.play.play`) only gets its ``touch``. The ``history`` artifact records per
+step the action, landing, perceived features, aimed note and MATCH (0) / NO_MATCH (1), which
+:mod:`kbcli.stages.detect` reads. :class:`Session` iterates over the steps; :func:`run` plays a
+whole session.
 """
 
 from __future__ import annotations

@@ -1,12 +1,9 @@
 """Sound discovery: which sounds the exploration heard, and which of them are neighbours.
 
-The robot never sees the simulator's key ids: from the perceived features alone it finds the
-sound classes by leader clustering with the matching threshold of Eq. 2 (paper Sect. III-A; a sound
-further than the threshold (Manhattan) from every class found so far opens a new class, classes
-whose mean sounds end up within the threshold are merged; class 0 is silence, the others sorted by
-their features, so ids do not depend on the sample order). Two sounds are neighbours where a
-Delaunay edge of the samples joins them (:func:`straddling_edges`): the start of every learned
-model class (:mod:`kbcli.core.model.lines`, :mod:`kbcli.core.model.svc`).
+From the perceived features alone, the sound classes by leader clustering with the matching
+threshold of Eq. 2 (:func:`discover_classes`; class 0 is silence, the others sorted by their
+features); two sounds are neighbours where a Delaunay edge of the samples joins them
+(:func:`straddling_edges`): the start of every learned model class.
 """
 
 from __future__ import annotations
@@ -42,7 +39,9 @@ def classify_features(
 
 
 def discover_classes(perceived: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
-    """Sound classes from perceived features by leader clustering (Eq. 2 threshold).
+    """Sound classes from perceived features by leader clustering (Eq. 2 threshold): a sound
+    further than the threshold from every class so far opens a new one; classes whose mean sounds
+    end up within the threshold are merged.
 
     Parameters
     ----------
