@@ -153,14 +153,8 @@ def check_reach(kb: Keyboard, family: str, params: np.ndarray, sim: SimConfig) -
         )
 
 
-def run(
-    cfg: PerturbConfig,
-    keyboard_art: Artifact,
-    *,
-    rng: np.random.Generator,
-    seed: int | None = None,
-    sim: SimConfig | None = None,
-) -> Artifact:
+def run(cfg: PerturbConfig, keyboard_art: Artifact, *, rng: np.random.Generator,
+        seed: int | None = None, sim: SimConfig | None = None) -> Artifact:
     """The scene artifact: the keyboard at its displaced pose.
 
     Parameters

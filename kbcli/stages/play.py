@@ -102,15 +102,8 @@ class Session:
         Recorded in the artifact.
     """
 
-    def __init__(
-        self,
-        cfg: PlayConfig,
-        model_art: Artifact,
-        scene_art: Artifact | None = None,
-        *,
-        rng: np.random.Generator,
-        seed: int | None = None,
-    ) -> None:
+    def __init__(self, cfg: PlayConfig, model_art: Artifact, scene_art: Artifact | None = None, *,
+                 rng: np.random.Generator, seed: int | None = None) -> None:
         self.cfg = cfg
         self.model_art = model_art
         self.scene_art = scene_art
@@ -202,14 +195,8 @@ class Session:
         )
 
 
-def run(
-    cfg: PlayConfig,
-    model_art: Artifact,
-    scene_art: Artifact | None = None,
-    *,
-    rng: np.random.Generator,
-    seed: int | None = None,
-) -> Artifact:
+def run(cfg: PlayConfig, model_art: Artifact, scene_art: Artifact | None = None, *,
+        rng: np.random.Generator, seed: int | None = None) -> Artifact:
     """Play a whole session and return its history artifact."""
     session = Session(cfg, model_art, scene_art, rng=rng, seed=seed)
     for _ in session:

@@ -20,15 +20,9 @@ def midi_to_hz(midi: np.ndarray | float) -> np.ndarray:
     return 440.0 * 2.0 ** ((np.asarray(midi, float) - 69.0) / 12.0)
 
 
-def render(
-    perceived: np.ndarray,
-    beats: np.ndarray,
-    fallback_tempo: np.ndarray,
-    *,
-    sample_rate: int = SAMPLE_RATE,
-    amplitude: float = 0.3,
-    fade: float = 0.01,
-) -> np.ndarray:
+def render(perceived: np.ndarray, beats: np.ndarray, fallback_tempo: np.ndarray, *,
+           sample_rate: int = SAMPLE_RATE, amplitude: float = 0.3, fade: float = 0.01
+          ) -> np.ndarray:
     """Synthesize one note per step.
 
     Parameters

@@ -146,14 +146,8 @@ class Keyboard:
         out[ok] = self.features[keys[ok]]
         return out
 
-    def perceive(
-        self,
-        points: np.ndarray,
-        pose: np.ndarray | None = None,
-        family: str = "translation",
-        *,
-        rng: np.random.Generator,
-    ) -> np.ndarray:
+    def perceive(self, points: np.ndarray, pose: np.ndarray | None = None,
+                 family: str = "translation", *, rng: np.random.Generator) -> np.ndarray:
         """What the robot hears with its finger at ``points``: features plus noise, NaN for silence.
 
         Returns

@@ -178,13 +178,8 @@ def inverse_many(
     return _rotate(p - centre - d[:, None, :], -angle) + centre
 
 
-def translation_mapping(
-    family: str,
-    angle_deg: float,
-    source: np.ndarray,
-    target: np.ndarray,
-    centre: np.ndarray,
-) -> np.ndarray:
+def translation_mapping(family: str, angle_deg: float, source: np.ndarray, target: np.ndarray,
+                        centre: np.ndarray) -> np.ndarray:
     """Translations that, with rotation ``angle_deg``, map each ``source`` point onto ``target``.
 
     This is Algorithm 2's ``computeTransform(a_i, a_t)``: for translation (angle 0) it is

@@ -124,23 +124,12 @@ class LearnedModel(ModelBase):
         Boundary lines (nx, ny, c), unit normal: signed distance ``nx * x + ny * y - c``.
     """
 
-    def __init__(
-        self,
-        *,
-        match_threshold: float = 1.5,
-        area: tuple[float, float, float, float] = DEFAULT_AREA,
-        n_neighbors: int = 8,
-        min_sd: float = 0.05,
-        max_sd: float = 25.0,
-        sd_scale: float = 1.0,
-        noise_sd: float = 0.0,
-        floor: float = 0.0,
-        noise_tol: float = 0.0,
-        extrapolation: float = 1.0,
-        merge_angle: float = 10.0,
-        merge_offset: float = 10.0,
-        piece_reach: float = 10.0,
-    ) -> None:
+    def __init__(self, *, match_threshold: float = 1.5,
+                 area: tuple[float, float, float, float] = DEFAULT_AREA, n_neighbors: int = 8,
+                 min_sd: float = 0.05, max_sd: float = 25.0, sd_scale: float = 1.0,
+                 noise_sd: float = 0.0, floor: float = 0.0, noise_tol: float = 0.0,
+                 extrapolation: float = 1.0, merge_angle: float = 10.0, merge_offset: float = 10.0,
+                 piece_reach: float = 10.0) -> None:
         self.match_threshold = match_threshold
         self.area = area
         self.n_neighbors = n_neighbors

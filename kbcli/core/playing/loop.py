@@ -89,18 +89,9 @@ class LoopStep:
     marginal: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
-def closed_loop(
-    model,
-    melody: Melody,
-    touch: Touch,
-    *,
-    play_steps: int,
-    detector: DetectorConfig,
-    adapter: AdapterConfig,
-    max_adapt_steps: int,
-    rng: np.random.Generator,
-    table=None,
-) -> Iterator[LoopStep]:
+def closed_loop(model, melody: Melody, touch: Touch, *, play_steps: int, detector: DetectorConfig,
+                adapter: AdapterConfig, max_adapt_steps: int, rng: np.random.Generator, table=None
+               ) -> Iterator[LoopStep]:
     """Run the closed loop until ``play_steps`` play touches are done.
 
     Parameters

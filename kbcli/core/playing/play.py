@@ -132,16 +132,8 @@ def play(model, melody: Melody, touch: Touch, *, rng: np.random.Generator) -> It
         step += 1
 
 
-def expected_failure_rate(
-    model,
-    keyboard,
-    melody: Melody,
-    family: str,
-    params: np.ndarray | None,
-    *,
-    rng: np.random.Generator,
-    n_samples: int = 400,
-) -> np.ndarray:
+def expected_failure_rate(model, keyboard, melody: Melody, family: str, params: np.ndarray | None,
+                          *, rng: np.random.Generator, n_samples: int = 400) -> np.ndarray:
     """Long-run NO_MATCH rate of Algorithm 1 with the keyboard at each given pose (evaluation side).
 
     For each note, the probability ``f_i`` that an action drawn from the model for that note does not

@@ -79,14 +79,8 @@ class Exploration:
         Each class explored with and the number of reaches from which it was.
     """
 
-    def __init__(
-        self,
-        cfg: ExploreConfig,
-        touch: Touch,
-        area: tuple[float, float, float, float],
-        match_threshold: float,
-        rng: np.random.Generator,
-    ) -> None:
+    def __init__(self, cfg: ExploreConfig, touch: Touch, area: tuple[float, float, float, float],
+                 match_threshold: float, rng: np.random.Generator) -> None:
         self.area = tuple(float(v) for v in area)
         if STRATEGIES.trait(cfg.strategy, "covers", False):  # it reaches around its samples
             check_cover(self.area, cfg.explore_radius)
