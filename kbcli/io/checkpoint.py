@@ -1,11 +1,9 @@
 """A run's checkpoint: finished experiments kept beside the output, so a killed run resumes.
 
-:class:`Checkpoint` keeps finished experiments in a folder beside the output (``OUTPUT.ckpt/``): a
-``meta.json`` with the fingerprint of what is being run, and ``part-NNNNNN.h5`` files, each written
-atomically (temporary file, then rename) every few experiments, so a killed run loses at most the
-experiments since the last part. ``resume=True`` loads them and refuses a checkpoint whose fingerprint
-differs, naming the fields that differ. The fingerprint holds :func:`source_digest`, the code that
-makes the numbers, so results of two versions are never mixed in one artifact.
+:class:`Checkpoint` keeps them in ``OUTPUT.ckpt/``: a ``meta.json`` with the fingerprint of what is
+being run, and ``part-NNNNNN.h5`` files written atomically every few experiments. ``resume=True``
+loads them and refuses a checkpoint whose fingerprint differs, naming the fields that differ; the
+fingerprint holds :func:`source_digest`, so results of two code versions are never mixed.
 """
 
 from __future__ import annotations

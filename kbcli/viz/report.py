@@ -1,11 +1,6 @@
-"""The report's figures from an ``evaluation`` artifact (paper Figs. 5, 6 and 7).
-
-- :func:`plot_posterior` (Fig. 5): the posterior over the displacement (px) after successive
-  observations of one example run per method and strategy (Eq. 8, the product of the
-  per-observation terms: of KDEs for the paper's method);
-- :func:`plot_entropy` (Fig. 6): posterior entropy against observations per method and strategy;
-- :func:`plot_error` (Fig. 7): RMSE of the estimate against observations, one panel per category
-  and method.
+"""The report's figures from an ``evaluation`` artifact: :func:`plot_posterior` (Fig. 5, the
+posterior after successive observations of one example run per method and strategy),
+:func:`plot_entropy` (Fig. 6) and :func:`plot_error` (Fig. 7, RMSE per category and method).
 """
 
 from __future__ import annotations

@@ -1,13 +1,10 @@
 """Held-out touches: the folds of a cross-validation, a fold model's predictions in the full
 model's classes, and the weights that make held-out touches stand for the working area.
 
-Held-out touches are harder than the points the model will be asked about. Active exploration
-puts most touches near boundaries: :func:`area_weights` weights each by the area it stands for
-(an inverse density), so they describe the working area as a uniform grid would. And a held-out
-touch is further from the samples its fold's model was fitted on than a point of the pad is from
-the full model's samples: :func:`distance_weights` weights each by the density ratio of that
-distance (importance weighting for a covariate shift). Neither weight uses the keyboard: only the
-samples and the working area.
+:func:`area_weights` weights each touch by the area it stands for (active exploration puts most
+near boundaries); :func:`distance_weights` by the density ratio of its distance to its fold's
+samples (a held-out touch is further from them than a point of the pad is from the full model's).
+Neither uses the keyboard.
 """
 
 from __future__ import annotations

@@ -1,11 +1,6 @@
-"""The learned model classes' common base: p(sound | action) from pairwise contests between the
-sounds heard nearby (paper Sect. III-A, M_INST learned by exploration).
-
-At an action the candidate sounds are the classes of its nearest samples; each pair of
-candidates with a boundary contests the action, and p(sound | action) is the softmax of the sums
-of ``log 2 p(on its side)`` over each candidate's contests. A subclass decides a pair's contest
-(the ``lines`` and ``svc`` classes); the rest (fitting the sounds, storage, prediction, sampling,
-the raster) is here.
+"""The learned model classes' common base, :class:`ModelBase`: p(sound | action) from pairwise
+contests between the sounds heard nearby (paper Sect. III-A). A subclass decides a pair's contest
+(``lines``, ``svc``); fitting the sounds, storage, prediction, sampling and the raster are here.
 """
 
 from __future__ import annotations

@@ -1,13 +1,10 @@
 """Straight boundary pieces between neighbouring sounds (the ``lines`` model's fit).
 
-The straddling edges of each pair of sounds (:func:`kbcli.core.model.sounds.straddling_edges`) get the
-max-margin line separating their two ends (the hard-margin linear SVM, solved exactly in 2-D as the
-perpendicular bisector of the closest points of the two convex hulls, :func:`separating_line`);
-when no line separates them (silence around a corner key bends) they are split by the direction
-in which they cross, recursively (:func:`split_pieces`). Pieces whose lines nearly coincide are
-merged when one line still separates all their samples (:func:`merge_pieces`), and a lone piece
-whose edges are all crossed by shared lines is re-expressed with them (:func:`absorb_pieces`).
-:func:`fit_pieces` runs the three steps.
+Each pair of sounds' straddling edges get the max-margin line separating their ends
+(:func:`separating_line`), split by the direction in which they cross where no line separates them
+(:func:`split_pieces`); pieces whose lines nearly coincide are merged (:func:`merge_pieces`) and a
+lone piece crossed by shared lines is re-expressed with them (:func:`absorb_pieces`).
+:func:`fit_pieces` runs the steps.
 """
 
 from __future__ import annotations

@@ -1,13 +1,11 @@
 """The model, rasterised: ``p_eps(sound class | point)`` on a raster (paper Sect. III-D).
 
-A :class:`LikelihoodTable` is the model's ``p(sound | action)`` rasterised once per adaptation: for
-the exact model a class map, for a learned model its probability raster. ``p_eps = (1 - eps) p +
-eps / C`` is an outlier floor: a touch that contradicts the truth (a grid cell a quarter pixel off,
-a mislabelled learned region, an unknown landing) costs ``log(eps / C)`` instead of zeroing the
-truth. When the robot knows only where it *aimed* (not where it landed), the table is the raster
-blurred by the reach noise, which is exactly ``p(s | aim, h) = int N(x; aim, sigma^2) p(s | T_h^-1 x)
-dx``. The strategies read its predictive distributions (:meth:`LikelihoodTable.top_at`,
-:meth:`LikelihoodTable.entropy_at`) and its class boundaries.
+A :class:`LikelihoodTable` is the model's ``p(sound | action)`` rasterised once per adaptation (a
+class map for the exact model). ``p_eps = (1 - eps) p + eps / C`` is an outlier floor: a touch
+that contradicts the truth costs ``log(eps / C)`` instead of zeroing it. When the robot knows only
+where it *aimed*, the raster is blurred by the reach noise. The strategies read its predictive
+distributions (:meth:`LikelihoodTable.top_at`, :meth:`LikelihoodTable.entropy_at`) and its class
+boundaries.
 """
 
 from __future__ import annotations
