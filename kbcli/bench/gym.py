@@ -2,13 +2,10 @@
 side on the same task, seeds and scorer.
 
 Every agent (:func:`kbcli.envs.load_agent`) runs ``experiments`` episodes per displacement category
-through ``kbcli/KeyboardAdapt-v0`` (or the dynamics one), each ``max_steps`` touches, with
-``belief=True``. The displacements, seeds and table are ``kbcli bench adapt --section learned``'s
-(:func:`~kbcli.bench.adapt.plan`, :func:`~kbcli.bench.adapt.summarize`; ``learned-rigid`` for the
-rigid family), so in the ideal environment the built-in agents reproduce its medians exactly.
-Episode ``i`` starts from ``env.unwrapped.np_random = default_rng(seed_i)`` and
-``reset(options={"move": truth_i})``. :func:`step_cost` times one environment step against one
-ask/tell step.
+through ``kbcli/KeyboardAdapt-v0`` (or the dynamics one), ``max_steps`` touches each, with
+``belief=True``, on ``kbcli bench adapt --section learned``'s displacements, seeds and table
+(``learned-rigid`` for the rigid family): in the ideal environment the built-in agents reproduce its
+medians exactly. :func:`step_cost` times one environment step against one ask/tell step.
 """
 
 from __future__ import annotations

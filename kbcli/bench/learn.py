@@ -1,11 +1,10 @@
 """Benchmark of learning the instrument model: sample efficiency and speed, per layout and class.
 
 For each layout (:func:`bench_keyboard`, or a given keyboard), model class and exploration
-strategy, the model is learned from ``seeds`` seeds (run ``i`` with the same seed everywhere) up to
-the largest budget, scored on a grid of ``eval_step`` px every ``resolution`` reaches and at each
-budget. Reported per row: the median accuracy at each budget, the median reaches to 97 % and 99 %,
-the median boundary error at ``boundary_budget`` reaches and the median fit time; and the wall time
-of a ``learn`` stage run and the ``dynamics`` simulator's reaches per second.
+strategy, the model is learned from ``seeds`` seeds up to the largest budget and scored on a grid
+of ``eval_step`` px. Per row: the median accuracy at each budget, the median reaches to 97 % and
+99 %, the median boundary error at ``boundary_budget`` reaches and the median fit time; and the
+wall time of a ``learn`` run and the ``dynamics`` simulator's reaches per second.
 """
 
 from __future__ import annotations

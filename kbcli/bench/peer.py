@@ -1,12 +1,10 @@
 """kbcli's learning against an established active learner, side by side.
 
-The peer is scikit-activeml's pool-based uncertainty sampling around plain scikit-learn
-classifiers (:data:`PEERS`). Both learn the same keyboard (:func:`kbcli.bench.learn.bench_keyboard`)
-from the same simulator with the same seeds, and are scored by the same functions
-(:mod:`kbcli.core.model.accuracy`, a grid of ``eval_step`` px) at the same budgets. The peer is
-handed each touch's key and the list of all keys in advance, which kbcli must discover; its pool is
-``pool`` uniform actions, it starts from ``init`` random reaches and queries ``batch`` per refit.
-scikit-activeml is an optional dependency (``pip install -e '.[bench]'``).
+The peer is scikit-activeml's pool-based uncertainty sampling around scikit-learn classifiers
+(:data:`PEERS`, an optional dependency: ``pip install -e '.[bench]'``). Both learn the same keyboard
+from the same simulator and seeds and are scored alike (:mod:`kbcli.core.model.accuracy`) at the
+same budgets; the peer is handed each touch's key and the list of all keys, which kbcli must
+discover, and queries ``batch`` of ``pool`` uniform actions per refit after ``init`` random reaches.
 """
 
 from __future__ import annotations

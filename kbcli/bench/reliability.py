@@ -1,13 +1,11 @@
 """Benchmark of the learned model's calibration and self-assessment.
 
-For each exploration strategy and reach budget, a model is learned on the default keyboard with
-the given arm and mode (``kbcli learn``'s stage), then measured against the simulator on a 2 px
-grid: the expected calibration error of p(sound | felt action) against the simulator's own
-p(key | felt action), drawn by Monte Carlo (:func:`kbcli.sim.keys_heard_when_felt`), the accuracy
-and the boundary error (:mod:`kbcli.core.model.accuracy`); beside what the model estimated of
-itself (:mod:`kbcli.core.model.reliability`). Every cell is learned with several seeds (``seed``,
-``seed + 1``, ...), one learning run being one draw, and :func:`summarise` reports the median
-beside the smallest and largest. Pure: returns rows.
+For each exploration strategy and reach budget, a model learned on the default keyboard
+(``kbcli learn``'s stage, several seeds per cell) is measured against the simulator on a 2 px grid
+(calibration error against p(key | felt action) by Monte Carlo,
+:func:`kbcli.sim.keys_heard_when_felt`; accuracy and boundary error) beside what it estimated of
+itself (:mod:`kbcli.core.model.reliability`); :func:`summarise` reports the median over seeds and
+their spread. Pure: returns rows.
 """
 
 from __future__ import annotations

@@ -1,12 +1,11 @@
 """Benchmark of the robust posterior on a given model: accuracy and cost per step.
 
-For each reach setting (``ideal`` mode with the ideal arm; ``dynamics`` mode with the ``realistic``
-arm), strategy and posterior (``robust``, the default; ``plain``, the map read as the truth,
-softened by 1 px for a learned model), ``experiments`` paired adaptations per displacement category
-(:func:`kbcli.stages.perturb.draw`), ``max_steps`` touches each. Reported per row and category: the
+For each reach setting (ideal; ``dynamics`` with the ``realistic`` arm), strategy and posterior
+(``robust``, the default; ``plain``, softened by 1 px for a learned model), ``experiments`` paired
+adaptations per displacement category, ``max_steps`` touches each. Per row and category: the
 median touches until the error first drops below 1 px (``T + 1`` when never), the median and 90th
-percentile of the final error, the median wall-clock time of one step and the run's whole CPU time
-over its touches (:func:`step_time` times the posterior's step alone). Pure: returns rows.
+percentile of the final error, the median step time and the run's CPU time per touch
+(:func:`step_time` times the posterior's step alone). Pure: returns rows.
 """
 
 from __future__ import annotations

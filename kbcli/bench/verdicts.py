@@ -1,11 +1,10 @@
 """The tables behind ``kbcli bench verdicts``: a report's verdicts as a result file's tables.
 
-``kbcli report`` writes a README for people; the documentation's results pages read result files
-(``benchmarks/results/NAME.json``, one ``{"title", "columns", "rows"}`` per table). These functions
-turn an evaluation (the paper's claims and their verdicts, :func:`claim_table`) or a model-quality
-sweep (the paper's explanation tested, :func:`hypothesis_table`, and its models,
-:func:`models_table`) into such tables, each cell a string; :func:`timings_table` reads the stage
-timings ``benchmarks/reproduce.sh`` writes (``timings.txt``). Pure: no I/O.
+The documentation's results pages read result files (``benchmarks/results/NAME.json``, one
+``{"title", "columns", "rows"}`` per table, each cell a string). These functions make them from an
+evaluation (:func:`claim_table`), a model-quality sweep (:func:`hypothesis_table`,
+:func:`models_table`) and ``benchmarks/reproduce.sh``'s stage timings (:func:`timings_table`).
+Pure: no I/O.
 """
 
 from __future__ import annotations

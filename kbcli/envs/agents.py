@@ -1,11 +1,9 @@
 """Agents of the environment: kbcli's own strategies (:class:`StrategyAgent`), and any agent
 named ``module:callable`` or ``file.py:callable`` (:func:`load_agent`).
 
-An agent is a callable ``agent(obs) -> action`` (or an object with ``act(obs)``); it may have
-``reset(seed)``, which ``kbcli bench gym`` calls at each episode's start with a seed of its own
-(the same for every agent on a paired run). ``load_agent`` builds one from a factory,
-``factory(env) -> agent``, given the environment it will act in (a Stable-Baselines3 agent's
-factory loads its policy there: ``examples/ppo_agent.py``).
+An agent is a callable ``agent(obs) -> action`` (or has ``act(obs)``), optionally with
+``reset(seed)``, which ``kbcli bench gym`` calls at each episode's start. ``load_agent`` builds one
+from a factory, ``factory(env) -> agent`` (``examples/ppo_agent.py`` loads a policy there).
 """
 
 from __future__ import annotations

@@ -1,12 +1,7 @@
-"""What a touch earns in the environment (``gymnasium.make(ID, reward=NAME)``).
-
-A reward is a function registered by name in :data:`REWARDS`::
-
-    fn(before: float, after: float, error: float) -> float
-
-``before`` and ``after`` are the entropy (nats) of kbcli's posterior over the displacement before
-and after the touch, ``error`` the estimate's error (px) after it, measured against the
-environment's truth, which the agent never sees.
+"""What a touch earns in the environment (``gymnasium.make(ID, reward=NAME)``): a function
+registered in :data:`REWARDS`, ``fn(before, after, error) -> float``, of the entropy (nats) of
+kbcli's posterior before and after the touch and the estimate's error (px) after it, against the
+truth the agent never sees.
 """
 
 from __future__ import annotations

@@ -1,14 +1,12 @@
 """The robot keeps what it learned: a model artifact repaired by adaptations' touches.
 
 ``kbcli adapt --repair --model-out`` and ``kbcli run --repair --model-out`` write, beside their run,
-a new ``model`` artifact: the input model refitted (:func:`kbcli.core.adaptation.repair.absorb`)
-with its adaptations' touches, mapped back into the model's frame by each adaptation's estimate,
-then calibrated and self-assessed again (:func:`kbcli.core.model.reliability.assess`). An
-adaptation whose 90 % credible disc is wider than ``absorb_radius`` px gives nothing.
-
-Lineage: the artifact's ``inputs`` hold its ``parent`` (recursively) and the keyboard; its attrs
-``lineage`` list every generation (parent sha256, touches absorbed, shift, credible radius), the
-parent's first. A model ``kbcli learn`` writes is generation 0.
+the input model refitted (:func:`kbcli.core.adaptation.repair.absorb`) with its adaptations'
+touches, mapped back by each adaptation's estimate, then calibrated and self-assessed again
+(:func:`kbcli.core.model.reliability.assess`); an adaptation whose 90 % credible disc is wider than
+``absorb_radius`` px gives nothing. Its ``inputs`` hold its ``parent`` (recursively) and its attrs
+``lineage`` every generation (parent sha256, touches absorbed, shift, credible radius); a model
+``kbcli learn`` writes is generation 0.
 """
 
 from __future__ import annotations

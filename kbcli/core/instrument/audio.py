@@ -1,11 +1,8 @@
 """Render what the robot heard as audio, so a person can hear it go wrong (paper Sect. III-A, Fig. 3).
 
-Each played step becomes one note: a tone at the perceived pitch (MIDI number -> Hz, equal
-temperament, A4 = 440 Hz) lasting the melody note's duration in beats at the perceived tempo
-(``beats * 60 / bpm`` seconds). A step where the finger missed every key (silence, NaN features) is
-silence for the duration the robot meant to play, at the tempo of the note it aimed for. The result
-is a float array in [-1, 1]; writing it as a WAV file is done at the CLI edge with the standard
-library's ``wave`` module.
+Each played step becomes a tone at the perceived pitch (equal temperament, A4 = 440 Hz) lasting
+the note's beats at the perceived tempo; a missed key is silence for the duration the robot meant
+to play. The result is a float array in [-1, 1]; the CLI writes it as a WAV file.
 """
 
 from __future__ import annotations

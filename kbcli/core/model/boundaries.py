@@ -1,12 +1,9 @@
 """Where the ``lines`` model's boundary lines can be, and how sure it is (the band of each line).
 
-Any line separating the samples heard on either side of a boundary must pass between their hulls:
-under the lower hull of the positive side's samples and over the upper hull of the negative side's
-(:func:`line_hulls`). The width of that band at a position along the line is the line's
-uncertainty there (:func:`band`); beyond the samples it widens by ``2 * extrapolation`` px per px.
-A pair of sounds with several pieces (a key in the corner of silence's L) has one sound inside
-(:func:`pair_inside`): it must be on its side of every piece, the other of any one
-(:func:`log_any`).
+A line separating the samples heard on either side must pass between their hulls
+(:func:`line_hulls`); the band's width along the line is its uncertainty (:func:`band`). A pair
+with several pieces has one sound inside (:func:`pair_inside`), on its side of every piece, the
+other of any one (:func:`log_any`).
 """
 
 from __future__ import annotations

@@ -1,14 +1,11 @@
 """Playing a melody in a loop with the learned model (paper Sect. III-A, Algorithm 1).
 
-At each step the robot samples an action from its model's p(action | sound) for the current note
-(line 10), reaches, and hears a sound. A MATCH (history value 0) moves on to the next note, looping
-after the last (lines 4-6); a NO_MATCH (1) restarts from note 0 (lines 7-9). A MATCH means the
-heard sound matches (Eq. 2, :func:`kbcli.core.instrument.keyboard.match`) a melody note *with the
-aimed note's sound*: the paper's melody repeats notes, so Algorithm 1's best-matching index is
-ambiguous, and Sect. III-C counts an action as successful only if it produced the expected sound.
-
-The robot side knows only its model, the melody and a ``touch`` callback
-(:meth:`kbcli.sim.World.touch`): never where the keyboard really is.
+At each step the robot samples an action from p(action | sound) for the current note (line 10),
+reaches and hears a sound: a MATCH (0) moves on to the next note, looping after the last (lines
+4-6); a NO_MATCH (1) restarts from note 0 (lines 7-9). A MATCH means the heard sound matches (Eq. 2,
+:func:`kbcli.core.instrument.keyboard.match`) a note *with the aimed note's sound*: the paper's
+melody repeats notes, and Sect. III-C counts an action as successful only if it produced the
+expected sound. The robot side only gets a ``touch`` callback (:meth:`kbcli.sim.World.touch`).
 """
 
 from __future__ import annotations

@@ -1,14 +1,12 @@
 """Rungs on the evaluation's inputs: each claim that differs, judged again where the robot is
 given something else, not told to reason otherwise.
 
-The paper's explanation of its robot's results (Sect. IV-C) names two *inputs*: the learned model
-and the dynamics of the action. A rung here is an evaluation of the same protocol in which the
-judged method keeps its options while an input changes: the model (``make reproduce-own-model``)
-or the arm's landing scatter (``make reproduce-reach-noise``). Every claim the main evaluation
-marks *differs* is judged on each rung with the same rule (:func:`.paper.claim_rules`) and
-replicated at the paper's sample size (:mod:`.power`); a rung *flips* a claim when the claim agrees
-in most replicates (on its own verdict when none was drawn). What a rung changes is computed from
-the two artifacts, never written by hand.
+A rung is an evaluation of the same protocol in which the judged method keeps its options while
+an input the paper blames (Sect. IV-C) changes: the model (``make reproduce-own-model``) or the
+arm's landing scatter (``make reproduce-reach-noise``). Each claim that *differs* is judged on every
+rung with the same rule (:func:`.paper.claim_rules`) and replicated at the paper's sample size
+(:mod:`.power`); a rung *flips* a claim that agrees in most replicates. What a rung changes is
+computed from the two artifacts.
 """
 
 from __future__ import annotations

@@ -1,11 +1,10 @@
 """How likely the paper's verdict is at the paper's sample size, if the effect is the one we measured.
 
 :func:`replication` draws replicates of our experiment at the paper's 50 runs per parametrization
-(Sect. IV-B), resampling the runs of each (category, parametrization, strategy) with replacement (a
-stratified bootstrap), recomputes the evaluation's summaries for each
-(:func:`kbcli.stages.evaluate.assembly.resummarise`) and judges the claim with its own rule. The
-share of replicates in which the claim *agrees* estimates the probability that the paper's
-protocol, run on our system, would give the paper's verdict: near 0, the difference is not chance.
+(a stratified bootstrap of the runs), recomputes the evaluation's summaries for each
+(:func:`kbcli.stages.evaluate.assembly.resummarise`) and judges the claim with its own rule: the
+share of replicates that *agree* estimates how likely the paper's protocol, run on our system,
+gives the paper's verdict.
 """
 
 from __future__ import annotations

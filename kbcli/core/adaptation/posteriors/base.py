@@ -1,11 +1,9 @@
 """The protocol every kind of posterior follows, and the registry that holds them.
 
-A kind of posterior turns one classified touch into a log term over the hypothesis grid (Eq. 8
-multiplies the posterior by it). The adaptation (:class:`kbcli.core.adaptation.adapter.Adapter`) never asks a
-kind's name: it asks the registered object (``POSTERIORS.get(cfg.posterior)``) for its term and for
-what it needs. Adding a posterior is one module with a class that follows :class:`PosteriorKind`
-(most simply a subclass of :class:`KindBase`), registered with ``POSTERIORS.register(name, kind,
-summary=...)`` (see ``tests/test_posteriors.py`` for a toy one).
+A kind turns one classified touch into a log term over the hypothesis grid (Eq. 8). The adapter
+never asks a kind's name, only the registered object (``POSTERIORS.get(cfg.posterior)``). Adding a
+posterior is one module with a class that follows :class:`PosteriorKind` (most simply a subclass
+of :class:`KindBase`), registered with ``POSTERIORS.register(name, kind, summary=...)``.
 """
 
 from __future__ import annotations

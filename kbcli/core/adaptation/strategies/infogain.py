@@ -1,13 +1,11 @@
 """``infogain`` (ours): the action with the largest expected information gain
-``I(S; H | a) = H[p(s | a)] - E_h H[p(s | a, h)]``, the mutual information between the outcome and
-the transform over the whole posterior predictive (not only the best hypothesis).
+``I(S; H | a) = H[p(s | a)] - E_h H[p(s | a, h)]`` over the whole posterior predictive.
 
-It is evaluated on a weighted subsample of at most ``hypotheses`` posterior cells (the exact
-support once it is small; systematic resampling before). Candidates: a quarter uniform over the
-area, a quarter on the model's class edges and half on its corners (where three or four sounds
-meet), each edge or corner point carried into the pad by a hypothesis drawn from the posterior
-(shifted by half a grid cell, so the boundary falls between cells), so that it falls where the
-posterior is still undecided."""
+It is evaluated on a weighted subsample of at most ``hypotheses`` posterior cells. Candidates: a
+quarter uniform over the area, a quarter on the model's class edges and half on its corners, each
+edge or corner point carried into the pad by a hypothesis drawn from the posterior (shifted by
+half a grid cell), so that it falls where the posterior is still undecided.
+"""
 
 from __future__ import annotations
 
