@@ -340,3 +340,30 @@ def test_bench_config_rejects_bad_values():
         bench.BenchConfig(detectors=("kswin",))
     with pytest.raises(ConfigError, match="n_st must be smaller"):
         bench.BenchConfig(n_lt=10, n_st=10)
+
+
+def test_a_toy_detector_owns_its_option():
+    """A detector with an option of its own is one class and one registration: the option given
+    flat reaches it, another detector's is refused by it, and it runs online."""
+    from kbcli.core.detection.detectors.base import Bank
+    from kbcli.core.options import Options
+
+    class ToyOptions(Options):
+        level: float = 0.5
+
+    class ToyBank(Bank):
+        def _score(self, x):
+            return np.where(self.n_f > 0, self.cfg.detector.level, 1.0)
+
+    with DETECTORS.temporarily("toy", ToyBank, traits={"options": ToyOptions}):
+        cfg = DetectorConfig(detector="toy", level=0.25, n_lt=5, n_st=2, threshold=0.3)
+        assert cfg.detector == ToyOptions(name="toy", level=0.25)
+        assert DetectorConfig.from_dict(cfg.to_dict()) == cfg
+        with pytest.raises(ConfigError, match="detector toy takes no option 'shift' "
+                                              r"\(detector cusum does\); its options: level"):
+            DetectorConfig(detector="toy", shift=0.2)
+        with pytest.raises(ConfigError, match="detector cusum takes no option 'level'"):
+            DetectorConfig(detector="cusum", level=0.2)
+        for level, fires in ((0.25, True), (0.5, False)):  # its own option decides
+            d = Detector(cfg.replace(detector={"name": "toy", "level": level}))
+            assert [d.update(x) for x in [0] * 7 + [1]] == [False] * 7 + [fires]

@@ -17,19 +17,15 @@ from kbcli.cli.app import bench_app, check_io, command, err, out
 from kbcli.cli.record import show_table
 from kbcli.cli.show import progress, table
 from kbcli.core.config import refused_option
-from kbcli.core.detection.detectors import DETECTORS, MAX_N_LT, MAX_N_ST, DetectorConfig
-from kbcli.core.options import options_of
+from kbcli.core.detection.detectors import MAX_N_LT, MAX_N_ST, DetectorConfig
+from kbcli.core.detection.detectors.bocpd import BocpdOptions
+from kbcli.core.detection.detectors.cusum import CusumOptions
 from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import detect as stage
 
 #: The detector's defaults: its config's, the one source of them.
 DEFAULT = DetectorConfig()
-
-
-def _own(name: str, option: str):
-    """The default of a detector's own option (shown by ``--help``)."""
-    return options_of(DETECTORS, name).model_fields[option].default
 
 
 @command(name="detect")
@@ -45,10 +41,10 @@ def detect_cmd(
         "--threshold", help="Fire when the score (binomial: upper tail of Eq. 6) falls below it; in (0, 1).")] = DEFAULT.threshold,
     shift: Annotated[float | None, typer.Option(
         "--shift", help="cusum: failure-rate increase it is tuned to (p1 = p0 + shift).",
-        show_default=str(_own("cusum", "shift")))] = None,
+        show_default=str(CusumOptions.model_fields["shift"].default))] = None,
     hazard: Annotated[float | None, typer.Option(
         "--hazard", help="bocpd: prior change probability per step.",
-        show_default=str(_own("bocpd", "hazard")))] = None,
+        show_default=str(BocpdOptions.model_fields["hazard"].default))] = None,
 ) -> None:
     """Run a failure detector online over a play history, one result at a time.
 

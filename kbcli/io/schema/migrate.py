@@ -10,10 +10,8 @@ options moved into the parts (``{"posterior": {"name": "likelihood", "robust": t
 do not take (recorded at their defaults, never read) dropped: the same numbers, the current
 layout (:func:`kbcli.core.options.route`, lenient).
 
-A detector config was recorded flat until detection 1 and closed loop 4 (``{"detector": "cusum",
-"shift": 0.15, "hazard": 0.001, ...}``); it is read as ``{"detector": {"name": "cusum", "shift":
-0.15}, ...}``, wherever it is (a detection's config, a loop's ``detector`` table). A flat one is
-known by its shape (its ``detector`` a name), so a closed loop of schema 4 may hold either.
+A detector config recorded flat (detection 1, closed loop 4: ``{"detector": "cusum", "shift": 0.15,
+"hazard": 0.001, ...}``) is known by its shape and read the same way, wherever it is.
 """
 
 from __future__ import annotations

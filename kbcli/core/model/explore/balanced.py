@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from kbcli.core.model.explore.base import STRATEGIES
+from kbcli.core.model.explore.base import STRATEGIES, Covering
 from kbcli.core.model.explore.cover import (
     boundary_sites,
     cover_candidates,
@@ -15,7 +15,7 @@ from kbcli.core.model.explore.cover import (
 )
 
 
-@STRATEGIES.register("balanced", traits={"covers": True})
+@STRATEGIES.register("balanced", traits={"options": Covering})
 def balanced_strategy(exploration, n: int, rng: np.random.Generator) -> np.ndarray:
     """Boundary seeking and coverage weighed in one rule, instead of ``active``'s
     cover-then-bisect.
@@ -29,7 +29,7 @@ def balanced_strategy(exploration, n: int, rng: np.random.Generator) -> np.ndarr
     holes are wide and coverage wins; as the pad fills, the widest bands take over, and a band
     found late still competes with the holes left (no phase waits for another to finish).
     """
-    taken, area, cfg = exploration.landed, exploration.area, exploration.cfg
+    taken, area, cfg = exploration.landed, exploration.area, exploration.cfg.strategy
     if len(taken) == 0:
         lattice = hex_lattice(area, 2 * cfg.explore_radius * np.sqrt(3), rng)
         return farthest_points(lattice, np.empty((0, 2)), len(lattice))
