@@ -299,9 +299,10 @@ class Learning:
 
 
 def model_config(cfg: LearnConfig, keyboard: dict, chosen: str | None = None) -> dict:
-    """The config a ``model`` artifact records: ``cfg``, the keyboard's config and the scoring
-    grids; under ``auto``, the class ``chosen`` as ``model_class`` (the class that reads
-    ``model/...``) and ``model_class_requested = "auto"``."""
+    """The config a ``model`` artifact records: ``cfg`` (flat, as models always recorded it: the
+    strategy by its name, its options beside it), the keyboard's config and the scoring grids;
+    under ``auto``, the class ``chosen`` as ``model_class`` (the class that reads ``model/...``)
+    and ``model_class_requested = "auto"``."""
     out = {**flat_view(cfg.to_dict(), SLOTS), "keyboard": keyboard, "curve_step": CURVE_STEP,
            "eval_step": EVAL_STEP}
     if chosen is not None:
