@@ -54,8 +54,13 @@ def fake_history(result, perturb_at=None) -> Artifact:
         ({"threshold": float("nan")}, "threshold"),
         ({"detector": "page"}, "valid: binomial, cusum, bocpd"),
         ({"prior": (0.0, 1.0)}, "prior"),
-        ({"shift": 1.5}, "shift"),
-        ({"hazard": 0.0}, "hazard"),
+        ({"detector": "cusum", "shift": 1.5}, "detector.detector.shift must be a number in (0, 1)"),
+        ({"detector": "bocpd", "hazard": 0.0}, "detector.detector.hazard must be a number in (0, 1)"),
+        # an option of another detector is refused by the chosen one, naming it and its own
+        ({"detector": "cusum", "hazard": 0.1},
+         "detector cusum takes no option 'hazard' (detector bocpd does); its options: shift"),
+        ({"shift": 0.2}, "detector binomial takes no option 'shift' (detector cusum does)"),
+        ({"detector": {"name": "bocpd", "shift": 0.2}}, "detector bocpd takes no option 'shift'"),
     ],
 )
 def test_bad_config_rejected(kw, word):
@@ -100,9 +105,15 @@ def test_the_detector_defaults_have_one_source():
     root = typer.main.get_command(app)
     for name in ("detect", "run"):
         params = {p.name: p.default for p in root.commands[name].params}
-        for field in ("detector", "n_lt", "n_st", "threshold", "shift", "hazard"):
+        for field in ("n_lt", "n_st", "threshold"):
             if field in params:
                 assert params[field] == getattr(cfg, field), (name, field)
+        assert params["detector"] == cfg.detector.name
+    # a detector's own options: given only when set (the chosen detector refuses another's)
+    params = {p.name: p for p in root.commands["detect"].params}
+    assert params["shift"].default is None and params["hazard"].default is None
+    assert params["shift"].show_default == str(DetectorConfig(detector="cusum").detector.shift)
+    assert params["hazard"].show_default == str(DetectorConfig(detector="bocpd").detector.hazard)
 
 
 def test_binomial_counts_windows_like_eq_4_and_5():
@@ -207,7 +218,7 @@ def test_stage_on_a_history_and_round_trip(tmp_path):
     write_artifact(art, path)
     back = read_artifact(path, "detection")
     np.testing.assert_array_equal(back.array("firings"), art.array("firings"))
-    assert back.config["detector"] == "binomial" and back.config["n_lt"] == 100
+    assert back.config["detector"] == {"name": "binomial"} and back.config["n_lt"] == 100
     with pytest.raises(ArtifactError, match="expected a history"):
         stage.run(DetectorConfig(), Artifact(kind="scene", config={}))
 
@@ -236,6 +247,10 @@ def test_cli_detect(runner, history_path, tmp_path, name):
         (["--threshold", "1"], "threshold must be a number in (0, 1)"),
         (["--threshold", "0"], "threshold must be a number in (0, 1)"),
         (["--detector", "adwin"], "unknown detector 'adwin'"),
+        (["--detector", "cusum", "--hazard", "0.1"], "detect: --hazard does not apply to detector "
+         "cusum: detector cusum takes no option 'hazard' (detector bocpd does)"),
+        (["--shift", "0.2"], "--shift does not apply to detector binomial"),
+        (["--detector", "bocpd", "--hazard", "1"], "hazard must be a number in (0, 1)"),
     ],
 )
 def test_cli_detect_bad_input(runner, history_path, tmp_path, args, word):
@@ -245,6 +260,41 @@ def test_cli_detect_bad_input(runner, history_path, tmp_path, args, word):
     lines = r.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("kbcli: error:") and word in lines[0]
     assert not out.exists()
+
+
+def test_cli_detect_own_options_reach_the_detector(runner, history_path, tmp_path):
+    out = tmp_path / "c.h5"
+    r = runner.invoke(app, ["detect", str(history_path), "--detector", "cusum", "--shift", "0.3",
+                            "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    art = read_artifact(out, "detection")
+    assert art.config["detector"] == {"name": "cusum", "shift": 0.3}
+    flat = DetectorConfig(detector="cusum", shift=0.3)
+    assert DetectorConfig.from_dict({k: v for k, v in art.config.items() if k != "perturb_at"}) \
+        == flat
+    np.testing.assert_array_equal(art.array("score"),
+                                  [s for s, _ in det.detect_stream(flat, art_results(history_path))])
+
+
+def art_results(path):
+    return read_artifact(path, "history").array("result").astype(np.int8)
+
+
+def test_a_flat_stored_detector_config_reads_nested():
+    """Detection 1 and closed loop 4 recorded every detector's options flat: read now, the chosen
+    detector holds its own, the others' are dropped (kbcli.io.schema.migrate)."""
+    data = Path(__file__).resolve().parent.parent / "data"
+    old = read_artifact(data / "schema" / "v1" / "detection.h5", "detection")
+    assert old.schema_version == 1
+    assert old.config["detector"] == {"name": "binomial"} and "hazard" not in old.config
+    assert old.config["perturb_at"] == 60
+    loop = read_artifact(data / "schema" / "flat" / "closed_loop.h5", "closed_loop")
+    assert loop.config["loop"]["detector"] == DetectorConfig().to_dict()
+    from kbcli.io.schema.migrate import nest_detector
+
+    flat = {"detector": "bocpd", "shift": 0.15, "hazard": 0.01, "n_lt": 50, "n_st": 5}
+    assert DetectorConfig.from_dict(nest_detector(flat)) == DetectorConfig(
+        detector="bocpd", hazard=0.01, n_lt=50, n_st=5)
 
 
 def test_cli_detect_wrong_kind(runner, kb_path, tmp_path):
@@ -290,3 +340,30 @@ def test_bench_config_rejects_bad_values():
         bench.BenchConfig(detectors=("kswin",))
     with pytest.raises(ConfigError, match="n_st must be smaller"):
         bench.BenchConfig(n_lt=10, n_st=10)
+
+
+def test_a_toy_detector_owns_its_option():
+    """A detector with an option of its own is one class and one registration: the option given
+    flat reaches it, another detector's is refused by it, and it runs online."""
+    from kbcli.core.detection.detectors.base import Bank
+    from kbcli.core.options import Options
+
+    class ToyOptions(Options):
+        level: float = 0.5
+
+    class ToyBank(Bank):
+        def _score(self, x):
+            return np.where(self.n_f > 0, self.cfg.detector.level, 1.0)
+
+    with DETECTORS.temporarily("toy", ToyBank, traits={"options": ToyOptions}):
+        cfg = DetectorConfig(detector="toy", level=0.25, n_lt=5, n_st=2, threshold=0.3)
+        assert cfg.detector == ToyOptions(name="toy", level=0.25)
+        assert DetectorConfig.from_dict(cfg.to_dict()) == cfg
+        with pytest.raises(ConfigError, match="detector toy takes no option 'shift' "
+                                              r"\(detector cusum does\); its options: level"):
+            DetectorConfig(detector="toy", shift=0.2)
+        with pytest.raises(ConfigError, match="detector cusum takes no option 'level'"):
+            DetectorConfig(detector="cusum", level=0.2)
+        for level, fires in ((0.25, True), (0.5, False)):  # its own option decides
+            d = Detector(cfg.replace(detector={"name": "toy", "level": level}))
+            assert [d.update(x) for x in [0] * 7 + [1]] == [False] * 7 + [fires]

@@ -112,6 +112,13 @@ def test_exact_strategy_gives_the_exact_model(runner, files):
         (["--reach-noise", "-1"], ["reach_noise"]),
         (["--batch", "0"], ["batch"]),
         (["--explore-radius", "0"], ["explore_radius"]),
+        # an option of another strategy is refused by the chosen one, naming the flag
+        (["--strategy", "random", "--explore-radius", "5"],
+         ["learn: --explore-radius does not apply to strategy random",
+          "exploration strategy random takes no option 'explore_radius' (exploration strategy "
+          "active and balanced do)"]),
+        (["--strategy", "exact", "--explore-radius", "5"],
+         ["strategy exact learns nothing: it takes no option 'explore_radius'"]),
         (["--curve-every", "0"], ["curve_every"]),
     ],
 )

@@ -230,6 +230,26 @@ def test_unknown_strategy_lists_the_valid_ones():
         ExploreConfig(budget=0)
 
 
+def test_a_strategy_owns_its_options():
+    """``explore_radius`` is the covering strategies' (active, balanced): given flat it goes to
+    the chosen one, another refuses it; a model records the learn config flat, as before."""
+    from kbcli.core.model.explore.base import Covering
+    from kbcli.stages.learn import LearnConfig, model_config
+
+    cfg = ExploreConfig(strategy="balanced", explore_radius=12.0)
+    assert cfg.strategy == Covering(name="balanced", explore_radius=12.0)
+    assert ExploreConfig.from_dict(cfg.to_dict()) == cfg
+    with pytest.raises(ConfigError, match="exploration strategy random takes no option "
+                                          "'explore_radius' \\(exploration strategy active and "
+                                          "balanced do\\)"):
+        ExploreConfig(strategy="random", explore_radius=12.0)
+    learn = LearnConfig(explore_radius=12.0)
+    assert learn.explore_config().strategy == Covering(name="active", explore_radius=12.0)
+    recorded = model_config(learn, {})
+    assert recorded["strategy"] == "active" and recorded["explore_radius"] == 12.0
+    assert "explore_radius" not in model_config(LearnConfig(strategy="random"), {})
+
+
 def test_hex_lattice_covers_the_area_to_its_radius():
     rng = np.random.default_rng(0)
     r = 20.0

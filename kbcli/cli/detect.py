@@ -16,7 +16,11 @@ from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, out
 from kbcli.cli.record import show_table
 from kbcli.cli.show import progress, table
+from kbcli.core.config import refused_option
 from kbcli.core.detection.detectors import MAX_N_LT, MAX_N_ST, DetectorConfig
+from kbcli.core.detection.detectors.bocpd import BocpdOptions
+from kbcli.core.detection.detectors.cusum import CusumOptions
+from kbcli.errors import ConfigError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.stages import detect as stage
 
@@ -28,16 +32,19 @@ DEFAULT = DetectorConfig()
 def detect_cmd(
     history: Annotated[Path, typer.Argument(help="History artifact (kbcli play).")],
     output: opts.output_option("Detection artifact to write (.h5)."),
-    detector: opts.detector_option() = DEFAULT.detector,
+    detector: opts.detector_option() = DEFAULT.detector.name,
     n_lt: Annotated[int, typer.Option(
         "--n-lt", help=f"Long-term window N_LT (Eq. 4), at most {MAX_N_LT}.")] = DEFAULT.n_lt,
     n_st: Annotated[int, typer.Option(
         "--n-st", help=f"Short-term window N_ST (Eq. 5), < N_LT and at most {MAX_N_ST}.")] = DEFAULT.n_st,
     threshold: Annotated[float, typer.Option(
         "--threshold", help="Fire when the score (binomial: upper tail of Eq. 6) falls below it; in (0, 1).")] = DEFAULT.threshold,
-    shift: Annotated[float, typer.Option(
-        "--shift", help="cusum: failure-rate increase it is tuned to (p1 = p0 + shift).")] = DEFAULT.shift,
-    hazard: Annotated[float, typer.Option("--hazard", help="bocpd: prior change probability per step.")] = DEFAULT.hazard,
+    shift: Annotated[float | None, typer.Option(
+        "--shift", help="cusum: failure-rate increase it is tuned to (p1 = p0 + shift).",
+        show_default=str(CusumOptions.model_fields["shift"].default))] = None,
+    hazard: Annotated[float | None, typer.Option(
+        "--hazard", help="bocpd: prior change probability per step.",
+        show_default=str(BocpdOptions.model_fields["hazard"].default))] = None,
 ) -> None:
     """Run a failure detector online over a play history, one result at a time.
 
@@ -46,8 +53,12 @@ def detect_cmd(
     it (post-move actions seen when it fired) and the false alarms before it.
     """
     check_io({"HISTORY": history}, ("--output", output))
-    cfg = DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold, shift=shift,
-                         hazard=hazard)
+    own = {k: v for k, v in {"shift": shift, "hazard": hazard}.items() if v is not None}
+    try:
+        cfg = DetectorConfig(detector=detector, n_lt=n_lt, n_st=n_st, threshold=threshold, **own)
+    except ConfigError as exc:
+        raise refused_option(exc, {k: f"--{k}" for k in own}, "detect", f"detector {detector}") \
+            from None
     hist = read_artifact(history, "history")
     art = stage.run(cfg, hist)
     write_artifact(art, output)

@@ -12,6 +12,8 @@ from kbcli.cli import options as opts
 from kbcli.cli.app import bench_app, check_io, command, err, figure_output, note_arm, out, plot_app
 from kbcli.cli.record import show_table
 from kbcli.cli.show import busy, drain, phases, progress, table, wide
+from kbcli.core.config import refused_option
+from kbcli.core.model.explore.base import Covering
 from kbcli.errors import ConfigError, KbcliError
 from kbcli.io.artifact import read_artifact, write_artifact
 from kbcli.io.config import arm_file, load_arm
@@ -38,10 +40,10 @@ def learn_cmd(
     reach_noise: opts.ReachNoise = 0.0,
     arm: opts.arm_option() = "ideal",
     batch: Annotated[int, typer.Option("--batch", help=f"Reaches per refit, at most {MAX_BUDGET}.")] = 10,
-    explore_radius: Annotated[float, typer.Option(
-        "--explore-radius", help="active: first cover the working area to this radius, px "
-        "(at least 1.9 px on the default pad: a cover of 1,000,000 points).")
-    ] = 20.0,
+    explore_radius: Annotated[float | None, typer.Option(
+        "--explore-radius", help="active, balanced: first cover the working area to this radius, "
+        "px (at least 1.9 px on the default pad: a cover of 1,000,000 points).",
+        show_default=str(Covering.model_fields["explore_radius"].default))] = None,
     curve_every: Annotated[int, typer.Option(
         "--curve-every", help=f"Reaches between learning-curve points, at most {MAX_BUDGET}.")] = 50,
     model_class: opts.model_class_option(
@@ -59,9 +61,13 @@ def learn_cmd(
     simulator's ground truth.
     """
     sim = SimConfig(mode=mode, reach_noise=reach_noise, arm=load_arm(arm))
-    cfg = stage.LearnConfig(strategy=strategy, budget=budget, batch=batch,
-                            explore_radius=explore_radius, curve_every=curve_every, sim=sim,
-                            model_class=model_class)
+    own = {} if explore_radius is None else {"explore_radius": explore_radius}
+    try:
+        cfg = stage.LearnConfig(strategy=strategy, budget=budget, batch=batch,
+                                curve_every=curve_every, sim=sim, model_class=model_class, **own)
+    except ConfigError as exc:
+        raise refused_option(exc, {"explore_radius": "--explore-radius"}, "learn",
+                             f"strategy {strategy}") from None
     check_io({"--keyboard": keyboard, "--arm": arm_file(arm)}, ("--output", output))
     kb_art = read_artifact(keyboard, "keyboard")
     if not cfg.exact:  # (the exact model reaches for nothing)

@@ -71,7 +71,7 @@ def run_cmd(
         help=f"Touches at most per adaptation (at most {MAX_ADAPT_STEPS}).")] = 40,
     repair: opts.Repair = None,
     model_out: opts.ModelOut = None,
-    detector: opts.detector_option() = DEFAULT.detector,
+    detector: opts.detector_option() = DEFAULT.detector.name,
     n_lt: Annotated[int, typer.Option(
         help=f"Detector long-term window N_LT, at most {MAX_N_LT}.")] = DEFAULT.n_lt,
     n_st: Annotated[int, typer.Option(

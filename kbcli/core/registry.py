@@ -72,7 +72,7 @@ class Registry(Generic[T]):
             claiming one name is a bug).
         traits : dict, optional
             What the part declares of itself for the code that uses it: a capability
-            (``{"covers": True}``), its options model (``{"options": KdeOptions}``,
+            (``{"simulates": True}``), its options model (``{"options": KdeOptions}``,
             :mod:`kbcli.core.options`), report texts; read with :meth:`trait`, never inferred from
             its name.
         """

@@ -20,7 +20,7 @@ SCHEMA_VERSIONS: dict[str, int] = {
     "model": 3,
     "scene": 1,
     "history": 1,
-    "detection": 1,
+    "detection": 2,  # 2: the detector holds its own options (1 still read)
     "run": 4,  # 2: joint_angles (dynamics mode), attrs arm and mode; serve sessions (no truth);
     #            3: the adapt config holds the robot's options under "robot" (2 still read);
     #            4: the robot's strategy and posterior hold their own options (3 still read)

@@ -28,15 +28,25 @@ from collections.abc import Callable, Iterator
 from typing import Annotated, Any, ClassVar
 
 import numpy as np
-from pydantic import AfterValidator, Field, InstanceOf, field_serializer
+from pydantic import (
+    AfterValidator,
+    BeforeValidator,
+    Field,
+    InstanceOf,
+    SerializeAsAny,
+    field_serializer,
+    model_validator,
+)
 
-from kbcli.core.config import Config, Name, Positive, Whole, between
+from kbcli.core.config import Config, Name, Whole, between
 from kbcli.core.instrument.keyboard import Keyboard
 from kbcli.core.model import accuracy as scoring
 from kbcli.core.model import reliability, select
 from kbcli.core.model.base import grid_points
 from kbcli.core.model.classes import AUTO, EXACT, check_choice, fit_model, learned_classes
 from kbcli.core.model.explore import STRATEGIES, Exploration, ExploreConfig
+from kbcli.core.model.explore.base import SLOTS
+from kbcli.core.options import Options, flat_view, owners, parse_part, route
 from kbcli.errors import ArtifactError, ConfigError
 from kbcli.sim import SimConfig, World, check_keyboard_reachable, make_reacher
 from kbcli.stages import keyboard as keyboard_stage
@@ -64,10 +74,15 @@ def strategies() -> tuple[str, ...]:
     return (*sorted(STRATEGIES), EXACT)
 
 
-def _strategy(name: str) -> str:
-    if name not in strategies():
-        raise ConfigError(f"unknown strategy {name!r}; valid: {', '.join(strategies())}")
-    return name
+def _name(v: Any) -> Any:
+    return v.get("name", "active") if isinstance(v, dict) else getattr(v, "name", v)
+
+
+def _strategy(v: Any) -> Options:
+    """``exact`` (no learning, no option) or an exploration strategy with its options."""
+    if _name(v) not in strategies():
+        raise ConfigError(f"unknown strategy {_name(v)!r}; valid: {', '.join(strategies())}")
+    return Options(name=EXACT) if _name(v) == EXACT else parse_part(STRATEGIES, v, "active")
 
 
 class LearnConfig(Config):
@@ -75,14 +90,13 @@ class LearnConfig(Config):
 
     Parameters
     ----------
-    strategy : str
-        ``active``, ``random`` (exploration strategies) or ``exact`` (no learning).
+    strategy : Options
+        An exploration strategy (``active``, ``balanced``, ``random``) with its own options
+        (``explore_radius``, ...; given flat beside it too), or ``exact`` (no learning).
     budget : int
         Reaches.
     batch : int
         Reaches per model refit.
-    explore_radius : float
-        ``active``: cover the working area to this radius (px) before localizing boundaries.
     curve_every : int
         Reaches between two points of the learning curve (a point is taken after the batch that
         reaches each multiple, and at the end).
@@ -99,13 +113,21 @@ class LearnConfig(Config):
 
     what: ClassVar[str] = "learn"
 
-    strategy: Annotated[Name, AfterValidator(_strategy)] = "active"
+    strategy: Annotated[SerializeAsAny[Options], BeforeValidator(_strategy)] = "active"
     budget: between(Whole, 1, MAX_BUDGET) = 800
     batch: between(Whole, 1, MAX_BUDGET) = 10
-    explore_radius: Positive = 20.0
     curve_every: between(Whole, 1, MAX_BUDGET) = 50
     sim: InstanceOf[SimConfig] = Field(default_factory=SimConfig)
     model_class: Annotated[Name, AfterValidator(check_choice)] = AUTO
+
+    @model_validator(mode="before")
+    @classmethod
+    def _part(cls, data: Any) -> Any:
+        """The strategy's options given flat go to it (``exact`` takes none)."""
+        name = _name(data.get("strategy", "active")) if isinstance(data, dict) else None
+        if name == EXACT and (given := [k for k in data if owners(STRATEGIES, k)]):
+            raise ConfigError(f"strategy exact learns nothing: it takes no option {given[0]!r}")
+        return route(data, SLOTS, cls.model_fields) if name in STRATEGIES else data
 
     @field_serializer("sim")
     def _sim_dict(self, sim: SimConfig) -> dict[str, Any]:
@@ -114,11 +136,11 @@ class LearnConfig(Config):
     @property
     def exact(self) -> bool:
         """No learning: the exact model (``strategy = "exact"``)."""
-        return self.strategy == EXACT
+        return self.strategy.name == EXACT
 
     def explore_config(self) -> ExploreConfig:
         return ExploreConfig(strategy=self.strategy, budget=self.budget, batch=self.batch,
-                             explore_radius=self.explore_radius, model_class=self.model_class)
+                             model_class=self.model_class)
 
 
 def check_keyboard(art: Artifact) -> Keyboard:
@@ -235,7 +257,7 @@ class Learning:
                                "step": np.float64(EVAL_STEP)},
             },
             attrs={
-                "strategy": self.cfg.strategy,
+                "strategy": self.cfg.strategy.name,
                 "model_class": model_class,
                 **({"model_selection": sel.to_dict()} if sel is not None else {}),
                 "layout": self.keyboard.layout,
@@ -266,10 +288,11 @@ class Learning:
 
 
 def model_config(cfg: LearnConfig, keyboard: dict, chosen: str | None = None) -> dict:
-    """The config a ``model`` artifact records: ``cfg``, the keyboard's config and the scoring
-    grids; under ``auto``, the class ``chosen`` as ``model_class`` (the class that reads
-    ``model/...``) and ``model_class_requested = "auto"``."""
-    out = {**cfg.to_dict(), "keyboard": keyboard, "curve_step": CURVE_STEP,
+    """The config a ``model`` artifact records: ``cfg`` (flat, as models always recorded it: the
+    strategy by its name, its options beside it), the keyboard's config and the scoring grids;
+    under ``auto``, the class ``chosen`` as ``model_class`` (the class that reads ``model/...``)
+    and ``model_class_requested = "auto"``."""
+    out = {**flat_view(cfg.to_dict(), SLOTS), "keyboard": keyboard, "curve_step": CURVE_STEP,
            "eval_step": EVAL_STEP}
     if chosen is not None:
         out.update(model_class=chosen, model_class_requested=AUTO)

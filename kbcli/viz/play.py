@@ -63,7 +63,7 @@ def plot_play(history: Artifact, path: str | os.PathLike, detection: Artifact | 
         ax = axes[2]
         score = np.clip(detection.array("score"), 1e-300, 1.0)
         thr = detection.config["threshold"]
-        ax.semilogy(t, score, color="tab:purple", lw=1, label=f"{detection.config['detector']} score")
+        ax.semilogy(t, score, color="tab:purple", lw=1, label=f"{detection.config['detector']['name']} score")
         ax.axhline(thr, color="tab:red", ls=":", lw=1, label=f"threshold {thr:g}")
         ax.set_ylim(max(score.min(), 1e-12) / 3, 2.0)
         ax.set_ylabel("score (fires below)")

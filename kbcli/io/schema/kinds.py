@@ -150,6 +150,9 @@ _DETECTION_1 = Schema(
         Dataset("firings", INT, ("F",), index="T"),
     ),
 )
+# detection 2: the detector holds its own options (``{"name": "cusum", "shift": 0.15}``)
+_DETECTION_2 = Schema(config={"detector": "dict", "threshold": "num"},
+                      datasets=_DETECTION_1.datasets)
 
 # -- run, closed_loop ------------------------------------------------------------------------------
 
@@ -293,7 +296,7 @@ SCHEMAS: dict[str, dict[int, Schema]] = {
     "model": {1: _MODEL_1, 2: _MODEL_2, 3: _MODEL_3},
     "scene": {1: _SCENE_1},
     "history": {1: _HISTORY_1},
-    "detection": {1: _DETECTION_1},
+    "detection": {1: _DETECTION_1, 2: _DETECTION_2},
     # run 3, closed_loop 3: the adapt config nests the robot's options under "robot"; run 4,
     # closed_loop 4, evaluation 3, model_quality 2: the robot's parts hold their own options
     # (older ones are migrated on read: :mod:`kbcli.io.schema.migrate`)

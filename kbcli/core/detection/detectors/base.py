@@ -2,8 +2,10 @@
 detector on ``S`` parallel 0/1 streams, with the short- and long-term windows of Eq. 4-5.
 
 A detector registers a :class:`Bank` subclass under its name in :data:`DETECTORS`
-(``DETECTORS.register(name, cls)``): ``cls(cfg, n_streams)`` is a bank, and its :meth:`Bank._score`
-turns the windows' counts into a score in (0, 1] (small: strong evidence of a change).
+(``DETECTORS.register(name, cls, traits={"options": ...})``, its own options a
+:class:`~kbcli.core.options.Options` beside it): ``cls(cfg, n_streams)`` is a bank, and its
+:meth:`Bank._score` turns the windows' counts into a score in (0, 1] (small: strong evidence of a
+change).
 """
 
 from __future__ import annotations
@@ -14,7 +16,8 @@ from typing import Any
 import numpy as np
 from pydantic import field_validator, model_validator
 
-from kbcli.core.config import Config, Name, Number, Positive, Whole, between
+from kbcli.core.config import Config, Number, Positive, Whole, between
+from kbcli.core.options import part_field, route
 from kbcli.core.registry import Registry
 from kbcli.errors import ConfigError
 
@@ -24,16 +27,25 @@ MAX_N_LT = 10_000
 #: Largest short-term window ``n_st``.
 MAX_N_ST = 1_000
 
-_Probability = between(Number, 0.0, 1.0, low_open=True, high_open=True)
+#: A probability in (0, 1) (a detector's own options use it too).
+Probability = between(Number, 0.0, 1.0, low_open=True, high_open=True)
+
+#: name -> factory(cfg, n_streams) -> Bank (a :class:`Bank` subclass)
+DETECTORS: Registry[Callable[[DetectorConfig, int], Bank]] = Registry("detector")
+#: The field of :class:`DetectorConfig` that chooses the detector and carries its options.
+SLOTS = {"detector": (DETECTORS, "binomial")}
 
 
 class DetectorConfig(Config):
-    """Which detector and its parameters.
+    """Which detector and its parameters: the detector's own options in it, the windows shared.
 
     Parameters
     ----------
-    detector : str
-        One of :data:`DETECTORS` (``binomial``, ``cusum``, ``bocpd``).
+    detector : Options
+        A detector of :data:`DETECTORS` (``binomial``, ``cusum``, ``bocpd``) with its own options
+        (cusum's ``shift``, bocpd's ``hazard``); a name, a table ``{name, options...}`` or the
+        options given flat beside it (``DetectorConfig(detector="cusum", shift=0.2)``) are read.
+        An option the chosen detector does not take is refused by it.
     n_lt : int
         Long-term window N_LT (Eq. 4): results older than the short-term window; at most
         :data:`MAX_N_LT`.
@@ -45,26 +57,21 @@ class DetectorConfig(Config):
     prior : tuple of float
         Beta pseudo-counts ``(a, b)`` of failures and successes added to the long-term window when
         estimating ``p_fail`` (and the segment prior of ``bocpd``); both > 0.
-    shift : float
-        ``cusum`` only: the failure-rate increase it is tuned to, ``p1 = p0 + shift``; in (0, 1).
-    hazard : float
-        ``bocpd`` only: prior probability of a change at each step; in (0, 1).
     """
 
     what = "detector"
 
-    detector: Name = "binomial"
+    detector: part_field(DETECTORS, "binomial") = "binomial"
     n_lt: between(Whole, 1, MAX_N_LT) = 100
     n_st: between(Whole, 1, MAX_N_ST) = 10
-    threshold: _Probability = 0.01
+    threshold: Probability = 0.01
     prior: tuple[Positive, Positive] = (1.0, 1.0)
-    shift: _Probability = 0.15
-    hazard: _Probability = 1e-3
 
-    @field_validator("detector")
+    @model_validator(mode="before")
     @classmethod
-    def _known(cls, v: str) -> str:
-        return DETECTORS.check(v)
+    def _part(cls, data: Any) -> Any:
+        """The detector's options given flat go to the detector (:func:`kbcli.core.options.route`)."""
+        return route(data, SLOTS, cls.model_fields) if isinstance(data, dict) else data
 
     @field_validator("n_lt", "n_st", mode="before")
     @classmethod
@@ -153,10 +160,7 @@ class Bank:
         raise NotImplementedError
 
 
-#: name -> factory(cfg, n_streams) -> Bank (a :class:`Bank` subclass)
-DETECTORS: Registry[Callable[[DetectorConfig, int], Bank]] = Registry("detector")
-
-
 def make_bank(cfg: DetectorConfig, n_streams: int) -> Bank:
     """A bank of ``cfg.detector`` on ``n_streams`` streams."""
-    return DETECTORS.get(cfg.detector)(cfg, n_streams)
+    return DETECTORS.get(cfg.detector.name)(cfg, n_streams)
+

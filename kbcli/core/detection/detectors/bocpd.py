@@ -13,14 +13,23 @@ only on more failures, never on fewer. Like the binomial test it has a memory of
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import numpy as np
 from scipy.special import logsumexp
 
-from kbcli.core.detection.detectors.base import DETECTORS, Bank, DetectorConfig
+from kbcli.core.detection.detectors.base import DETECTORS, Bank, DetectorConfig, Probability
+from kbcli.core.options import Options
 
 
-@DETECTORS.register("bocpd")
+class BocpdOptions(Options):
+    """``bocpd``'s option: ``hazard``, the prior probability of a change at each step; in (0, 1)."""
+
+    what: ClassVar[str] = "detector bocpd"
+    hazard: Probability = 1e-3
+
+
+@DETECTORS.register("bocpd", traits={"options": BocpdOptions})
 class BocpdBank(Bank):
     """Bayesian online changepoint detection with a Beta-Bernoulli model (run lengths truncated)."""
 
@@ -29,8 +38,8 @@ class BocpdBank(Bank):
         self.r_max = cfg.warmup  # run lengths 0 .. r_max, the last bin holds every longer run
         a, b = cfg.prior
         self._den = np.broadcast_to(a + b + np.arange(self.r_max + 1.0), (self.n_streams, self.r_max + 1)).copy()
-        self._log_h = math.log(cfg.hazard)
-        self._log_1mh = math.log1p(-cfg.hazard)
+        self._log_h = math.log(cfg.detector.hazard)
+        self._log_1mh = math.log1p(-cfg.detector.hazard)
         self.log_post = np.full((self.n_streams, self.r_max + 1), -np.inf)
         self.log_post[:, 0] = 0.0
         # failures in the last r results; the last bin counts the whole run since the reset

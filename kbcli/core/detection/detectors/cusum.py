@@ -12,12 +12,23 @@ detector (Lorden's minimax delay) for a known jump size.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 
-from kbcli.core.detection.detectors.base import DETECTORS, Bank, DetectorConfig
+from kbcli.core.detection.detectors.base import DETECTORS, Bank, DetectorConfig, Probability
+from kbcli.core.options import Options
 
 
-@DETECTORS.register("cusum")
+class CusumOptions(Options):
+    """``cusum``'s option: ``shift``, the failure-rate increase it is tuned to
+    (``p1 = p0 + shift``); in (0, 1)."""
+
+    what: ClassVar[str] = "detector cusum"
+    shift: Probability = 0.15
+
+
+@DETECTORS.register("cusum", traits={"options": CusumOptions})
 class CusumBank(Bank):
     """Page's Bernoulli CUSUM for ``p0 -> p0 + shift``, ``p0`` from the long-term window."""
 
@@ -32,7 +43,7 @@ class CusumBank(Bank):
         a, b = self.cfg.prior
         n_old = np.maximum(self.seen - self.cfg.n_st, 0)
         p0 = (self.k_old + a) / (n_old + a + b)
-        p1 = np.minimum(p0 + self.cfg.shift, 1.0 - 1e-9)
+        p1 = np.minimum(p0 + self.cfg.detector.shift, 1.0 - 1e-9)
         llr = np.where(x > 0, np.log(p1 / p0), np.log1p(-p1) - np.log1p(-p0))
         active = self.seen >= self.cfg.warmup
         self.s = np.where(active, np.maximum(0.0, self.s + llr), 0.0)

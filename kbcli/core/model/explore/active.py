@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from kbcli.core.model.explore.base import STRATEGIES
+from kbcli.core.model.explore.base import STRATEGIES, Covering
 from kbcli.core.model.explore.cover import (
     boundary_sites,
     cover_candidates,
@@ -30,11 +30,14 @@ from kbcli.core.model.explore.cover import (
     uniform,
 )
 
+#: Uniform candidates from which reaches are spread while no boundary is known.
+SPREAD_CANDIDATES = 4000
 
-@STRATEGIES.register("active", traits={"covers": True})
+
+@STRATEGIES.register("active", traits={"options": Covering})
 def active_strategy(exploration, n: int, rng: np.random.Generator) -> np.ndarray:
     """Cover the area to ``explore_radius``, then the widest places of the boundary bands."""
-    taken, area, cfg = exploration.landed, exploration.area, exploration.cfg
+    taken, area, cfg = exploration.landed, exploration.area, exploration.cfg.strategy
     if len(taken) == 0:  # first: a lattice covering the area to explore_radius, spread-out order
         lattice = hex_lattice(area, cfg.explore_radius * np.sqrt(3), rng)
         return farthest_points(lattice, np.empty((0, 2)), len(lattice))
@@ -46,10 +49,10 @@ def active_strategy(exploration, n: int, rng: np.random.Generator) -> np.ndarray
         return picks
     model = exploration.model
     if model is None or model.n_classes < 2:
-        return farthest_points(uniform(area, cfg.n_candidates, rng), taken, n)
+        return farthest_points(uniform(area, SPREAD_CANDIDATES, rng), taken, n)
     p, w = boundary_sites(model, area, tree, rng)
     if len(p) == 0:  # no boundary met yet: keep spreading reaches over the area
-        return farthest_points(uniform(area, cfg.n_candidates, rng), taken, n)
+        return farthest_points(uniform(area, SPREAD_CANDIDATES, rng), taken, n)
     picks = []
     for _ in range(min(n, len(p))):  # loop over picks; each is vectorized over the sites
         i = int(np.argmax(w))

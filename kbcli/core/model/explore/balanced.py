@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from kbcli.core.model.explore.base import STRATEGIES
+from kbcli.core.model.explore.base import STRATEGIES, Covering
 from kbcli.core.model.explore.cover import (
     boundary_sites,
     cover_candidates,
@@ -15,7 +15,7 @@ from kbcli.core.model.explore.cover import (
 )
 
 
-@STRATEGIES.register("balanced", traits={"covers": True})
+@STRATEGIES.register("balanced", traits={"options": Covering})
 def balanced_strategy(exploration, n: int, rng: np.random.Generator) -> np.ndarray:
     """Boundary seeking and coverage weighed in one rule, instead of ``active``'s
     cover-then-bisect.
@@ -25,7 +25,7 @@ def balanced_strategy(exploration, n: int, rng: np.random.Generator) -> np.ndarr
     caps it) or a hole, a point at distance d from every landing, worth ``2 d``. A pick of width w
     caps every site's width at ``w / 2 + distance`` and every hole's at ``2 distance``.
     """
-    taken, area, cfg = exploration.landed, exploration.area, exploration.cfg
+    taken, area, cfg = exploration.landed, exploration.area, exploration.cfg.strategy
     if len(taken) == 0:
         lattice = hex_lattice(area, 2 * cfg.explore_radius * np.sqrt(3), rng)
         return farthest_points(lattice, np.empty((0, 2)), len(lattice))

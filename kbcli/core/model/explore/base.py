@@ -1,8 +1,9 @@
 """The exploration strategies' registry, their one signature (:data:`Strategy`) and the
 exploration's config.
 
-A strategy registers under its name in :data:`STRATEGIES` and declares what it does
-(``traits={"covers": True}``: it reaches around its samples, so its cover is bounded first).
+A strategy registers under its name in :data:`STRATEGIES` with its own options
+(``traits={"options": ...}``, a :class:`~kbcli.core.options.Options`); one that reaches around its
+samples takes :class:`Covering`'s, and its cover is bounded first.
 """
 
 from __future__ import annotations
@@ -11,10 +12,11 @@ from collections.abc import Callable
 from typing import Annotated, Any, ClassVar
 
 import numpy as np
-from pydantic import AfterValidator
+from pydantic import AfterValidator, model_validator
 
 from kbcli.core.config import Config, Count, Name, Positive
 from kbcli.core.model.classes import DEFAULT_MODEL_CLASS, check_choice
+from kbcli.core.options import Options, part_field, route
 from kbcli.core.registry import Registry
 from kbcli.errors import ConfigError
 
@@ -41,10 +43,16 @@ def check_cover(area: tuple, explore_radius: float) -> None:
 #: ``exploration.targets``, ``.landed``, ``.perceived``, ``.cfg`` and ``.model`` (fitted on demand).
 Strategy = Callable[[Any, int, np.random.Generator], np.ndarray]
 STRATEGIES: Registry[Strategy] = Registry("exploration strategy")
+#: The field of :class:`ExploreConfig` that chooses the strategy and carries its options.
+SLOTS = {"strategy": (STRATEGIES, "active")}
 
 
-def _strategy(name: str) -> str:
-    return STRATEGIES.check(name)
+class Covering(Options):
+    """Options of a strategy that covers the working area: ``explore_radius``, the radius (px)
+    within which every point of the area gets a reach (bounded by :func:`check_cover`)."""
+
+    what: ClassVar[str] = "exploration strategy"
+    explore_radius: Positive = 20.0
 
 
 class ExploreConfig(Config):
@@ -52,16 +60,14 @@ class ExploreConfig(Config):
 
     Parameters
     ----------
-    strategy : str
-        A name in :data:`STRATEGIES`.
+    strategy : Options
+        A strategy of :data:`STRATEGIES` with its own options (``active``'s and ``balanced``'s
+        ``explore_radius``); a name, a table or its options given flat beside it are read, and an
+        option the strategy does not take is refused by it.
     budget : int
         Number of reaches.
     batch : int
         Reaches proposed per model refit.
-    explore_radius : float
-        ``active``: cover the working area until no point is further than this (px) from a reach.
-    n_candidates : int
-        ``active``: uniform candidates from which to spread reaches while no boundary is known.
     model_class : str
         The model fitted to the samples (:data:`kbcli.core.model.classes.MODEL_CLASSES`): the
         ``active`` strategy bisects its boundary bands, whatever the class. ``auto``: the
@@ -73,9 +79,13 @@ class ExploreConfig(Config):
 
     what: ClassVar[str] = "explore"
 
-    strategy: Annotated[Name, AfterValidator(_strategy)] = "active"
+    strategy: part_field(STRATEGIES, "active") = "active"
     budget: Count = 800
     batch: Count = 10
-    explore_radius: Positive = 20.0
-    n_candidates: Count = 4000
     model_class: Annotated[Name, AfterValidator(check_choice)] = DEFAULT_MODEL_CLASS
+
+    @model_validator(mode="before")
+    @classmethod
+    def _part(cls, data: Any) -> Any:
+        """The strategy's options given flat go to it (:func:`kbcli.core.options.route`)."""
+        return route(data, SLOTS, cls.model_fields) if isinstance(data, dict) else data

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kbcli.core.model.classes import AUTO, fit_model
-from kbcli.core.model.explore.base import STRATEGIES, ExploreConfig, check_cover
+from kbcli.core.model.explore.base import STRATEGIES, Covering, ExploreConfig, check_cover
 from kbcli.core.model.explore.cover import uniform
 from kbcli.core.model.select import RESELECT, explore_choice, explore_class, explore_params
 
@@ -82,13 +82,13 @@ class Exploration:
     def __init__(self, cfg: ExploreConfig, touch: Touch, area: tuple[float, float, float, float],
                  match_threshold: float, rng: np.random.Generator) -> None:
         self.area = tuple(float(v) for v in area)
-        if STRATEGIES.trait(cfg.strategy, "covers", False):  # it reaches around its samples
-            check_cover(self.area, cfg.explore_radius)
+        if isinstance(cfg.strategy, Covering):  # it reaches around its samples
+            check_cover(self.area, cfg.strategy.explore_radius)
         self.cfg = cfg
         self.touch = touch
         self.match_threshold = match_threshold
         self.rng = rng
-        self.strategy = STRATEGIES.get(cfg.strategy)
+        self.strategy = STRATEGIES.get(cfg.strategy.name)
         self.targets = np.empty((0, 2))
         self.landed = np.empty((0, 2))
         self.perceived = np.empty((0, 0))
