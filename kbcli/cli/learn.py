@@ -52,6 +52,7 @@ def learn_cmd(
         "forest, knn: scikit-learn SVMs, random forest, nearest samples (any key shape); "
         "forest-xy: a forest splitting on x and y only (horizontal and vertical key edges).")
         = "auto",
+    model_option: opts.ModelOption = None,
 ) -> None:
     """Learn the instrument model by exploring the pad with the simulated arm.
 
@@ -62,9 +63,10 @@ def learn_cmd(
     """
     sim = SimConfig(mode=mode, reach_noise=reach_noise, arm=load_arm(arm))
     own = {} if explore_radius is None else {"explore_radius": explore_radius}
+    mine = opts.key_values(model_option, "--model-option")
     try:
-        cfg = stage.LearnConfig(strategy=strategy, budget=budget, batch=batch,
-                                curve_every=curve_every, sim=sim, model_class=model_class, **own)
+        cfg = stage.LearnConfig(strategy=strategy, budget=budget, batch=batch, curve_every=curve_every,
+                                sim=sim, model_class={"name": model_class, **mine}, **own)
     except ConfigError as exc:
         raise refused_option(exc, {"explore_radius": "--explore-radius"}, "learn",
                              f"strategy {strategy}") from None

@@ -16,6 +16,7 @@ from __future__ import annotations
 import functools
 import inspect
 import sys
+import tomllib
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Annotated, Any
@@ -331,6 +332,27 @@ def model_class_option(help: str, many: bool = False, **kw: Any) -> Any:
     return Annotated[kind, _opt("--model-class",
                                 help=help.format(classes=", ".join(names_of("model class"))),
                                 **kw)]
+
+
+#: ``--model-option KEY=VALUE`` (repeated): an option of the model class (``n_estimators=200``).
+ModelOption = Annotated[list[str] | None, _opt(
+    "--model-option", metavar="KEY=VALUE", help="An option of the model class (repeat), e.g. "
+    "n_estimators=200 with forest; one the class does not take, or any with auto, is refused.")]
+
+
+def key_values(items: list[str] | None, option: str) -> dict[str, Any]:
+    """The ``KEY=VALUE`` items of a repeated ``option``, each value read as a TOML value
+    (``200``, ``2.5``, ``true``; any other text as it is)."""
+    out: dict[str, Any] = {}
+    for item in items or ():
+        key, sep, text = (v.strip() for v in item.partition("="))
+        if not sep or not key:
+            raise ConfigError(f"{option} must be KEY=VALUE, got {item!r}")
+        try:
+            out[key] = tomllib.loads(f"v = {text}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[key] = text
+    return out
 
 
 def detector_option(default_note: str = "binomial: Eq. 4-6 with the upper tail of Eq. 6") -> Any:

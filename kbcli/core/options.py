@@ -63,9 +63,11 @@ class Options(Config):
 
 
 def options_of(registry: Registry, name: str) -> type[Options]:
-    """The options model ``name`` registered (``traits={"options": ...}``); :class:`Options`
-    (no option of its own) when it registered none."""
-    return registry.trait(name, "options", Options)
+    """The options model ``name`` registered (``traits={"options": ...}``, the class or a loader
+    of it that imports its module on first use); :class:`Options` (no option of its own) when it
+    registered none."""
+    found = registry.trait(name, "options", Options)
+    return found if isinstance(found, type) else found()
 
 
 def declared(registry: Registry, name: str) -> tuple[str, ...]:

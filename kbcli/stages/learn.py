@@ -29,7 +29,6 @@ from typing import Annotated, Any, ClassVar
 
 import numpy as np
 from pydantic import (
-    AfterValidator,
     BeforeValidator,
     Field,
     InstanceOf,
@@ -38,12 +37,20 @@ from pydantic import (
     model_validator,
 )
 
-from kbcli.core.config import Config, Name, Whole, between
+from kbcli.core.config import Config, Whole, between
 from kbcli.core.instrument.keyboard import Keyboard
 from kbcli.core.model import accuracy as scoring
 from kbcli.core.model import reliability, select
 from kbcli.core.model.base import grid_points
-from kbcli.core.model.classes import AUTO, EXACT, check_choice, fit_model, learned_classes
+from kbcli.core.model.classes import (
+    AUTO,
+    EXACT,
+    fit_model,
+    learned_classes,
+    model_choice,
+    route_options,
+    set_options,
+)
 from kbcli.core.model.explore import STRATEGIES, Exploration, ExploreConfig
 from kbcli.core.model.explore.base import SLOTS
 from kbcli.core.options import Options, flat_view, owners, parse_part, route
@@ -102,9 +109,11 @@ class LearnConfig(Config):
         reaches each multiple, and at the end).
     sim : SimConfig
         The arm and its reach mode.
-    model_class : str
+    model_class : Options
         The class of model fitted (a learned class of
-        :data:`~kbcli.core.model.classes.MODEL_CLASSES`), or ``auto`` (the default): explore with
+        :data:`~kbcli.core.model.classes.MODEL_CLASSES`) with its own options (a name or a table
+        ``{name = "forest", n_estimators = 200}``; given flat beside it too; an option the class
+        does not take is refused by it), or ``auto`` (the default, no option): explore with
         :func:`kbcli.core.model.select.explore_class` (each class declares whether it joins), re-chosen every
         :data:`kbcli.core.model.select.RESELECT` reaches (:func:`kbcli.core.model.select.explore_choice`),
         then fit the class with the best cross-validated score on the samples
@@ -118,16 +127,20 @@ class LearnConfig(Config):
     batch: between(Whole, 1, MAX_BUDGET) = 10
     curve_every: between(Whole, 1, MAX_BUDGET) = 50
     sim: InstanceOf[SimConfig] = Field(default_factory=SimConfig)
-    model_class: Annotated[Name, AfterValidator(check_choice)] = AUTO
+    model_class: model_choice(AUTO) = AUTO
 
     @model_validator(mode="before")
     @classmethod
     def _part(cls, data: Any) -> Any:
-        """The strategy's options given flat go to it (``exact`` takes none)."""
-        name = _name(data.get("strategy", "active")) if isinstance(data, dict) else None
+        """The strategy's and the model class's options given flat go to them (``exact`` takes
+        none)."""
+        if not isinstance(data, dict):
+            return data
+        name = _name(data.get("strategy", "active"))
         if name == EXACT and (given := [k for k in data if owners(STRATEGIES, k)]):
             raise ConfigError(f"strategy exact learns nothing: it takes no option {given[0]!r}")
-        return route(data, SLOTS, cls.model_fields) if name in STRATEGIES else data
+        data = route(data, SLOTS, cls.model_fields) if name in STRATEGIES else data
+        return route_options(data, cls.model_fields)
 
     @field_serializer("sim")
     def _sim_dict(self, sim: SimConfig) -> dict[str, Any]:
@@ -197,7 +210,7 @@ class Learning:
 
     def selection(self) -> select.Selection | None:
         """Under ``auto``, the class chosen by cross-validation on the samples (None otherwise)."""
-        if self.cfg.model_class != AUTO:
+        if self.cfg.model_class.name != AUTO:
             return None
         ex, kb = self.exploration, self.keyboard
         rng = np.random.default_rng(np.random.SeedSequence(self._seed, spawn_key=(SELECT_KEY,)))
@@ -219,7 +232,7 @@ class Learning:
         if name != ex.explorer or select.explore_params(name):  # the final model's parameters
             model = fit_model(name, ex.landed, ex.perceived,
                               match_threshold=kb.config.match_threshold, area=kb.area,
-                              targets=ex.targets)
+                              targets=ex.targets, **set_options(self.cfg.model_class))
         rng = np.random.default_rng(np.random.SeedSequence(self._seed,
                                                            spawn_key=(RELIABILITY_KEY,)))
         return reliability.assess(model, ex.landed, ex.perceived, rng=rng)
@@ -231,10 +244,10 @@ class Learning:
         if len(ex.targets) < self.cfg.budget:
             raise RuntimeError("learning is not finished: iterate to the end first")
         phase = on_phase or (lambda text: None)
-        if self.cfg.model_class == AUTO:
+        if self.cfg.model_class.name == AUTO:
             phase("choosing the model class (5-fold cross-validation of each)")
         sel = self.selection()
-        model_class = self.cfg.model_class if sel is None else sel.chosen
+        model_class = self.cfg.model_class.name if sel is None else sel.chosen
         phase(f"cross-validating and calibrating the {model_class} model (5 folds)")
         model, rel = self.reliability(model_class)
         phase("scoring the model against the keyboard")
@@ -289,10 +302,11 @@ class Learning:
 
 def model_config(cfg: LearnConfig, keyboard: dict, chosen: str | None = None) -> dict:
     """The config a ``model`` artifact records: ``cfg`` (flat, as models always recorded it: the
-    strategy by its name, its options beside it), the keyboard's config and the scoring grids;
+    strategy and the model class by their names, their options beside them, the class's only
+    those set), the keyboard's config and the scoring grids;
     under ``auto``, the class ``chosen`` as ``model_class`` (the class that reads ``model/...``)
     and ``model_class_requested = "auto"``."""
-    out = {**flat_view(cfg.to_dict(), SLOTS), "keyboard": keyboard, "curve_step": CURVE_STEP,
+    out = {**flat_view(cfg.to_dict(), (*SLOTS, "model_class")), "keyboard": keyboard, "curve_step": CURVE_STEP,
            "eval_step": EVAL_STEP}
     if chosen is not None:
         out.update(model_class=chosen, model_class_requested=AUTO)

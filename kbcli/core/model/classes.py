@@ -29,13 +29,15 @@ in anything that wraps every class.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import BeforeValidator, PlainSerializer
 
+from kbcli.core.options import Options, owners, parse_part, route
 from kbcli.core.registry import Registry
 from kbcli.errors import ConfigError
 
@@ -113,19 +115,29 @@ _exact = partial(_import, _MODEL + "base", "ExactModel")
 #: ``auto``'s cross-validation: 60 trees instead of the final model's 120 (twice as fast a fit).
 _LIGHT_FOREST = {"n_estimators": 60}
 
-MODEL_CLASSES.register("lines", ModelClass(_lines, auto=3),
+
+
+def _options(module: str, name: str) -> dict[str, Any]:
+    """The traits of a class whose options are ``name`` of ``module`` (imported on first use)."""
+    return {"options": partial(_import, _MODEL + module, name)}
+
+
+MODEL_CLASSES.register("lines", ModelClass(_lines, auto=3), traits=_options("lines", "LinesOptions"),
                        summary="straight key edges shared across keys (polygon keys)")
 MODEL_CLASSES.register("svc", ModelClass(_svc, auto=2, explores=1), summary="scikit-learn SVMs "
-                       "per pair of neighbouring sounds, linear or RBF (any key shape)")
+                       "per pair of neighbouring sounds, linear or RBF (any key shape)",
+                       traits=_options("svc", "SVCOptions"))
 MODEL_CLASSES.register("forest", ModelClass(_forest, auto=0, explores=0,
                                             explore_params=_LIGHT_FOREST),
                        summary="scikit-learn random forest on the coordinates and oblique "
-                       "projections (any key shape)")
+                       "projections (any key shape)", traits=_options("classifiers", "ForestOptions"))
 MODEL_CLASSES.register("forest-xy", ModelClass(_forest_xy, auto=1, explore_params=_LIGHT_FOREST),
                        summary="scikit-learn random forest on the two coordinates only (keys "
-                       "with horizontal and vertical edges)")
+                       "with horizontal and vertical edges)",
+                       traits=_options("classifiers", "ForestXYOptions"))
 MODEL_CLASSES.register("knn", ModelClass(_knn, auto=4), summary="scikit-learn k nearest "
-                       "samples, distance-weighted votes (any key shape)")
+                       "samples, distance-weighted votes (any key shape)",
+                       traits=_options("classifiers", "KNNOptions"))
 MODEL_CLASSES.register(EXACT, ModelClass(_exact, learned=False),
                        summary="the keyboard's own geometry (not learned)")
 
@@ -159,6 +171,66 @@ def check_choice(name: str) -> str:
         raise ConfigError(f"unknown model class {name!r}; valid: "
                           f"{', '.join((AUTO, *learned_classes()))}")
     return check_learned(name)
+
+
+def _chosen(value: Any, default: str) -> Any:
+    """The class a ``model_class`` value names (a name, a table or an :class:`Options`)."""
+    if isinstance(value, Options):
+        return value.name
+    return value.get("name", default) if isinstance(value, Mapping) else value
+
+
+def _auto_refuses(key: str) -> ConfigError:
+    """``auto`` refusing the option ``key`` (as :func:`kbcli.core.options.refusal` words it)."""
+    reason = (f"model class auto takes no option {key!r}: it fits each class with its defaults "
+              f"(name a class that takes it: {', '.join(owners(MODEL_CLASSES, key))})")
+    err = ConfigError(reason)
+    err.option, err.reason = key, reason
+    return err
+
+
+def parse_choice(value: Any, default: str = AUTO) -> Options:
+    """``auto`` (no option) or a learned class with its own options, from a name, a table
+    (``{"name": "forest", "n_estimators": 200}``) or an :class:`Options`; an option the class
+    does not take is refused by it (:func:`kbcli.core.options.parse_part`)."""
+    if check_choice(_chosen(value, default)) != AUTO:
+        return parse_part(MODEL_CLASSES, value, default)
+    given = value.own() if isinstance(value, Options) else value if isinstance(value, Mapping) else {}
+    if extra := [k for k in given if k != "name"]:
+        raise _auto_refuses(extra[0])
+    return Options(name=AUTO)
+
+
+def set_options(options: Options) -> dict[str, Any]:
+    """The options of a class a user set (its defaults left out): what a model records and what
+    its fits are given (over :attr:`ModelClass.explore_params` while exploring)."""
+    return {k: v for k, v in options.own().items() if k in options.model_fields_set}
+
+
+def _recorded(options: Options) -> Any:
+    given = set_options(options)
+    return {"name": options.name, **given} if given else options.name
+
+
+def model_choice(default: str) -> Any:
+    """The type of a config field choosing ``auto`` or a learned class with its options (default
+    ``default``), written as the class's name when no option is set (the config of a model learned
+    with the defaults is the one it always was)."""
+    def parse(v: Any) -> Options:
+        return parse_choice(v, default)
+
+    return Annotated[Options, BeforeValidator(parse), PlainSerializer(_recorded)]
+
+
+def route_options(data: dict, own: Iterable[str], default: str = AUTO) -> dict:
+    """``data`` with the class's options given flat (``n_estimators = 200`` beside
+    ``model_class = "forest"``) moved into its ``model_class`` table (``auto`` refuses them)."""
+    flat = [k for k in data if k not in set(own) and owners(MODEL_CLASSES, k)]
+    if not flat:
+        return data
+    if check_choice(_chosen(data.get("model_class", default), default)) == AUTO:
+        raise _auto_refuses(flat[0])
+    return route(data, {"model_class": (MODEL_CLASSES, default)}, own)
 
 
 def model_class_of(config: Mapping) -> str:

@@ -26,11 +26,14 @@ deterministically. Sampling, the raster and the confusion factor are the base's
 from __future__ import annotations
 
 import warnings
+from typing import ClassVar
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from kbcli.core.config import Whole, between
 from kbcli.core.model.pairwise import DEFAULT_AREA, ModelBase
+from kbcli.core.options import Options
 from kbcli.errors import ConfigError
 
 SITE_GRID = 2.0  # px, grid on which boundary sites are looked for
@@ -207,6 +210,30 @@ def _positive_int(model, name: str, least: int = 1) -> None:
         raise ConfigError(f"{name} must be a whole number >= {least}, got {v!r}")
 
 
+class ForestXYOptions(Options):
+    """``forest-xy``'s options (a user sets them; the defaults are the class's): ``n_estimators``
+    trees (while exploring, 60 unless set) and ``min_samples_leaf``, the fewest samples in a leaf."""
+
+    what: ClassVar[str] = "model class forest-xy"
+    n_estimators: between(Whole, 1, 10_000) = 120
+    min_samples_leaf: between(Whole, 1, 1_000) = 1
+
+
+class ForestOptions(ForestXYOptions):
+    """``forest``'s options: ``forest-xy``'s and ``n_directions``, the directions its trees split
+    along (x, y and ``n_directions - 2`` oblique ones)."""
+
+    what: ClassVar[str] = "model class forest"
+    n_directions: between(Whole, 2, 180) = 6
+
+
+class KNNOptions(Options):
+    """``knn``'s option: ``n_neighbors``, the samples that vote."""
+
+    what: ClassVar[str] = "model class knn"
+    n_neighbors: between(Whole, 1, 1_000) = 5
+
+
 class ForestModel(SklearnModel):
     """p(sound | action) from a random forest on the coordinates and oblique projections.
 
@@ -347,4 +374,4 @@ class _KNN:
         return self.clf.predict_proba(x)
 
 
-__all__ = ["ForestModel", "KNNModel", "SklearnModel", "grid_boundary_sites", "class_distance"]
+__all__ = ["ForestModel", "ForestOptions", "ForestXYOptions", "KNNModel", "KNNOptions", "SklearnModel", "grid_boundary_sites", "class_distance"]

@@ -26,14 +26,19 @@ The pairwise contests and step 3 are the base class :class:`~kbcli.core.model.pa
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
+from pydantic import model_validator
 from scipy.spatial import cKDTree
 from scipy.special import log_ndtr
 
+from kbcli.core.config import NonNegative, Positive, Whole, between
 from kbcli.core.model import boundaries
 from kbcli.core.model.pairwise import DEFAULT_AREA, ModelBase
 from kbcli.core.model.pieces import fit_pieces, line_sides
 from kbcli.core.model.sounds import prepare_samples
+from kbcli.core.options import Options
 from kbcli.errors import ConfigError
 
 #: The parameter checks of :meth:`LearnedModel._check_params`: (name, is it valid, what is allowed).
@@ -77,6 +82,26 @@ def _stored_pieces(d: dict) -> tuple[np.ndarray, ...]:
             np.asarray(d["piece_line"], np.int64),
             np.asarray(d["piece_sign"], float),
             np.asarray(d["lines"], float))
+
+
+class LinesOptions(Options):
+    """``lines``' options, the fit's parameters of :class:`LearnedModel` (its defaults; those
+    the calibration chooses, ``noise_tol``, ``noise_sd``, ``sd_scale`` and ``floor``, aside)."""
+
+    what: ClassVar[str] = "model class lines"
+    n_neighbors: between(Whole, 2, 1_000) = 8
+    min_sd: Positive = 0.05
+    max_sd: Positive = 25.0
+    extrapolation: NonNegative = 1.0
+    merge_angle: between(NonNegative, 0, 90, high_open=True) = 10.0
+    merge_offset: NonNegative = 10.0
+    piece_reach: NonNegative = 10.0
+
+    @model_validator(mode="after")
+    def _sd_order(self) -> LinesOptions:
+        if self.max_sd < self.min_sd:
+            raise ConfigError(f"max_sd must be >= min_sd ({self.min_sd:g}), got {self.max_sd:g}")
+        return self
 
 
 class LearnedModel(ModelBase):

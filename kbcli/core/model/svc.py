@@ -31,15 +31,19 @@ is a scikit-learn one (:class:`~kbcli.core.model.pairwise.ModelBase`).
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 from scipy.optimize import linprog
 from scipy.spatial import cKDTree
 from scipy.special import log_ndtr
 from sklearn.svm import SVC
 
+from kbcli.core.config import Flag, Positive, Whole, between
 from kbcli.core.model.classifiers import class_distance, grid_boundary_sites
 from kbcli.core.model.pairwise import DEFAULT_AREA, ModelBase
 from kbcli.core.model.sounds import straddling_edges
+from kbcli.core.options import Options
 from kbcli.errors import ArtifactError, ConfigError
 
 _SQRT3 = float(np.sqrt(3.0))
@@ -96,6 +100,18 @@ def _stored_params(d: dict) -> dict:
         # and before circle pairs existed, no circles
         "circle_pairs": bool(int(d["circle_pairs"])) if "circle_pairs" in d else False,
     }
+
+
+class SVCOptions(Options):
+    """``svc``'s options, the fit's parameters of :class:`SVCModel` (its defaults)."""
+
+    what: ClassVar[str] = "model class svc"
+    length_scale: Positive = 25.0
+    C: Positive = 1e3
+    local_radius: Positive = 30.0
+    n_neighbors: between(Whole, 2, 1_000) = 8
+    linear_pairs: Flag = True
+    circle_pairs: Flag = True
 
 
 class SVCModel(ModelBase):

@@ -9,13 +9,13 @@ samples takes :class:`Covering`'s, and its cover is bounded first.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Annotated, Any, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
-from pydantic import AfterValidator, model_validator
+from pydantic import model_validator
 
-from kbcli.core.config import Config, Count, Name, Positive
-from kbcli.core.model.classes import DEFAULT_MODEL_CLASS, check_choice
+from kbcli.core.config import Config, Count, Positive
+from kbcli.core.model.classes import DEFAULT_MODEL_CLASS, model_choice, route_options
 from kbcli.core.options import Options, part_field, route
 from kbcli.core.registry import Registry
 from kbcli.errors import ConfigError
@@ -68,8 +68,9 @@ class ExploreConfig(Config):
         Number of reaches.
     batch : int
         Reaches proposed per model refit.
-    model_class : str
-        The model fitted to the samples (:data:`kbcli.core.model.classes.MODEL_CLASSES`): the
+    model_class : Options
+        The model fitted to the samples (:data:`kbcli.core.model.classes.MODEL_CLASSES`), with
+        the options of its own that are set (a name or a table; given flat beside it too): the
         ``active`` strategy bisects its boundary bands, whatever the class. ``auto``: the
         exploration starts with :func:`kbcli.core.model.select.explore_class` and re-chooses the class
         it refits every :data:`kbcli.core.model.select.RESELECT` reaches
@@ -82,10 +83,14 @@ class ExploreConfig(Config):
     strategy: part_field(STRATEGIES, "active") = "active"
     budget: Count = 800
     batch: Count = 10
-    model_class: Annotated[Name, AfterValidator(check_choice)] = DEFAULT_MODEL_CLASS
+    model_class: model_choice(DEFAULT_MODEL_CLASS) = DEFAULT_MODEL_CLASS
 
     @model_validator(mode="before")
     @classmethod
     def _part(cls, data: Any) -> Any:
-        """The strategy's options given flat go to it (:func:`kbcli.core.options.route`)."""
-        return route(data, SLOTS, cls.model_fields) if isinstance(data, dict) else data
+        """The strategy's and the model class's options given flat go to them
+        (:func:`kbcli.core.options.route`)."""
+        if not isinstance(data, dict):
+            return data
+        return route_options(route(data, SLOTS, cls.model_fields), cls.model_fields,
+                             DEFAULT_MODEL_CLASS)

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kbcli.core.model.classes import AUTO, fit_model
+from kbcli.core.model.classes import AUTO, fit_model, set_options
 from kbcli.core.model.explore.base import STRATEGIES, Covering, ExploreConfig, check_cover
 from kbcli.core.model.explore.cover import uniform
 from kbcli.core.model.select import RESELECT, explore_choice, explore_class, explore_params
@@ -94,7 +94,7 @@ class Exploration:
         self.perceived = np.empty((0, 0))
         self._model = None
         self._plan = np.empty((0, 2))
-        self.explorer = explore_class(cfg.model_class)
+        self.explorer = explore_class(cfg.model_class.name)
         self.explorers = [(0, self.explorer)]
 
     @property
@@ -104,9 +104,11 @@ class Exploration:
         if len(self.landed) == 0:
             return None
         if self._model is None:
+            own = set_options(self.cfg.model_class) if self.explorer == self.cfg.model_class.name \
+                else {}
             self._model = fit_model(self.explorer, self.landed, self.perceived,
                                     match_threshold=self.match_threshold, area=self.area,
-                                    targets=self.targets, **explore_params(self.explorer))
+                                    targets=self.targets, **{**explore_params(self.explorer), **own})
         return self._model
 
     @property
@@ -119,7 +121,7 @@ class Exploration:
         reaches) reached a multiple of :data:`~kbcli.core.model.select.RESELECT` before the budget and two
         classes or more (silence among them) were heard (eagerly, whoever asks for the model when)."""
         n = len(self.landed)
-        if (self.cfg.model_class != AUTO or n // RESELECT == before // RESELECT
+        if (self.cfg.model_class.name != AUTO or n // RESELECT == before // RESELECT
                 or n >= self.cfg.budget):
             return
         silent = np.isnan(self.perceived).all(axis=1)
