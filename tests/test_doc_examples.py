@@ -50,14 +50,22 @@ SMALL = [
 _ONE_SHORT_EXPERIMENT = [(r"^experiments = \d+", "experiments = 1"),
                          (r"^max_steps = \d+", "max_steps = 3"),
                          (r"^(displacements = \[\[[^\]]*\]).*", r"\1]")]
+
+
+def _coarse_grid(table: str) -> tuple[str, str]:
+    """The hypothesis grid at 2 px (not 0.5) in the TOML tables named ``table`` (a regex): each
+    model's likelihood table takes 1 s, not 10, as for ``kbcli adapt`` above."""
+    return (rf"^\[{table}\]$", "\\g<0>\nresolution = 2.0")
+
+
 #: The pipeline configs, shrunk in the temporary copy of pipelines/ (a regex on each line): the
 #: paper's evaluation in the ideal mode, the smallest model sweep.
 SMALL_CONFIGS = {
-    "paper.toml": [*_ONE_SHORT_EXPERIMENT,
+    "paper.toml": [*_ONE_SHORT_EXPERIMENT, _coarse_grid("evaluate.methods.[^]]+"),
                    (r"^modes = .*", 'modes = ["ideal"]'),
                    (r"^play_notes = \d+", "play_notes = 10"),
                    (r"^kde_samples = \d+", "kde_samples = 500")],
-    "model-quality.toml": [*_ONE_SHORT_EXPERIMENT,
+    "model-quality.toml": [*_ONE_SHORT_EXPERIMENT, _coarse_grid("quality.adapt"),
                            (r"^budgets = .*", "budgets = [100]"),
                            (r"^explorations = .*", 'explorations = ["active"]'),
                            (r"^ideal = true", "ideal = false")],

@@ -106,9 +106,15 @@ def test_every_reader_runs_on_the_golden_set(runner, tmp_path, kind):
     for argv in READERS[kind]:
         _ok(runner.invoke(app, [a.format(path=GOLDEN / f"{kind}.h5", tmp=tmp_path, dir=GOLDEN)
                                 for a in argv]))
+    # the default format, png: what the test below checks of pdf and svg
+    for fig in tmp_path.rglob("*.png"):
+        assert fig.read_bytes()[:5].startswith(MAGIC["png"]), fig
+    if (tmp_path / "rep" / "README.md").is_file():
+        readme = (tmp_path / "rep" / "README.md").read_text()
+        assert all(f"]({p.name})" in readme for p in (tmp_path / "rep").glob("*.png"))
 
 
-@pytest.mark.parametrize("fmt", ["png", "pdf", "svg"])
+@pytest.mark.parametrize("fmt", ["pdf", "svg"])  # png, the default: the readers' test above
 def test_every_plot_writes_the_format_of_its_suffix(runner, tmp_path, fmt):
     plots = [["plot", "keyboard", GOLDEN / "keyboard.h5"], ["plot", "model", GOLDEN / "model.h5"],
              ["plot", "play", GOLDEN / "history.h5", "--detection", GOLDEN / "detection.h5"],
