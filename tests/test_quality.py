@@ -28,6 +28,8 @@ infogain = { strategy = "infogain" }
 [quality.categories.small]
 limit = 10.0
 displacements = [[3.0, -2.0]]
+[quality.adapt]
+resolution = 2.0  # each model's likelihood table in 1 s, not 10
 """
 
 
