@@ -71,8 +71,9 @@ def detect_cmd(
         if a["detected_at"] is None:
             msg += f"; the move at step {a['perturb_at']} was not detected"
         else:
-            msg += (f"; detected the move at step {a['perturb_at']} at step {a['detected_at']} "
-                    f"(delay {a['delay']} actions, {a['false_alarms']} false alarm(s) before)")
+            msg += (f"; the move at step {a['perturb_at']} was detected at step "
+                    f"{a['detected_at']} (delay {a['delay']} actions, {a['false_alarms']} false "
+                    "alarm(s) before)")
     out.print(f"wrote {output}: {msg}")
 
 
