@@ -102,3 +102,49 @@ def test_run_repair_writes_the_repaired_model(runner, files):
     art = read_artifact(files / "loop-model.h5", "model")
     assert art.attrs["lineage"][-1]["source"] == "run"
     assert art.attrs["lineage"][-1]["adaptations"] >= 1
+
+
+# -- kbcli bench repair ---------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def tiny_weak():
+    """One weak model of the protocol's kind, small (40 random reaches, ideal arm)."""
+    from kbcli.bench import repair as bench
+
+    return bench.weak_models(seeds=(1,), budget=40, arms=(("ideal", "ideal"),))
+
+
+def test_bench_repair_replicates_are_the_single_seed_runs_of_successive_seeds(tiny_weak):
+    """Run r * moves + k of --replicates R is move k adapted at seed --seed + r: the first
+    replicate is the single-seed benchmark, the second the single-seed benchmark at seed + 1."""
+    from kbcli.bench import repair as bench
+
+    plain = (bench.METHODS[0],)
+    kw = {"n_moves": 2, "touches": 3, "methods": plain}
+    both = bench.side_by_side(tiny_weak, seed=4, replicates=2, **kw)
+    first = bench.side_by_side(tiny_weak, seed=4, **kw)
+    second = bench.side_by_side(tiny_weak, seed=5, **kw)
+    assert [r.move for r in both] == [0, 1, 2, 3]
+    for got, want in zip(both, [*first, *second], strict=True):
+        np.testing.assert_array_equal(got.errors, want.errors)
+    assert bench.summarize(both, 3)[0]["runs"] == 4
+
+
+def test_bench_repair_cli_pools_replicates_and_skips_the_lifelong_section(runner, tiny_weak,
+                                                                           tmp_path, monkeypatch):
+    from kbcli.bench import repair as bench
+
+    monkeypatch.setattr(bench, "weak_models", lambda **_: tiny_weak)
+    r = runner.invoke(app, ["bench", "repair", "--moves", "2", "-T", "3", "--replicates", "2",
+                            "--episodes", "0", "--plot", str(tmp_path / "l.png")],
+                      env={"COLUMNS": "200"})
+    assert r.exit_code == 0, r.output
+    assert "2 moves x 2 adaptation seeds" in r.output and "lifelong" not in r.output
+    assert not (tmp_path / "l.png").exists()
+
+
+@pytest.mark.parametrize("flag, value", [("--replicates", "0"), ("--replicates", "11"),
+                                         ("--episodes", "-1"), ("--episodes", "21")])
+def test_bench_repair_refuses_counts_out_of_range(runner, flag, value):
+    r = runner.invoke(app, ["bench", "repair", flag, value])
+    assert r.exit_code != 0
+    one_line_error(r, flag)

@@ -52,13 +52,16 @@ def bench_repair_cmd(
                                           "section, at most 20 (0: skip it).")] = 5,
     plot: Annotated[Path, typer.Option("--plot", help="Figure of the lifelong section (PNG, PDF "
                                        "or SVG by the suffix).")] = Path("repair-lifelong.png"),
+    replicates: Annotated[int, typer.Option("--replicates", help="Adaptations of each move, "
+                                            "seeds --seed, --seed + 1, ...: one seed's median "
+                                            "swings by about 0.2 px. At most 10.")] = 3,
     seed: opts.seed_option("Seed of the adaptations.") = 0,
 ) -> None:
     """Adaptation that repairs the model, side by side with plain infogain and the exact model.
 
     Learns the weak models in memory (kbcli learn --strategy random --budget 250
     --seed 1..N, ideal arm and --mode dynamics --arm realistic), adapts each to --moves
-    displacements with --touches infogain touches: plain (the robust posterior), repair (the
+    displacements (each --replicates times) with --touches infogain touches: plain (the robust posterior), repair (the
     repaired belief) and exact (the keyboard's own map), paired. Prints the median final error,
     the share under 1 px, the touches to stay under 1 px, the runs made worse than plain by more
     than 0.5 px, the coverage of the 90 % credible discs and the time per touch; then the lifelong
@@ -67,14 +70,17 @@ def bench_repair_cmd(
     from kbcli.bench import repair as bench
 
     opts.check_counts(("--moves", moves, MAX_EXPERIMENTS), ("--touches", touches, MAX_ADAPT_STEPS),
-                      ("--seeds", seeds, 10), ("--episodes", episodes, 20))
+                      ("--seeds", seeds, 10), ("--episodes", episodes or None, 20),
+                      ("--replicates", replicates, 10))
     check_io({}, figure_output(plot))
     with busy("learning the weak models"):
         models = bench.weak_models(seeds=tuple(range(1, seeds + 1)))
-    with ticker(len(models) * len(bench.METHODS) * moves, "adaptations") as tick:
-        runs = bench.side_by_side(models, n_moves=moves, touches=touches, seed=seed, progress=tick)
+    with ticker(len(models) * len(bench.METHODS) * moves * replicates, "adaptations") as tick:
+        runs = bench.side_by_side(models, n_moves=moves, touches=touches, seed=seed,
+                                  replicates=replicates, progress=tick)
     con = wide(160)
-    _side_table(con, bench.summarize(runs, touches), models, moves, touches)
+    _side_table(con, bench.summarize(runs, touches), models, f"{moves} moves x {replicates} "
+                f"adaptation seed{'s' if replicates > 1 else ''}", touches)
     if episodes:
         with ticker(episodes, "lifelong moves") as tick:
             start, eps = bench.lifelong(models[0], episodes=episodes, touches=touches, seed=seed,
@@ -87,9 +93,9 @@ def bench_repair_cmd(
         con.print(f"wrote {plot}")
 
 
-def _side_table(con, rows: list[dict], models, moves: int, touches: int) -> None:
+def _side_table(con, rows: list[dict], models, runs: str, touches: int) -> None:
     t = table(f"repair vs plain infogain vs exact model: {len(models)} weak models (random, 250 "
-              f"reaches) x {moves} moves (5-30 px), {touches} touches",
+              f"reaches) x {runs} (moves of 5-30 px), {touches} touches",
               ("method", "runs", "median final px", "under 1 px", "touches to stay < 1 px",
                "never", "worse than plain by > 0.5 px", "90 % disc covers truth",
                "ms / touch (median)", "x plain"))
