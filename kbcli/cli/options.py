@@ -1,14 +1,7 @@
-"""Options shared by several commands, declared once.
-
-Each is an ``Annotated`` alias (``seed: Seed = 0``) or, where the help names what the option means
-to one command, a function returning one (``seed: seed_option("Seed of a --category draw.") = 0``).
-The help of an option that names a registered part (posterior, estimator, transform family,
-strategy, layout, model class, detector, arm preset, sim mode) lists the valid names, read from
-the part's registry through :func:`names_of` and :func:`describe_of`. Option names, defaults and
-behaviour are the commands' own: a bad name is refused by the stage's config (one line, exit 1).
-A group of options a command takes together (a config's fields) comes in as one dict through
-:func:`with_flags`; what an option's text means is read here too (:func:`comma_list`,
-:func:`check_counts`, :func:`read_model`).
+"""Options shared by several commands, declared once: ``Annotated`` aliases (``seed: Seed = 0``)
+or functions returning one (``seed_option("Seed of a --category draw.")``). The help of an option
+naming a registered part lists the valid names (:func:`names_of`, :func:`describe_of`); a group of
+options comes in as one dict through :func:`with_flags`.
 """
 
 from __future__ import annotations
@@ -106,8 +99,7 @@ def config_option(help: str, optional: bool = True) -> Any:
 
 
 # -- counts -----------------------------------------------------------------------------------------
-#: Upper bounds of the benchmarks' counts that no stage config bounds (issue 29: a typo such as 1e9
-#: is refused in one line before any work, never run at full CPU until killed).
+#: Upper bounds of the benchmarks' counts that no stage config bounds (a typo such as 1e9 is refused).
 MAX_SEEDS = 1000
 MAX_REACHES = 100_000
 MAX_STREAMS = 100_000
@@ -259,7 +251,7 @@ ModelBlur = Annotated[float | None, _opt(
     "and twice a weak model's own boundary error; rigid: 0 px; recorded in the run as "
     "robust_blurs); the plain (robust = false) and kde posteriors soften a learned model's map by "
     "1 px, the exact one's by 0.", show_default="learned from the touches")]
-#: ``--repair``: the repaired belief (issue 42).
+#: ``--repair``: the repaired belief .
 Repair = Annotated[bool | None, _opt(
     "--repair/--no-repair", help="Adapt with the model repaired by the touches: a joint belief over "
     "the shift and the model's map (each hypothesis scored by the map its own touches repaired, "

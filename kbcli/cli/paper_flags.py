@@ -1,7 +1,5 @@
-"""The flags of the paper's method's parts (issue 26), declared once for ``kbcli adapt`` and
-``kbcli run``: each an option of the robot's adapter, its help closed by the adapter's default, and
-each refused where the method does not read it
-(:func:`kbcli.core.adaptation.config.refuse_inactive`)."""
+"""The flags of the paper's method's parts, declared once for ``kbcli adapt`` and ``kbcli run``:
+each refused where the method does not read it (:func:`kbcli.core.adaptation.config.refuse_inactive`)."""
 
 from __future__ import annotations
 
