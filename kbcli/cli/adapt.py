@@ -162,10 +162,8 @@ def _adapt_config(config: Path | None, flags: dict, arm: str | None, scene_art,
                   ) -> tuple[stage.AdaptConfig, bool, tuple[int, ...]]:
     """The [adapt] table of ``config`` (if any) with the flags given on top, the arm, and the
     scene's family unless set; whether it was the scene's; and the steps to snapshot
-    (:func:`_snapshots`). A robot option set (in either) that the method does not read is refused
-    (the part refuses an option it does not take; one it takes but does not read under the
-    others: :func:`kbcli.core.adaptation.config.refuse_inactive`), and so is a ``--model-out``
-    without the repaired belief."""
+    (:func:`_snapshots`). Refuses a robot option the method does not read
+    (:func:`kbcli.core.adaptation.config.refuse_inactive`) and ``--model-out`` without ``--repair``."""
     table = load_stage_table(config, "adapt") if config is not None else {}
     snaps = table.pop("snapshot_steps", None)
     given = {k: v for k, v in flags.items() if v is not None}

@@ -1,6 +1,5 @@
-"""Long parallel runs kept in a checkpoint (``kbcli evaluate``, ``kbcli quality``): the checks
-of the backend, the notes on what ``--resume`` continues, and the results drained into the
-checkpoint (Ctrl-C keeps what finished and says how to resume)."""
+"""Long parallel runs kept in a checkpoint (``kbcli evaluate``, ``kbcli quality``): Ctrl-C keeps
+what finished and says how to resume."""
 
 from __future__ import annotations
 

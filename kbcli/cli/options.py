@@ -1,14 +1,7 @@
-"""Options shared by several commands, declared once.
-
-Each is an ``Annotated`` alias (``seed: Seed = 0``) or, where the help names what the option means
-to one command, a function returning one (``seed: seed_option("Seed of a --category draw.") = 0``).
-The help of an option that names a registered part (posterior, estimator, transform family,
-strategy, layout, model class, detector, arm preset, sim mode) lists the valid names, read from
-the part's registry through :func:`names_of` and :func:`describe_of`. Option names, defaults and
-behaviour are the commands' own: a bad name is refused by the stage's config (one line, exit 1).
-A group of options a command takes together (a config's fields) comes in as one dict through
-:func:`with_flags`; what an option's text means is read here too (:func:`comma_list`,
-:func:`check_counts`, :func:`read_model`).
+"""Options shared by several commands, declared once: ``Annotated`` aliases (``seed: Seed = 0``)
+or functions returning one (``seed_option("Seed of a --category draw.")``). The help of an option
+naming a registered part lists the valid names (:func:`names_of`, :func:`describe_of`); a group of
+options comes in as one dict through :func:`with_flags`.
 """
 
 from __future__ import annotations
@@ -106,8 +99,7 @@ def config_option(help: str, optional: bool = True) -> Any:
 
 
 # -- counts -----------------------------------------------------------------------------------------
-#: Upper bounds of the benchmarks' counts that no stage config bounds (issue 29: a typo such as 1e9
-#: is refused in one line before any work, never run at full CPU until killed).
+#: Upper bounds of the benchmarks' counts that no stage config bounds (a typo such as 1e9 is refused).
 MAX_SEEDS = 1000
 MAX_REACHES = 100_000
 MAX_STREAMS = 100_000
@@ -127,7 +119,6 @@ def count_option(flag: str, text: str, bound: int, *decls: str, **kw: Any) -> An
     return Annotated[int, _opt(flag, *decls, help=at_most(text, bound), **kw)]
 
 
-#: ``--category`` repeated: the displacement categories a benchmark runs.
 Categories = Annotated[list[str] | None, _opt(
     "--category", help="Displacement categories (repeat): small, medium, large.",
     show_default="all three")]
@@ -172,11 +163,9 @@ def _cap_jobs(value: int) -> int:
     return cap_workers(value)
 
 
-#: ``--jobs/-j``: local worker processes.
 Jobs = Annotated[int, _opt("--jobs", "-j", callback=_cap_jobs,
                            help="Local worker processes (joblib/loky); at most the number of "
                            "cores this process may use (more is capped, with a note).")]
-#: ``--scheduler``: a Dask scheduler's address.
 Scheduler = Annotated[str | None, _opt(
     "--scheduler", help="Run on a Dask cluster: address of its scheduler, tcp://HOST:PORT.")]
 
@@ -252,34 +241,28 @@ def reach_noise_option(default: str | None = None) -> Any:
 
 ReachNoise = reach_noise_option()
 
-#: ``--model-blur``: fix the blur of the model's key edges (None: the posterior's own).
 ModelBlur = Annotated[float | None, _opt(
     "--model-blur", help="Override: fix the blur (px, 0-50) of the model's key edges. Not given, "
     "the robust posterior learns it from the touches (translation: it weighs 0, 1, 2.5 and 5 px "
     "and twice a weak model's own boundary error; rigid: 0 px; recorded in the run as "
     "robust_blurs); the plain (robust = false) and kde posteriors soften a learned model's map by "
     "1 px, the exact one's by 0.", show_default="learned from the touches")]
-#: ``--repair``: the repaired belief (issue 42).
 Repair = Annotated[bool | None, _opt(
     "--repair/--no-repair", help="Adapt with the model repaired by the touches: a joint belief over "
     "the shift and the model's map (each hypothesis scored by the map its own touches repaired, "
     "the model's local uncertainty), infogain planning under it; translation family, likelihood "
     "posterior. Needed by --model-out.", show_default="--no-repair")]
-#: ``--model-out``: where the repaired model goes.
 ModelOut = Annotated[Path | None, _opt(
     "--model-out", help="Also write the model repaired by this run's adaptation touches (kind "
     "'model', recording its parent's sha256 and the touches it absorbed; never the input model's "
     "path): the robot's next run can start from it. Needs --repair.")]
-#: ``--resolution``: the hypothesis grid step.
 Resolution = Annotated[float | None, _opt(
     "--resolution", help="Hypothesis grid step, px.", show_default="0.5")]
-#: ``--prior-halfwidth``: the prior box.
 PriorHalfwidth = Annotated[float | None, _opt(
     "--prior-halfwidth", help="Half-width of the prior box of dx and dy, px (the robot expects a "
     "move within +-this).", show_default="45")]
 
 
-#: ``--replicates``: bootstrap replicates of each claim that differs (kbcli report, bench verdicts).
 Replicates = Annotated[int, _opt(
     "--replicates", min=0, max=10000,
     help="Bootstrap replicates (at the paper's 50 runs per parametrization) of each claim that "
@@ -334,7 +317,6 @@ def model_class_option(help: str, many: bool = False, **kw: Any) -> Any:
                                 **kw)]
 
 
-#: ``--model-option KEY=VALUE`` (repeated): an option of the model class (``n_estimators=200``).
 ModelOption = Annotated[list[str] | None, _opt(
     "--model-option", metavar="KEY=VALUE", help="An option of the model class (repeat), e.g. "
     "n_estimators=200 with forest; one the class does not take, or any with auto, is refused.")]
@@ -361,5 +343,4 @@ def detector_option(default_note: str = "binomial: Eq. 4-6 with the upper tail o
         "--detector", help=f"Failure detector: {', '.join(names_of('detector'))} ({default_note}).")]
 
 
-#: ``-o/--output`` of a plot command: a figure, its format by the suffix.
 Figure = output_option("Figure to write: .png, .pdf or .svg (the suffix picks the format).")

@@ -1,7 +1,5 @@
-"""The flags of the paper's method's parts (issue 26), declared once for ``kbcli adapt`` and
-``kbcli run``: each an option of the robot's adapter, its help closed by the adapter's default, and
-each refused where the method does not read it
-(:func:`kbcli.core.adaptation.config.refuse_inactive`)."""
+"""The flags of the paper's method's parts, declared once for ``kbcli adapt`` and ``kbcli run``:
+each refused where the method does not read it (:func:`kbcli.core.adaptation.config.refuse_inactive`)."""
 
 from __future__ import annotations
 
@@ -39,57 +37,44 @@ def robot_given(flags: Mapping[str, Any], table: Mapping[str, Any] | None = None
     return given
 
 
-#: ``--kde-samples``: N of Algorithm 2.
 KdeSamples = _robot_option("kde_samples", int, "kde posterior: actions drawn from p(action | "
                            "sound) per KDE term (N of Algorithm 2), a whole number >= 10, at most "
                            f"{MAX_KDE_SAMPLES}")
-#: ``--kde-draw``: when those samples are drawn.
 KdeDraw = _robot_option("kde_draw", str, "kde posterior: shared (each sound's samples drawn once, "
                         "reused by every touch) or fresh (Algorithm 2 as written: new samples for "
                         "every touch, from the run's seed)")
-#: ``--simulate-draw``: the samples of paper-active's simulated touches (not yet wired into
-#: ``kbcli adapt`` / ``kbcli run``).
 SimulateDraw = _robot_option("simulate_draw", str, "kde posterior with paper-active: the samples "
                              "of the simulated touches; shared (each sound's samples drawn once "
                              "per run, reused by every simulated touch: faster, not the paper's "
                              "text) or fresh (new samples for each)", default="as --kde-draw")
-#: ``--kde-sampler``: what draws samples of p(action | sound).
 KdeSampler = _robot_option("kde_sampler", str, "What draws actions from p(action | sound) for "
                            "--kde-draw fresh, --random-actions model and paper-active's candidates: "
                            "model (the model's own rejection sampler: exact, ~250 ms per 10,000 "
                            "draws) or raster (the model's raster: a cell by p(sound | cell), then a "
                            "point in it; ~1 ms)")
-#: ``--kde-beyond``: what the KDE posterior knows beyond the working area.
 KdeBeyond = _robot_option("kde_beyond", str, "kde posterior: the pad beyond the working area is "
                           "silent (silence's samples cover it as far as a hypothesis can move a "
                           "touch back) or unknown (no samples there: without a floor a silent "
                           "touch mapped there rules its hypothesis out)")
-#: ``--kde-floor``: the uniform floor of each KDE term.
 KdeFloor = _robot_option("kde_floor", float, "kde posterior: weight in [0, 1) of the uniform floor "
                          "mixed into each KDE term; 0: none (Eq. 7 as written: a displacement no "
                          "sample supports is ruled out)", default="0.001, the outlier rate")
-#: ``--ml-ties``: ties of the maximum-likelihood cell.
 MlTies = _robot_option("ml_ties", str, "Which of several equally probable cells is the maximum-"
                        "likelihood one (read by --estimator ml, active, paper-active and --stop-ml): "
                        "first (the lowest grid index: the prior box's corner on a flat posterior) "
                        "or random (uniformly among the tied cells, seeded: no positional bias)")
-#: ``--stop-ml``: the paper's stopping rule.
 StopMl = _robot_option("stop_ml", float, "The paper's stopping rule: stop when the most probable "
                        "cell of the posterior holds at least this probability, > 0", default="off")
-#: ``--stop-mass``: ours.
 StopMass = _robot_option("stop_mass", float, "Our stopping rule: stop when this fraction (0-1) of "
                          "the posterior lies within 1 px of the estimate; 0: off (the paper's rule "
                          "alone)")
-#: ``--random-actions``: where the random strategy touches.
 RandomActions = _robot_option("random_actions", str, "Where strategy random touches: area "
                               "(uniform over the working area) or model (a sound uniform over the "
                               "model's sounds, then an action from p(action | sound): the paper's "
                               "random selection of samples)")
-#: ``--candidates``: candidate actions per decision.
 Candidates = _robot_option("candidates", int, "Candidate actions per decision of active, "
                            "paper-active (sampled from the model) and infogain, a whole number "
                            f">= 1, at most {MAX_CANDIDATES}")
-#: ``--active-keep``: the most confusing candidates simulated.
 ActiveKeep = _robot_option("active_keep", int, "Most confusing candidates active and "
                            "paper-active keep and simulate, a whole number >= 1, at most "
                            f"{MAX_CANDIDATES}")
@@ -103,7 +88,5 @@ _PAPER_TYPES = {"kde_samples": KdeSamples, "kde_draw": KdeDraw, "simulate_draw":
                 "candidates": Candidates, "active_keep": ActiveKeep}
 #: The adapter options of the flags above (and those every adapting command has), by flag.
 PAPER_FLAGS = tuple(_PAPER_TYPES)
-#: Give a command the flags of :data:`PAPER_FLAGS`: it declares a parameter ``paper_flags`` where
-#: they go in its ``--help`` and receives them there as one dict (flag name to value, None where
-#: not given).
+#: Give a command the flags of :data:`PAPER_FLAGS`, as one dict in its parameter ``paper_flags``.
 with_paper_flags = with_flags("paper_flags", _PAPER_TYPES)

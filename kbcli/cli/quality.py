@@ -1,4 +1,4 @@
-"""``kbcli quality``: the model-quality sweep (issue 9; the paper's Sect. IV-C hypothesis)."""
+"""``kbcli quality``: the model-quality sweep (the paper's Sect. IV-C hypothesis)."""
 
 from __future__ import annotations
 

@@ -5,9 +5,7 @@ also written, when the command ends, to one JSON file with the command line, the
 and the kbcli version, the git commit of the code and whether its tree was clean, and the sha256 of
 every input file the command named: ``{"command", "date", "machine", "kbcli_version",
 "platform", "load", "git", "inputs", "tables": [{"title", "columns", "rows": [{column: cell}]}]}``
-(:mod:`kbcli.io.provenance`). The documentation's results pages are
-generated from such files (``benchmarks/results/*.json``, ``tools/docs_hooks.py``), so no measured
-number in the docs is typed by hand.
+(:mod:`kbcli.io.provenance`).
 """
 
 from __future__ import annotations

@@ -1,5 +1,4 @@
-"""The repaired model of ``kbcli adapt --repair --model-out`` and ``kbcli run --repair
---model-out`` (issue 42): writing it and saying what it absorbed."""
+"""The repaired model of ``kbcli adapt/run --repair --model-out``: writing it, saying what it absorbed."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""What a command shows besides its result line: progress bars and spinners while it works (on a
-terminal only: CI logs stay plain), and the tables a benchmark prints when it ends (kept for
-``kbcli bench --json`` by :func:`kbcli.cli.record.show_table`)."""
+"""Progress bars and spinners (on a terminal only) and the tables a benchmark prints when it ends
+(kept for ``kbcli bench --json`` by :func:`kbcli.cli.record.show_table`)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``kbcli bench speed``: the adaptation's time per touch (issue 26's speed targets)."""
+"""``kbcli bench speed``: the adaptation's time per touch against its targets."""
 
 from __future__ import annotations
 

@@ -2,22 +2,9 @@
 
 It never sees the true pose. It is driven by an ask/tell loop (the public API, ``from kbcli import
 Adapter``): ``suggest() -> action``, ``observe(action, heard, felt_position=None)``, then
-``estimate()``, ``posterior``, ``entropy()``, ``done()``. ``propose`` and ``should_stop`` are the
-older names of ``suggest`` and of the stopping rule.
-
-Choices
--------
-- An *unknown* sound (class -1: heard something that matches no known sound) carries no usable
-  information about the pose and is skipped (the posterior is unchanged); silence is an observation.
-- The robot uses the landed finger position it *feels* (proprioception, ``felt_position``) as the
-  point of the observation; ``action`` is where it aimed. When it only knows its aim (no
-  ``felt_position``), set ``blur`` to the reach noise: the model raster is blurred by it.
-- The belief is the plain posterior, the robust one (the model's boundary blur and outlier rate
-  marginalised online, :mod:`~kbcli.core.adaptation.posteriors.likelihood.robust`) or the
-  repaired one (:mod:`~kbcli.core.adaptation.repair`), as :class:`AdapterConfig` says; the
-  strategies plan with the map as that belief sees it (:meth:`Adapter.planning_table`).
-- The estimate is read by the config's estimator (:mod:`~kbcli.core.adaptation.estimators`);
-  the stopping rules are :meth:`Adapter.should_stop`'s.
+``estimate()``, ``posterior``, ``entropy()``, ``done()`` (``propose`` and ``should_stop`` are the
+older names of ``suggest`` and of the stopping rule). An unknown sound (class -1) is skipped;
+silence is an observation.
 """
 
 from __future__ import annotations
@@ -222,10 +209,8 @@ class Adapter:
         return np.stack([self.kind.term(o)[0] for o in obs])
 
     def prepare(self) -> Adapter:
-        """Build now what the first touches would otherwise build on their way: the model's class
-        boundaries, the map the strategies plan with and, for the robust posterior, the model's
-        map blurred at each of its blur levels (cached on the shared table). A set-up cost, not a
-        touch's (``kbcli adapt`` times it apart); it draws nothing, so no number changes.
+        """Build now what the first touches would otherwise build on their way (the class
+        boundaries, the planning map, the robust posterior's blurred maps); draws nothing.
         Returns the adapter."""
         self.context()
         if self.robust is not None:

@@ -3,8 +3,7 @@
 The region reported is the disc around the estimate holding ``level`` of the posterior mass: its
 radius ``r_level`` is the smallest distance (px) from the estimate within which the translation
 marginal holds at least ``level``. It *covers* the truth when the true translation lies within
-``r_level`` of the estimate; a posterior whose 90 % discs cover the truth in about 90 % of runs says
-how sure it is honestly, one that covers it in far fewer is certain and wrong.
+``r_level`` of the estimate.
 """
 
 from __future__ import annotations

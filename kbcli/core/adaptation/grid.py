@@ -3,8 +3,7 @@
 ``dx, dy`` in ``[-prior_halfwidth, +prior_halfwidth]`` at ``resolution`` px (default +-45 px at
 0.5 px: 181 x 181 = 32,761 cells), and for a family that rotates (``rigid``) an extra angle axis in
 ``[-max_angle, +max_angle]`` at ``angle_resolution`` degrees (default +-5 deg at 0.25 deg: 41 angles,
-1,343,201 cells; 0.5 deg, 21 angles, is twice as fast and reached the 0.5 deg target slightly less
-often in our trials). Array layout is ``[angle,] dy, dx`` (image order: row = dy, column = dx). The
+1,343,201 cells). Array layout is ``[angle,] dy, dx`` (image order: row = dy, column = dx). The
 prior is uniform over the grid (:class:`kbcli.core.adaptation.posteriors.posterior.Posterior`).
 """
 

@@ -1,21 +1,10 @@
 """The adaptation loop of the action space (paper Sect. III-D and III-E), one step at a time.
 
-Each step: the strategy decides an action (:mod:`kbcli.core.adaptation.strategies`) -> the robot touches
-(a callback: the World in simulation, the arm in a closed loop) -> the perceived sound is classified
-with the model (``model.classify``: Eq. 2 matching; 0 silence, -1 unknown) -> the posterior is
-multiplied by the observation's term (Eq. 7 ``kde`` or the ``likelihood``, Eq. 8; see
-:mod:`kbcli.core.adaptation.posteriors.posterior`) -> estimates (maximum-likelihood cell and posterior mean), entropy and
-the stopping rules are read off.
-
-:class:`Adapter` is the robot's side: it never sees the true pose. It is driven by an ask/tell
-loop (the public API, ``from kbcli import Adapter``): ``suggest() -> action``,
-``observe(action, heard, felt_position=None)``, then ``estimate()``, ``posterior``, ``entropy()``,
-``done()``. :func:`adapt` wraps the same calls into an iterator of :class:`Step` records (the
-``adapt``, ``run`` and ``evaluate`` stages), and ``kbcli serve`` drives them from another process.
-``propose`` and ``should_stop`` are the older names of ``suggest`` and of the stopping rule.
-
-The pieces: the config (:mod:`kbcli.core.adaptation.config`), the per-model set-up (rasterised
-table, KDE samples: :mod:`kbcli.core.adaptation.setup`) and the robot's :class:`~kbcli.core.adaptation.adapter.Adapter`.
+Each step: the strategy decides an action -> the robot touches (a callback: the World in
+simulation, the arm in a closed loop) -> the sound is classified (``model.classify``; 0 silence,
+-1 unknown) -> the posterior is updated -> estimates, entropy and the stopping rules are read off.
+:func:`adapt` wraps the :class:`~kbcli.core.adaptation.adapter.Adapter`'s ask/tell calls into an
+iterator of :class:`Step` records (the ``adapt``, ``run`` and ``evaluate`` stages).
 """
 
 from __future__ import annotations

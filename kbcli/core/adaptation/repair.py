@@ -1,53 +1,30 @@
 """Adaptation that repairs the model: a joint belief over the shift and the model's map.
 
-Every touch the robot makes while adapting is a labelled sample of the instrument: under a
-hypothesis ``h`` of the displacement, the touch at ``a`` that sounded ``c`` says that the reference
-map holds ``c`` at ``T_h^-1(a)`` (``a - h`` for a translation). This module keeps, for every
-hypothesis of the grid, the model's map *repaired* by the touches mapped at that hypothesis, and
-scores each hypothesis by how well its own repaired map predicted each touch before it was made: a
-Rao-Blackwellised joint belief over (shift, map), the map integrated out given the shift (the
-scheme of Rao-Blackwellised particle filters for SLAM, Grisetti et al. 2005: each pose hypothesis
-carries its own map). A wrong hypothesis only ever writes labels into its own map, so it cannot
-poison the others.
+Under a hypothesis ``h`` of the displacement, the touch at ``a`` that sounded ``c`` says that the
+reference map holds ``c`` at ``T_h^-1(a)``. Each hypothesis is scored by how well its own map,
+repaired by the touches mapped at ``h``, predicted each touch before it was made: a
+Rao-Blackwellised joint belief over (shift, map) (Grisetti et al. 2005), so a wrong hypothesis
+only writes labels into its own map.
 
-The map at a reference point ``x`` is a Dirichlet over the sounds (Bayesian kernel inference,
-Doherty et al. 2017; Gan et al. 2020 for classes): its prior is the model's own probabilities
-``q(. | x)`` weighed by a **local confidence** ``kappa(x)``, and each touch adds a kernel-weighted
-count of its sound, ``k(x - x_s) = exp(-|x - x_s|^2 / (2 w^2))``:
+The map at a reference point ``x`` is a Dirichlet over the sounds (Doherty et al. 2017; Gan et
+al. 2020): the model's ``q(. | x)`` weighed by a local confidence ``kappa(x)`` (the model's
+training samples counted with the kernel, plus a small floor), plus a kernel-weighted count of
+each touch's sound, ``k(x - x_s) = exp(-|x - x_s|^2 / (2 w^2))``:
 
 ``alpha_c(x) = kappa(x) q(c | x) + sum_s k(x - x_s) [c_s = c]``.
 
-``kappa(x)`` is the model's training samples counted with the same kernel (a training sample at
-``x`` is worth one touch there) plus a small floor: high where the model had many nearby samples,
-low where it had few. The predictive of touch ``t`` under ``h``, its previous touches mapped at
-``h``, is the Dirichlet-multinomial one, with an outlier rate ``eps``:
+The predictive of touch ``t`` under ``h``, with an outlier rate ``eps``, is
 
 ``p(c_t | a_t, h, D_<t) = (1 - eps) (kappa(x) q(c_t | x) + N_t^c) / (kappa(x) + N_t) + eps / C``,
 ``x = a_t - h``,
 
-where ``N_t^c = sum_{s<t} k(a_t - a_s) [c_s = c_t]`` and ``N_t`` the same over every sound. For a
-translation the offsets between touches do not depend on ``h``, so these counts are numbers, and
-the whole joint belief is one gather over the grid per touch, as the likelihood posterior's: the
-map is integrated out exactly (given the kernel), without a map per hypothesis in memory. A touch
-near earlier ones is predicted mostly by them, at every hypothesis alike: the ``k``-th touch at one
-spot says little more about the shift than the first (the redundancy the robust posterior
-discounts by hand is here a consequence of the model).
+where ``N_t^c = sum_{s<t} k(a_t - a_s) [c_s = c_t]`` and ``N_t`` the same over every sound: for a
+translation these counts do not depend on ``h``, so each touch is one gather over the grid.
 
-**Local model uncertainty.** The model's probabilities ``q`` are those of the learned model blurred
-by a Gaussian whose width grows with the distance to its nearest training sample,
-``sigma(x) = s d(x)``: the model knows its edges as well as its samples pin them (in a gap of width
-``g`` between samples of two sounds the edge lies anywhere, ``sigma = g / sqrt(12)`` at ``s``
-about 0.6). The scale ``s`` and the outlier rate ``eps`` are unknowns on a small grid marginalised
-online with the shift (:class:`~kbcli.core.adaptation.posteriors.likelihood.robust.RobustPosterior` holds the accumulated
-log-likelihood per value), so the evidence picks how far to trust the model, region by region.
-
-The strategies plan with the repaired belief's posterior over the shift and the model's locally
-blurred map (:func:`repair_outcome`: where the model has few samples its map is blurred, so its
-uncertain regions promise only what they can tell); a spot already touched ``k`` times promises
-``1 / (k + 1)`` of its information, as the repaired map there is mostly those touches' counts. The
-counts themselves do not steer the plan: a touch's label is as noisy as the arm that made it, and
-planning by them leads an arm that does not feel exactly where it landed astray (``kbcli bench
-repair`` measures it).
+``q`` is the learned model blurred by a Gaussian of width ``sigma(x) = s d(x)``, ``d`` the distance
+to its nearest training sample; the scale ``s`` and ``eps`` are marginalised online on a small grid
+(:class:`~kbcli.core.adaptation.posteriors.likelihood.robust.RobustPosterior`). The strategies
+plan with the shift's posterior and that locally blurred map (:func:`repair_outcome`).
 """
 
 from __future__ import annotations
@@ -229,9 +206,7 @@ def repair_outcome(belief: RepairBelief, table: LikelihoodTable, hyp: np.ndarray
     At hypothesis h (weighted by the repaired belief) the outcome of action a follows the
     model's map locally blurred, ``q(. | a - h)`` read from ``table`` (the belief's planning
     table, floor included); an action within ``belief.radius`` of ``k`` earlier touches keeps
-    ``1 / (k + 1)`` of its information ``H[pred] - cond`` (the repaired map there is mostly
-    those touches' counts, the same at every hypothesis). The counts themselves do not enter the
-    plan (module docstring).
+    ``1 / (k + 1)`` of its information ``H[pred] - cond``. The counts do not enter the plan.
 
     Parameters
     ----------

@@ -1,27 +1,9 @@
 """Statistics of repeated adaptation experiments (paper Sect. IV-A and IV-B, Figs. 6 and 7).
 
-The paper runs 50 experiments per displacement parametrization, groups the parametrizations into
-small, medium and large displacements, and reports
-
-- the estimation error against the number of observations (Fig. 7): here the root-mean-square of
-  the per-experiment error over the experiments of a group, ``RMSE(t) = sqrt(mean_i e_i(t)^2)``,
-  with its spread (quartiles and standard deviation of ``e_i(t)``, and the RMSE of each
-  parametrization);
-- how many observations each experiment needed to bring its error below a threshold, and a test
-  between two strategies on those counts; an experiment that never gets below a threshold within
-  its ``T`` steps counts as ``T + 1`` (it ranks after every experiment that did, and ties with the
-  others that did not). The counts tie heavily, so the tests are tie-corrected:
-
-  - unpaired samples (the evaluation: every run has its own seed): the Wilcoxon rank-sum test in
-    its Mann-Whitney U form, ``scipy.stats.mannwhitneyu(method="asymptotic")``, whose normal
-    approximation uses the tie-corrected variance (:func:`mannwhitney_pvalues`);
-  - paired samples (the adapt benchmark: run ``i`` of every strategy shares its displacement and
-    seed): the Wilcoxon signed-rank test, ``scipy.stats.wilcoxon`` on the differences, zero
-    differences dropped (:func:`signed_rank_pvalues`);
-
-  and the smallest p-value a design can give at all (:func:`min_pvalue_unpaired`,
-  :func:`min_pvalue_paired`) tells whether a claim of ``p < bound`` could be checked at all;
-- the entropy of the posterior per step (Fig. 6).
+RMSE curves over a group of experiments (Fig. 7), observations to thresholds (a run that never
+gets below a threshold within its ``T`` steps counts as ``T + 1``) and tie-corrected rank tests
+between strategies on them (:func:`mannwhitney_pvalues` unpaired, :func:`signed_rank_pvalues`
+paired, with the smallest attainable p-values), and the posterior entropy per step (Fig. 6).
 
 Pure numpy/scipy: no I/O, no plotting. Shapes: ``errors`` is ``(n, T)`` (experiment, step), step
 ``t`` (0-based) being the state after ``t + 1`` observations.

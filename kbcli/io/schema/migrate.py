@@ -2,16 +2,11 @@
 options (the robot's, the detector's), read in the nested layout.
 
 Until run 3, closed loop 3, evaluation 2 and model quality 1, an artifact recorded the adapter's
-config flat: the strategy's and the posterior's names beside every option of every part
-(``{"posterior": "likelihood", "kde_samples": 10000, "candidates": 256, ...}``); schema 1 and 2
-runs put the loop's options beside them too. Read now, each such robot config has its parts'
-options moved into the parts (``{"posterior": {"name": "likelihood", "robust": true, ...},
-"strategy": {"name": "infogain", "candidates": 256, ...}, ...}``) and the options the chosen parts
-do not take (recorded at their defaults, never read) dropped: the same numbers, the current
-layout (:func:`kbcli.core.options.route`, lenient).
-
-A detector config recorded flat (detection 1, closed loop 4: ``{"detector": "cusum", "shift": 0.15,
-"hazard": 0.001, ...}``) is known by its shape and read the same way, wherever it is.
+config flat (``{"posterior": "likelihood", "kde_samples": 10000, "candidates": 256, ...}``; schema
+1 and 2 runs with the loop's options beside them). Read now, each such robot config has its parts'
+options moved into the parts and the options the chosen parts do not take dropped: the same
+numbers, the current layout (:func:`kbcli.core.options.route`, lenient). A detector config recorded
+flat (detection 1, closed loop 4) is known by its shape and read the same way, wherever it is.
 """
 
 from __future__ import annotations

@@ -1,15 +1,8 @@
 """The kinds of posterior over the transform (Sect. III-D): a registry read by name.
 
 ``AdapterConfig.posterior`` names one :class:`~kbcli.core.adaptation.posteriors.base.PosteriorKind`
-(the protocol: :mod:`kbcli.core.adaptation.posteriors.base`), one module per kind:
-
-``likelihood`` (ours, :mod:`kbcli.core.adaptation.posteriors.likelihood`)
-    Each touch multiplies the posterior by the model's classifier read at the touch (Eq. 8 with
-    the learned p(sound | action)); it can be made robust to the model's own errors
-    (:mod:`kbcli.core.adaptation.posteriors.likelihood.robust`).
-``kde`` (the paper's, Eq. 7, :mod:`kbcli.core.adaptation.posteriors.kde`)
-    Each touch multiplies it by a kernel density estimate of p(action | sound) built from
-    samples of the model (:class:`~kbcli.core.adaptation.posteriors.kde.samples.ActionSamples`).
+(the protocol: :mod:`kbcli.core.adaptation.posteriors.base`), one module per kind: ``likelihood``
+(ours, Eq. 8, robust or not) and ``kde`` (the paper's, Eq. 7).
 """
 
 from __future__ import annotations

@@ -7,10 +7,8 @@ each with its own options::
 
 It sees the robot's side only (:class:`Context`, :mod:`~kbcli.core.adaptation.strategies.base`):
 the current posterior, the rasterised model, the working area and the model's class boundaries,
-never the true pose. Registered, in this order: ``random`` (the paper's baseline), ``active`` (our
-first reading of the paper's), ``paper-active`` (the paper's) and ``infogain`` (ours: the largest
-expected information gain). The model-based ones work for hard and soft models alike
-(:mod:`~kbcli.core.adaptation.strategies.predictive`).
+never the true pose. Registered, in this order: ``random`` (the paper's baseline), ``active``,
+``paper-active`` (the paper's) and ``infogain`` (ours: the largest expected information gain).
 """
 
 from __future__ import annotations

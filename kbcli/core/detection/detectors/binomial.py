@@ -3,15 +3,10 @@
 The last ``n_st`` results form the short-term window, the ``n_lt`` results before them the
 long-term window. The long-term window gives the failure probability (Eq. 4),
 ``p_fail = (k_lt + a) / (n_lt + a + b)`` where ``k_lt`` counts its failures and ``(a, b)`` are
-Beta prior pseudo-counts (default ``(1, 1)``, Laplace's rule of succession: this keeps ``p_fail``
-above 0 for a model that never failed, where Eq. 6 would otherwise give probability 0 to any
-failure and fire on the first one). The short-term window counts recent failures ``n_f``
-(Eq. 5). The score is the *upper tail* of the binomial law of Eq. 6,
-``P(X >= n_f; n_st, p_fail)``: Eq. 6 as printed is the point probability ``P(X = n_f)``, which
-also becomes small when there are unusually *few* failures (and for every ``n_f`` when ``n_st``
-is large); the upper tail fires only on an excess of failures, which is the event the robot
-must react to. The tail of every ``(k_lt, n_f)`` pair is tabulated once, so a step costs a
-lookup.
+Beta prior pseudo-counts (default ``(1, 1)``: ``p_fail`` stays above 0 for a model that never
+failed). The short-term window counts recent failures ``n_f`` (Eq. 5). The score is the *upper
+tail* of the binomial law of Eq. 6, ``P(X >= n_f; n_st, p_fail)`` (not the point probability Eq. 6
+prints): it fires only on an excess of failures. The tails are tabulated once per ``(k_lt, n_f)``.
 """
 
 from __future__ import annotations

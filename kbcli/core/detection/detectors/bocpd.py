@@ -6,8 +6,7 @@ in log space. Run lengths are truncated to ``n_lt + n_st``: the last bin holds e
 with the failure counts of the whole run since the reset. The score is ``P(r_t >= n_lt | H)``:
 the posterior probability that no change happened within the long-term window. It is set to 1
 unless the posterior failure rate of the recent segments exceeds the long run's, so it fires
-only on more failures, never on fewer. Like the binomial test it has a memory of about
-``n_lt`` results: a change it has not flagged by then is absorbed into the long run.
+only on more failures, never on fewer.
 """
 
 from __future__ import annotations

@@ -5,9 +5,7 @@ failure rate ``p1 = p0 + shift`` against the current rate ``p0``. ``p0`` is esti
 binomial detector's ``p_fail`` (same Beta prior) but from *all* results since the last reset except
 the short-term window, so that it is not dragged up by the failures it has to detect during the
 first ``n_lt`` results after a change (a self-starting CUSUM). The score is ``exp(-S_t)``, so
-``threshold = alpha`` means the alarm level ``h = log(1 / alpha)``, for which the in-control
-average run length is at least about ``1 / alpha`` when ``p0`` is right. CUSUM is the optimal
-detector (Lorden's minimax delay) for a known jump size.
+``threshold = alpha`` means the alarm level ``h = log(1 / alpha)``.
 """
 
 from __future__ import annotations
