@@ -152,3 +152,16 @@ def test_every_stored_adapt_config_is_read(path):
     cfg = AdaptConfig.from_dict(art.config["adapt"])
     if "golden" in path.parts:
         assert cfg.to_dict() == art.config["adapt"]
+
+
+def test_learn_config_replace_keeps_its_arm():
+    """``replace`` round-trips the ``sim`` table through its dict form (it was refused: a SimConfig
+    instance only), and a bad table is refused naming the field."""
+    from kbcli.sim import SimConfig
+    from kbcli.stages.learn import LearnConfig
+
+    cfg = LearnConfig(sim=SimConfig(mode="dynamics", arm="realistic"), budget=300)
+    copy = cfg.replace(budget=100)
+    assert copy.budget == 100 and copy.sim == cfg.sim and copy.sim.mode == "dynamics"
+    with pytest.raises(ConfigError, match="learn.sim.mode"):
+        LearnConfig(sim={"mode": "warp"})

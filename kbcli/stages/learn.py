@@ -24,7 +24,7 @@ identical files.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from typing import Annotated, Any, ClassVar
 
 import numpy as np
@@ -92,6 +92,11 @@ def _strategy(v: Any) -> Options:
     return Options(name=EXACT) if _name(v) == EXACT else parse_part(STRATEGIES, v, "active")
 
 
+def _sim(value: Any) -> Any:
+    """A ``sim`` table (a recorded config's, :meth:`Config.replace`'s) read as a SimConfig."""
+    return SimConfig.from_dict(value) if isinstance(value, Mapping) else value
+
+
 class LearnConfig(Config):
     """How the model is learned.
 
@@ -126,7 +131,7 @@ class LearnConfig(Config):
     budget: between(Whole, 1, MAX_BUDGET) = 800
     batch: between(Whole, 1, MAX_BUDGET) = 10
     curve_every: between(Whole, 1, MAX_BUDGET) = 50
-    sim: InstanceOf[SimConfig] = Field(default_factory=SimConfig)
+    sim: Annotated[InstanceOf[SimConfig], BeforeValidator(_sim)] = Field(default_factory=SimConfig)
     model_class: model_choice(AUTO) = AUTO
 
     @model_validator(mode="before")
