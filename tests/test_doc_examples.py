@@ -34,11 +34,13 @@ PAGES = sorted([ROOT / "docs" / "getting-started.md", *(ROOT / "docs" / "tutoria
                 *(ROOT / "docs" / "concepts").glob("*.md")])
 
 #: Small settings, as substitutions on a command line: a 200-reach model knows every sound of the
-#: default keyboard (the melody's notes among them) and learns in seconds; one local process; a
+#: default keyboard (the melody's notes among them) and learns in seconds (a learn that states no
+#: budget gets 200 too, except the exact model, which makes no reach); one local process; a
 #: coarser hypothesis grid for adapt (2 px, not 0.5: its likelihood tables take 1 s, not 11); a
 #: shorter closed loop and animation; a robot that touches three times.
 SMALL = [
     (r"--budget \d+", "--budget 200"),
+    (r"^kbcli learn (?!.*--budget)(?!.*--strategy exact).*", r"\g<0> --budget 200"),
     (r"^kbcli adapt .*", r"\g<0> --resolution 2"),
     (r"--jobs \d+", "--jobs 1"),
     (r"^kbcli run .*", r"\g<0> --steps 300 --perturb-at 150"),
