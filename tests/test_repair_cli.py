@@ -19,10 +19,11 @@ from kbcli.stages.perturb import run as perturb_run
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
-    """A weak learned model (120 random reaches, forest-xy) and a scene moved by (6, -4)."""
+    """A weak learned model (120 random reaches, k-nearest neighbours: cheap to refit) and a scene
+    moved by (6, -4)."""
     d = tmp_path_factory.mktemp("repair")
     kb_art = keyboard_stage.run(KeyboardConfig())
-    cfg = learn_stage.LearnConfig(strategy="random", budget=120, model_class="forest-xy")
+    cfg = learn_stage.LearnConfig(strategy="random", budget=120, model_class="knn")
     write_artifact(learn_stage.run(cfg, kb_art, rng=np.random.default_rng(1), seed=1),
                    d / "model.h5")
     write_artifact(perturb_run(PerturbConfig(params=(6.0, -4.0)), kb_art,
@@ -107,10 +108,14 @@ def test_run_repair_writes_the_repaired_model(runner, files):
 # -- kbcli bench repair ---------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def tiny_weak():
-    """One weak model of the protocol's kind, small (40 random reaches, ideal arm)."""
+    """One weak model as the protocol learns it, smaller and cheaper to rasterise: 40 random
+    reaches, ideal arm, k-nearest neighbours (the benchmark's logic does not look at the class)."""
     from kbcli.bench import repair as bench
 
-    return bench.weak_models(seeds=(1,), budget=40, arms=(("ideal", "ideal"),))
+    kb_art = keyboard_stage.run(KeyboardConfig())
+    cfg = learn_stage.LearnConfig(strategy="random", budget=40, model_class="knn")
+    art = learn_stage.run(cfg, kb_art, rng=np.random.default_rng(1), seed=1)
+    return [bench.WeakModel("ideal-1", art, load_model(art), "ideal", "ideal")]
 
 
 def test_bench_repair_replicates_are_the_single_seed_runs_of_successive_seeds(tiny_weak):
