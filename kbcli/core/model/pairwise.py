@@ -33,6 +33,7 @@ class ModelBase(ClassifierMixin, BaseEstimator):
     subclass has ``_tree`` (a :class:`scipy.spatial.cKDTree` of ``actions_``) and ``_pairs`` (pair
     code ``lower * C + higher`` -> what decides the pair's contests), and implements
     ``_pair_logp(code, q) -> (log p(lower's side), log p(higher's side))``.
+
     Parameters
     ----------
     match_threshold : float
