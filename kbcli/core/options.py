@@ -135,28 +135,24 @@ def route(data: Mapping[str, Any], slots: Mapping[str, tuple[Registry, str]],
           own: Iterable[str], *, strict: bool = True,
           keep: Mapping[str, Iterable[str]] | None = None) -> dict[str, Any]:
     """A config's table with the parts' options given flat moved into the parts' tables.
-
     Parameters
     ----------
-    data : mapping
-        The table: the config's own options, each slot's part (a name or a table), and options of
-        the parts given flat (``{"posterior": "kde", "kde_samples": 1000}``).
     slots : mapping
         slot -> (registry, default name): the fields that choose a part.
     own : iterable of str
         The config's own options (they stay where they are).
     strict : bool
         Refuse an option of a slot's kind that the chosen part does not take (the part names it);
-        False: drop it (a stored config of an older kbcli, which recorded every option).
+        False: drop it (a stored config of an older kbcli).
     keep : mapping, optional
-        slot -> names: options of a slot taken by any of these parts pass (a method comparing
-        several strategies under one set of options: :func:`for_part` then gives each its own).
+        slot -> names: options of a slot taken by any of these parts pass (:func:`for_part` then
+        gives each its own).
 
     Returns
     -------
     dict
-        ``data`` with each slot a table ``{"name": ..., options...}``; options no part of any
-        slot declares stay flat (the config refuses them as unknown).
+        ``data`` with each slot a table ``{"name": ..., options...}``; options no part declares
+        stay flat (the config refuses them as unknown).
     """
     out = dict(data)
     own = set(own)

@@ -65,16 +65,13 @@ class Registry(Generic[T]):
         Parameters
         ----------
         summary : str
-            One line on what the entry does (shown by ``--help`` and :meth:`describe`); default:
-            the first line of the entry's docstring.
+            One line on what the entry does (``--help``, :meth:`describe`); default: the first
+            line of the entry's docstring.
         replace : bool
-            Allow replacing an entry of the same name (otherwise a ``ValueError``: two parts
-            claiming one name is a bug).
+            Allow replacing an entry of the same name (otherwise a ``ValueError``).
         traits : dict, optional
-            What the part declares of itself for the code that uses it: a capability
-            (``{"simulates": True}``), its options model (``{"options": KdeOptions}``,
-            :mod:`kbcli.core.options`), report texts; read with :meth:`trait`, never inferred from
-            its name.
+            What the part declares of itself (``{"simulates": True}``, ``{"options":
+            KdeOptions}``), read with :meth:`trait`.
         """
         if not isinstance(name, str) or not name:
             raise ValueError(f"a {self.kind} needs a non-empty name, got {name!r}")

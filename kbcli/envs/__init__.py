@@ -3,14 +3,12 @@
 Importing this package registers two environments::
 
     import gymnasium
-    import kbcli.envs  # registers them (or: gymnasium.make("kbcli.envs:kbcli/KeyboardAdapt-v0"))
+    import kbcli.envs
 
     env = gymnasium.make("kbcli/KeyboardAdapt-v0")            # the ideal arm (paper Sect. IV-A, B)
     env = gymnasium.make("kbcli/KeyboardAdaptDynamics-v0")    # the realistic arm (Sect. IV-C)
 
-Their options (``gymnasium.make(ID, model=..., category=..., move=..., family=..., max_steps=...,
-reward=..., belief=..., stop=..., adapt={...})``) are :class:`~kbcli.envs.config.EnvConfig`'s; the
-environment is :class:`~kbcli.envs.env.KeyboardAdaptEnv`. kbcli's strategies act in it as
+Their options are :class:`~kbcli.envs.config.EnvConfig`'s; kbcli's strategies act in them as
 :class:`StrategyAgent`; ``kbcli bench gym`` holds any agent against them (:func:`load_agent`).
 """
 

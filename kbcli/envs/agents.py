@@ -30,19 +30,11 @@ Agent = Callable[[dict], np.ndarray]
 class StrategyAgent:
     """One of kbcli's strategies (``infogain``, ``active``, ``random``, ...) as an agent.
 
-    It plans as ``Adapter.suggest`` does, on kbcli's posterior: the environment's ``adapter``,
-    built from this agent's own touches and what they gave (the posterior ``belief=True``
-    observes), with the episode's robot generator (the environment's, see
-    :mod:`kbcli.envs.env`). It never reads the environment's truth. Run with the same seed, its
-    touches, estimates and errors are ``kbcli adapt``'s, bit for bit.
-
-    Parameters
-    ----------
-    strategy : str
-        A name in :data:`kbcli.core.adaptation.strategies.STRATEGIES`.
-    env : gymnasium.Env
-        The kbcli environment it acts in (wrapped or not; one environment, not a vector of them:
-        it reads that environment's posterior).
+    It plans as ``Adapter.suggest`` does, on the environment's ``adapter`` (built from this
+    agent's own touches, never the truth) with the episode's robot generator: run with the same
+    seed, its touches, estimates and errors are ``kbcli adapt``'s, bit for bit. ``env`` is one
+    kbcli environment (wrapped or not), ``strategy`` a name in
+    :data:`kbcli.core.adaptation.strategies.STRATEGIES`.
 
     Examples
     --------

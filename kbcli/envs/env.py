@@ -1,19 +1,11 @@
 """The adaptation task as a Gymnasium environment (paper Sect. III-D, III-E, IV).
 
 An episode is one adaptation: at :meth:`~KeyboardAdaptEnv.reset` the keyboard moves by a hidden
-displacement; at each :meth:`~KeyboardAdaptEnv.step` the agent touches the pad at an action (pad
-px, inside the working area), the simulated arm reaches for it, and the agent observes what the
-robot has: the class of the sound heard (Eq. 2: 0 silence, -1 unknown), where it felt its finger
-land, and the step. kbcli's own :class:`~kbcli.core.adaptation.adapter.Adapter`, fed the same
-touches, keeps the posterior (Eq. 8): with ``belief=True`` the agent observes it too, its estimate,
-error and entropy are in ``info``, the reward is read from it, and its stopping rule ends the
-episode. A step is the body of :func:`kbcli.core.adaptation.loop.adapt` with the agent's action in
-place of ``suggest()``.
-
-Randomness: ``reset(seed=s)`` seeds ``np_random`` as ``numpy.random.default_rng(s)``; each episode
-spawns three children of it, the robot's, the world's and the displacement's. The first two are
-those ``kbcli adapt --seed s`` spawns, so a :class:`~kbcli.envs.StrategyAgent` gives its numbers bit
-for bit; a reset without a seed spawns the next children.
+displacement; at each :meth:`~KeyboardAdaptEnv.step` the agent touches the pad and observes what
+the robot has (the sound class heard, where it felt its finger land, the step). kbcli's own
+:class:`~kbcli.core.adaptation.adapter.Adapter`, fed the same touches, keeps the posterior: the
+reward, ``info`` and the stopping rule read it. ``reset(seed=s)`` spawns the robot's and the
+world's generators as ``kbcli adapt --seed s`` does, so its numbers repeat bit for bit.
 """
 
 from __future__ import annotations
@@ -58,9 +50,8 @@ class KeyboardAdaptEnv(gymnasium.Env):
     Parameters
     ----------
     **options
-        :class:`~kbcli.envs.config.EnvConfig`'s fields (``model``, ``category``, ``move``,
-        ``family``, ``max_steps``, ``reward``, ``belief``, ``stop``, ``mode``, ``arm``, ``adapt``),
-        as ``gymnasium.make(ID, **options)`` passes them.
+        :class:`~kbcli.envs.config.EnvConfig`'s fields, as ``gymnasium.make(ID, **options)``
+        passes them.
 
     Attributes
     ----------

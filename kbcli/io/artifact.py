@@ -81,19 +81,10 @@ def _write_group(group: h5py.Group, data: dict[str, Any]) -> None:
 
 
 def hdf5_image(fill: Callable[[h5py.File], None], *, reproducible: bool = True) -> bytes:
-    """An HDF5 file built in memory by ``fill(file)`` (HDF5's core driver, no backing store).
-
-    Building the file in memory keeps HDF5 away from the disk: a full disk or an I/O error then
-    happens in a plain Python write, which fails cleanly. (Written by HDF5 itself, a failed write
-    leaves dirty metadata in HDF5's cache that every later close or finalisation tries to flush
-    again: pages of ``Can't decrement id ref count`` tracebacks, then a segmentation fault.) The
-    bytes are those HDF5 writes to disk.
-
-    Parameters
-    ----------
-    reproducible : bool
-        The artifact settings: no object times, the earliest file format that holds the data.
-    """
+    """An HDF5 file built in memory by ``fill(file)`` (HDF5's core driver, no backing store):
+    the bytes HDF5 would write to disk, so a full disk or an I/O error fails in a plain Python
+    write (HDF5 failing its own write corrupts its cache and crashes later). ``reproducible``: no
+    object times, the earliest file format that holds the data."""
     fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
     if reproducible:
         fapl.set_libver_bounds(h5py.h5f.LIBVER_EARLIEST, h5py.h5f.LIBVER_LATEST)
@@ -131,17 +122,14 @@ def _fill(art: Artifact) -> Callable[[h5py.File], None]:
 
 def write_artifact(art: Artifact, path: str | os.PathLike,
                    also: Sequence[tuple[str | os.PathLike, bytes]] = ()) -> str:
-    """Write ``art`` atomically to ``path`` (mode 0644) and return the file's sha256.
-
-    ``also``: other files (path, bytes) written with it, all or none (e.g. ``play --wav``: a failed
-    WAV leaves no history behind, nor an old one replaced).
+    """Write ``art`` atomically to ``path`` (mode 0644) and return the file's sha256; ``also``:
+    other files (path, bytes) written with it, all or none.
 
     Raises
     ------
     ArtifactError
-        If the destination folder does not exist or is not writable, or the write fails (disk
-        full, read-only file system, I/O error): one line naming ``path`` and the cause, and no
-        temporary file is left.
+        If the destination folder does not exist or is not writable, or the write fails: one line
+        naming ``path`` and the cause, and no temporary file is left.
     """
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")

@@ -1,10 +1,9 @@
 """Atomic writes: a temporary file (or folder) beside the destination, then ``os.replace``.
 
-A crash, Ctrl-C or SIGTERM never leaves a half-written file under the final name (mode 0644; a
-folder 0755). Temporary files are named ``.NAME.kbcli-tmp-PID-XXXXXXXX.SUFFIX``, so the next write
-of ``NAME`` removes those a killed run left (only those whose process is gone). An
-operating-system error becomes an :class:`~kbcli.errors.ArtifactError` naming the destination and
-the cause, on one line, and the temporary file is removed.
+A crash, Ctrl-C or SIGTERM never leaves a half-written file under the final name. Temporary files
+are named ``.NAME.kbcli-tmp-PID-XXXXXXXX.SUFFIX``, so the next write of ``NAME`` removes those a
+killed run left. An OS error becomes one line of :class:`~kbcli.errors.ArtifactError` naming the
+destination and the cause.
 """
 
 from __future__ import annotations
@@ -84,13 +83,10 @@ def _remove(tmp: str | os.PathLike) -> bool:
 
 @contextlib.contextmanager
 def _signals_deferred() -> Iterator[None]:
-    """Hold SIGINT and SIGTERM until the block is done (their handlers then run, and raise, just
-    after it): a temporary file is never created without being known to the cleanup.
-
-    The hold is at the Python level: blocking the signals with ``pthread_sigmask`` is not enough,
-    since the kernel then hands a process-directed signal to another thread (pytest-xdist's, a
-    library's) and Python still runs the handler in the main thread, at once. Only the main thread
-    runs Python signal handlers, so elsewhere there is nothing to hold.
+    """Hold SIGINT and SIGTERM until the block is done (their handlers then run just after it):
+    a temporary file is never created without being known to the cleanup. The hold is at the
+    Python level (``pthread_sigmask`` would let the kernel hand the signal to another thread);
+    only the main thread runs Python signal handlers, so elsewhere there is nothing to hold.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -208,12 +204,10 @@ def _sync_folder(folder: Path) -> None:
 def atomic_folder(path: str | os.PathLike, *, owned: Sequence[str] = ()) -> Iterator[Path]:
     """Yield a temporary folder beside ``path`` to fill; on success its files move into ``path``.
 
-    When ``path`` does not exist, the temporary folder is renamed into place (one atomic step). When
-    it exists, each new file replaces its namesake (``README.md`` last, so a reader never sees a new
-    README beside old figures), and the files an older run wrote there that this one did not
-    (those matching the glob patterns ``owned``) are removed; nothing else in the folder is touched
-    (it may hold the user's own files, even the command's input). An error or an interruption
-    removes the temporary folder and leaves ``path`` as it was (or absent).
+    A new ``path`` is the temporary folder renamed; an existing one gets each new file replacing
+    its namesake (``README.md`` last), and the files an older run wrote there that this one did
+    not (matching the globs ``owned``) removed; nothing else in it is touched. An error removes
+    the temporary folder and leaves ``path`` as it was.
 
     Raises
     ------

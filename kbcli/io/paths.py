@@ -1,10 +1,8 @@
 """Output paths checked against input paths before any work: a user's input files are sacred.
 
-Every command calls :func:`check_outputs` first, with every file it reads and every path it would
-write. An output that is an input under another name (the same path, a symlink or hard link to
-it, or a folder holding it that would be filled or removed) is refused with one line
-(:class:`~kbcli.errors.KbcliError`). Two paths are the same file when their resolved paths are
-equal or, for files that exist, their ``(st_dev, st_ino)`` pairs are.
+Every command calls :func:`check_outputs` first: an output that is an input under another name
+(the same path, a link to it, or a folder holding it that would be filled or removed) is refused
+with one line. Two paths are the same file when their resolved paths or ``(st_dev, st_ino)`` are.
 """
 
 from __future__ import annotations
@@ -30,12 +28,9 @@ class Output:
     what : str
         What it is, for the message ("--output", "--wav", "report folder").
     folder : bool
-        A folder the command creates or fills (report, checkpoint).
-    files : tuple of str
-        Names the command writes inside a folder output.
+        A folder the command creates or fills (report, checkpoint), writing ``files`` in it.
     removes : bool
         The command deletes the folder afterwards (a checkpoint): no input may live inside it.
-        A folder that is only filled may hold inputs, as long as it writes none of them.
     figure : bool
         A figure: its suffix picks the format (:func:`figure_format`).
     """
@@ -61,15 +56,8 @@ def _file_type(mode: int) -> str | None:
 
 
 def check_replaceable(path: PathLike) -> None:
-    """Refuse an output path that exists and is not a regular file (a FIFO, a device such as
-    ``/dev/null``, a socket; a symlink to one): writing replaces the file, so an output is a
-    regular file or a new path.
-
-    Raises
-    ------
-    KbcliError
-        Naming the path and what it is.
-    """
+    """Refuse (:class:`KbcliError`) an output path that exists and is not a regular file (a FIFO,
+    ``/dev/null``, a socket; a symlink to one): writing replaces the file."""
     try:
         mode = os.stat(path).st_mode
     except OSError:
@@ -177,15 +165,8 @@ def figure_format(path: PathLike) -> str:
 
 
 def probe_writable(folder: PathLike, target: PathLike, *, folder_output: bool = False) -> None:
-    """Refuse, before any work, a folder in which nothing can be created (read-only, ``/proc``).
-
-    Creates and removes a temporary file (or, for a folder output, a temporary folder) there.
-
-    Raises
-    ------
-    KbcliError
-        Naming ``target`` and the reason.
-    """
+    """Refuse (:class:`KbcliError`), before any work, a folder in which nothing can be created,
+    by creating and removing a temporary file (or folder) there."""
     import tempfile
 
     folder = Path(folder) if str(folder) else Path(".")

@@ -1,28 +1,13 @@
 """A planar two-link arm simulated with pymunk: the ``dynamics`` reach mode (paper Sect. IV-C).
 
-The arm lies on the tactile pad, seen from above (no gravity): a shoulder pivot fixed at
-``SimConfig.base``, an upper arm and a forearm of ``SimConfig.link_lengths``, the fingertip at the
-forearm's end. A reach to a target point on the pad:
-
-1. checks the target is inside the annular workspace ``|l1 - l2| <= r <= l1 + l2`` (targets outside
-   raise :class:`~kbcli.errors.OutOfReachError`; they are never clipped);
-2. computes joint targets by analytic inverse kinematics (always the elbow branch q2 > 0);
-3. with ``reach_noise > 0``, offsets the joint targets by ``J^-1 e``, ``e ~ N(0, reach_noise^2 I)``,
-   so that the fingertip scatters isotropically by ``reach_noise`` px around the target;
-4. drives both joints with pymunk ``SimpleMotor`` servos (``rate = KP * error``, clipped to
-   ``MAX_RATE``, torque bounded by ``MAX_TORQUE``), one physics step every ``DT`` s;
-5. steps until the fingertip settles (or ``MAX_STEPS``) and returns where it actually is.
-
-With an arm preset that has finite servo gains (``ArmConfig.kp``, :mod:`kbcli.sim.arms`), step 4
-is a torque-level PD servo ``tau = kp * e - kd * w`` (bounded by ``max_torque``) against joint
-friction (the motors kept at rate 0 with ``max_force = friction``), driving the joints' *measured*
-angles (true + ``proprio_bias``) until both are still, or after ``settle_time``. Where the robot
-feels it landed is the forward kinematics of its encoder readings
-(:func:`kbcli.sim.kinematics.felt_positions`).
-
-Each reach starts from the pose the previous one ended in; the start joint angles of the last batch
-are kept in :attr:`DynamicsReacher.last_start_angles`, and :meth:`DynamicsReacher.reset` puts the
-arm back in a given pose, so a run is reproducible from its seed and its first pose.
+The arm lies on the pad, seen from above: a shoulder pivot at ``SimConfig.base``, links of
+``SimConfig.link_lengths``. A reach checks the target is in the annular workspace (else
+:class:`~kbcli.errors.OutOfReachError`; never clipped), solves the inverse kinematics (elbow
+branch q2 > 0), offsets the joint targets by ``J^-1 e``, ``e ~ N(0, reach_noise^2 I)``, and drives
+both joints with ``SimpleMotor`` servos (``rate = KP * error``) until the fingertip settles. With
+finite servo gains (``ArmConfig.kp``) the drive is a torque PD servo against joint friction on the
+*measured* angles instead. Each reach starts from the pose the previous one ended in
+(:meth:`DynamicsReacher.reset` sets it).
 """
 
 from __future__ import annotations
@@ -55,13 +40,9 @@ def _wrap(a: float) -> float:
 
 
 def _chipmunk(reacher: DynamicsReacher):
-    """(lib, upper, forearm, space) as chipmunk handles, or None when pymunk does not expose them.
-
-    The servo loops step the space hundreds of times per reach, and pymunk's properties cost about
-    as much as the physics; the arm never adds, removes or collides anything while it reaches, so
-    ``cpSpaceStep`` does exactly what ``Space.step`` would. ``pymunk._chipmunk_cffi`` and
-    ``Body._body`` are private: a pymunk without them falls back to the public API.
-    """
+    """(lib, upper, forearm, space) as chipmunk handles, or None when pymunk does not expose them
+    (private API: the fast path of the servo loops; ``cpSpaceStep`` does exactly what
+    ``Space.step`` would, as the arm adds and removes nothing while it reaches)."""
     try:
         from pymunk._chipmunk_cffi import lib
 
@@ -87,17 +68,13 @@ class DynamicsReacher:
 
     Attributes
     ----------
-    last_start_angles : (n, 2) ndarray
-        Joint angles (q1, q2) the arm started each reach of the last :meth:`reach` call from.
+    last_start_angles, last_end_angles : (n, 2) ndarray
+        Joint angles each reach of the last :meth:`reach` call started from and ended in
+        (``last_angles`` the same as the latter).
     last_steps : (n,) int ndarray
         Physics steps each reach of the last call took to settle.
-    last_angles : (n, 2) ndarray
-        True joint angles at the end of each reach of the last call.
     last_felt : (n, 2) ndarray
-        Where the robot felt its fingertip at the end of each reach (the true fingertip for an arm
-        with exact proprioception).
-    last_end_angles : (n, 2) ndarray
-        Joint angles each reach of the last call ended in (the pose at the touch).
+        Where the robot felt its fingertip at the end of each reach.
     """
 
     def __init__(self, cfg: SimSpec) -> None:
@@ -169,11 +146,8 @@ class DynamicsReacher:
 
     # -- reaching -------------------------------------------------------------------------------
     def _drive(self, q1t: float, q2t: float) -> int:
-        """Servo both joints to (q1t, q2t) until settled; return the number of steps.
-
-        Runs on chipmunk directly when pymunk exposes it (:func:`_chipmunk`), else through
-        pymunk's public API (:meth:`_drive_public`); both take the same steps, to the bit.
-        """
+        """Servo both joints to (q1t, q2t) until settled; return the number of steps (on
+        chipmunk directly when it can, else :meth:`_drive_public`: the same steps, to the bit)."""
         cm = _chipmunk(self)
         if cm is None:
             return self._drive_public(q1t, q2t)
@@ -224,12 +198,9 @@ class DynamicsReacher:
         return MAX_STEPS
 
     def _drive_torque(self, q1t: float, q2t: float) -> int:
-        """Torque PD servo of both joints against friction until still; return the steps taken.
-
-        ``q1t, q2t`` are targets of the *measured* joint angles (true + encoder bias). Runs on
-        chipmunk directly when pymunk exposes it (:func:`_chipmunk`), else through pymunk's
-        public API (:meth:`_drive_torque_public`); both take the same steps, to the bit.
-        """
+        """Torque PD servo of both joints to the *measured* angles (q1t, q2t) against friction
+        until still; return the steps (as :meth:`_drive`, :meth:`_drive_torque_public` the
+        fallback)."""
         cm = _chipmunk(self)
         if cm is None:
             return self._drive_torque_public(q1t, q2t)
@@ -295,19 +266,8 @@ class DynamicsReacher:
         return max_steps
 
     def reach(self, targets: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Reach for each target in turn; return where the fingertip ended.
-
-        Parameters
-        ----------
-        targets : (n, 2) ndarray
-            Pad points.
-        rng : numpy.random.Generator
-            Source of the motor noise (unused when ``reach_noise`` is 0).
-
-        Returns
-        -------
-        (n, 2) ndarray
-            Landed fingertip positions.
+        """(n, 2) where the fingertip ended reaching for each of ``targets`` (n, 2) in turn
+        (``rng``: the motor noise).
 
         Raises
         ------

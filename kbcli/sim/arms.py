@@ -1,25 +1,11 @@
 """Arm presets: how a simulated arm errs (its servo, its joints, its finger, its proprioception).
 
-An :class:`ArmConfig` describes four sources of error, each optional, and :data:`PRESETS` names
-three arms built from them (``--arm NAME``, or an ``[arm]`` TOML table with ``preset = NAME`` and
-any field to override):
-
-``ideal``
-    No error: the finger lands on the target (in ``dynamics`` mode within about 0.01 px) and the
-    robot feels exactly where it landed: the paper's idealised problem.
-``servo``
-    Finite servo gains and joint friction (``dynamics`` mode): a torque-level PD controller
-    ``tau = kp * e - kd * w`` (bounded by ``max_torque``) against a Coulomb friction torque
-    ``friction``, so a joint stops short of its target by up to ``friction / kp`` rad, depending
-    on the reach; a reach gives up after ``settle_time`` seconds. Perception stays exact.
-``realistic``
-    ``servo`` plus a finger of contact radius ``finger_radius`` px (the pad registers a point
-    uniform in the disc) and encoders reading ``q + proprio_bias + N(0, proprio_noise^2)`` rad:
-    the robot feels the fingertip at the forward kinematics of the measured angles, 1 to 3 px
-    (median) from where it landed (``kbcli bench arm``).
-
-In ``ideal`` mode the servo fields are ignored; the finger and the proprioception apply (the
-encoders then read the inverse kinematics of the landing point).
+:data:`PRESETS` names three arms (``--arm NAME``, or an ``[arm]`` TOML table with ``preset =
+NAME`` and any field to override): ``ideal``, no error (the paper's idealised problem);
+``servo``, a torque PD servo ``tau = kp * e - kd * w`` against Coulomb joint friction, so a joint
+stops short of its target by up to ``friction / kp`` rad (``dynamics`` mode); ``realistic``,
+``servo`` plus a finger of contact radius ``finger_radius`` px and encoders reading ``q +
+proprio_bias + N(0, proprio_noise^2)`` rad. In ``ideal`` mode the servo fields are ignored.
 """
 
 from __future__ import annotations

@@ -30,19 +30,16 @@ class SimConfig(Config):
     Parameters
     ----------
     mode : str
-        A reach mode of :data:`kbcli.sim.modes.MODES`: ``ideal``, the finger lands exactly on the
-        target (the paper's Sect. IV); ``dynamics``, a pymunk two-link arm driven by motors
-        (Sect. IV-C).
+        A reach mode of :data:`kbcli.sim.modes.MODES`: ``ideal`` (the finger lands on the
+        target) or ``dynamics`` (a pymunk two-link arm, Sect. IV-C).
     base : tuple of float
-        Pad coordinates of the shoulder joint, within +-:data:`~kbcli.core.instrument.geometry.MAX_COORD`.
+        Pad coordinates of the shoulder joint.
     link_lengths : tuple of float
-        Upper arm and forearm lengths, px, at most :data:`~kbcli.core.instrument.geometry.MAX_COORD`.
+        Upper arm and forearm lengths, px.
     reach_noise : float
-        Std (px) of the landing scatter, at most :data:`MAX_REACH_NOISE`: motor noise in ``dynamics`` mode, Gaussian scatter of the
-        landing point in ``ideal`` mode.
+        Std (px) of the landing scatter, at most :data:`MAX_REACH_NOISE`.
     arm : ArmConfig
-        How the arm errs beyond ``reach_noise``: servo, friction, finger, proprioception
-        (:mod:`kbcli.sim.arms`; default the ``ideal`` preset). A preset name or a table is accepted.
+        How the arm errs beyond ``reach_noise`` (:mod:`kbcli.sim.arms`; a preset name or a table).
     """
 
     what = "sim"

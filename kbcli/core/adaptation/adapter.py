@@ -1,10 +1,8 @@
 """The robot's side of the adaptation: :class:`Adapter` decides, observes, estimates and stops.
 
-It never sees the true pose. It is driven by an ask/tell loop (the public API, ``from kbcli import
-Adapter``): ``suggest() -> action``, ``observe(action, heard, felt_position=None)``, then
-``estimate()``, ``posterior``, ``entropy()``, ``done()`` (``propose`` and ``should_stop`` are the
-older names of ``suggest`` and of the stopping rule). An unknown sound (class -1) is skipped;
-silence is an observation.
+It never sees the true pose. An ask/tell loop: ``suggest()``, ``observe(action, heard,
+felt_position=None)``, then ``estimate()``, ``entropy()``, ``done()``. An unknown sound (class -1)
+is skipped; silence is an observation.
 """
 
 from __future__ import annotations
@@ -56,18 +54,14 @@ class Adapter:
     table : LikelihoodTable, optional
         A prebuilt :func:`build_table` (saves rasterising the model again).
     samples : ActionSamples, optional
-        The ``kde`` posterior's samples of p(action | sound), drawn once per class and shared (see
-        :func:`build_samples`); default: a cache of this adapter's own, seeded from ``rng``.
-        Ignored with ``cfg.kde_draw = "fresh"`` (new draws for every observation, from a child of
-        ``rng``: :class:`~kbcli.core.adaptation.posteriors.kde.samples.FreshSamples`).
+        The ``kde`` posterior's samples of p(action | sound), shared (:func:`build_samples`);
+        default: this adapter's own, seeded from ``rng``.
     max_steps : int, optional
-        A touch budget: :meth:`done` holds once this many touches were observed (None: only the
-        stopping rule ends the adaptation).
+        A touch budget after which :meth:`done` holds (None: only the stopping rule).
 
     Examples
     --------
-    The ask/tell loop, with a touch of the bundled simulator (``kbcli.Adapter``,
-    :class:`kbcli.api.Adapter`, reads a model file in :meth:`from_model`)::
+    The ask/tell loop, with a touch of the bundled simulator::
 
         adapter = Adapter.from_model("data/default-model.h5", strategy="infogain", seed=0)
         while not adapter.done():
@@ -94,8 +88,7 @@ class Adapter:
         self.area = tuple(float(v) for v in (model.area if area is None else area))
         self.grid = hypothesis_grid(cfg, self.area, centre)
         self.table = build_table(model, cfg, self.area) if table is None else table
-        # the adapter's own generators, by name (spawning does not move ``rng``'s stream, so the
-        # options that use neither draw the same): ties of the ML cell, and fresh KDE samples
+        # own generators (spawning does not move ``rng``'s stream): ML ties, fresh KDE samples
         self.kind = cfg.kind  #: the kind of posterior (:data:`~.posteriors.POSTERIORS`)
         own = dict(zip(("ties", "kde"), rng.spawn(2), strict=True)) \
             if cfg.ml_ties == "random" or self.kind.draws_fresh(cfg) else {}
@@ -128,16 +121,15 @@ class Adapter:
                    seed: int | None = None, rng: np.random.Generator | None = None,
                    config: AdapterConfig | None = None, max_steps: int | None = None,
                    **options) -> Adapter:
-        """An adapter for a model (what :meth:`load` accepts: a model object here; the public
-        ``kbcli.Adapter``, :class:`kbcli.api.Adapter`, also reads a model artifact file).
+        """An adapter for a model object (:class:`kbcli.api.Adapter` also reads a model file).
 
         Parameters
         ----------
-        model : SoundModel (or, through :class:`kbcli.api.Adapter`, a path or an Artifact)
+        model : SoundModel
         strategy, family : str
             See :class:`AdapterConfig`.
         seed : int, optional
-            Seed of the robot's generator (``numpy.random.default_rng(seed)``); or pass ``rng``.
+            Seed of the robot's generator; or pass ``rng``.
         config : AdapterConfig, optional
             A whole config (then ``strategy``, ``family`` and ``options`` must not be given).
         max_steps : int, optional
@@ -147,11 +139,8 @@ class Adapter:
 
         Raises
         ------
-        ArtifactError
-            (:class:`kbcli.api.Adapter`) A missing or unreadable file, or an artifact that is not a
-            model.
         ConfigError
-            An unknown or invalid option, or (the core's) a model that is not a model object.
+            An unknown or invalid option, or a model that is not a model object.
         """
         if config is None:
             config = AdapterConfig.from_dict({"strategy": strategy, "family": family, **options})
@@ -165,8 +154,7 @@ class Adapter:
 
     @staticmethod
     def load(model):
-        """The model object :meth:`from_model` adapts with. The core takes model objects only (it
-        reads no files); :class:`kbcli.api.Adapter` overrides this to read artifacts."""
+        """The model object :meth:`from_model` adapts with (:class:`kbcli.api.Adapter` reads files)."""
         if not hasattr(model, "classify"):
             raise ConfigError(f"Adapter.from_model needs a sound model here, got {model!r}; read a "
                               f"model file with kbcli.Adapter.from_model (kbcli.api)")
@@ -174,10 +162,8 @@ class Adapter:
 
     # -- deciding ----------------------------------------------------------------------------------
     def planning_table(self) -> LikelihoodTable:
-        """The map the strategies plan with: the model's, or with the robust posterior, blurred by
-        the most probable boundary blur and floored at the most probable outlier rate; with the
-        repaired belief, the model's map locally blurred, floored at its most probable outlier
-        rate."""
+        """The map the strategies plan with: the model's, or the robust posterior's (or the
+        repaired belief's) most probable blur and outlier rate applied to it."""
         if self.repair is not None:
             return self.repair.planning_table()
         if self.robust is None:
@@ -198,8 +184,7 @@ class Adapter:
 
     def simulate_many(self, actions: np.ndarray, classes: np.ndarray) -> np.ndarray:
         """``(k, *grid.shape)``: :meth:`simulate` of ``k`` touches (``actions`` (k, 2),
-        ``classes`` (k,)), the same numbers as one call each in turn, computed together when the
-        kind of posterior can (its ``terms``)."""
+        ``classes`` (k,)), together when the kind of posterior can (its ``terms``)."""
         pairs = zip(np.asarray(actions, float).reshape(-1, 2), np.asarray(classes).reshape(-1),
                     strict=True)
         obs = [self._observation(a, c, self.simulation_samples) for a, c in pairs]
@@ -209,9 +194,8 @@ class Adapter:
         return np.stack([self.kind.term(o)[0] for o in obs])
 
     def prepare(self) -> Adapter:
-        """Build now what the first touches would otherwise build on their way (the class
-        boundaries, the planning map, the robust posterior's blurred maps); draws nothing.
-        Returns the adapter."""
+        """Build now what the first touches would build (boundaries, planning map, blurred maps);
+        draws nothing. Returns the adapter."""
         self.context()
         if self.robust is not None:
             for blur in self.robust.nuisance.blurs:
@@ -327,8 +311,7 @@ class Adapter:
 
     def repaired_model(self):
         """The model refitted with this adaptation's touches, mapped back into its reference
-        frame by the estimate (:func:`kbcli.core.adaptation.repair.absorb`): what the robot keeps of what
-        it learned (``repair``; the model itself is left as it is).
+        frame by the estimate (:func:`kbcli.core.adaptation.repair.absorb`).
 
         Raises
         ------
@@ -371,8 +354,7 @@ class Adapter:
         return self.mass_near_estimate() >= self.cfg.stop_mass
 
     def done(self) -> bool:
-        """Whether to stop touching: the stopping rule (:meth:`should_stop`) holds, or the
-        ``max_steps`` budget is used up."""
+        """Whether the stopping rule holds or the ``max_steps`` budget is used up."""
         return (self.max_steps is not None and self.touches >= self.max_steps) or \
             self.should_stop()
 

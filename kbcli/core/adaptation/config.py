@@ -60,19 +60,17 @@ SLOTS = {"strategy": (STRATEGIES, "infogain"), "posterior": (POSTERIORS, "likeli
 class AdapterConfig(Config):
     """How the robot adapts (robot side only: nothing about the simulated world).
 
-    The strategy and the posterior are parts with options of their own: each field holds the
-    part's options (``cfg.posterior.kde_samples``; a name, a table ``{name, options...}``, or the
-    part's options given flat beside it, ``AdapterConfig(posterior="kde", kde_samples=1000)``,
-    are read). An option the chosen part does not take is refused by the part.
+    The strategy and the posterior are parts with options of their own: a name, a table ``{name,
+    options...}``, or the part's options given flat beside it (``AdapterConfig(posterior="kde",
+    kde_samples=1000)``). An option the chosen part does not take is refused by the part.
 
     Parameters
     ----------
     strategy : Options
-        Where to touch next: a part of :data:`kbcli.core.adaptation.strategies.STRATEGIES`
-        (random, active, paper-active, infogain) with its options (``candidates``, ...).
+        Where to touch next: a part of :data:`kbcli.core.adaptation.strategies.STRATEGIES`.
     posterior : Options
         The kind of posterior: a part of :data:`kbcli.core.adaptation.posteriors.POSTERIORS`
-        (``likelihood``, robust or not, ours; ``kde``, the paper's Eq. 7) with its options.
+        (``likelihood``, robust or not, ours; ``kde``, the paper's Eq. 7).
     family : str
         Transform family (translation or rigid).
     resolution : float
@@ -86,23 +84,19 @@ class AdapterConfig(Config):
     blur : float
         Std (px) of the landing scatter the robot cannot see (0 when it knows where it landed).
     model_blur : float or None
-        Override: softening (px, a Gaussian) of the model's map. With the robust posterior, the
-        blur is fixed to it instead of being learned. Without, None means ``LEARNED_BLUR`` (1 px)
-        for a learned model and 0 for the exact one.
+        Softening (px, a Gaussian) of the model's map, fixed instead of learned with the robust
+        posterior. None: ``LEARNED_BLUR`` for a learned model, 0 for the exact one.
     raster_step : float or None
         Cell of the model raster, px (None: the grid resolution; half of it for the exact model
-        with a rotating family, whose cell-averaged likelihood needs a finer map).
+        with a rotating family).
     kde_sampler : str
-        What draws fresh samples of p(action | sound) (the KDE posterior's fresh draws, the
-        ``model`` actions of ``random`` and ``paper-active``): ``model`` (the model's own rejection
-        sampler: exact) or ``raster`` (the model rasterised at ``resolution``:
-        :class:`kbcli.core.model.sampling.RasterSampler`).
+        What draws fresh samples of p(action | sound): ``model`` (its rejection sampler) or
+        ``raster`` (:class:`kbcli.core.model.sampling.RasterSampler`).
     estimator : str
         ``mean`` or ``ml``: which estimate :meth:`Adapter.estimate` returns.
     ml_ties : str
-        Which of several equally probable cells is the maximum-likelihood one: ``first`` (the
-        lowest grid index) or ``random`` (uniformly among the tied cells, seeded from the
-        adapter's generator: no positional bias).
+        Which of equally probable cells is the maximum-likelihood one: ``first`` (the lowest grid
+        index) or ``random`` (seeded from the adapter's generator).
     stop_ml : float or None
         The paper's rule: stop when the most probable cell holds at least this probability.
     stop_mass, stop_radius, stop_angle : float
@@ -318,10 +312,8 @@ def _declared(registry, name: str) -> tuple[str, ...]:
 
 
 def own_boundary_error(reliability: dict | None) -> float | None:
-    """The boundary error (px) a model's own estimate (its ``reliability`` table) gives the robust
-    posterior: the cross-validated one, at most ``MAX_BLUR / WIDE_BLUR_FACTOR`` (25 px; a model
-    that could not place its edges at all says inf), or None when it has no estimate. Every
-    setting resolved from it (blur grid, learning rate, redundancy radius) uses this value."""
+    """The boundary error (px) a model's ``reliability`` table gives the robust posterior: the
+    cross-validated one, at most ``MAX_BLUR / WIDE_BLUR_FACTOR``, or None without an estimate."""
     berr = reliability.get("boundary_error") if isinstance(reliability, dict) else None
     if berr is None or np.isnan(berr):
         return None
@@ -333,10 +325,9 @@ def _boundary_error(model) -> float | None:
 
 
 def robust_blurs(model, cfg: AdapterConfig) -> tuple[float, ...]:
-    """The boundary blurs (px) the robust posterior weighs for ``model`` (see
-    :class:`AdapterConfig`): ``cfg.model_blur`` alone when set, ``cfg.robust_blurs`` when given,
-    else the family's grid, widened for a translation by ``WIDE_BLUR_FACTOR`` times the model's
-    own boundary error when that lies beyond it."""
+    """The boundary blurs (px) the robust posterior weighs for ``model``: ``cfg.model_blur``
+    alone when set, ``cfg.robust_blurs`` when given, else the family's grid
+    (:func:`blur_grid` for a translation)."""
     if cfg.model_blur is not None:
         return (float(cfg.model_blur),)
     if cfg.posterior.robust_blurs is not None:

@@ -1,30 +1,15 @@
 """Adaptation that repairs the model: a joint belief over the shift and the model's map.
 
-Under a hypothesis ``h`` of the displacement, the touch at ``a`` that sounded ``c`` says that the
-reference map holds ``c`` at ``T_h^-1(a)``. Each hypothesis is scored by how well its own map,
-repaired by the touches mapped at ``h``, predicted each touch before it was made: a
-Rao-Blackwellised joint belief over (shift, map) (Grisetti et al. 2005), so a wrong hypothesis
-only writes labels into its own map.
-
-The map at a reference point ``x`` is a Dirichlet over the sounds (Doherty et al. 2017; Gan et
-al. 2020): the model's ``q(. | x)`` weighed by a local confidence ``kappa(x)`` (the model's
-training samples counted with the kernel, plus a small floor), plus a kernel-weighted count of
-each touch's sound, ``k(x - x_s) = exp(-|x - x_s|^2 / (2 w^2))``:
-
-``alpha_c(x) = kappa(x) q(c | x) + sum_s k(x - x_s) [c_s = c]``.
-
-The predictive of touch ``t`` under ``h``, with an outlier rate ``eps``, is
+Each hypothesis ``h`` of the displacement is scored by how well its own map, repaired by the
+touches mapped back at ``h``, predicted each touch before it was made: a Rao-Blackwellised joint
+belief over (shift, map) (Grisetti et al. 2005). The map at a reference point ``x`` is a Dirichlet
+over the sounds (Doherty et al. 2017), ``alpha_c(x) = kappa(x) q(c | x) + sum_s k(x - x_s) [c_s =
+c]``, ``q`` the model locally blurred, ``kappa`` its local confidence and ``k`` a Gaussian kernel
+of width ``w``. The predictive of touch ``t`` under ``h`` with outlier rate ``eps`` is
 
 ``p(c_t | a_t, h, D_<t) = (1 - eps) (kappa(x) q(c_t | x) + N_t^c) / (kappa(x) + N_t) + eps / C``,
-``x = a_t - h``,
-
-where ``N_t^c = sum_{s<t} k(a_t - a_s) [c_s = c_t]`` and ``N_t`` the same over every sound: for a
-translation these counts do not depend on ``h``, so each touch is one gather over the grid.
-
-``q`` is the learned model blurred by a Gaussian of width ``sigma(x) = s d(x)``, ``d`` the distance
-to its nearest training sample; the scale ``s`` and ``eps`` are marginalised online on a small grid
-(:class:`~kbcli.core.adaptation.posteriors.likelihood.robust.RobustPosterior`). The strategies
-plan with the shift's posterior and that locally blurred map (:func:`repair_outcome`).
+``x = a_t - h``, where for a translation the counts ``N`` do not depend on ``h``. The blur's scale
+and ``eps`` are marginalised online (:class:`~.posteriors.likelihood.robust.RobustPosterior`).
 """
 
 from __future__ import annotations
@@ -86,9 +71,7 @@ class Touches:
 def repaired_map(rmap: RepairMap, touches: Touches, shift: np.ndarray,
                  scale: float = DEFAULT_SCALE) -> np.ndarray:
     """(H, W, C) the Dirichlet parameters ``alpha`` of the map repaired by ``touches`` mapped back
-    by ``shift`` (the map one hypothesis of the joint belief carries), on ``rmap``'s raster: the
-    model's prior ``kappa q_s`` plus each touch's kernel-weighted count of its sound. Its argmax
-    is the repaired map's most probable sound, ``alpha / alpha.sum(-1)`` its predictive."""
+    by ``shift``, on ``rmap``'s raster."""
     t = rmap.table
     h, w = t.shape
     gx, gy = np.meshgrid(t.origin[0] + t.step * np.arange(w), t.origin[1] + t.step * np.arange(h))
@@ -131,15 +114,8 @@ def repair_terms(grid: HypothesisGrid, rmap: RepairMap, touches: Touches, action
 class RepairBelief:
     """The joint belief over the shift and the repaired map (module docstring); immutable.
 
-    Attributes
-    ----------
-    posterior : RobustPosterior
-        Accumulated log-likelihood per (scale, outlier) value and hypothesis.
-    rmap : RepairMap
-    touches : Touches
-    radius : float
-        Planning: a candidate within this many px of ``k`` earlier touches promises
-        ``1 / (k + 1)`` of its information (0: no discount).
+    ``radius``: a candidate within this many px of ``k`` earlier touches promises ``1 / (k + 1)``
+    of its information when planning (0: no discount).
     """
 
     __slots__ = ("posterior", "rmap", "touches", "radius")
@@ -161,10 +137,8 @@ class RepairBelief:
     @classmethod
     def for_model(cls, grid: HypothesisGrid, table: LikelihoodTable, model, cfg) -> RepairBelief:
         """The flat prior for ``model`` (rasterised as ``table``) and an adapter config ``cfg``
-        (its likelihood posterior's ``repair_kernel``, ``repair_scale``, ``repair_blur``,
-        ``robust_outliers``: None reads the defaults, and the model's own landing scatter for the
-        blur); the planning radius is ``REDUNDANCY_FACTOR`` times the model's own
-        cross-validated boundary error (the robust posterior's default spot)."""
+        (None options read the defaults; the blur's, the model's landing scatter); the planning
+        radius is the robust posterior's default spot."""
         opts = cfg.posterior
         width = DEFAULT_KERNEL if opts.repair_kernel is None else float(opts.repair_kernel)
         blur = (float(getattr(model, "reach_sd_", 0.0)) if opts.repair_blur is None
@@ -199,26 +173,12 @@ class RepairBelief:
 
 def repair_outcome(belief: RepairBelief, table: LikelihoodTable, hyp: np.ndarray,
                    weights: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The predictive of each action's outcome the strategies plan with under the repaired
-    belief, and the expected conditional entropy (as
-    :func:`kbcli.core.adaptation.strategies.outcome_distribution`).
-
-    At hypothesis h (weighted by the repaired belief) the outcome of action a follows the
-    model's map locally blurred, ``q(. | a - h)`` read from ``table`` (the belief's planning
-    table, floor included); an action within ``belief.radius`` of ``k`` earlier touches keeps
-    ``1 / (k + 1)`` of its information ``H[pred] - cond``. The counts do not enter the plan.
-
-    Parameters
-    ----------
-    hyp : (K, 2) ndarray
-        Translation hypotheses (dx, dy).
-    weights : (K,) ndarray
-    actions : (M, 2) ndarray
-
-    Returns
-    -------
-    pred : (M, C) ndarray
-    cond : (M,) ndarray
+    """The predictive ``pred`` (M, C) of each action's outcome under the repaired belief and the
+    expected conditional entropy ``cond`` (M,) (as
+    :func:`kbcli.core.adaptation.strategies.outcome_distribution`): the translation hypotheses
+    ``hyp`` (K, 2) weighted by ``weights``, the outcome following the belief's planning ``table``
+    at ``a - h``; an action within ``belief.radius`` of ``k`` earlier touches keeps ``1 / (k + 1)``
+    of its information.
     """
     pred, cond = outcome_distribution(table, "translation", hyp, weights, actions, np.zeros(2))
     pts, r = belief.touches.points, belief.radius
@@ -230,26 +190,10 @@ def repair_outcome(belief: RepairBelief, table: LikelihoodTable, hyp: np.ndarray
 
 
 def absorb(model, points: np.ndarray, classes: np.ndarray, shift: np.ndarray):
-    """The model refitted on its own training samples and the touches mapped into its reference
-    frame by ``shift`` (the translation estimate): a new, unfitted-then-fitted estimator of the
-    same class and parameters (``sklearn.base.clone``); ``model`` is left as it is.
-
-    Parameters
-    ----------
-    model : ModelBase
-        A learned model (``actions_``, ``labels_``, ``class_features_``).
-    points : (n, 2) ndarray
-        Where the touches were read (pad px).
-    classes : (n,) int ndarray
-        Their classes (-1, unknown sounds, are left out).
-    shift : (2,) ndarray
-        The displacement ``(dx, dy)`` the touches are mapped back by (``a - shift``).
-
-    Returns
-    -------
-    model
-        Fitted on ``n_train + n_kept`` samples, the touches last; the class ids are unchanged (the
-        samples carry the class features of ``model``, which every class of it has).
+    """The model refitted on its own training samples and the touches (``points`` (n, 2),
+    ``classes`` (n,), unknown sounds left out) mapped into its reference frame by ``shift``
+    (``a - shift``): a clone of ``model``, fitted with the touches last; the class ids are
+    unchanged and ``model`` is left as it is.
     """
     pts = np.asarray(points, float).reshape(-1, 2)
     cls = np.asarray(classes, np.int64).reshape(-1)

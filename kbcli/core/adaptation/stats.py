@@ -1,12 +1,9 @@
 """Statistics of repeated adaptation experiments (paper Sect. IV-A and IV-B, Figs. 6 and 7).
 
-RMSE curves over a group of experiments (Fig. 7), observations to thresholds (a run that never
-gets below a threshold within its ``T`` steps counts as ``T + 1``) and tie-corrected rank tests
-between strategies on them (:func:`mannwhitney_pvalues` unpaired, :func:`signed_rank_pvalues`
-paired, with the smallest attainable p-values), and the posterior entropy per step (Fig. 6).
-
-Pure numpy/scipy: no I/O, no plotting. Shapes: ``errors`` is ``(n, T)`` (experiment, step), step
-``t`` (0-based) being the state after ``t + 1`` observations.
+RMSE curves (Fig. 7), observations to thresholds (a run that never gets there within its ``T``
+steps counts as ``T + 1``), tie-corrected rank tests between strategies on them, and the posterior
+entropy per step (Fig. 6). ``errors`` is ``(n, T)`` (experiment, step), step ``t`` being the state
+after ``t + 1`` observations.
 """
 
 from __future__ import annotations
@@ -20,17 +17,7 @@ QUANTILES = (0.25, 0.5, 0.75)
 
 
 def rmse_curve(errors: np.ndarray) -> np.ndarray:
-    """Root-mean-square error over experiments at each step.
-
-    Parameters
-    ----------
-    errors : (n, T) ndarray
-        Error of each experiment at each step (px); ``n >= 1``.
-
-    Returns
-    -------
-    (T,) ndarray
-    """
+    """(T,) root-mean-square error over the experiments ``errors`` (n, T), px, at each step."""
     e = np.asarray(errors, float)
     return np.sqrt(np.mean(e * e, axis=0))
 
@@ -49,19 +36,8 @@ def spread(errors: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def curves(errors: np.ndarray, groups: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """Everything Fig. 7 draws for one category and strategy.
-
-    Parameters
-    ----------
-    errors : (n, T) ndarray
-    groups : (n,) int ndarray, optional
-        Parametrization of each experiment; adds ``rmse_by_group`` (G, T) in sorted group order.
-
-    Returns
-    -------
-    dict of (T,) ndarrays
-        ``rmse`` and the :func:`spread` entries, plus ``rmse_by_group`` when ``groups`` is given.
-    """
+    """Everything Fig. 7 draws for one category and strategy: ``rmse`` and the :func:`spread`
+    entries, plus ``rmse_by_group`` (G, T) in sorted group order when ``groups`` (n,) is given."""
     out = {"rmse": rmse_curve(errors), **spread(errors)}
     if groups is not None:
         groups = np.asarray(groups)
@@ -72,19 +48,8 @@ def curves(errors: np.ndarray, groups: np.ndarray | None = None) -> dict[str, np
 
 
 def samples_to_threshold(errors: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
-    """Observations each experiment needed for its error to first drop below each threshold.
-
-    Parameters
-    ----------
-    errors : (n, T) ndarray
-    thresholds : (k,) ndarray
-        Error thresholds (px).
-
-    Returns
-    -------
-    (n, k) int ndarray
-        ``t + 1`` for the first step ``t`` with ``errors[i, t] < thresholds[j]``; ``T + 1`` when the
-        error never gets below it (censored).
+    """(n, k) observations each experiment needed for its error to first drop below each of
+    ``thresholds`` (k,): ``t + 1`` for the first such step ``t``, ``T + 1`` when never (censored).
     """
     e = np.asarray(errors, float)
     thr = np.asarray(thresholds, float)
@@ -94,21 +59,15 @@ def samples_to_threshold(errors: np.ndarray, thresholds: np.ndarray) -> np.ndarr
 
 
 def reached(counts: np.ndarray, max_steps: int) -> np.ndarray:
-    """(k,) fraction of experiments that got below each threshold within ``max_steps``.
-
-    Parameters
-    ----------
-    counts : (n, k) int ndarray
-        From :func:`samples_to_threshold`.
-    """
+    """(k,) fraction of experiments that got below each threshold within ``max_steps``, from
+    :func:`samples_to_threshold` ``counts``."""
     return np.mean(np.asarray(counts) <= max_steps, axis=0)
 
 
 def median_samples(counts: np.ndarray, max_steps: int) -> np.ndarray:
     """(k,) median observations to each threshold; NaN when fewer than half the runs got there.
 
-    Censored runs (``T + 1``) count as slower than every run that got there, so the median is exact
-    whenever at least half the runs reached the threshold.
+    Censored runs count as slower than every run that got there: the median is exact.
     """
     c = np.asarray(counts)
     med = np.median(c, axis=0).astype(float)
@@ -121,16 +80,14 @@ def mannwhitney_pvalues(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.nd
     Parameters
     ----------
     a, b : (n, k) and (m, k) ndarrays
-        Observations to each of ``k`` thresholds (:func:`samples_to_threshold`), one row per
-        experiment of each strategy (independent samples).
+        Observations to each of ``k`` thresholds, one row per experiment of each strategy.
 
     Returns
     -------
     effect, pvalue : (k,) ndarrays
-        ``effect = P(a > b) + P(a = b) / 2 - 1/2`` (from U / (n m)), in [-0.5, 0.5]: < 0 when ``a``
-        needed fewer observations than ``b``. ``pvalue`` from the normal approximation with the
-        tie-corrected variance and continuity correction. Samples with no spread at all (every
-        count tied) give effect 0 and p-value 1.
+        ``effect = P(a > b) + P(a = b) / 2 - 1/2``, in [-0.5, 0.5]: < 0 when ``a`` needed fewer
+        observations. ``pvalue`` from the normal approximation with continuity correction. No
+        spread at all: effect 0, p-value 1.
     """
     a = np.asarray(a, float)
     b = np.asarray(b, float)
@@ -154,10 +111,9 @@ def signed_rank_pvalues(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.nd
     Returns
     -------
     effect, pvalue : (k,) ndarrays
-        ``effect = (R+ - R-) / (R+ + R-)``, the rank-biserial correlation of the differences
-        ``a - b`` (zeros dropped), in [-1, 1]: < 0 when ``a`` needed fewer. ``pvalue`` from
-        ``scipy.stats.wilcoxon`` (``zero_method="wilcox"``; exact for small samples without ties,
-        else the tie-corrected normal approximation). No nonzero difference: effect 0, p-value 1.
+        ``effect = (R+ - R-) / (R+ + R-)``, the rank-biserial correlation of ``a - b`` (zeros
+        dropped): < 0 when ``a`` needed fewer. ``pvalue`` from ``scipy.stats.wilcoxon``. No nonzero
+        difference: effect 0, p-value 1.
     """
     a = np.asarray(a, float)
     b = np.asarray(b, float)
@@ -180,10 +136,8 @@ def signed_rank_pvalues(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 def min_pvalue_unpaired(n: int, m: int) -> float:
-    """Smallest two-sided p-value any rank test of two independent samples of sizes ``n`` and
-    ``m`` can give: ``2 / C(n + m, n)``, the probability of the most extreme arrangement (every
-    run of one strategy faster than every run of the other) under the null hypothesis. With ties
-    the attainable minimum is larger still. 0.0 when it underflows a float (below ~1e-308)."""
+    """Smallest two-sided p-value a rank test of two independent samples of sizes ``n`` and ``m``
+    can give, ``2 / C(n + m, n)`` (ties make it larger); 0.0 when it underflows a float."""
     if n < 1 or m < 1:
         return 1.0
     log_p = math.log(2) - (math.lgamma(n + m + 1) - math.lgamma(n + 1) - math.lgamma(m + 1))

@@ -38,25 +38,19 @@ MAX_MATCH_THRESHOLD = 100.0
 class KeyboardConfig(Config):
     """Layout, geometry and sounds of a keyboard. All lengths in pad pixels.
 
-    The layout is a part with options of its own (:mod:`kbcli.core.instrument.layouts`): the
-    ``layout`` field holds them (``cfg.layout.rows``); a name, a table ``{name, options...}`` or the
-    layout's options given flat beside its name (``KeyboardConfig(layout="pads", pad_radius=15)``,
-    as a TOML table writes them) are read, and an option the layout does not take is refused by
-    the layout, naming it. ``to_dict`` writes the flat form.
+    The layout is a part with options of its own (:mod:`kbcli.core.instrument.layouts`): a name,
+    a table ``{name, options...}`` or the layout's options given flat beside its name
+    (``KeyboardConfig(layout="pads", pad_radius=15)``) are read; ``to_dict`` writes the flat form.
 
     Parameters
     ----------
     layout : Options
-        A layout of :data:`~kbcli.core.instrument.layouts.LAYOUTS` (grid, hex, piano, pads or
-        polygons) with its options: ``rows``, ``cols``, ``key_size`` (grid, hex, pads),
-        ``pad_radius`` (pads), ``cols``, ``key_size``, ``key_height``, ``black_width``,
-        ``black_height`` (piano), ``keys`` (polygons).
+        A layout of :data:`~kbcli.core.instrument.layouts.LAYOUTS` with its options.
     origin : tuple of float
         Lower-left corner of the keyboard at its reference pose (default: the keyboard centred on
-        (400, 350), the grid's (200, 250); polygons: (0, 0), so their vertices are pad coordinates).
+        (400, 350); polygons: (0, 0), so their vertices are pad coordinates).
     margin : float
-        Width of the band around the keyboard that belongs to the robot's working area (where it
-        explores, where displaced keys can be, and where model accuracy is measured).
+        Width of the band around the keyboard that belongs to the robot's working area.
     base_note : str
         Note of key 0 (bottom-left); the next keys climb ``scale`` (grid, pads, polygons), the
         Wicki-Hayden lattice (hex) or the chromatic scale (piano).
@@ -64,16 +58,14 @@ class KeyboardConfig(Config):
         One of ``SCALES`` (grid, pads, polygons; default diatonic).
     tempo_base, tempo_col_step, tempo_row_step : float
         Tempo of key (r, c) is ``tempo_base + c * tempo_col_step + r * tempo_row_step`` bpm (grid,
-        hex, pads; piano and polygons: see :mod:`kbcli.core.instrument.layouts`).
+        hex, pads).
     noise_std : float
-        Standard deviation of the Gaussian noise added to perceived features (pitch and tempo
-        units), at most :data:`MAX_NOISE_STD`.
+        Standard deviation of the Gaussian noise added to perceived features.
     match_threshold : float
-        Manhattan distance below which a perceived sound matches a known one (Eq. 2), at most
-        :data:`MAX_MATCH_THRESHOLD`.
+        Manhattan distance below which a perceived sound matches a known one (Eq. 2).
 
-    Lengths (sizes, ``margin``) are at most :data:`~kbcli.core.instrument.geometry.MAX_COORD` px, the tempo
-    of key 0 at most :data:`MAX_TEMPO` bpm and each tempo step at most :data:`MAX_TEMPO_STEP`.
+    Every value is bounded by this module's ``MAX_*`` constants (lengths by
+    :data:`~kbcli.core.instrument.geometry.MAX_COORD`).
     """
 
     what: ClassVar[str] = "keyboard"

@@ -1,26 +1,11 @@
 """Model classes on plain scikit-learn classifiers: random forests (``forest``, ``forest-xy``) and
-k-NN (``knn``).
+k-NN (``knn``), behind the interface of the bespoke classes.
 
-M_INST = p(sound | action) from a general-purpose classifier, behind the same interface as the
-bespoke classes (:mod:`kbcli.core.model.lines`, :mod:`kbcli.core.model.svc`):
-
-1. **the sound classes** are found as every class finds them
-   (:func:`~kbcli.core.model.sounds.prepare_samples`; class 0 is silence);
-2. **p(sound | action)** is the classifier's ``predict_proba`` ``p``, sharpened
-   (``p_c ** sharpen / sum_c' p_c' ** sharpen``) and mixed with a uniform ``floor``, the two chosen
-   by held-out Brier score (:meth:`SklearnModel.calibration_grid`; :data:`FOREST_SHARPEN_GRID`).
-   ``forest`` (:class:`ForestModel`) is a random forest on the two coordinates and oblique
-   projections ``x cos t + y sin t``, so that a split can follow a slanted edge; ``forest-xy``
-   (:class:`ForestXYModel`) the same on the two coordinates only; ``knn`` (:class:`KNNModel`)
-   distance-weighted votes of the ``n_neighbors`` nearest samples;
-3. **boundary sites** for active exploration (:meth:`SklearnModel.boundary_sites`): where the
-   predicted class changes on a 2 px grid, with the width of the band the boundary is known to lie
-   in there.
-
-Storage without pickle: :meth:`SklearnModel.to_arrays` keeps the samples, their classes and the
-hyper-parameters (``random_state`` included); :meth:`SklearnModel.from_arrays` refits
-deterministically. Sampling, the raster and the confusion factor are the base's
-(:class:`~kbcli.core.model.pairwise.ModelBase`).
+p(sound | action) is the classifier's ``predict_proba``, sharpened (``p_c ** sharpen / sum_c'
+p_c' ** sharpen``) and mixed with a uniform ``floor``, both chosen by held-out score
+(:meth:`SklearnModel.calibration_grid`). Boundary sites for active exploration are where the
+predicted class changes on a 2 px grid. Storage keeps the samples and hyper-parameters
+(``random_state`` included); loading refits deterministically.
 """
 
 from __future__ import annotations
@@ -40,17 +25,14 @@ SITE_GRID = 2.0  # px, grid on which boundary sites are looked for
 _CHUNK = 65536  # query points per block of a prediction
 #: Candidate values of the calibration's uniform floor (:meth:`SklearnModel.calibration_grid`).
 FLOOR_GRID = (0.0, 0.002, 0.01, 0.03)
-#: The forests' candidate floors (0.03 left out: the held-out Brier score overrates the floor;
-#: ``docs/design-notes.md``, Model classes).
+#: The forests' candidate floors (0.03 left out: ``docs/design-notes.md``, Model classes).
 FOREST_FLOOR_GRID = (0.0, 0.002, 0.01)
-#: Candidate values of the calibration's exponent ``sharpen`` of the forests, whose own is 2 (the
-#: first value: kept unless another beats it on the held-out touches by a standard error; how
-#: they were chosen: ``docs/design-notes.md``, Model classes).
+#: Candidate values of the forests' ``sharpen`` (their own, 2, first: kept unless another beats it
+#: on the held-out touches by a standard error).
 FOREST_SHARPEN_GRID = (2.0, 4.0, 8.0)
 #: Candidate values of ``sharpen`` for k-NN, whose own is 1 (its distance-weighted votes).
 SHARPEN_GRID = (1.0, 2.0, 4.0, 8.0)
-#: Largest ``sharpen`` accepted (p ** 16 of the smallest share of 120 trees is 5e-34: no
-#: underflow of a class that has a vote).
+#: Largest ``sharpen`` accepted (no underflow of a class that has a vote among 120 trees).
 MAX_SHARPEN = 16.0
 
 
@@ -79,12 +61,8 @@ def class_distance(actions: np.ndarray, labels: np.ndarray, pts: np.ndarray,
 def grid_boundary_sites(model, phase: float = 0.0, step: float = SITE_GRID) -> dict:
     """Boundary sites of any fitted model: where its predicted class changes between neighbouring
     cells of a ``step`` px grid (shifted by ``phase`` of a cell), each with the width of its band
-    (distance to the nearest sample of either sound, summed).
-
-    Returns
-    -------
-    dict with ``points`` (m, 2), ``width`` (m,), ``pair`` (m, 2)
-    """
+    (distance to the nearest sample of either sound, summed): ``points`` (m, 2), ``width`` (m,),
+    ``pair`` (m, 2)."""
     x0, y0, x1, y1 = (float(v) for v in model.area)
     g = np.stack(np.meshgrid(np.arange(x0 + phase * step, x1, step),
                              np.arange(y0 + phase * step, y1, step)), -1)
@@ -116,9 +94,7 @@ class SklearnModel(ModelBase):
     # -- parameters -----------------------------------------------------------------------------
     @classmethod
     def calibration_grid(cls) -> dict[str, tuple[float, ...]]:
-        """Candidate values of the prediction-time calibration: the exponent ``sharpen`` on the
-        classifier's probabilities (the class's own default first) and the uniform ``floor``
-        mixed in after it."""
+        """Candidate values of the calibration: ``sharpen`` (the class's own first) and ``floor``."""
         return {"floor": cls._FLOOR_GRID, "sharpen": cls._SHARPEN_GRID}
 
     def _check_params(self) -> None:
@@ -173,16 +149,14 @@ class SklearnModel(ModelBase):
     # -- exploration ----------------------------------------------------------------------------
     def boundary_sites(self, step: float = 1.0, extend: float = 25.0,
                        phase: float = 0.0) -> dict[str, np.ndarray]:
-        """Where the model places each boundary, and how uncertain it is there
-        (:func:`grid_boundary_sites`; ``step`` and ``extend`` are accepted for the ``lines``
-        model's signature)."""
+        """Boundary sites (:func:`grid_boundary_sites`; ``step`` and ``extend`` are accepted for
+        the ``lines`` model's signature)."""
         self._check_fitted()
         return grid_boundary_sites(self, phase)
 
     # -- storage --------------------------------------------------------------------------------
     def to_arrays(self) -> dict[str, np.ndarray]:
-        """The fitted model as named arrays: the samples, their classes and the hyper-parameters
-        (:meth:`from_arrays` refits the classifier, deterministically)."""
+        """The fitted model as named arrays (:meth:`from_arrays` refits, deterministically)."""
         own = {
             "floor": np.float64(self.floor),
             "sharpen": np.float64(self.sharpen),
@@ -195,9 +169,8 @@ class SklearnModel(ModelBase):
 
     @classmethod
     def from_arrays(cls, d: dict) -> SklearnModel:
-        """Rebuild a fitted model from :meth:`to_arrays` output (the same predictions: the
-        classifier is refitted on the stored samples with the stored ``random_state``). A model
-        stored before ``sharpen`` existed loads with ``sharpen`` 1 (its predictions unchanged)."""
+        """Rebuild a fitted model from :meth:`to_arrays` output (a model stored before
+        ``sharpen`` existed loads with ``sharpen`` 1)."""
         return cls._from_stored(d, cls.kind, lambda d: {
             "floor": float(d["floor"]),
             "sharpen": float(d["sharpen"]) if "sharpen" in d else 1.0,
@@ -242,22 +215,17 @@ class ForestModel(SklearnModel):
     match_threshold, area
         As every class (:class:`~kbcli.core.model.pairwise.ModelBase`).
     n_estimators : int
-        Trees (exploration refits a 60-tree forest every batch,
-        :func:`kbcli.core.model.select.explore_params`).
+        Trees.
     n_directions : int
-        Directions the trees split along: x, y and ``n_directions - 2`` oblique projections
-        (``n_directions`` >= 2; directions evenly spaced in [0, pi), x and y among them when
-        ``n_directions`` is even).
+        Directions the trees split along, evenly spaced in [0, pi): x, y and
+        ``n_directions - 2`` oblique projections.
     min_samples_leaf : int
         Fewest samples in a leaf (1: fully grown trees).
     random_state : int
-        Seed of the trees' bootstrap samples and features (fixed: a stored model refits to the
-        same trees).
+        Seed of the trees (fixed: a stored model refits to the same trees).
     sharpen : float
-        Exponent in [1, 16] on the share of votes, renormalised over the sounds (calibration:
-        ``p_c ** sharpen / sum_c' p_c' ** sharpen``; 1 leaves the votes as they are, the most
-        probable sound never changes). 2 by default: the bootstrap spreads the votes wider than
-        the band a boundary can lie in (:data:`FOREST_SHARPEN_GRID`).
+        Exponent in [1, 16] on the share of votes, renormalised (calibration; the most probable
+        sound never changes).
     floor : float
         Probability spread evenly over the sounds after ``sharpen`` (calibration).
     """
@@ -304,12 +272,8 @@ class ForestModel(SklearnModel):
 
 
 class ForestXYModel(ForestModel):
-    """:class:`ForestModel` whose trees split on the two coordinates only (``n_directions`` 2).
-
-    Exact for keys whose edges are horizontal and vertical (piano, grid), a staircase on slanted
-    edges, where ``auto``'s cross-validation keeps the oblique forest
-    (:mod:`kbcli.core.model.select`).
-    """
+    """:class:`ForestModel` whose trees split on the two coordinates only (``n_directions`` 2):
+    exact for axis-aligned key edges, a staircase on slanted ones."""
 
     kind = "forest-xy"
 
@@ -325,17 +289,7 @@ class ForestXYModel(ForestModel):
 class KNNModel(SklearnModel):
     """p(sound | action) from the distance-weighted votes of the ``n_neighbors`` nearest samples.
 
-    Parameters
-    ----------
-    match_threshold, area
-        As every class (:class:`~kbcli.core.model.pairwise.ModelBase`).
-    n_neighbors : int
-        Neighbours that vote.
-    sharpen : float
-        Exponent in [1, 16] on the votes, renormalised over the sounds (calibration, as the
-        forest's).
-    floor : float
-        Probability spread evenly over the sounds after ``sharpen`` (calibration).
+    ``sharpen`` and ``floor`` calibrate as :class:`ForestModel`'s.
     """
 
     kind = "knn"

@@ -1,27 +1,12 @@
 """The ``lines`` model class: M_INST = p(sound, action) with straight boundaries, from exploration.
 
-The robot touches the pad at actions a_i (the fingertip positions it feels) and hears sounds s_i
-(feature vectors, NaN for silence); it never sees the simulator's key ids. The model
-
-1. **finds the sound classes** by leader clustering of the perceived features with the matching
-   threshold of Eq. 2 (:mod:`kbcli.core.model.sounds`); class 0 is silence, the others sorted by
-   their features;
-2. **models p(sound | action) with straight boundaries** (the keys are polygons): each pair of
-   sounds' straddling Delaunay edges get the max-margin line separating their ends, split into
-   pieces where no line does; pieces whose lines nearly coincide (``merge_angle``,
-   ``merge_offset``) are merged into shared lines (:mod:`kbcli.core.model.pieces`). At an action
-   a, the candidates are the classes of its ``n_neighbors`` nearest samples; a pair's contest is
-   ``p(a on i's side) = Phi(s / sigma)``, s the signed distance to the line and sigma the width of
-   the band between the two sides' hulls over sqrt(12) (:mod:`kbcli.core.model.boundaries`;
-   ``sd_scale``, ``min_sd``, ``max_sd``, ``noise_sd``). Each candidate's log-score sums log 2p over
-   its contests; p(sound | a) is their softmax, floored at ``floor``: the paper's *confusion
-   factor* (Sect. III-E). The landing scatter (``reach_sd_``) is estimated, not folded in;
-3. **samples actions for a sound**, p(action | sound) ~ p(sound | action) with p(action) uniform
-   over the working area (Algorithm 2, line 3), by rejection sampling.
-
-The pairwise contests and step 3 are the base class :class:`~kbcli.core.model.pairwise.ModelBase`
-(shared with ``svc``): a scikit-learn estimator that round-trips exactly through
-:meth:`LearnedModel.to_arrays` / :meth:`LearnedModel.from_arrays` (the fitted lines are stored).
+The sound classes are found by leader clustering of the perceived features (Eq. 2,
+:mod:`kbcli.core.model.sounds`). Each pair of sounds' straddling Delaunay edges get the max-margin
+line separating their ends, split into pieces where no line does and merged where lines nearly
+coincide (:mod:`kbcli.core.model.pieces`). A pair's contest at an action is ``Phi(s / sigma)``, s
+the signed distance to the line and sigma the width of the band between the two sides' hulls over
+sqrt(12) (:mod:`kbcli.core.model.boundaries`); the contests, softmax, floor (the paper's confusion
+factor, Sect. III-E) and sampling are :class:`~kbcli.core.model.pairwise.ModelBase`'s.
 """
 
 from __future__ import annotations
@@ -114,37 +99,29 @@ class LearnedModel(ModelBase):
     n_neighbors : int
         Samples looked at around an action to find the sounds it could make.
     min_sd, max_sd : float
-        Bounds (px) of a boundary line's uncertainty sigma_b in p(sound | action).
+        Bounds (px) of a boundary line's uncertainty sigma_b.
     sd_scale : float
-        Factor on every boundary's band-width uncertainty (calibration, see
-        :mod:`kbcli.core.model.reliability`; 1: the band as it is).
+        Factor on every boundary's uncertainty (calibration).
     noise_sd : float
-        Std (px) of the label noise near a boundary (an arm that does not feel exactly where it
-        touched, a finger of finite size): combined with sigma_b as ``hypot(sigma_b, noise_sd)``.
+        Std (px) of the label noise near a boundary, combined as ``hypot(sigma_b, noise_sd)``.
     noise_tol : float
-        Label-noise tolerance (px) of the boundary fit: two sounds' samples that no line separates
-        get one soft-margin line when every sample on its wrong side is within ``noise_tol`` of it
-        (0: exact separation, as for an arm that feels exactly where it touched).
+        Label-noise tolerance (px) of the boundary fit: a soft-margin line is accepted when every
+        sample on its wrong side is within ``noise_tol`` of it (0: exact separation).
     floor : float
-        Share of probability spread evenly over all sounds (``p = (1 - floor) p + floor / C``):
-        the rate at which a touch sounds other than the map says, far from any boundary.
+        Share of probability spread evenly over all sounds (``p = (1 - floor) p + floor / C``).
     extrapolation : float
         Growth (px per px) of a boundary band's width beyond the samples along its line.
     merge_angle, merge_offset : float
-        Pieces whose lines are within this angle (degrees) and offset (px) may share a line
-        (0 degrees: never).
+        Pieces whose lines are within this angle (degrees) and offset (px) may share a line.
     piece_reach : float
         Where a pair of sounds has several boundary pieces, those within this many px of the
-        nearest one (both legs of a corner) decide together; further ones have no say.
+        nearest one decide together; further ones have no say.
 
     Attributes
     ----------
-    class_features_, actions_, labels_, reach_sd_
-        As every class (:class:`~kbcli.core.model.pairwise.ModelBase`).
     edges_, edge_piece_, piece_pair_, piece_line_, piece_sign_ : ndarray
-        The boundary pieces, as :func:`~kbcli.core.model.pieces.fit_pieces` returns them (``edges``,
-        ``edge_piece``, ``pairs``, ``group``, ``sign``): the straddling edges (sample indices),
-        the piece of each edge, and each piece's pair of classes, line and side.
+        The boundary pieces (:func:`~kbcli.core.model.pieces.fit_pieces`): the straddling edges
+        (sample indices), the piece of each edge, each piece's pair of classes, line and side.
     lines_ : (L, 3) ndarray
         Boundary lines (nx, ny, c), unit normal: signed distance ``nx * x + ny * y - c``.
     """
@@ -181,15 +158,12 @@ class LearnedModel(ModelBase):
     @staticmethod
     def fit_grid() -> dict[str, tuple[float, ...]]:
         """Candidate values of the fit's own calibration parameter, the label-noise tolerance
-        (px; :func:`kbcli.core.model.reliability.assess` refits with each and keeps the best held-out
-        score: 0 for an arm that feels exactly where it touched, more for a noisy one)."""
+        (px; :func:`kbcli.core.model.reliability.assess` keeps the best held-out score)."""
         return {"noise_tol": (0.0, 2.0, 4.0)}
 
     @staticmethod
     def calibration_grid() -> dict[str, tuple[float, ...]]:
-        """Candidate values of the calibration parameters (read at prediction time, so a fitted
-        model is recalibrated by setting them; :func:`kbcli.core.model.reliability.assess` picks them by
-        held-out Brier score, weighted for the distance to the samples)."""
+        """Candidate values of the calibration parameters (read at prediction time)."""
         return {"noise_sd": (0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.5, 6.0), "floor": (0.0, 0.002, 0.01)}
 
     # -- fitting --------------------------------------------------------------------------------
@@ -248,12 +222,9 @@ class LearnedModel(ModelBase):
     def _pair_logp(self, code: int, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Log-probability that each point is on the lower / higher class's side of their boundary.
 
-        With one boundary piece, ``log Phi(z)`` and ``log Phi(-z)``, z = s / sigma (s the signed
-        distance to the line, sigma the boundary's uncertainty there).
-        With several pieces, only those near the point count: the nearest (distance to the
-        piece's extent along its line) and any within ``piece_reach`` px more (both legs of a
-        corner). The sound inside (see :meth:`_set_fitted`) must be on its side of all of them
-        (product), the other of any: the two log-probabilities are complementary.
+        With one piece, ``log Phi(+-s / sigma)``. With several, only the nearest and those within
+        ``piece_reach`` px more count; the sound inside must be on its side of all of them, the
+        other of any.
         """
         pieces = self._pairs[code]
         g = self.piece_line_[pieces]
@@ -281,14 +252,10 @@ class LearnedModel(ModelBase):
     def boundary_sites(
         self, step: float = 1.0, extend: float = 25.0, phase: float = 0.0
     ) -> dict[str, np.ndarray]:
-        """Points along every boundary piece and how uncertain the boundary is there.
-
-        The points run along each piece's line every ``step`` px (shifted by ``phase`` in [0, 1)),
-        from ``extend`` px before its first straddling sample to ``extend`` px after its last; each
-        sits in the middle of the band the piece's boundary must lie in (between the hulls of the
-        samples on either side: any line separating them crosses there), and ``width`` is the
-        band's width (px), growing by ``2 * extrapolation`` px per px beyond the samples. Points
-        that the model does not put between the piece's two sounds are dropped.
+        """Points along every boundary piece, every ``step`` px (shifted by ``phase`` in [0, 1))
+        from ``extend`` px before its first straddling sample to ``extend`` px after its last,
+        each in the middle of the band the boundary must lie in, with the band's ``width`` (px).
+        Points the model does not put between the piece's two sounds are dropped.
 
         Returns
         -------

@@ -17,31 +17,22 @@ from kbcli.errors import ArtifactError, ConfigError
 
 #: Query points per block of a prediction.
 _CHUNK = 16384
-#: Added to both sides of every pairwise contest: log(2 Phi(z)) instead of log Phi(z), so that a
-#: contest the model knows nothing about (z = 0) is neutral instead of penalising the candidates
-#: that take part in more contests (which made wide, honest boundary bands cost accuracy).
+#: Added to both sides of every pairwise contest: log(2 Phi(z)), so that a contest the model knows
+#: nothing about (z = 0) is neutral rather than penalising candidates in more contests.
 _NEUTRAL = float(np.log(2.0))
-#: Default ``area`` of the learned classes: the default keyboard's working area (xmin, ymin, xmax,
-#: ymax).
+#: Default ``area`` of the learned classes: the default keyboard's working area.
 DEFAULT_AREA = (150.0, 200.0, 650.0, 500.0)
 
 
 class ModelBase(ClassifierMixin, BaseEstimator):
     """Base of the learned model classes: p(sound | action) from pairwise contests.
 
-    A scikit-learn estimator (``get_params`` / ``set_params`` / ``clone`` inherited; ``__init__``
-    only stores the parameters, ``fit`` returns ``self``, fitted attributes end in ``_``,
-    predicting before fitting raises :class:`~sklearn.exceptions.NotFittedError`). The candidate
-    sounds at an action are the classes of its ``n_neighbors`` nearest samples; each pair of
-    candidates with a boundary contests the action, and a candidate's log-score sums
-    ``log 2 p(on its side)`` over its contests; p(sound | action) is their softmax. A subclass fits
-    the contests: after ``fit`` it has the attributes below,
-
-    - ``_tree``: a :class:`scipy.spatial.cKDTree` of ``actions_``;
-    - ``_pairs``: pair code ``lower * C + higher`` -> what decides the pair's contests, for the
-      pairs of sounds that have a boundary;
-
-    and implements ``_pair_logp(code, q) -> (log p(lower's side), log p(higher's side))``.
+    A scikit-learn estimator. The candidate sounds at an action are the classes of its
+    ``n_neighbors`` nearest samples; a candidate's log-score sums ``log 2 p(on its side)`` over its
+    contests with the other candidates; p(sound | action) is their softmax. After ``fit`` a
+    subclass has ``_tree`` (a :class:`scipy.spatial.cKDTree` of ``actions_``) and ``_pairs`` (pair
+    code ``lower * C + higher`` -> what decides the pair's contests), and implements
+    ``_pair_logp(code, q) -> (log p(lower's side), log p(higher's side))``.
 
     Parameters
     ----------
@@ -59,9 +50,7 @@ class ModelBase(ClassifierMixin, BaseEstimator):
     labels_ : (n,) int ndarray
         Sound class of each sample.
     reach_sd_ : float
-        Landing scatter of a reach (px, per-axis rms of landing minus target), for information:
-        p(sound | action) is about where the finger *is*; a caller that only knows where it aimed
-        blurs it by this much.
+        Landing scatter of a reach (px, per-axis rms of landing minus target), for information.
     """
 
     #: True only for the exact model (the keyboard's own geometry, :class:`ExactModel`).
@@ -69,7 +58,6 @@ class ModelBase(ClassifierMixin, BaseEstimator):
     n_neighbors: int
     match_threshold: float
     area: tuple[float, float, float, float]
-
 
     def fit(self, actions: np.ndarray, perceived: np.ndarray,
             targets: np.ndarray | None = None) -> ModelBase:
@@ -87,12 +75,6 @@ class ModelBase(ClassifierMixin, BaseEstimator):
         Returns
         -------
         self
-
-        Notes
-        -----
-        A class checks its settings in ``_check_params`` and keeps what it learned from the samples
-        in ``_set_fitted(features, actions, labels, reach_sd)``; the ``lines`` class, which fits its
-        boundary pieces here too, overrides ``fit``.
         """
         self._check_params()
         x, features, labels, reach_sd = prepare_samples(actions, perceived, targets,
@@ -111,13 +93,8 @@ class ModelBase(ClassifierMixin, BaseEstimator):
         return len(self.class_features_)
 
     def _check_common(self) -> None:
-        """The checks of every learned class: ``match_threshold`` > 0, a valid ``area``.
-
-        Raises
-        ------
-        ConfigError
-            Naming the parameter and what is allowed.
-        """
+        """The checks of every learned class (``match_threshold`` > 0, a valid ``area``); raises
+        :class:`ConfigError` naming the parameter."""
         if not (np.isfinite(self.match_threshold) and self.match_threshold > 0):
             raise ConfigError(f"match_threshold must be > 0, got {self.match_threshold!r}")
         x0, y0, x1, y1 = (float(v) for v in self.area)
@@ -144,14 +121,13 @@ class ModelBase(ClassifierMixin, BaseEstimator):
     @classmethod
     def _from_stored(cls, d: Mapping, kind: str, params: Callable[[Mapping], dict],
                      fitted: Callable[[Mapping], tuple] = lambda d: ()) -> ModelBase:
-        """Rebuild a model from :meth:`_arrays` output: the class built with the stored
-        ``match_threshold``, ``area`` and ``params(d)``, then ``_set_fitted`` with the stored
-        samples, ``fitted(d)`` (what the class learned besides) and the landing scatter.
+        """Rebuild a model from :meth:`_arrays` output (``params(d)``: the class's parameters,
+        ``fitted(d)``: what it learned besides the samples).
 
         Raises
         ------
         ArtifactError
-            Where ``d`` is not a stored ``kind`` model (a key missing, a value of the wrong type).
+            Where ``d`` is not a stored ``kind`` model.
         """
         try:
             model = cls(match_threshold=float(d["match_threshold"]),
@@ -174,17 +150,8 @@ class ModelBase(ClassifierMixin, BaseEstimator):
 
     # -- prediction -----------------------------------------------------------------------------
     def _slot_scores(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Candidate classes and their log-scores at each point.
-
-        The candidates are the distinct classes among the ``n_neighbors`` nearest samples; a
-        candidate's log-score is the sum over the other candidates of log p(on its side of their
-        boundary) = log Phi(+-s / sigma). Repeated classes get -inf.
-
-        Returns
-        -------
-        cls : (n, k) int ndarray
-        score : (n, k) ndarray
-        """
+        """Candidate classes ``(n, k)`` and their log-scores ``(n, k)`` at each point; repeated
+        classes get -inf."""
         n = len(q)
         k = int(min(self.n_neighbors, len(self.actions_)))
         _, idx = self._tree.query(q, k=k)
@@ -241,18 +208,8 @@ class ModelBase(ClassifierMixin, BaseEstimator):
         return out
 
     def predict_proba(self, points: np.ndarray) -> np.ndarray:
-        """p(sound class | action) at each point, mixed with a uniform ``floor`` where the class
-        has one (``p = (1 - floor) p + floor / C``).
-
-        Parameters
-        ----------
-        points : (n, 2) ndarray
-
-        Returns
-        -------
-        (n, C) ndarray
-            Rows sum to 1.
-        """
+        """(n, C) p(sound class | action) at each of ``points`` (n, 2), mixed with a uniform
+        ``floor`` where the class has one (``p = (1 - floor) p + floor / C``)."""
         p = self._predict(points, proba=True)
         floor = getattr(self, "floor", 0.0)
         if floor > 0:
@@ -276,10 +233,8 @@ class ModelBase(ClassifierMixin, BaseEstimator):
         return classify_features(perceived, self.class_features_, self.match_threshold)
 
     def sample_actions(self, cls: int, n: int, rng: np.random.Generator) -> np.ndarray:
-        """(n, 2) draws from p(action | sound class ``cls``), uniform prior over the area.
-
-        Rejection sampling: uniform proposals over the box of the class's samples (widened by
-        their spacing; the whole area for silence), accepted with probability p(cls | proposal).
+        """(n, 2) draws from p(action | sound class ``cls``), uniform prior over the area, by
+        rejection sampling over the box of the class's samples.
 
         Raises
         ------
@@ -316,6 +271,5 @@ class ModelBase(ClassifierMixin, BaseEstimator):
         )
 
     def predict(self, points: np.ndarray) -> np.ndarray:
-        """(n,) most probable sound class at each point (scikit-learn's name for
-        :meth:`predict_class`)."""
+        """(n,) most probable sound class at each point (:meth:`predict_class`)."""
         return self.predict_class(points)

@@ -55,10 +55,8 @@ def merge_pieces(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Group boundary pieces that one straight line explains (an edge continuing across keys).
 
-    Two pieces are candidates when their lines are within ``max_angle`` rad and ``max_offset`` px
-    of each other; candidates are merged, closest first, when a single line still separates the
-    samples on either side of all their pieces (the data decide; a merge the samples contradict
-    is never made, and refitting with more samples undoes any that later turn out wrong).
+    Pieces whose lines are within ``max_angle`` rad and ``max_offset`` px are merged, closest
+    first, when a single line still separates the samples on either side of all of them.
 
     Returns
     -------
@@ -145,19 +143,10 @@ def absorb_pieces(
     x: np.ndarray, e: np.ndarray, edge_piece: np.ndarray, pairs: np.ndarray, group: np.ndarray,
     sign: np.ndarray, glines: np.ndarray, reach: float, tol: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Re-express lone boundary pieces with lines that several pieces share.
-
-    A piece alone on its line (typically a pair of sounds whose boundary bends, such as silence
-    around a corner key, fitted with too few samples to see the bend) is replaced by pieces on
-    shared lines when every one of its straddling edges is crossed by a shared line (within
-    ``reach`` px of that line's samples), each shared line crossed in one direction only, and each
-    line still separates its samples once the new ones are added (its line is then refitted).
-
-    Returns
-    -------
-    edge_piece, pairs, group, sign, glines
-        The same structure, renumbered (lines by first piece).
-    """
+    """Re-express lone boundary pieces with lines that several pieces share: a piece alone on its
+    line is replaced by pieces on shared lines when every one of its straddling edges is crossed
+    by one (within ``reach`` px of its samples, each in one direction) and each still separates
+    its samples (then refitted). Returns ``edge_piece, pairs, group, sign, glines`` renumbered."""
     edge_piece, pairs = edge_piece.copy(), [tuple(p) for p in pairs]
     group, sign, glines = list(group), list(sign), [g.copy() for g in glines]
     sizes = np.bincount(np.asarray(group), minlength=len(glines))
@@ -277,30 +266,20 @@ def fit_pieces(
     x : (n, 2) ndarray
         The samples (where the finger landed).
     labels : (n,) int ndarray
-        Sound class of each sample (:func:`kbcli.core.model.sounds.discover_classes`).
+        Sound class of each sample.
     n_classes : int
         Number of classes, silence included.
-    merge_angle : float
-        Pieces whose lines are within this angle (degrees) may share a line (0: never).
-    merge_offset : float
-        ... and within this offset (px).
+    merge_angle, merge_offset : float
+        Pieces whose lines are within this angle (degrees) and offset (px) may share a line.
     tol : float
         Label-noise tolerance (px) of the separating lines (:func:`separating_line`).
 
     Returns
     -------
-    edges : (m, 2) int ndarray
-        Straddling edges (the lower class's end first), sorted by pair.
-    edge_piece : (m,) int ndarray
-        Piece of each edge.
-    pairs : (P, 2) int ndarray
-        The two classes (lower first) each piece separates.
-    group : (P,) int ndarray
-        The line each piece lies on.
-    sign : (P,) ndarray
-        +1 where a piece's lower class is on its line's positive side, else -1.
-    lines : (L, 3) ndarray
-        (nx, ny, c) of each line.
+    edges, edge_piece, pairs, group, sign, lines
+        Straddling edges (the lower class's end first, sorted by pair), the piece of each edge,
+        the two classes of each piece, its line, its side (+1: lower class on the line's positive
+        side) and the lines (L, 3) ``(nx, ny, c)``.
     """
     e = straddling_edges(x, labels)
     e = e[np.lexsort((e[:, 1], e[:, 0], labels[e[:, 1]], labels[e[:, 0]]))]

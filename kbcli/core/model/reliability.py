@@ -1,28 +1,15 @@
 """How good a learned model is, estimated from its own samples; and its calibration.
 
-The robot never sees the keys, but it can ask how well the model predicts touches it was not
-fitted on. With ``K``-fold cross-validation over the exploration samples this module estimates
+``K``-fold cross-validation over the exploration samples estimates ``cv_error`` (the mislabel rate
+of held-out touches), ``cv_log_loss`` (their mean ``-log p(heard sound | touch)``, nats),
+``cv_ece`` (:func:`expected_calibration_error`), ``boundary_error`` (how far, px, the fold models'
+boundaries lie from the full model's, a stand-in for the distance to the truth) and
+``expected_error`` (one minus the calibrated model's top probability averaged over a 2 px grid).
 
-- ``cv_error``: the mislabel rate of held-out touches (high for active exploration, whose touches
-  sit on the boundaries);
-- ``cv_log_loss``: the mean ``-log p(heard sound | touch)`` of held-out touches (nats);
-- ``cv_ece``: the expected calibration error of the held-out predictions, debiased
-  (:func:`expected_calibration_error`);
-- ``boundary_error``: how far (px) the fold models' sound boundaries lie from the full model's
-  (:func:`kbcli.core.model.accuracy.boundary_error`, 2 px grid), a stand-in for the distance to the
-  truth;
-- ``expected_error``: the mislabel rate the calibrated model expects on the pad, one minus its top
-  probability averaged over a 2 px grid, not biased by where exploration put its touches;
-
-and **calibrates** p(sound | action): among a few values of the class's calibration parameters it
-keeps those with the lowest held-out Brier score, weighted for the distance shift
-(:mod:`~kbcli.core.model.heldout`), when they beat the model's own settings by more than one
-standard error of the paired difference (:func:`choose_calibration`; why: ``docs/design-notes.md``).
-
-Any learned model class works (fold models: ``clone(model).set_params(**fit_params).fit(...)``). A
-class may expose ``calibration_grid()`` (parameter name -> candidate values read at prediction
-time) and ``fit_grid()`` (parameters of the fit itself, refitted with each), or neither (then only
-the reliability is estimated).
+It also **calibrates** p(sound | action): among the class's ``calibration_grid()`` (read at
+prediction time) and ``fit_grid()`` (refitted with each) values it keeps those with the lowest
+distance-weighted held-out Brier score when they beat the model's own settings by more than one
+standard error (:func:`choose_calibration`; why: ``docs/design-notes.md``).
 """
 
 from __future__ import annotations
@@ -71,7 +58,8 @@ class Reliability(Record):
 
 def expected_calibration_error(probs: np.ndarray, hit: np.ndarray, bins: int = ECE_BINS,
                                weights: np.ndarray | None = None, debiased: bool = False) -> float:
-    """Top-label expected calibration error.
+    """Top-label expected calibration error, ``sum_b n_b / n |mean(hit)_b - mean(confidence)_b|``
+    over ``bins`` equal-width bins of the top probability (``n_b`` the weight in bin ``b``).
 
     Parameters
     ----------
@@ -80,22 +68,12 @@ def expected_calibration_error(probs: np.ndarray, hit: np.ndarray, bins: int = E
     hit : (n,) or (n, C) ndarray
         Whether (or how often) the most probable class was right: (n,) values in [0, 1], or an
         (n, C) true distribution of the outcome (its entry at the predicted class is taken).
-
     weights : (n,) ndarray, optional
         Weight of each prediction (default: equal).
     debiased : bool
-        For ``hit`` drawn once per prediction (0 or 1): a bin's ``|mean(hit) - mean(conf)|`` then
-        carries the binomial noise of its few outcomes, which inflates the error of a perfectly
-        calibrated model. Take instead the square root
-        of the plug-in squared gap less its sampling variance ``a_b (1 - a_b) / (n_b - 1)``,
-        floored at 0 (the debiased estimator of Kumar, Liang and Ma 2019, "Verified uncertainty
-        calibration"; ``n_b`` the bin's effective sample size under ``weights``).
-
-    Returns
-    -------
-    float
-        ``sum_b n_b / n |mean(hit)_b - mean(confidence)_b|`` over ``bins`` equal-width bins of the
-        top probability (``n_b`` the weight in bin ``b``).
+        For ``hit`` drawn once per prediction: the square root of the plug-in squared gap less
+        its sampling variance ``a_b (1 - a_b) / (n_b - 1)``, floored at 0 (Kumar, Liang and Ma
+        2019, "Verified uncertainty calibration").
     """
     p = np.asarray(probs, float)
     conf = p.max(axis=1)
@@ -128,25 +106,12 @@ def _own_index(model, names: list[str], combos: list[tuple]) -> int:
 
 def choose_calibration(scores: np.ndarray, weights: np.ndarray,
                        own: tuple[int, ...], margin: float = SE_MARGIN) -> tuple[int, ...]:
-    """The calibration to keep, from each candidate's held-out scores (lower is better).
+    """The calibration to keep, from each candidate's held-out scores ``scores``
+    (*candidates, n) (lower is better) and the touches' ``weights`` (n,).
 
-    Parameters
-    ----------
-    scores : (*candidates, n) ndarray
-        Score of every held-out touch under every candidate calibration.
-    weights : (n,) ndarray
-        Weight of each touch, summing to one.
-    own : tuple of int
-        Index of the model's own (uncalibrated) settings among the candidates.
-    margin : float
-        Standard errors by which a candidate must beat ``own``.
-
-    Returns
-    -------
-    tuple of int
-        Index of the candidate with the best weighted mean score among those that beat ``own``
-        by more than ``margin`` standard errors of the paired difference (the same touches scored
-        twice), or ``own`` when none does.
+    Returns the index of the candidate with the best weighted mean score among those that beat
+    ``own`` (the model's own settings) by more than ``margin`` standard errors of the paired
+    difference, or ``own`` when none does.
     """
     shape = scores.shape[:-1]
     b = scores.reshape(-1, scores.shape[-1])
@@ -236,16 +201,13 @@ def assess(full_model, actions: np.ndarray, perceived: np.ndarray, *,
     Parameters
     ----------
     full_model : ModelBase
-        The model fitted on every sample; each fold's model is a clone of it (same class and
-        settings) fitted on the other folds.
+        The model fitted on every sample; each fold's model is a clone of it.
     actions, perceived : (n, 2), (n, D) ndarrays
         The samples (where the robot felt it touched, what it heard).
     rng : numpy.random.Generator
         Assigns samples to folds.
     calibrate : bool
-        Choose the calibration parameters, if the model has any (:func:`choose_calibration`):
-        those read at prediction time (``calibration_grid()``, set on a copy) and those of the
-        fit (``fit_grid()``, the model is refitted with the chosen values).
+        Choose the calibration parameters, if the model has any (:func:`choose_calibration`).
 
     Returns
     -------

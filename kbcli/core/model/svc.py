@@ -1,32 +1,13 @@
-"""A general learned model of the instrument on scikit-learn: pairwise support-vector machines.
+"""The ``svc`` model class: pairwise support-vector machines, for keys of any shape.
 
-M_INST = p(sound, action) for keys of any shape (the ``svc`` model class; ``lines``,
-:mod:`kbcli.core.model.lines`, assumes straight key edges). From the exploration samples alone the
-model
-
-1. **finds the sound classes** as ``lines`` does (:func:`~kbcli.core.model.sounds.discover_classes`;
-   class 0 is silence);
-2. **finds the neighbouring sounds**: Delaunay edges of the samples whose ends were heard as two
-   different sounds (:func:`~kbcli.core.model.sounds.straddling_edges`);
-3. **fits one** :class:`~sklearn.svm.SVC` **per pair of neighbouring sounds** on the pair's samples
-   within ``local_radius`` px of their straddling edges: a hard-margin *linear* machine when a line
-   separates them (``linear_pairs``), else, when a circle does and one sound is an island in the
-   other (:data:`ISLAND`; ``circle_pairs``), a hard-margin machine on ``(u, v, u^2 + v^2)``, else an
-   RBF kernel of length scale ``length_scale`` px with a near-hard margin ``C``;
-4. **reads probabilities off the margin**: each pair (i, j) among the sounds of an action's
-   ``n_neighbors`` nearest samples contests it with ``p(a on j's side) = Phi(sqrt(3) f(a))``, f the
-   decision value (the boundary taken as uniform within the margin); a candidate's log-score sums
-   its contests and p(sound | a) is their softmax. Where every neighbour was heard as one sound,
-   that sound is certain; beyond half a length scale from a machine's samples its decision fades
-   into the nearest-sample rule.
-
-:meth:`SVCModel.boundary_sites` gives active exploration (:mod:`kbcli.core.model.explore`) points on
-the predicted boundaries, each with the width of the band the boundary is known to lie in. Defaults
-and how they were chosen: ``docs/design-notes.md``, Model classes.
-
-Storage without pickle: :meth:`SVCModel.to_arrays` keeps the samples, the classes and the
-hyper-parameters; :meth:`SVCModel.from_arrays` refits the machines deterministically. The estimator
-is a scikit-learn one (:class:`~kbcli.core.model.pairwise.ModelBase`).
+From the exploration samples alone: the sound classes as ``lines`` finds them; the neighbouring
+sounds from the straddling Delaunay edges (:func:`~kbcli.core.model.sounds.straddling_edges`);
+one :class:`~sklearn.svm.SVC` per pair of neighbouring sounds on the pair's samples within
+``local_radius`` px of their edges (hard-margin linear when a line separates them, a hard-margin
+circle when one sound is an island in the other, else RBF). A pair's contest at an action is
+``Phi(sqrt(3) f(a))``, f the decision value; far from a machine's samples it fades into the
+nearest-sample rule. Storage keeps the samples and hyper-parameters; loading refits
+deterministically. Defaults: ``docs/design-notes.md``, Model classes.
 """
 
 from __future__ import annotations
@@ -50,8 +31,7 @@ _SQRT3 = float(np.sqrt(3.0))
 _EDGE_STEPS = 17  # points along a straddling edge where the boundary site is looked for
 SITE_GRID = 2.0  # px, grid on which boundary sites between straddling edges are looked for
 #: a sound whose straddling edges are at least this share with one other sound is an island in
-#: it (a pad in silence; early on a few edges cross the gap to the next pad): their pair may get a
-#: circle machine (0.75 rather than 0.9: ``docs/design-notes.md``, Model classes)
+#: it (a pad in silence): their pair may get a circle machine (``docs/design-notes.md``)
 ISLAND = 0.75
 _HARD_C = 1e6  # margin penalty of a pair's linear machine: a hard margin (its samples separate)
 
@@ -68,9 +48,7 @@ def _separable(x: np.ndarray, y: np.ndarray) -> bool:
 
 class _CircleMachine:
     """A hard-margin linear machine on the features ``(u, v, u^2 + v^2)`` of points (in length
-    scales, relative to the centre of its samples): its boundary is a circle (or a straight line,
-    its limit). Near a circle the feature-space margin is the geometric one times about twice the
-    radius, the same all round, so the circle runs midway between the samples on either side."""
+    scales, relative to the centre of its samples): its boundary is a circle (or a line)."""
 
     def __init__(self, centre: np.ndarray) -> None:
         self.centre_ = np.asarray(centre, float)
@@ -130,19 +108,13 @@ class SVCModel(ModelBase):
         their straddling edges' ends.
     n_neighbors : int
         Samples looked at around an action to find the sounds it could make.
-    linear_pairs : bool
-        Fit a hard-margin linear machine to a pair whose samples a straight line separates (else,
-        and for every pair when False, the RBF one). Models stored before this option existed
-        load with False, their predictions unchanged.
-    circle_pairs : bool
-        Fit a hard-margin machine with a circular boundary to a pair whose samples a circle
-        separates and no line does, one sound an island in the other (:class:`_CircleMachine`).
-        Models stored before this option existed load with False, their predictions unchanged.
+    linear_pairs, circle_pairs : bool
+        Fit a hard-margin linear machine to a pair whose samples a line separates, a circular one
+        to a pair one of whose sounds is an island in the other and a circle separates (else the
+        RBF one). Models stored before these options existed load with False.
 
     Attributes
     ----------
-    class_features_, actions_, labels_, reach_sd_
-        As every class (:class:`~kbcli.core.model.pairwise.ModelBase`).
     pairs_ : (P, 2) int ndarray
         The neighbouring pairs of classes (lower first) that have a machine.
     edges_ : (m, 2) int ndarray
@@ -214,9 +186,7 @@ class SVCModel(ModelBase):
 
     def _pair_machine(self, x: np.ndarray, y: np.ndarray, island: bool = False) -> SVC:
         """A pair's machine on its samples ``x`` (in length scales) of labels ``y`` in {0, 1}:
-        a hard-margin linear one when a straight line separates them (``linear_pairs``), else,
-        when one of the two sounds is an island in the other (``island``: a pad in silence), a
-        hard-margin circle when one separates them (``circle_pairs``), else the RBF one."""
+        linear, circle (``island``) or RBF, as the class docstring says."""
         if self.linear_pairs and y.min() < y.max() and _separable(x, y):
             svm = SVC(kernel="linear", C=_HARD_C).fit(x, y)
             if np.all((2 * y - 1) * svm.decision_function(x) > 0):
@@ -231,12 +201,9 @@ class SVCModel(ModelBase):
 
     # -- the pairwise contests ------------------------------------------------------------------
     def _decision(self, code: int, q: np.ndarray) -> np.ndarray:
-        """(n,) the pair's decision value: > 0 on the higher class's side, +-1 on the margin.
-
-        Far from the samples it was fitted on, a machine only extrapolates its intercept: its
-        decision fades (weight ``exp(-2 d^2 / length_scale^2)``, d the distance to the nearest of
-        them, beyond half a length scale) into the nearest-sample rule
-        ``(d_lower - d_higher) / length_scale``.
+        """(n,) the pair's decision value: > 0 on the higher class's side, +-1 on the margin;
+        beyond half a length scale from its samples it fades (weight ``exp(-2 d^2 /
+        length_scale^2)``) into the nearest-sample rule ``(d_lower - d_higher) / length_scale``.
         """
         f = self._pairs[code].decision_function(q / self.length_scale)
         both, lo, hi = self._support[code]
@@ -258,14 +225,10 @@ class SVCModel(ModelBase):
     # -- exploration ----------------------------------------------------------------------------
     def boundary_sites(self, step: float = 1.0, extend: float = 25.0,
                        phase: float = 0.0) -> dict[str, np.ndarray]:
-        """Where the model places each boundary, and how uncertain it is there.
-
-        Sites: on every straddling edge, the point where its pair's machine changes sign (the
-        edge's midpoint when it does not); and between those, wherever the predicted class changes
-        between two neighbouring cells of a 2 px grid over the working area (shifted by ``phase``
-        in [0, 1) of a cell). ``width`` is the distance from a site to the nearest sample of either
-        of its two sounds, summed: the band the boundary is known to lie in there. (``step`` and
-        ``extend`` are accepted for the ``lines`` model's signature.)
+        """Boundary sites: on every straddling edge, where its pair's machine changes sign (the
+        midpoint when it does not), and where the predicted class changes on a 2 px grid
+        (shifted by ``phase``); ``width`` is the distance to the nearest sample of either sound,
+        summed. ``step`` and ``extend`` are accepted for the ``lines`` model's signature.
 
         Returns
         -------
@@ -300,8 +263,7 @@ class SVCModel(ModelBase):
 
     # -- storage --------------------------------------------------------------------------------
     def to_arrays(self) -> dict[str, np.ndarray]:
-        """The fitted model as named arrays: the samples, their classes and the hyper-parameters
-        (:meth:`from_arrays` refits the machines, deterministically)."""
+        """The fitted model as named arrays (:meth:`from_arrays` refits, deterministically)."""
         self._check_fitted()
         return self._arrays(
             pairs=self.pairs_.copy(),
@@ -317,8 +279,7 @@ class SVCModel(ModelBase):
 
     @classmethod
     def from_arrays(cls, d: dict) -> SVCModel:
-        """Rebuild a fitted model from :meth:`to_arrays` output (the same predictions: the
-        machines are refitted on the stored samples; nothing is unpickled)."""
+        """Rebuild a fitted model from :meth:`to_arrays` output (nothing is unpickled)."""
         model = cls._from_stored(d, "svc", _stored_params)
         if "pairs" in d and not np.array_equal(np.asarray(d["pairs"]).reshape(-1, 2),
                                                model.pairs_):

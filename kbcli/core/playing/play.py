@@ -1,11 +1,8 @@
 """Playing a melody in a loop with the learned model (paper Sect. III-A, Algorithm 1).
 
-At each step the robot samples an action from p(action | sound) for the current note (line 10),
-reaches and hears a sound: a MATCH (0) moves on to the next note, looping after the last (lines
-4-6); a NO_MATCH (1) restarts from note 0 (lines 7-9). A MATCH means the heard sound matches (Eq. 2,
-:func:`kbcli.core.instrument.keyboard.match`) a note *with the aimed note's sound*: the paper's
-melody repeats notes, and Sect. III-C counts an action as successful only if it produced the
-expected sound. The robot side only gets a ``touch`` callback (:meth:`kbcli.sim.World.touch`).
+Each step samples an action from p(action | sound) for the current note (line 10): a MATCH (0),
+the heard sound matching (Eq. 2) a note with the aimed note's sound, moves on to the next note,
+looping after the last (lines 4-6); a NO_MATCH (1) restarts from note 0 (lines 7-9).
 """
 
 from __future__ import annotations
@@ -31,24 +28,10 @@ Touch = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 class PlayStep:
     """One step of Algorithm 1.
 
-    Attributes
-    ----------
-    step : int
-        Step number, from 0.
-    target : int
-        Index in the melody of the note aimed for.
-    cls : int
-        The model's sound class of that note (the class the action was sampled from).
-    action : (2,) ndarray
-        Target finger position sent to the arm.
-    landed : (2,) ndarray
-        Where the finger landed (proprioception).
-    perceived : (D,) ndarray
-        Heard features (NaN for silence).
-    heard : int
-        Index of the best-matching melody note (Eq. 2), -1 if none is within the threshold.
-    result : int
-        :data:`MATCH` (0) or :data:`NO_MATCH` (1): the history value H of Sect. III-C.
+    ``target`` is the melody index aimed for, ``cls`` its sound class, ``action`` the finger
+    target sent, ``landed`` where it landed, ``perceived`` the heard features (NaN: silence),
+    ``heard`` the best-matching note (Eq. 2; -1: none) and ``result`` :data:`MATCH` or
+    :data:`NO_MATCH` (the history value H of Sect. III-C).
     """
 
     step: int
@@ -62,15 +45,8 @@ class PlayStep:
 
 
 def note_classes(model, melody: Melody) -> np.ndarray:
-    """The model's sound class of each melody note, matched by pitch.
-
-    The robot knows the notes it wants by name; its model knows sound classes by their features.
-    A note's class is the one whose pitch is nearest to the note's, within the model's match
-    threshold.
-
-    Returns
-    -------
-    (N,) int ndarray
+    """(N,) int: the model's sound class of each melody note, the class nearest in pitch within
+    the model's match threshold.
 
     Raises
     ------
@@ -92,23 +68,10 @@ def note_classes(model, melody: Melody) -> np.ndarray:
 
 
 def play(model, melody: Melody, touch: Touch, *, rng: np.random.Generator) -> Iterator[PlayStep]:
-    """Play ``melody`` in a loop forever (Algorithm 1); take as many steps as needed.
+    """Play ``melody`` in a loop forever (Algorithm 1), yielding a :class:`PlayStep` per touch.
 
-    Parameters
-    ----------
-    model : SoundModel
-        The robot's model of the instrument (:class:`kbcli.core.model.base.SoundModel`).
-    melody : Melody
-        The notes to play, looped.
-    touch : callable
-        ``touch(actions (1, 2)) -> (landed (1, 2), perceived (1, D))``: the only contact with the
-        world.
-    rng : numpy.random.Generator
-        Draws the actions.
-
-    Yields
-    ------
-    PlayStep
+    ``touch(actions (1, 2)) -> (landed (1, 2), perceived (1, D))`` is the only contact with the
+    world; ``rng`` draws the actions.
     """
     classes = note_classes(model, melody)
     sounds = np.asarray(model.class_features_, float)[classes]  # (N, D) expected sounds
@@ -131,28 +94,23 @@ def play(model, melody: Melody, touch: Touch, *, rng: np.random.Generator) -> It
 
 def expected_failure_rate(model, keyboard, melody: Melody, family: str, params: np.ndarray | None,
                           *, rng: np.random.Generator, n_samples: int = 400) -> np.ndarray:
-    """Long-run NO_MATCH rate of Algorithm 1 with the keyboard at each given pose (evaluation side).
+    """Long-run NO_MATCH rate of Algorithm 1 with the keyboard at each pose (evaluation side).
 
-    For each note, the probability ``f_i`` that an action drawn from the model for that note does not
-    land on the note's key of the displaced keyboard is estimated from ``n_samples`` draws (common to
-    all poses, ideal reaching, no perception noise). The player is a Markov chain over melody notes
-    (success: ``i -> i + 1 mod N``, failure: ``i -> 0``); its stationary distribution ``pi`` weights
-    the notes: the rate is ``sum_i pi_i f_i``.
+    Each note's failure probability ``f_i`` is estimated from ``n_samples`` model draws (common to
+    all poses, ideal reaching); the player's Markov chain over notes (success ``i -> i + 1 mod N``,
+    failure ``i -> 0``) has stationary distribution ``pi``: the rate is ``sum_i pi_i f_i``.
 
     Parameters
     ----------
     keyboard : Keyboard
-        The true instrument (uses its geometry, so this is for benchmarks and evaluation only).
-    family : str
-        Transform family of ``params``.
+        The true instrument (its geometry: for benchmarks and evaluation only).
     params : (H, P) ndarray or None
-        Poses; None for the reference pose only.
+        Poses in ``family``; None for the reference pose only.
 
     Returns
     -------
     (H,) ndarray (``(1,)`` for ``params=None``)
     """
-    from kbcli.core.instrument import transforms
 
     classes = note_classes(model, melody)
     n = len(melody)
@@ -186,38 +144,23 @@ def replay(model, melody: Melody, touch: Touch, *, rng: np.random.Generator, n_n
            ) -> np.ndarray:
     """Play ``n_notes`` touches of Algorithm 1 and return their history (vectorised).
 
-    The same rules as :func:`play` (sample an action for the aimed note, touch, match the heard
-    sound with Eq. 2; MATCH moves on to the next note, NO_MATCH restarts from note 0), with the
-    touches batched: for each sound class, ``chunk`` actions are drawn and touched at once, and the
-    note sequence consumes them in order (a class's next chunk is drawn when its actions run out).
-    The draws are i.i.d., so this is Algorithm 1 exactly, except that in ``dynamics`` mode the arm
-    reaches a class's batch one after the other rather than in the order of the melody (each reach
-    starts from where the previous one ended).
+    The rules of :func:`play`, with the touches batched: ``chunk`` actions per sound class are
+    drawn and touched at once and consumed in order. The draws are i.i.d., so this is Algorithm 1
+    exactly, except that in ``dynamics`` mode a class's batch is reached in a row.
 
     Parameters
     ----------
-    touch : callable
-        ``touch(actions (n, 2)) -> (landed (n, 2), perceived (n, D))``.
-    n_notes : int
-        Touches to play.
     correction : (P,) ndarray, optional
-        The robot's estimate of the displacement: every sampled action ``a`` is sent as
-        ``T_correction(a)`` (as :mod:`kbcli.core.playing.loop` resumes after adapting). None: no correction.
-    family : str
-        Transform family of ``correction``.
-    centre : (2,) ndarray, optional
-        Rotation centre of the family (default: the centre of the model's working area).
+        The robot's estimate of the displacement (in ``family``, about ``centre``, default the
+        working area's centre): every sampled action ``a`` is sent as ``T_correction(a)``.
     sampler : callable, optional
-        ``sampler(cls, n, rng) -> (n, 2)`` draws from p(action | sound) (Algorithm 1, line 10);
-        default ``model.sample_actions``. A pool of draws made once per class, resampled (e.g.
-        :meth:`kbcli.core.adaptation.posteriors.kde.samples.ActionSamples.draw`), saves the model's rejection sampling in
-        repeated replays.
+        ``sampler(cls, n, rng) -> (n, 2)`` draws from p(action | sound) (default
+        ``model.sample_actions``).
 
     Returns
     -------
     (n_notes,) int ndarray
-        :data:`MATCH` (0) or :data:`NO_MATCH` (1) per touch; the success rate is
-        ``mean(history == MATCH)``.
+        :data:`MATCH` (0) or :data:`NO_MATCH` (1) per touch.
     """
     if n_notes < 1:
         raise ConfigError(f"n_notes must be >= 1, got {n_notes}")

@@ -1,12 +1,9 @@
 """The posterior over the keyboard's displacement: Eq. 8, the product of per-observation terms, on
 a hypothesis grid, in log space (paper Sect. III-D, Algorithm 2).
 
-The prior is uniform over the hypothesis grid (:mod:`kbcli.core.adaptation.grid`). The posterior
-(:class:`Posterior`, immutable: ``update`` returns a new one) holds the normalised log-probability
-of every cell, a sum of per-observation log terms (the kinds registered in
-:mod:`kbcli.core.adaptation.posteriors`), exact on the grid and normalised by :func:`log_normalise`.
-Estimates: the maximum-likelihood cell, the posterior mean, the entropy in nats (``log G`` for the
-prior: compare at equal grids) and the mass within a radius.
+The prior is uniform over the grid; :class:`Posterior` (immutable) holds the normalised
+log-probability of every cell. Estimates: the maximum-likelihood cell, the mean, the entropy in
+nats (``log G`` for the prior) and the mass within a radius.
 """
 
 from __future__ import annotations
@@ -19,32 +16,16 @@ from kbcli.core.adaptation.grid import HypothesisGrid
 
 
 def log_normalise(logw: np.ndarray, axis: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Normalise log weights: ``(logw - logsumexp(logw), exp(logw - logsumexp(logw)))``.
+    """Normalise log weights: ``(logw - logsumexp(logw), exp(logw - max) / sum)`` along ``axis``
+    (None: the whole array); ``logw`` needs a finite maximum.
 
-    The one log-sum-exp of the adaptation (the posterior, ``active``'s simulated updates).
-    Hand-written rather than ``scipy.special.logsumexp`` because the probabilities must be
-    ``exp(logw - max) / sum`` exactly, as every stored artifact was computed: scipy's
-    ``exp(logw - lse)`` differs in the last bit, and is slower on the posterior's hot path
-    (``docs/design-notes.md``).
-
-    Parameters
-    ----------
-    logw : ndarray
-        Log weights, with a finite maximum (along ``axis``).
-    axis : int, optional
-        Normalise along this axis (None: over the whole array).
+    Hand-written rather than ``scipy.special.logsumexp``: the probabilities must be ``exp(logw -
+    max) / sum`` exactly, as every stored artifact was computed (scipy differs in the last bit).
 
     Raises
     ------
     ValueError
         When no weight is finite (``axis`` None).
-
-    Returns
-    -------
-    logp : ndarray of ``logw.shape``
-        Normalised log-probabilities.
-    p : ndarray of ``logw.shape``
-        ``exp(logp)``, computed as ``exp(logw - max) / sum``.
     """
     if axis is None:
         m = float(np.max(logw))
@@ -125,8 +106,7 @@ class Posterior:
     def entropies_after(self, terms: np.ndarray) -> np.ndarray:
         """(k,) the entropy (nats) of the posterior updated with each of ``k`` terms
         ``(k, *grid.shape)``: ``update(terms[i]).entropy()`` bit for bit, without building the
-        posteriors (one term at a time through two reused buffers, which stay in cache; a row's
-        sum adds pairwise like the 1-D sum of :func:`log_normalise`)."""
+        posteriors."""
         k = len(terms)
         flat = self.logp.reshape(-1)
         rows = np.asarray(terms, float).reshape(k, -1)
@@ -220,17 +200,9 @@ class Posterior:
 
     def sample_hypotheses(self, k: int, rng: np.random.Generator,
                           tol: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
-        """A weighted set of at most ``k`` cells standing for the posterior.
-
-        The support itself (exact weights) when it has at most ``k`` cells; otherwise ``k``
-        systematic-resampling draws from it, merged into distinct cells weighted by their counts.
-
-        Returns
-        -------
-        index : (m,) int ndarray
-            Flat cell indices, m <= k.
-        weights : (m,) ndarray
-            Summing to one.
+        """A weighted set of at most ``k`` cells standing for the posterior: ``(index, weights)``,
+        flat cell indices and weights summing to one. The support itself when it has at most
+        ``k`` cells, else ``k`` systematic-resampling draws from it merged into distinct cells.
         """
         sup = self.support(tol)
         p = self.probs.reshape(-1)[sup]

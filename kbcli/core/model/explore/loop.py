@@ -45,26 +45,12 @@ Touch = Callable[[np.ndarray, np.random.Generator], tuple[np.ndarray, np.ndarray
 
 
 class Exploration:
-    """Learn the instrument by reaching: an iterator over batches (propose, touch, refit).
+    """Learn the instrument by reaching: an iterator of :class:`ExploreStep` over batches
+    (propose, touch, refit) until ``cfg.budget`` reaches are done; the model is refitted only
+    when a strategy or the caller asks for it.
 
-    The model is refitted lazily: only when a strategy or the caller asks for it.
-
-    Parameters
-    ----------
-    cfg : ExploreConfig
-    touch : callable
-        ``touch(targets (k, 2), rng) -> (landed (k, 2), perceived (k, D))``: the world
-        (:meth:`kbcli.sim.World.touch`).
-    area : tuple of float
-        (xmin, ymin, xmax, ymax) working area in which targets are chosen.
-    match_threshold : float
-        Eq. 2 threshold used to tell sounds apart.
-    rng : numpy.random.Generator
-
-    Yields
-    ------
-    ExploreStep
-        After each batch, until ``cfg.budget`` reaches are done.
+    ``touch(targets (k, 2), rng) -> (landed (k, 2), perceived (k, D))`` is the world; targets are
+    chosen in the working ``area``; ``match_threshold`` tells sounds apart (Eq. 2).
 
     Attributes
     ----------
@@ -73,8 +59,8 @@ class Exploration:
     perceived : (n, D) ndarray
         Every sound heard so far.
     explorer : str
-        The model class refitted now (``cfg.model_class``; under ``auto`` re-chosen every
-        :data:`~kbcli.core.model.select.RESELECT` reaches, after the batch that reaches each multiple).
+        The model class refitted now (under ``auto`` re-chosen every
+        :data:`~kbcli.core.model.select.RESELECT` reaches).
     explorers : list of (int, str)
         Each class explored with and the number of reaches from which it was.
     """

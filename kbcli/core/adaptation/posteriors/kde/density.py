@@ -1,18 +1,11 @@
 """The KDE term of one observation (the paper's Eq. 7, Algorithm 2).
 
-Draw ``N`` actions ``a_i ~ p(action | s_t)`` from the model, map each onto ``a_t`` with
-``computeTransform`` (:func:`kbcli.core.instrument.transforms.translation_mapping`; for the rigid
-family, once per grid angle), bin the hypotheses linearly onto the grid and convolve with a
-separable Gaussian kernel by FFT (:func:`binned_kde`), mix with a uniform floor of weight ``eps``
-(``kde_floor``, :func:`floored_log`) and take the log. The samples do not depend on the posterior,
-so they can be drawn once per sound class (:class:`ActionSamples`, ``kde_draw = "shared"``) or anew
-for every observation as Algorithm 2 writes (``"fresh"``,
-:class:`kbcli.core.adaptation.posteriors.kde.samples.FreshSamples`).
-
-The bandwidth: :func:`~kbcli.core.adaptation.posteriors.kde.samples.scott_bandwidth`; each angle
-slice is its own 2-D KDE. As in Algorithm 2, actions for a silence are drawn from the model's
-working area only, so hypotheses that put the touch beyond it get the floor, not the silence they
-would in fact give.
+Draw ``N`` actions ``a_i ~ p(action | s_t)``, map each onto ``a_t`` with ``computeTransform``
+(:func:`kbcli.core.instrument.transforms.translation_mapping`; rigid family: once per grid angle),
+bin the hypotheses onto the grid, convolve with a Gaussian kernel by FFT (:func:`binned_kde`), mix
+with a uniform floor of weight ``eps`` (:func:`floored_log`) and take the log. As in Algorithm 2,
+silence's actions come from the working area only: hypotheses that put the touch beyond it get the
+floor.
 """
 
 from __future__ import annotations
@@ -45,14 +38,10 @@ def binned_kde(points: np.ndarray, x0: float, y0: float, res: float, n: int,
                bandwidth: float | np.ndarray) -> np.ndarray:
     """Gaussian KDE of 2-D points on an ``n x n`` grid by linear binning and FFT convolution.
 
-    ``density[..., i, j] ~= mean_k N((x0 + j res, y0 + i res); points[..., k, :], bandwidth^2 I)``,
-    the direct sum of the paper's Eq. 7 (with a Gaussian ``K``). Points are linearly binned onto the
-    grid widened by the kernel's reach (``4 bandwidth``, so points just outside the grid still count)
-    and convolved with the kernel by ``scipy.fft`` (O(G log G); the Gaussian is separable: real
-    1-D FFTs along the rows that hold points, then along the ``n`` inner columns). The kernel is
-    truncated at 4 standard deviations. Sets of points that share a kernel reach are binned and
-    transformed together (one ``bincount``, batched FFTs), each with its own bandwidth: the same
-    numbers as one call per set.
+    ``density[..., i, j] ~= mean_k N((x0 + j res, y0 + i res); points[..., k, :], bandwidth^2 I)``
+    (Eq. 7 with a Gaussian ``K``), the kernel truncated at 4 standard deviations; points just
+    outside the grid still count. Sets of points that share a kernel reach are binned and
+    transformed together, each with its own bandwidth: the same numbers as one call per set.
 
     Parameters
     ----------
@@ -154,30 +143,10 @@ def kde_term(grid: HypothesisGrid, model, action: np.ndarray, cls: int,
              bandwidth: float | None = None, max_bandwidth: float = 4.0,
              samples: ActionSamples | None = None) -> tuple[np.ndarray, float]:
     """``log KDE_t(h)`` of Algorithm 2 / Eq. 7 on the grid, with the floor ``eps`` (0: none;
-    :func:`floored_log`).
+    :func:`floored_log`), and the bandwidth used (px).
 
-    Parameters
-    ----------
-    model : SoundModel
-        ``sample_actions(cls, n, rng)`` draws from p(action | sound).
-    action : (2,) ndarray
-        Where the finger touched.
-    cls : int
-        The perceived sound class (0: silence, itself an observation).
-    rng : numpy.random.Generator, optional
-        Draws fresh samples when no ``samples`` cache is given.
-    n_samples : int
-        N, actions drawn from the model (ignored with ``samples``: the cache's N).
-    bandwidth : float, optional
-        Kernel std in px; None: the rule in the module docstring.
-    samples : ActionSamples, optional
-        Per-class samples drawn once (:class:`ActionSamples`); the fast path.
-
-    Returns
-    -------
-    logkde : ndarray of ``grid.shape``
-    bandwidth : float
-        The bandwidth used, px.
+    The samples are ``samples``' (per-class, drawn once) or, without them, ``n_samples`` fresh
+    draws of ``model.sample_actions`` with ``rng``; ``bandwidth`` None: Scott's rule.
     """
     res = grid.resolution
     if samples is not None:
@@ -195,24 +164,9 @@ def kde_term(grid: HypothesisGrid, model, action: np.ndarray, cls: int,
 
 def kde_terms(grid: HypothesisGrid, actions: np.ndarray, drawn: np.ndarray,
               bandwidths, eps: float) -> np.ndarray:
-    """The log KDE terms of several touches at once (:func:`kde_term` once the samples are drawn).
-
-    Parameters
-    ----------
-    actions : (k, 2) ndarray
-        Where each touch was read.
-    drawn : (k, N, 2) ndarray
-        Each touch's samples of p(action | its sound).
-    bandwidths : sequence of k floats
-        Each touch's kernel std, px.
-    eps : float
-        The floor (:func:`floored_log`).
-
-    Returns
-    -------
-    (k, *grid.shape) ndarray
-        The same numbers as one :func:`kde_term` per touch.
-    """
+    """(k, *grid.shape): the log KDE terms of touches at ``actions`` (k, 2), each with its
+    samples ``drawn`` (k, N, 2) and kernel std ``bandwidths`` (k,): the same numbers as one
+    :func:`kde_term` per touch."""
     a = np.asarray(actions, float)
     drawn = np.asarray(drawn, float)
     k = len(a)

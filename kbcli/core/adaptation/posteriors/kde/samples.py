@@ -1,15 +1,10 @@
 """Samples of p(action | sound) for the KDE posterior (Algorithm 2, line 3) and their bandwidth.
 
 :class:`ActionSamples` draws each sound's ``N`` actions once and reuses them (``kde_draw =
-"shared"``); :class:`FreshSamples` draws them anew at every observation (Algorithm 2 as written,
-``"fresh"``); both answer ``get(cls) -> (samples (N, 2), bandwidth px)``. The source is the model's
-own sampler or its raster (:class:`~kbcli.core.model.sampling.RasterSampler`). Beyond the working
-area the pad is silent, which neither sampler knows: :class:`SilentBeyond` adds that ring to
-silence's samples (``kde_beyond = "silent"``, kbcli's reading of what the paper leaves open).
-
-Bandwidth rule (:func:`scott_bandwidth`): Scott's ``sigma_hat * N^(-1/6)`` (d = 2) with
-Silverman's robust spread ``sigma_hat = min(std, IQR / 1.349)`` averaged over both axes, clipped
-to ``[resolution, max_bandwidth]``.
+"shared"``); :class:`FreshSamples` draws them anew at every observation (``"fresh"``); both answer
+``get(cls) -> (samples (N, 2), bandwidth px)``. :class:`SilentBeyond` adds the silent pad beyond
+the working area to silence's samples (``kde_beyond = "silent"``). Bandwidth: Scott's rule
+(:func:`scott_bandwidth`) clipped to ``[resolution, max_bandwidth]``.
 """
 
 from __future__ import annotations
@@ -27,11 +22,8 @@ MAX_BANDWIDTH, KERNEL_REACH = 4.0, 4.0
 
 def scott_bandwidth(samples: np.ndarray) -> float:
     """Scott's rule for a 2-D sample, ``sigma_hat * n^(-1/6)``, with Silverman's robust spread
-    ``sigma_hat = min(std, IQR / 1.349)`` averaged over both axes.
-
-    The spread is ``samples.std(axis=0)`` and ``numpy.percentile(samples, [75, 25], axis=0)``
-    bit for bit (:func:`_std_rows`, :func:`_percentile_rows`); the quartiles are skipped where
-    counting shows the IQR cannot be the smaller spread (:func:`_iqr_exceeds`).
+    ``sigma_hat = min(std, IQR / 1.349)`` averaged over both axes; bit for bit numpy's ``std`` and
+    ``percentile`` (the quartiles skipped where :func:`_iqr_exceeds` proves them unneeded).
     """
     s = np.asarray(samples, float)
     n = len(s)
@@ -51,12 +43,9 @@ def _iqr_exceeds(rows: np.ndarray, std: np.ndarray) -> bool:
     :func:`_percentile_rows` computes the quartiles, proven by counting without them.
 
     Bounds ``L < U`` around each row's mean, 5 % further apart than ``1.349 std``: at least
-    ``hi25 + 1`` values at or below ``L`` put the order statistic ``x(hi25) <= L``, at least
-    ``n - lo75`` at or above ``U`` put ``x(lo75) >= U``. Where numpy's interpolation is monotone in
-    floating point (``q75 = a + d g`` with ``g < 0.5``, so ``q75 >= x(lo75)``; ``q25 = b - d (1 - g)``
-    with ``g >= 0.5``, or ``g = 0``, so ``q25 <= x(hi25)``), ``q75 - q25 >= U - L`` in floating point
-    too (subtraction and division are monotone). False when it cannot tell (the caller computes
-    the quartiles): other sample sizes, or a spread whose IQR may be the smaller.
+    ``hi25 + 1`` values at or below ``L`` put ``x(hi25) <= L``, at least ``n - lo75`` at or above
+    ``U`` put ``x(lo75) >= U``; where numpy's interpolation is monotone in floating point, then
+    ``q75 - q25 >= U - L``. False when it cannot tell (the caller computes the quartiles).
     """
     n = rows.shape[1]
     v75, v25 = (n - 1) * 0.75, (n - 1) * 0.25
@@ -115,27 +104,17 @@ def _percentile_rows(rows: np.ndarray, qs: tuple[float, ...]) -> list[np.ndarray
 class ActionSamples:
     """Samples of ``p(action | sound)`` per sound class, drawn once and reused (Algorithm 2, line 3).
 
-    The actions that produce a sound do not depend on the posterior, so Algorithm 2's
-    ``sampleFrom(p(a | s_t, M_INST))`` needs no fresh draw at every touch: each class's ``n_samples``
-    actions (and their bandwidth) are drawn the first time the class is heard and kept. Each class
-    draws from its own generator, ``default_rng(SeedSequence([seed, cls]))``, so the samples do not
-    depend on the order in which classes are heard: one cache can serve every run of a model (as the
-    evaluation does, per process) and still give the same numbers on any worker.
+    Each class's ``n_samples`` actions (and their bandwidth) are drawn the first time the class is
+    heard, from its own generator ``default_rng(SeedSequence([*seed, cls]))``: the samples do not
+    depend on the order classes are heard, so one cache can serve every run of a model.
 
     Parameters
     ----------
     model : SoundModel
         ``sample_actions(cls, n, rng)`` draws from p(action | sound).
-    n_samples : int
-        N, actions per class.
-    seed : int or sequence of int
-        Root of the per-class generators.
     bandwidth : float, optional
-        Kernel std in px for every class; None: the rule of the module docstring per class.
-    resolution : float
-        The hypothesis grid step (the bandwidth rule's lower clip).
-    max_bandwidth : float
-        The bandwidth rule's upper clip, px.
+        Kernel std in px for every class; None: the bandwidth rule per class, clipped to
+        ``[resolution, max_bandwidth]``.
     """
 
     def __init__(self, model, n_samples: int, seed, *, bandwidth: float | None = None,
@@ -154,11 +133,7 @@ class ActionSamples:
         if cls not in self._cache:
             rng = np.random.default_rng(np.random.SeedSequence([*self.seed, cls]))
             s = np.asarray(self.model.sample_actions(cls, self.n_samples, rng), float)
-            bw = self.bandwidth
-            if bw is None:
-                res = self.resolution
-                bw = float(np.clip(scott_bandwidth(s), res, max(res, self.max_bandwidth)))
-            self._cache[cls] = (s, float(bw))
+            self._cache[cls] = (s, _bandwidth(self, s))
         return self._cache[cls]
 
     def __len__(self) -> int:
@@ -172,26 +147,9 @@ class ActionSamples:
 
 
 class FreshSamples:
-    """The KDE terms' samples drawn anew at every call (Algorithm 2 as written).
-
-    Same interface as :class:`~kbcli.core.adaptation.posteriors.kde.samples.ActionSamples` (``get(cls) -> (samples, bandwidth)``),
-    but every :meth:`get` draws ``n_samples`` new actions from ``source`` with ``rng`` (the
-    adapter's own generator: the samples depend on the experiment's seed alone, differ between
-    experiments and between observations, and repeat exactly for the same seed).
-
-    Parameters
-    ----------
-    source : object
-        ``sample_actions(cls, n, rng)``: the model or a :class:`RasterSampler`.
-    n_samples : int
-        N, actions per term.
-    rng : numpy.random.Generator
-    bandwidth : float, optional
-        Kernel std in px; None: Scott's rule on each draw, clipped to
-        ``[resolution, max_bandwidth]`` (:mod:`kbcli.core.adaptation.posteriors.kde.density`).
-    resolution, max_bandwidth : float
-        The clip of the bandwidth rule, px.
-    """
+    """The KDE terms' samples drawn anew with ``rng`` at every :meth:`get` (Algorithm 2 as
+    written); the interface and parameters of :class:`ActionSamples`, ``source`` being the model
+    or a :class:`RasterSampler`."""
 
     def __init__(self, source, n_samples: int, rng: np.random.Generator, *,
                  bandwidth: float | None = None, resolution: float = 0.5,
@@ -209,32 +167,25 @@ class FreshSamples:
         """``(samples (N, 2), bandwidth px)``: N new draws of p(action | sound ``cls``)."""
         s = np.asarray(self.source.sample_actions(int(cls), self.n_samples, self.rng), float)
         self.draws += 1
-        bw = self.bandwidth
-        if bw is None:
-            res = self.resolution
-            bw = float(np.clip(scott_bandwidth(s), res, max(res, self.max_bandwidth)))
-        return s, float(bw)
+        return s, _bandwidth(self, s)
+
+
+def _bandwidth(samples, s: np.ndarray) -> float:
+    """``samples.bandwidth``, or the bandwidth rule on ``s`` clipped to ``[resolution,
+    max_bandwidth]``."""
+    if samples.bandwidth is not None:
+        return float(samples.bandwidth)
+    res = samples.resolution
+    return float(np.clip(scott_bandwidth(s), res, max(res, samples.max_bandwidth)))
 
 
 class SilentBeyond:
     """Draws of p(action | sound) where the pad beyond the working area is silent.
 
-    With a uniform prior over actions, ``p(action | silence)`` is proportional to
-    ``p(silence | action)``: the model's own answer inside its raster, 1 on the ring of width
-    ``margin`` px around it (the pad beyond the keyboard, reached by the hypotheses that move a
-    touch back by up to the prior's extent). Silence's ``n`` draws are split between the two by
-    their masses (a binomial draw): the ring's area, and the sum of ``p(silence | cell)`` times the
-    cell area over the raster. Every other sound is drawn by ``source`` unchanged.
-
-    Parameters
-    ----------
-    source : object
-        ``sample_actions(cls, n, rng)`` inside the working area: the model or a
-        :class:`RasterSampler`.
-    table : LikelihoodTable
-        The model raster: its extent and silence's mass in it.
-    margin : float
-        Width of the silent ring beyond the raster, px (0: ``source`` alone).
+    With a uniform prior, ``p(action | silence)`` is proportional to ``p(silence | action)``: the
+    model's inside its raster (``table``), 1 on the ring of width ``margin`` px around it. Silence's
+    ``n`` draws are split between the two by their masses (a binomial draw); every other sound is
+    drawn by ``source`` unchanged.
     """
 
     def __init__(self, source, table, margin: float) -> None:
@@ -283,8 +234,6 @@ def beyond_margin(grid, area: tuple[float, float, float, float], reach: float) -
     r = float(np.max(np.hypot(*(corners - np.asarray(grid.centre, float)).T)))
     turn = 2 * r * np.sin(np.radians(float(np.max(np.abs(grid.angles)))) / 2)
     return shift + float(turn) + float(reach)
-
-
 
 
 def beyond_source(source, options, table, grid, area: tuple[float, float, float, float]):

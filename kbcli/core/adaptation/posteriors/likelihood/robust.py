@@ -1,32 +1,17 @@
 """A posterior that learns how far to trust the model: Eq. 8 with model error marginalised.
 
-The plain likelihood posterior reads ``p(s_t | T_h^-1(a_t))`` from the model as if the model were
-the instrument. A learned model's boundaries can sit a few px off and a region can carry the wrong
-sound; trusting it, the posterior becomes overconfident and locks onto a wrong displacement. Here
-the observation model has two more unknowns, treated like the displacement itself:
-
-- a **boundary blur** ``sigma`` (px): the instrument is the model's map convolved with an isotropic
-  Gaussian of std ``sigma``;
-- an **outlier rate** ``eps``: with probability ``eps`` a touch's sound is uniform over the C
-  sounds.
+A learned model's boundaries can sit a few px off; trusting it, the plain posterior locks onto a
+wrong displacement. Here the observation model has two more unknowns, a **boundary blur**
+``sigma`` (px) and an **outlier rate** ``eps``:
 
 ``p(s | a, h, sigma, eps) = (1 - eps) [p_model * N(0, sigma^2)](s | T_h^-1 a) + eps / C``.
 
 Both live on a small grid (:data:`DEFAULT_BLURS`, :data:`DEFAULT_OUTLIERS`) with a uniform prior
-and are marginalised exactly, online: for every nuisance value ``k`` the posterior keeps
-``L_k(h) = sum_t log p(s_t | a_t, h, k)``, so
-
-``p(h | D) = sum_k pi_k exp(L_k(h)) / Z`` and ``p(k | D) = pi_k sum_h exp(L_k(h)) / Z``.
-
-The strategies plan with the model as the posterior currently believes it (:func:`planning_table`:
-the map blurred by the most probable ``sigma``, floored at the most probable ``eps``).
-
-**A learning rate for a weak model.** After ``n`` touches the log-likelihood is multiplied by
-``zeta_n = alpha / (alpha + n)`` (the coarsened posterior of Miller and Dunson 2019), so the
-posterior is never sharper than about ``alpha`` touches' worth. ``alpha`` follows from the model's
-cross-validated boundary error ``b`` (:func:`kbcli.core.adaptation.config.learning_rate`) through
-the rate reached at ``HORIZON`` touches, ``eta = min(1, (TEMPER_PX / b)^2)``, as
-``alpha = HORIZON eta / (1 - eta)``; ``eta = 1`` is plain Bayes (why: ``docs/design-notes.md``).
+and are marginalised exactly, online: for every nuisance value ``k`` the posterior keeps ``L_k(h)
+= sum_t log p(s_t | a_t, h, k)``. After ``n`` touches the log-likelihood is multiplied by
+``zeta_n = alpha / (alpha + n)`` (the coarsened posterior of Miller and Dunson 2019), ``alpha =
+HORIZON eta / (1 - eta)`` for the learning rate ``eta`` (1: plain Bayes;
+:func:`kbcli.core.adaptation.config.learning_rate`).
 """
 
 from __future__ import annotations
