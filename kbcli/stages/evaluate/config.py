@@ -11,15 +11,7 @@ from typing import Annotated, Any, ClassVar
 from pydantic import AfterValidator, Field, InstanceOf, field_validator, model_validator
 
 from kbcli.core.adaptation.config import refuse_inactive
-from kbcli.core.config import (
-    Name,
-    Names,
-    NonNegativeInt,
-    Positive,
-    Whole,
-    between,
-    refused_option,
-)
+from kbcli.core.config import Name, Names, NonNegativeInt, Positive, Whole, between, refused_option
 from kbcli.core.instrument import transforms
 from kbcli.core.instrument.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
