@@ -134,13 +134,9 @@ def step_cost(env: gymnasium.Env, *, strategy: str = "infogain", episodes: int =
     machine slows both alike): through kbcli's ask/tell loop (:func:`kbcli.core.adaptation.loop.adapt`:
     ``suggest()``, the touch, ``observe()``, the estimates, entropy and stopping rule read after
     it), and through the environment (``StrategyAgent(strategy)``, then ``env.step``). Each step
-    is timed whole, in wall and in this process's CPU time.
-
-    Returns
-    -------
-    dict
-        ``asktell_ms``, ``env_ms``, ``asktell_cpu_ms``, ``env_cpu_ms``: (episodes * steps,)
-        ndarrays; ``same``: whether both drives touched the same places and estimated the same.
+    is timed whole, in wall and in this process's CPU time: ``asktell_ms``, ``env_ms``,
+    ``asktell_cpu_ms``, ``env_cpu_ms`` (episodes * steps,); ``same``: whether both drives touched
+    the same places and estimated the same.
     """
     base = env.unwrapped
     acfg = base.adapt_cfg.with_robot(strategy=strategy)

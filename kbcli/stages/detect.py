@@ -47,15 +47,9 @@ def run(cfg: DetectorConfig, history_art: Artifact) -> Artifact:
 
 
 def summarize(firings: np.ndarray, perturb_at: int | None) -> dict:
-    """First firing, and with a perturbation step: detection step, delay, false alarms.
-
-    Returns
-    -------
-    dict
-        ``first_firing`` (step or None), ``n_firings``, and when ``perturb_at`` is known
-        ``detected_at`` (first firing at or after it, or None), ``delay``
-        (``detected_at - perturb_at + 1``) and ``false_alarms`` (firings before it).
-    """
+    """``first_firing`` (step or None), ``n_firings`` and, when ``perturb_at`` is known,
+    ``detected_at`` (first firing at or after it, or None), ``delay`` (``detected_at - perturb_at
+    + 1``) and ``false_alarms`` (firings before it)."""
     firings = np.asarray(firings, dtype=np.int64)
     out: dict = {
         "first_firing": int(firings[0]) if len(firings) else None,

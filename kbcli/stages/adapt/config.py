@@ -129,18 +129,9 @@ class AdaptConfig(StageConfig):
 
 
 class PlayCheck(StageConfig):
-    """Playing success measured by replaying the melody (Algorithm 1) around an adaptation.
-
-    Parameters
-    ----------
-    melody : str
-        Notes ``NOTE:BEATS`` (:mod:`kbcli.core.instrument.melody`).
-    notes : int
-        Touches per replay.
-    reference : bool
-        Also replay before the displacement and after it without adaptation (else only after
-        adaptation, with the final estimate).
-    """
+    """Playing success measured by replaying the melody (Algorithm 1) around an adaptation:
+    ``notes`` touches per replay, after adaptation with the final estimate and, with
+    ``reference``, also before the displacement and after it without adaptation."""
 
     what: ClassVar[str] = "play"
 

@@ -47,19 +47,9 @@ def counts(art: Artifact, mode: str, method: str, category: str, strategy: str,
 
 
 def superiority(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Probability of superiority of ``a`` over ``b`` (fewer observations) and its variance.
-
-    Parameters
-    ----------
-    a, b : (n, k) and (m, k) ndarrays
-        Observations to each of ``k`` thresholds of two independent samples of runs.
-
-    Returns
-    -------
-    A, var : (k,) ndarrays
-        ``A = P(a < b) + P(a = b) / 2``; ``var`` its DeLong variance
-        ``var_i(V10) / n + var_j(V01) / m``.
-    """
+    """Probability of superiority of ``a`` (n, k) over ``b`` (m, k), observations to each of ``k``
+    thresholds of two independent samples: (k,) ``A = P(a < b) + P(a = b) / 2`` and (k,) its
+    DeLong variance ``var_i(V10) / n + var_j(V01) / m``."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     psi = (a[:, None, :] < b[None, :, :]) + 0.5 * (a[:, None, :] == b[None, :, :])  # (n, m, k)
     v10, v01 = psi.mean(axis=1), psi.mean(axis=0)
