@@ -154,8 +154,7 @@ def step_cost(env: gymnasium.Env, *, strategy: str = "infogain", episodes: int =
 
 def _asktell_steps(base, acfg, ss, truth, steps: int, out: dict) -> np.ndarray:
     robot_rng, world_rng = np.random.default_rng(fresh(ss)).spawn(2)
-    adapter = Adapter(base.model, acfg.adapter_config(), rng=robot_rng,
-                      table=base.table).prepare()
+    adapter = Adapter(base.model, acfg.adapter_config(), rng=robot_rng, table=base.table).prepare()
     world = World(base.keyboard, make_reacher(acfg.sim_config()), np.asarray(truth, float),
                   base.config.family)
 

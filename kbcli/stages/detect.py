@@ -18,13 +18,7 @@ from kbcli.stages.artifact import Artifact, ref
 
 
 def run(cfg: DetectorConfig, history_art: Artifact) -> Artifact:
-    """The detection artifact (kind ``detection``) of a history artifact.
-
-    Raises
-    ------
-    ArtifactError
-        If ``history_art`` is not a history.
-    """
+    """The detection artifact of a history artifact (ArtifactError for any other kind)."""
     if history_art.kind != "history":
         raise ArtifactError(f"expected a history artifact (kbcli play), got a {history_art.kind}")
     results = history_art.array("result").astype(np.int8)

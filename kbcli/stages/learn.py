@@ -312,15 +312,8 @@ def reaches_to(level: float, reaches: np.ndarray, accuracy: np.ndarray, final: f
 
 def learn(cfg: LearnConfig, keyboard_art: Artifact, *, rng: np.random.Generator,
           seed: int | None = None) -> Learning:
-    """Start a learning run (checks the inputs: the keyboard artifact and that it is reachable).
-
-    Raises
-    ------
-    ArtifactError
-        If ``keyboard_art`` is not a keyboard artifact.
-    OutOfReachError
-        If the keyboard's working area is not within the arm's reach (names the keys).
-    """
+    """Start a learning run: ArtifactError if ``keyboard_art`` is not a keyboard artifact,
+    OutOfReachError (naming the keys) if its working area is not within the arm's reach."""
     return Learning(cfg, keyboard_art, rng=rng, seed=seed)
 
 

@@ -124,8 +124,7 @@ def _label_spot(poly: np.ndarray, centre: np.ndarray, text: str, ppu: float
     return pts[pick], float(fs[pick])
 
 
-def key_labels(kb: Keyboard, ppu: float, offset=(0.0, 0.0)
-               ) -> tuple[list[str], np.ndarray, float]:
+def key_labels(kb: Keyboard, ppu: float, offset=(0.0, 0.0)) -> tuple[list[str], np.ndarray, float]:
     """Each key's label, where to centre it and the font size to draw them at, ``ppu`` points per
     data unit.
 

@@ -111,8 +111,7 @@ def shrinks(art: Artifact, mode: str, method: str, strategy: str, cats: list[str
                            (seq[-1], float(adv[cats[-1]]["var"][j])))
         falls &= all(x > y for x, y in zip(seq, seq[1:], strict=False))
         shown |= p < EFFECT_LEVEL
-        parts.append(f"{thr[j]:g} px: " + " -> ".join(f"{x:.2f}" for x in seq)
-                     + f" (p={fmt_p(p)})")
+        parts.append(f"{thr[j]:g} px: " + " -> ".join(f"{x:.2f}" for x in seq) + f" (p={fmt_p(p)})")
     verdict = "agrees" if falls and shown else "differs"
     text = (f"advantage A = P({strategy} needs fewer observations) over "
             f"{' -> '.join(cats)}, one-sided p of the fall {cats[0]} -> {cats[-1]}: "
