@@ -169,7 +169,7 @@ def _curve_panel(ax, art: Artifact) -> None:
     acc = np.asarray(art.data["curve"]["accuracy"], float)
     ax.plot(n, 100 * acc, "o-", ms=3, color="tab:blue", label="accuracy")
     ax.axhline(99.0, ls="--", color="grey", lw=1, label="99 % (the target)")
-    # below the line, inside the axes (above it, the label sat on the frame at 100.5 %)
+    # below the line, inside the axes
     ax.text(0.02, 99.0, "99 %", transform=ax.get_yaxis_transform(), ha="left", va="top",
             fontsize=9, color="0.35", gid="target-label",
             bbox={"boxstyle": "square,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8})
