@@ -110,10 +110,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
 def _run(cfg: AdaptConfig, adapter: Adapter, touch: _Touches, truth: np.ndarray,
          world_family: str, snapshot_steps: tuple[int, ...],
          on_step: Callable[[int], None] | None) -> dict[str, np.ndarray]:
-    """Adapt for ``cfg.max_steps`` touches (or to the stop), recording each step with its errors
-    against the truth; returns the records (:meth:`Recorder.arrays`) with, world side (only the
-    evaluation reads them), ``truth_logratio``: the log of the posterior at the truth over its
-    maximum after each step, and ``true_landed``."""
+    """Adapt for ``cfg.max_steps`` touches (or to the stop): the records :func:`experiment`
+    returns."""
     rec = Recorder(adapter, [s for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps])
     truth_robot = _as_family(truth, world_family, cfg.robot.family)
     ratios = []
@@ -170,11 +168,9 @@ def _play_after(cfg: AdaptConfig, model, keyboard: Keyboard, truth: np.ndarray,
                 rng: np.random.Generator, pool: ActionSamples | None,
                 reference_rng: np.random.Generator | None = None) -> dict[str, float]:
     """:func:`play_success` around an adaptation whose records are ``out``, corrected by its final
-    estimate (``cfg.robot.estimator``'s) in the world's parameters. The reference replays
-    (``play.reference``: before the displacement and unadapted), which do not depend on the
-    adaptation, from ``reference_rng`` when given (the evaluation gives them a seed without method
-    and strategy, so they measure the same whichever experiment runs them); else from children of
-    ``rng``, as the adapted replay."""
+    estimate in the world's parameters. The reference replays (``play.reference``), which do not
+    depend on the adaptation, draw from ``reference_rng`` when given (so they measure the same
+    whichever experiment runs them), else from children of ``rng``, as the adapted replay."""
     final = ESTIMATORS.get(cfg.robot.estimator).final(out)
     if world_family != cfg.robot.family:  # correct in the world's parameters
         final = _as_family(final, cfg.robot.family, world_family)
