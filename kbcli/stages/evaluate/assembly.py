@@ -247,10 +247,7 @@ def resummarise(art: Artifact, rows: np.ndarray | None = None, *, error_scale: f
     table = {k: np.asarray(v)[idx] for k, v in exp.items()}
     st = {k: np.asarray(v)[idx] for k, v in steps.items()}
     for k in ERRORS.values():
-        if k in st:
-            st[k] = st[k] * error_scale
-        else:
-            st[k] = np.full(st["errors"].shape, np.nan)
+        st[k] = st[k] * error_scale if k in st else np.full(st["errors"].shape, np.nan)
     curves, pvalues, entropy, _ = _summaries(cfg, [], {}, table, st, art.array("thresholds"))
     data = {**art.data, "experiments": table, "steps": st, "curves": curves,
             "pvalues": pvalues, "entropy": entropy, "examples": {}}
