@@ -9,19 +9,7 @@ the median observations until the error is below 4, 2, 1, 0.5 px (runs that neve
 within T count as T + 1), the RMSE at steps 1, 2, 3, 5, 10, 20, 40, the Wilcoxon signed-rank
 p-value of those counts against ``random`` (:func:`kbcli.core.adaptation.stats.signed_rank_pvalues`)
 and the median milliseconds per step. For the rigid family a threshold of ``t`` px also asks the
-angle to be within ``t / 2`` degrees.
-
-Sections (``--section``):
-
-- ``exact``: the exact model, translation, no reach noise;
-- ``noise``: 2 px reach noise, the robot knowing only where it *aimed* (``feedback = aim``); plus
-  infogain knowing where it landed;
-- ``rigid``: the rigid family (angles up to 5 degrees);
-- ``kde``: the paper's KDE posterior (Eq. 7) against the likelihood posterior, and with a learned
-  model the speed of one KDE step against a likelihood step (:func:`kde_speed`);
-- ``learned``: a learned model (``--model``), its boundary error beside the final error, its map
-  softened by ``model_blur`` and, for reference, infogain on the unsoftened map;
-- ``learned-rigid``: the learned model with the rigid family.
+angle to be within ``t / 2`` degrees. The sections (``--section``) are :data:`SECTIONS`.
 """
 
 from __future__ import annotations
@@ -50,8 +38,7 @@ from kbcli.stages.perturb import CATEGORIES, draw
 STRATEGY_ORDER = ("random", "active", "infogain")
 THRESHOLDS = (4.0, 2.0, 1.0, 0.5)
 RMSE_STEPS = (1, 2, 3, 5, 10, 20, 40)
-#: The true displacements' random streams: translation draws use stream 0 (the exact section's
-#: index before sections were a registry), rigid draws stream 2 (the rigid section's).
+#: The true displacements' random stream per family.
 _TRUTH_STREAM = {"translation": 0, "rigid": 2}
 
 
@@ -59,22 +46,10 @@ _TRUTH_STREAM = {"translation": 0, "rigid": 2}
 class Section:
     """One section of the benchmark: its rows (label, adaptation config, model) and its table.
 
-    Parameters
-    ----------
-    variants : callable
-        ``variants(cfg, base, exact, learned) -> [(label, AdaptConfig, model), ...]``: the rows,
-        in print order (each run on every category).
-    family : str
-        The transform family of the true displacements.
-    title : str
-        The table's title (``{noise}`` is the reach noise, ``{model}`` the learned model's
-        description).
-    learned : bool
-        Needs a learned model (``--model``); the table shows its boundary error.
-    angle : bool
-        The table shows the final angle RMSE.
-    timed : bool
-        ``kbcli bench adapt`` first times one step of the section's posterior (the KDE's).
+    ``variants(cfg, base, exact, learned) -> [(label, AdaptConfig, model), ...]`` gives the rows in
+    print order; ``family`` is the true displacements'; ``title`` may use ``{noise}`` and
+    ``{model}``; ``learned``: needs ``--model`` (the table shows its boundary error); ``angle``: the
+    table shows the final angle RMSE; ``timed``: first time one step of the section's posterior.
     """
 
     variants: Callable[..., list[tuple[str, AdaptConfig, object]]]
@@ -322,19 +297,13 @@ def kde_speed(model, *, steps: int = 200, seed: int = 0, resolution: float = 0.5
               prior_halfwidth: float = 45.0, kde_samples: int = 10000) -> dict:
     """Milliseconds of one adaptation update with the KDE posterior and with the likelihood one.
 
-    ``steps`` touches uniform over the model's working area, each classified by the model
-    (``predict_proba``'s most probable class), update both posteriors; timed per step: the
-    observation term and the product (``Adapter.observe_class``) plus the maximum-likelihood and
-    mean estimates. The KDE's per-class samples are drawn before the timing starts (that is the
-    point: once per class, not per touch) and their drawing is timed separately.
+    ``steps`` touches uniform over the model's area, each classified by the model, update both
+    posteriors; timed per step: ``Adapter.observe_class`` plus the ML and mean estimates. The
+    KDE's per-class samples are drawn (and timed) before, once per class.
 
-    Returns
-    -------
-    dict
-        ``kde_ms``, ``likelihood_ms``: (steps,) ndarrays of wall time; ``kde_cpu_ms``,
-        ``likelihood_cpu_ms``: the same in this process's CPU time (what a busy machine's other
-        processes do not add to); ``sample_ms``: drawing one class's samples, median over the
-        classes heard; ``classes``: how many; ``grid_cells``.
+    Returns ``kde_ms``, ``likelihood_ms`` ((steps,) wall time), ``kde_cpu_ms``,
+    ``likelihood_cpu_ms`` (this process's CPU time), ``sample_ms`` (drawing one class's samples,
+    median over the ``classes`` heard) and ``grid_cells``.
     """
     import time
 

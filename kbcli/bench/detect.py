@@ -45,29 +45,11 @@ RIVER = ("fhddm", "ddm", "adwin")
 class BenchConfig(Config):
     """Benchmark settings (see the module docstring).
 
-    Parameters
-    ----------
-    p_pre : float
-        Failure rate before the change.
-    p_post : tuple of float, optional
-        Explicit post-change rates, one row of the table each, instead of the categories.
-    categories : tuple of str
-        Displacement categories whose post-change rates are computed (when ``p_post`` is None).
-    streams : int
-        Evaluation streams per category (or per ``p_post`` value).
-    change_min, change_max : int
-        The change happens at a step uniform in ``[change_min, change_max]``.
-    horizon : int
-        Post-change results after which an undetected change is a miss.
-    tune_actions : int
-        Number of change-free actions used to tune every detector (in streams as long as the
-        evaluation's pre-change segments).
-    fa_target : float
-        Largest false-alarm rate allowed, per 10,000 actions.
-    n_lt, n_st : int
-        Windows of our detectors.
-    detectors : tuple of str
-        Which detectors to run (ours: binomial, cusum, bocpd; river: fhddm, ddm, adwin).
+    ``p_post``: explicit post-change rates, one table row each, instead of the ``categories``'
+    computed ones; ``streams`` per category (or ``p_post`` value); the change is at a step uniform
+    in ``[change_min, change_max]``; undetected ``horizon`` results after it, a miss;
+    ``tune_actions`` change-free actions tune every detector; ``fa_target`` per 10,000 actions;
+    ``n_lt``, ``n_st``: our detectors' windows.
     """
 
     what: ClassVar[str] = "bench detect"
@@ -273,8 +255,8 @@ def tune_river(name: str, x: np.ndarray, lengths: np.ndarray, target: float, *,
     return safe, r_safe
 
 
-#: DDM warm-ups tried in turn (ours, n_lt + n_st, first); the first that reaches the target is used
-DDM_WARM_STARTS = (1, 2, 3, 5, 10)  # multiples of n_lt + n_st
+#: DDM warm-ups tried in turn, multiples of ours (n_lt + n_st); the first reaching the target wins
+DDM_WARM_STARTS = (1, 2, 3, 5, 10)
 
 
 # -- evaluation -------------------------------------------------------------------------------------
@@ -309,7 +291,6 @@ def run(cfg: BenchConfig, *, rng: np.random.Generator, model=None, keyboard: Key
             thr, r = tune_ours(dc, tune_x, tune_len, cfg.fa_target)
             settings[name] = (thr, r, f"threshold {thr:.3g}")
         else:
-            warm = cfg.n_lt + cfg.n_st
             for mult in DDM_WARM_STARTS if name == "ddm" else (1,):
                 warm = mult * (cfg.n_lt + cfg.n_st)
                 v, r = tune_river(name, tune_x, tune_len, cfg.fa_target, warm_start=warm)

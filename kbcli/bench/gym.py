@@ -134,13 +134,9 @@ def step_cost(env: gymnasium.Env, *, strategy: str = "infogain", episodes: int =
     machine slows both alike): through kbcli's ask/tell loop (:func:`kbcli.core.adaptation.loop.adapt`:
     ``suggest()``, the touch, ``observe()``, the estimates, entropy and stopping rule read after
     it), and through the environment (``StrategyAgent(strategy)``, then ``env.step``). Each step
-    is timed whole, in wall and in this process's CPU time.
-
-    Returns
-    -------
-    dict
-        ``asktell_ms``, ``env_ms``, ``asktell_cpu_ms``, ``env_cpu_ms``: (episodes * steps,)
-        ndarrays; ``same``: whether both drives touched the same places and estimated the same.
+    is timed whole, in wall and in this process's CPU time: ``asktell_ms``, ``env_ms``,
+    ``asktell_cpu_ms``, ``env_cpu_ms`` (episodes * steps,); ``same``: whether both drives touched
+    the same places and estimated the same.
     """
     base = env.unwrapped
     acfg = base.adapt_cfg.with_robot(strategy=strategy)
@@ -158,8 +154,7 @@ def step_cost(env: gymnasium.Env, *, strategy: str = "infogain", episodes: int =
 
 def _asktell_steps(base, acfg, ss, truth, steps: int, out: dict) -> np.ndarray:
     robot_rng, world_rng = np.random.default_rng(fresh(ss)).spawn(2)
-    adapter = Adapter(base.model, acfg.adapter_config(), rng=robot_rng,
-                      table=base.table).prepare()
+    adapter = Adapter(base.model, acfg.adapter_config(), rng=robot_rng, table=base.table).prepare()
     world = World(base.keyboard, make_reacher(acfg.sim_config()), np.asarray(truth, float),
                   base.config.family)
 

@@ -196,8 +196,7 @@ def runs(cfg: PeerConfig, jobs: int = 1
         return
     from joblib import Parallel, delayed
 
-    yield from Parallel(n_jobs=jobs, return_as="generator")(delayed(_one)(cfg, *t)
-                                                            for t in tasks)
+    yield from Parallel(n_jobs=jobs, return_as="generator")(delayed(_one)(cfg, *t) for t in tasks)
 
 
 def summarize(cfg: PeerConfig, results: list[tuple]) -> list[dict]:

@@ -2,8 +2,8 @@
 
 **Side by side.** Weak models, as ``kbcli learn --strategy random --budget 250 --seed S`` learns
 them (seeds 1-3, the ideal and the realistic arm), each adapted to the same ``moves``
-displacements (:func:`moves`), each ``replicates`` times (one adaptation seed each: one seed's
-median swings by about 0.2 px), with ``touches`` infogain touches by three methods on the same seeds:
+displacements (:func:`moves`), each ``replicates`` times (one adaptation seed each), with
+``touches`` infogain touches by three methods on the same seeds:
 ``plain`` (the robust posterior, kbcli's default), ``repair`` (``repair = true``:
 :mod:`kbcli.core.adaptation.repair`) and ``exact`` (the keyboard's own geometry, the reference). Per
 method: the median final error, the share of runs under 1 px, the median touches to *stay* under

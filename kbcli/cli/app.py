@@ -227,12 +227,8 @@ def check_io(inputs: dict[str, Path | None], *outputs: Output | tuple[str, Path 
     symlink or a hard link to it, or a folder holding it that would be overwritten or removed), and
     no other kbcli is writing it (each output is locked until the command ends).
 
-    Parameters
-    ----------
-    inputs : dict
-        What the command reads, by option name (``{"--model": path}``); None entries are skipped.
-    outputs : Output or (what, path)
-        What it writes; a (what, None) pair is skipped.
+    ``inputs`` by option name (``{"--model": path}``) and ``outputs`` (an Output or a
+    ``(what, path)`` pair); None paths are skipped.
     """
     outs: list[Output] = []
     for o in outputs:

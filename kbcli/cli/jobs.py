@@ -47,22 +47,9 @@ def run_checkpointed(results: Iterable[tuple[int, dict]], todo: int, ckpt: Any, 
     """Drain ``(index, result)`` pairs of a parallel job into its checkpoint, with a progress bar.
 
     On Ctrl-C the pending results are flushed, one line says how many of ``total`` ``what`` (a
-    plural noun) are kept and how to resume, and the command exits 130.
-
-    Parameters
-    ----------
-    results : iterable of (int, dict)
-        :func:`kbcli.io.runner.execute`'s output.
-    todo : int
-        How many results to expect (the bar's length).
-    ckpt : kbcli.io.checkpoint.Checkpoint
-    kept : int
-        Results already in the checkpoint when this run resumed.
-
-    Returns
-    -------
-    dict
-        The new results by index.
+    plural noun) are kept and how to resume, and the command exits 130. ``results`` is
+    :func:`kbcli.io.runner.execute`'s output, ``todo`` how many to expect, ``kept`` how many the
+    checkpoint held when this run resumed. Returns the new results by index.
     """
     fresh: dict[int, dict] = {}
     try:

@@ -165,8 +165,7 @@ def _quality_report(art, source: Path, output: Path, fmt: str) -> None:
              Output(output, "report folder", folder=True, files=("README.md", fig)))
     with atomic_folder(output, owned=OWNED) as tmp, busy("drawing the report's figure"):
         plot_advantage(art, tmp / fig)
-        _write_text(tmp / "README.md",
-                    quality.report(art).replace("](advantage.png)", f"]({fig})"))
+        _write_text(tmp / "README.md", quality.report(art).replace("](advantage.png)", f"]({fig})"))
     out.print(f"wrote {output}/: README.md and {fig}")
     for r in quality.compared_rows(art.attrs):
         out.print(f"  {r}: the paper's explanation "
@@ -224,8 +223,7 @@ def bench_verdicts_cmd(
         ladders = [read_artifact(p, ("evaluation",)) for p in ablations or ()]
         rungs = [read_artifact(p, ("evaluation",)) for p in rung or ()]
         with busy("judging the paper's claims (and replicating those that differ)"):
-            tables = bench.evaluation_tables(art, own, ladders, replicates=replicates,
-                                             rungs=rungs)
+            tables = bench.evaluation_tables(art, own, ladders, replicates=replicates, rungs=rungs)
     if timing_text is not None:
         tables += [t for t in bench.timings_table(timing_text) if t.rows]
     con = wide(160)

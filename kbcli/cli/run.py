@@ -186,6 +186,5 @@ def plot_run_cmd(
     from kbcli.viz.loop import plot_loop  # (matplotlib: seconds)
     art = read_artifact(artifact, "closed_loop")
     with busy("drawing"):
-        plot_loop(art.data["steps"], art.attrs, keyboard_stage.load(art), output,
-                  config=art.config)
+        plot_loop(art.data["steps"], art.attrs, keyboard_stage.load(art), output, config=art.config)
     out.print(f"wrote {output}")

@@ -45,14 +45,8 @@ def progress(items: Iterable[T], total: int | None, description: str, *,
              describe: Callable[[T], str | None] | None = None) -> Iterator[T]:
     """Iterate with a Rich progress bar on a terminal (count, rate, time left); plain otherwise.
 
-    Parameters
-    ----------
-    total : int, optional
-        Units of work in all (None: a count without a bar end).
-    advance : callable, optional
-        Units of work an item stands for (default 1), e.g. the reaches of a batch.
-    describe : callable, optional
-        A new description after an item (None keeps the current one).
+    ``total`` units of work (None: no bar end); ``advance(item)``: the units an item stands for
+    (default 1); ``describe(item)``: a new description after it (None keeps the current one).
     """
     if not interactive():
         yield from items

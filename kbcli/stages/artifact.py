@@ -32,25 +32,10 @@ SCHEMA_VERSIONS: dict[str, int] = {
 
 @dataclass
 class Artifact:
-    """One stage output.
-
-    Attributes
-    ----------
-    kind : str
-        One of :data:`SCHEMA_VERSIONS`.
-    config : dict
-        The full, JSON-serialisable config of the stage that made it.
-    seed : int or None
-        The seed it was made with (None for deterministic stages).
-    data : dict
-        Arrays (numpy) by name; a nested dict is a group.
-    attrs : dict
-        Small JSON-serialisable metadata (summaries, names).
-    inputs : dict
-        Role -> reference of each input artifact (see :func:`ref`).
-    sha256 : str or None
-        Hash of the file it was read from (None when made in memory).
-    """
+    """One stage output: ``kind`` (one of :data:`SCHEMA_VERSIONS`), the full JSON-serialisable
+    ``config`` of the stage that made it, its ``seed`` (None for deterministic stages), ``data``
+    (arrays by name; a nested dict is a group), ``attrs`` (small JSON metadata), ``inputs`` (role
+    -> :func:`ref`) and ``sha256`` of the file it was read from (None when made in memory)."""
 
     kind: str
     config: dict

@@ -18,13 +18,7 @@ from kbcli.stages.artifact import Artifact, ref
 
 
 def run(cfg: DetectorConfig, history_art: Artifact) -> Artifact:
-    """The detection artifact (kind ``detection``) of a history artifact.
-
-    Raises
-    ------
-    ArtifactError
-        If ``history_art`` is not a history.
-    """
+    """The detection artifact of a history artifact (ArtifactError for any other kind)."""
     if history_art.kind != "history":
         raise ArtifactError(f"expected a history artifact (kbcli play), got a {history_art.kind}")
     results = history_art.array("result").astype(np.int8)
@@ -47,15 +41,9 @@ def run(cfg: DetectorConfig, history_art: Artifact) -> Artifact:
 
 
 def summarize(firings: np.ndarray, perturb_at: int | None) -> dict:
-    """First firing, and with a perturbation step: detection step, delay, false alarms.
-
-    Returns
-    -------
-    dict
-        ``first_firing`` (step or None), ``n_firings``, and when ``perturb_at`` is known
-        ``detected_at`` (first firing at or after it, or None), ``delay``
-        (``detected_at - perturb_at + 1``) and ``false_alarms`` (firings before it).
-    """
+    """``first_firing`` (step or None), ``n_firings`` and, when ``perturb_at`` is known,
+    ``detected_at`` (first firing at or after it, or None), ``delay`` (``detected_at - perturb_at
+    + 1``) and ``false_alarms`` (firings before it)."""
     firings = np.asarray(firings, dtype=np.int64)
     out: dict = {
         "first_firing": int(firings[0]) if len(firings) else None,

@@ -76,8 +76,7 @@ def model_classes() -> tuple[str, ...]:
 
 
 def strategies() -> tuple[str, ...]:
-    """Valid ``--strategy`` values: the exploration strategies and ``exact`` (no learning: the
-    exact model class)."""
+    """Valid ``--strategy`` values: the exploration strategies and ``exact`` (no learning)."""
     return (*sorted(STRATEGIES), EXACT)
 
 
@@ -100,29 +99,13 @@ def _sim(value: Any) -> Any:
 class LearnConfig(Config):
     """How the model is learned.
 
-    Parameters
-    ----------
-    strategy : Options
-        An exploration strategy (``active``, ``balanced``, ``random``) with its own options
-        (``explore_radius``, ...; given flat beside it too), or ``exact`` (no learning).
-    budget : int
-        Reaches.
-    batch : int
-        Reaches per model refit.
-    curve_every : int
-        Reaches between two points of the learning curve (a point is taken after the batch that
-        reaches each multiple, and at the end).
-    sim : SimConfig
-        The arm and its reach mode.
-    model_class : Options
-        The class of model fitted (a learned class of
-        :data:`~kbcli.core.model.classes.MODEL_CLASSES`) with its own options (a name or a table
-        ``{name = "forest", n_estimators = 200}``; given flat beside it too; an option the class
-        does not take is refused by it), or ``auto`` (the default, no option): explore with
-        :func:`kbcli.core.model.select.explore_class` (each class declares whether it joins), re-chosen every
-        :data:`kbcli.core.model.select.RESELECT` reaches (:func:`kbcli.core.model.select.explore_choice`),
-        then fit the class with the best cross-validated score on the samples
-        (:func:`kbcli.core.model.select.choose`; never the simulator's truth).
+    ``strategy`` is an exploration strategy with its options (given flat beside it too) or
+    ``exact`` (no learning); ``budget`` reaches, refitting every ``batch``; a learning-curve point
+    after the batch that reaches each multiple of ``curve_every``, and at the end; ``sim`` the arm.
+    ``model_class`` is a learned class with its options (a name or a table; flat beside it too), or
+    ``auto``: explore with :func:`kbcli.core.model.select.explore_class`, re-chosen every
+    :data:`kbcli.core.model.select.RESELECT` reaches, then fit the class with the best
+    cross-validated score on the samples (never the simulator's truth).
     """
 
     what: ClassVar[str] = "learn"
@@ -137,8 +120,7 @@ class LearnConfig(Config):
     @model_validator(mode="before")
     @classmethod
     def _part(cls, data: Any) -> Any:
-        """The strategy's and the model class's options given flat go to them (``exact`` takes
-        none)."""
+        """Options given flat go to the strategy or the model class (``exact`` takes none)."""
         if not isinstance(data, dict):
             return data
         name = _name(data.get("strategy", "active"))
@@ -306,11 +288,9 @@ class Learning:
 
 
 def model_config(cfg: LearnConfig, keyboard: dict, chosen: str | None = None) -> dict:
-    """The config a ``model`` artifact records: ``cfg`` (flat, as models always recorded it: the
-    strategy and the model class by their names, their options beside them, the class's only
-    those set), the keyboard's config and the scoring grids;
-    under ``auto``, the class ``chosen`` as ``model_class`` (the class that reads ``model/...``)
-    and ``model_class_requested = "auto"``."""
+    """The config a ``model`` artifact records: ``cfg`` flat (parts by name, options beside them),
+    the keyboard's config and the scoring grids; under ``auto``, ``model_class`` is the class
+    ``chosen`` (the one that reads ``model/...``) and ``model_class_requested = "auto"``."""
     out = {**flat_view(cfg.to_dict(), (*SLOTS, "model_class")), "keyboard": keyboard, "curve_step": CURVE_STEP,
            "eval_step": EVAL_STEP}
     if chosen is not None:
@@ -332,15 +312,8 @@ def reaches_to(level: float, reaches: np.ndarray, accuracy: np.ndarray, final: f
 
 def learn(cfg: LearnConfig, keyboard_art: Artifact, *, rng: np.random.Generator,
           seed: int | None = None) -> Learning:
-    """Start a learning run (checks the inputs: the keyboard artifact and that it is reachable).
-
-    Raises
-    ------
-    ArtifactError
-        If ``keyboard_art`` is not a keyboard artifact.
-    OutOfReachError
-        If the keyboard's working area is not within the arm's reach (names the keys).
-    """
+    """Start a learning run: ArtifactError if ``keyboard_art`` is not a keyboard artifact,
+    OutOfReachError (naming the keys) if its working area is not within the arm's reach."""
     return Learning(cfg, keyboard_art, rng=rng, seed=seed)
 
 
@@ -348,15 +321,8 @@ def run(cfg: LearnConfig, keyboard_art: Artifact, *, rng: np.random.Generator,
         seed: int | None = None) -> Artifact:
     """Learn a model (or build the exact one) and return its ``model`` artifact.
 
-    Parameters
-    ----------
-    cfg : LearnConfig
-    keyboard_art : Artifact
-        A keyboard artifact.
-    rng : numpy.random.Generator
-        Drives the exploration and the arm's noise.
-    seed : int, optional
-        Recorded in the artifact (``rng`` should be ``default_rng(seed)``).
+    ``rng`` drives the exploration and the arm's noise; ``seed`` is recorded in the artifact
+    (``rng`` should be ``default_rng(seed)``).
     """
     if cfg.exact:
         kb = check_keyboard(keyboard_art)

@@ -40,19 +40,9 @@ MAX_ANGLE = 180.0
 
 
 class PerturbConfig(Config):
-    """How to move the keyboard: explicit ``params`` or a random draw of ``category``.
-
-    Parameters
-    ----------
-    family : str
-        ``translation`` or ``rigid`` (:data:`kbcli.core.instrument.transforms.FAMILIES`).
-    params : tuple of float, optional
-        The transform parameters (``(dx, dy)`` or ``(angle, dx, dy)``, px and degrees).
-    category : str, optional
-        ``small``, ``medium`` or ``large``: draw the parameters (needs a seed).
-    max_angle : float
-        Largest rotation of a rigid draw, degrees, in [0, :data:`MAX_ANGLE`].
-    """
+    """How to move the keyboard: explicit ``params`` of ``family`` (``(dx, dy)`` or
+    ``(angle, dx, dy)``, px and degrees) or a random draw of ``category`` (needs a seed), rigid
+    draws rotating by at most ``max_angle`` degrees."""
 
     what = "perturb"
 
@@ -88,13 +78,7 @@ class PerturbConfig(Config):
 def draw(
     category: str, family: str, n: int, *, rng: np.random.Generator, max_angle: float = 5.0
 ) -> np.ndarray:
-    """Draw ``n`` displacements of a category.
-
-    Returns
-    -------
-    (n, P) ndarray
-        ``(dx, dy)`` rows for ``translation``, ``(angle, dx, dy)`` for ``rigid``.
-    """
+    """(n, P) displacements of a category: ``(dx, dy)`` rows, ``(angle, dx, dy)`` for ``rigid``."""
     names = transforms.check_family(family)
     if category not in CATEGORIES:
         raise ConfigError(f"unknown category {category!r}; valid: {', '.join(CATEGORIES)}")
@@ -126,15 +110,8 @@ def size_category(params: np.ndarray) -> str | None:
 
 
 def key_outline(kb: Keyboard, spacing: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
-    """Points along every key's outline at the reference pose (whatever the layout): its vertices
-    and points at most ``spacing`` px apart.
-
-    Returns
-    -------
-    points : (m, 2) ndarray
-    keys : (m,) int ndarray
-        The key of each point.
-    """
+    """(m, 2) points along every key's outline at the reference pose (vertices and at most
+    ``spacing`` px apart) and (m,) the key of each."""
     return kb.key_outline_points(spacing)
 
 
@@ -157,22 +134,9 @@ def run(cfg: PerturbConfig, keyboard_art: Artifact, *, rng: np.random.Generator,
         seed: int | None = None, sim: SimConfig | None = None) -> Artifact:
     """The scene artifact: the keyboard at its displaced pose.
 
-    Parameters
-    ----------
-    cfg : PerturbConfig
-    keyboard_art : Artifact
-        A keyboard artifact (or any artifact whose config holds a ``keyboard`` table).
-    rng : numpy.random.Generator
-        Used only for a category draw.
-    seed : int, optional
-        Recorded in the artifact (the seed ``rng`` was made from).
-    sim : SimConfig, optional
-        The arm whose reach is checked (default: ``SimConfig()``).
-
-    Raises
-    ------
-    OutOfReachError
-        If a key would leave the arm's workspace.
+    ``keyboard_art`` is any artifact whose config holds a ``keyboard`` table; ``rng`` is used only
+    for a category draw (``seed``, recorded, is what it was made from). OutOfReachError if a key
+    would leave the workspace of the arm ``sim`` (default: ``SimConfig()``).
     """
     sim = SimConfig() if sim is None else sim
     kb = keyboard_stage.load(keyboard_art)

@@ -47,24 +47,9 @@ def check_melody_text(v: str) -> str:
 
 
 class PlayConfig(Config):
-    """A play session.
-
-    Parameters
-    ----------
-    melody : str
-        Notes and durations, ``"A:1 D:1 E:0.5 D:2 A:1"`` (see :mod:`kbcli.core.instrument.melody`).
-    steps : int
-        Number of actions, at most :data:`MAX_PLAY_STEPS`.
-    perturb_at : int, optional
-        Step from which the keyboard is at the scene's pose (needs a scene; default with a scene:
-        ``steps // 2``).
-    mode : str
-        A reach mode of :data:`kbcli.sim.MODES` (``ideal`` or ``dynamics``).
-    reach_noise : float
-        Landing scatter of the arm, px.
-    arm : ArmConfig
-        How the arm errs (:mod:`kbcli.sim.arms`; a preset name or table is accepted).
-    """
+    """A play session: ``steps`` actions playing ``melody`` (``"A:1 D:1 E:0.5 D:2 A:1"``); from
+    ``perturb_at`` (needs a scene; default with one: ``steps // 2``) the keyboard is at the scene's
+    pose. ``arm`` may be a preset name or a table; ``reach_noise`` in px."""
 
     what = "play"
 
@@ -88,18 +73,9 @@ class PlayConfig(Config):
 class Session:
     """One play session, an iterator of :class:`~kbcli.core.playing.play.PlayStep`.
 
-    Parameters
-    ----------
-    cfg : PlayConfig
-    model_art : Artifact
-        Kind ``model``.
-    scene_art : Artifact, optional
-        Kind ``scene``: where the keyboard goes at ``perturb_at``. Without it the keyboard stays.
-    rng : numpy.random.Generator
-        Split into the robot's generator (actions) and the world's (reach and perception noise), so
-        the same seed gives the same actions before the perturbation whatever the scene.
-    seed : int, optional
-        Recorded in the artifact.
+    The keyboard goes where ``scene_art`` puts it at ``perturb_at`` (without a scene it stays).
+    ``rng`` is split into the robot's generator and the world's, so the same seed gives the same
+    actions before the perturbation whatever the scene.
     """
 
     def __init__(self, cfg: PlayConfig, model_art: Artifact, scene_art: Artifact | None = None, *,

@@ -25,8 +25,7 @@ from kbcli.errors import ConfigError
 from kbcli.stages import keyboard as keyboard_stage
 from kbcli.stages.artifact import Artifact, ref
 
-#: An adaptation whose 90 % credible disc is wider than this (px) is not absorbed: its touches,
-#: mapped back, are then off by less than a weak model's own edges (3.7-4.2 px at 250 reaches).
+#: An adaptation whose 90 % credible disc is wider than this (px) is not absorbed.
 ABSORB_RADIUS = 3.0
 #: Grid (px) of the repaired model's accuracy and boundary error (``kbcli learn``'s).
 EVAL_STEP = 1.0
@@ -36,21 +35,9 @@ REPAIR_KEY = 42
 
 @dataclass(frozen=True)
 class Adaptation:
-    """The touches of one adaptation and what it concluded.
-
-    Attributes
-    ----------
-    aims, felt : (n, 2) ndarrays
-        Where each touch aimed and where the robot felt it land (pad px).
-    perceived : (n, D) ndarray
-        What it heard (NaN rows: silence).
-    classes : (n,) int ndarray
-        Its class (-1: an unknown sound, never absorbed).
-    shift : (2,) ndarray
-        The adaptation's estimate of the translation (dx, dy).
-    radius : float
-        Its 90 % credible radius, px.
-    """
+    """The touches of one adaptation and what it concluded: where each touch aimed and was felt
+    to land (n, 2), what it heard (n, D; NaN rows: silence), its class (n,; -1: unknown, never
+    absorbed), the estimated translation ``shift`` (2,) and its 90 % credible ``radius`` (px)."""
 
     aims: np.ndarray
     felt: np.ndarray
@@ -133,21 +120,8 @@ def repaired_model(parent: Artifact, model, adaptations: list[Adaptation], *,
                    source: str, absorb_radius: float = ABSORB_RADIUS) -> tuple[Artifact, dict]:
     """The repaired model artifact, and a summary (touches absorbed, adaptations skipped).
 
-    Parameters
-    ----------
-    parent : Artifact
-        The model artifact adapted with (kind ``model``, a learned model).
-    model : ModelBase
-        Its loaded model.
-    adaptations : list of Adaptation
-        In the order they happened.
-    source : str
-        The stage that adapted (``adapt`` or ``run``), recorded.
-
-    Raises
-    ------
-    ConfigError
-        The exact model (nothing to repair).
+    ``model`` is the loaded learned model of ``parent``; ``adaptations`` in the order they
+    happened; ``source`` (``adapt`` or ``run``) is recorded. ConfigError for the exact model.
     """
     if not hasattr(model, "actions_"):
         raise ConfigError("the exact model has nothing to repair: --model-out needs a learned "

@@ -39,25 +39,10 @@ MAX_LOOP_STEPS = 100_000
 
 
 class LoopConfig(Config):
-    """A closed-loop session.
-
-    Parameters
-    ----------
-    melody : str
-        The melody played in a loop (see :mod:`kbcli.core.instrument.melody`).
-    steps : int
-        Play touches in the session (adaptation touches come on top), at most
-        :data:`MAX_LOOP_STEPS`.
-    perturb_at : int
-        Touches after which the world moves the keyboard to the scene's pose.
-    max_adapt_steps : int
-        At most this many touches per adaptation (at most :data:`MAX_ADAPT_STEPS`).
-    detector : DetectorConfig
-        The failure detector (Sect. III-C).
-    adapt : AdaptConfig
-        How the robot adapts (strategy, posterior, family, stopping rule; ``mode`` and
-        ``reach_noise`` also set the simulated arm).
-    """
+    """A closed-loop session: ``melody`` played in a loop for ``steps`` play touches (adaptation
+    touches come on top); the world moves the keyboard after ``perturb_at`` touches; each
+    adaptation takes at most ``max_adapt_steps`` touches; ``adapt``'s ``mode`` and
+    ``reach_noise`` also set the simulated arm."""
 
     what = "loop"
 
@@ -94,14 +79,8 @@ def _rate(results: np.ndarray) -> float | None:
 
 
 class LoopSession:
-    """One closed-loop session: iterate it for :class:`~kbcli.core.playing.loop.LoopStep` records, then
-    take :meth:`artifact`.
-
-    Parameters
-    ----------
-    rng : numpy.random.Generator
-        Split into the robot's generator and the world's (reach and perception noise).
-    """
+    """One closed-loop session: iterate it for :class:`~kbcli.core.playing.loop.LoopStep` records,
+    then take :meth:`artifact`. ``rng`` is split into the robot's generator and the world's."""
 
     def __init__(self, cfg: LoopConfig, model_art: Artifact, scene_art: Artifact, *,
                  rng: np.random.Generator, seed: int | None = None, model=None) -> None:

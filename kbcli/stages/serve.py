@@ -72,17 +72,8 @@ FELT_MARGIN = 0.5
 
 
 class ServeConfig(Config):
-    """A session with an external robot.
-
-    Parameters
-    ----------
-    adapter : AdapterConfig
-        The robot-side settings (strategy, posterior, family, grid, stopping rule).
-    max_steps : int
-        Touches at most (at most :data:`MAX_SERVE_STEPS`); ``done`` holds once they are observed.
-    stop : bool
-        ``done`` also holds when the stopping rule does (else only at ``max_steps``).
-    """
+    """A session with an external robot: the robot-side ``adapter`` settings; ``done`` holds once
+    ``max_steps`` touches are observed and, with ``stop``, when the stopping rule does."""
 
     what = "serve"
 
@@ -182,22 +173,8 @@ def _check_fields(msg: dict) -> str:
 class Session:
     """One adaptation with an external robot: JSON messages in, replies out.
 
-    Parameters
-    ----------
-    cfg : ServeConfig
-    model_artifact : Artifact
-        The robot's model (kind ``model``).
-    rng : numpy.random.Generator
-        The robot's generator (the strategy's draws).
-    seed : int, optional
-        Recorded in the artifact.
-    transport : str
-        How the messages travel (recorded): ``stdio``, ``unix`` or ``tcp``.
-
-    Raises
-    ------
-    ArtifactError
-        A model artifact of another kind.
+    ``rng`` is the robot's generator; ``seed`` and ``transport`` (``stdio``, ``unix`` or ``tcp``)
+    are recorded. ArtifactError when ``model_artifact`` is not of kind ``model``.
     """
 
     def __init__(self, cfg: ServeConfig, model_artifact: Artifact, *, rng: np.random.Generator,

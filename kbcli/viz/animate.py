@@ -71,20 +71,9 @@ def animate(art: Artifact, path: str | os.PathLike, *, fps: float = 3.0, max_fra
             dpi: int = 80) -> int:
     """Write an animation of a ``run`` or ``closed_loop`` artifact; return the number of frames.
 
-    Parameters
-    ----------
-    path : path
-        ``.gif`` (Pillow) or ``.mp4`` (needs ffmpeg on the PATH).
-    fps : float
-        Frames (touches) per second.
-    max_frames : int
-        At most this many touch frames (a long closed loop is subsampled, see :func:`frame_plan`);
-        the last frame is then held for 2 s.
-
-    Raises
-    ------
-    KbcliError
-        Another format, no ffmpeg for ``.mp4``, an artifact without touches.
+    ``path`` is ``.gif`` (Pillow) or ``.mp4`` (needs ffmpeg); ``fps`` touches per second; at most
+    ``max_frames`` touch frames (a long closed loop is subsampled, :func:`frame_plan`). KbcliError
+    for another format, no ffmpeg for ``.mp4`` or an artifact without touches.
     """
     path = Path(path)
     suffix = path.suffix.lower()

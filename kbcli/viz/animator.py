@@ -54,8 +54,7 @@ class Animator:
         else:
             self.ax_c1 = fig.add_subplot(gs[1])
             self.ax_c2 = None
-        self.title = fig.text(0.5, 0.978, "", ha="center", va="top", fontsize=11,
-                              fontweight="bold")
+        self.title = fig.text(0.5, 0.978, "", ha="center", va="top", fontsize=11, fontweight="bold")
         self.subtitle = fig.text(0.5, 0.938, "", ha="center", va="top", fontsize=9.5)
         self.pad = PadPanel(self.ax_pad, rep)
         self.post = PosteriorPanel(self.ax_post, rep)

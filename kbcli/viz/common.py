@@ -71,8 +71,7 @@ def save(fig: Figure, path: str | os.PathLike, dpi: int = 110) -> None:
             fig.savefig(buf, format=fmt, dpi=dpi, bbox_inches="tight", metadata=meta)
     finally:
         plt.close(fig)
-    # Drawn in memory, then written: a full disk under matplotlib's PDF writer ended in a zlib
-    # traceback (its cleanup flushed the compressor again), not the one line a write error is.
+    # drawn in memory, then written: a full disk fails as one write error, not a zlib traceback
     write_bytes(path, buf.getvalue(), suffix="." + fmt)
 
 
@@ -125,8 +124,7 @@ def _label_spot(poly: np.ndarray, centre: np.ndarray, text: str, ppu: float
     return pts[pick], float(fs[pick])
 
 
-def key_labels(kb: Keyboard, ppu: float, offset=(0.0, 0.0)
-               ) -> tuple[list[str], np.ndarray, float]:
+def key_labels(kb: Keyboard, ppu: float, offset=(0.0, 0.0)) -> tuple[list[str], np.ndarray, float]:
     """Each key's label, where to centre it and the font size to draw them at, ``ppu`` points per
     data unit.
 
@@ -222,13 +220,8 @@ def place_labels(ax, xy: np.ndarray, texts: list[str], fontsize: float = 6.5,
     placed before it and of every point (``xy`` and ``avoid``, as a marker of about 8 points);
     a label with no free place, or of a point that is not finite, is left out; with ``inside``, a
     place must also lie inside the axes. Each label's box counts ``margin`` points wider on every
-    side (at least the pad of a background box given in ``bbox``). Call once the axes' limits and position are final (after
-    ``tight_layout``).
-
-    Returns
-    -------
-    int
-        How many labels were left out.
+    side (at least the pad of a background box given in ``bbox``). Call once the axes' limits
+    and position are final (after ``tight_layout``). Returns how many labels were left out.
     """
     fig = ax.figure
     fig.canvas.draw()  # the final limits and axes position

@@ -222,17 +222,8 @@ def _title(phase: np.ndarray, result: np.ndarray, attrs: dict) -> str:
 
 def plot_loop(steps: dict, attrs: dict, kb: Keyboard, path: str | os.PathLike, window: int = 20,
               config: dict | None = None) -> None:
-    """Draw a closed-loop session to a figure file (format from the suffix).
-
-    Parameters
-    ----------
-    steps : dict
-        The artifact's ``steps`` group (``phase``, ``result``, ``score``, ``landed``).
-    attrs : dict
-        Its summary attributes.
-    config : dict, optional
-        Its config (for the detector's threshold).
-    """
+    """Draw a closed-loop session (the artifact's ``steps`` group, attrs and config, which holds
+    the detector's threshold) to a figure file (format from the suffix)."""
     phase = np.asarray(steps["phase"]).astype(int)
     result = np.asarray(steps["result"]).astype(int)
     score = np.asarray(steps["score"], float)

@@ -47,15 +47,10 @@ def _map(model, kb: Keyboard) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def boundary_segments(lines: np.ndarray, keys: np.ndarray, area, step: float = MAP_STEP
                       ) -> np.ndarray:
-    """Where each fitted boundary line ``n . x = c`` separates two different predicted keys on
-    the map (``keys``: the key per ``step`` px cell of ``area``): points of the lines 1 px apart,
-    NaN where the cells 2 px either side agree (there the line is no boundary of the model's) or
-    fall off the map, one row of NaN between lines (to plot as one broken line).
-
-    Returns
-    -------
-    (n, 2) ndarray
-    """
+    """(n, 2) points, 1 px apart, where each fitted boundary line ``n . x = c`` separates two
+    different predicted keys on the map (``keys``: the key per ``step`` px cell of ``area``); NaN
+    where the cells 2 px either side agree or fall off the map, and one NaN row between lines
+    (to plot as one broken line)."""
     x0, y0, x1, y1 = (float(v) for v in area)
     half = np.hypot(x1 - x0, y1 - y0)
     t = np.arange(-half, half, 1.0)
@@ -174,7 +169,7 @@ def _curve_panel(ax, art: Artifact) -> None:
     acc = np.asarray(art.data["curve"]["accuracy"], float)
     ax.plot(n, 100 * acc, "o-", ms=3, color="tab:blue", label="accuracy")
     ax.axhline(99.0, ls="--", color="grey", lw=1, label="99 % (the target)")
-    # below the line, inside the axes (above it, the label sat on the frame at 100.5 %)
+    # below the line, inside the axes
     ax.text(0.02, 99.0, "99 %", transform=ax.get_yaxis_transform(), ha="left", va="top",
             fontsize=9, color="0.35", gid="target-label",
             bbox={"boxstyle": "square,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8})

@@ -38,8 +38,7 @@ def _palette() -> np.ndarray:
     """:data:`DISTINCT_KEYS` colours chosen greedily (each the candidate farthest, in CIELAB, from
     those already chosen: Glasbey's method) among light and mid tones, so black labels stay
     readable and neighbouring keys differ."""
-    h, sat, val = np.meshgrid(np.arange(36) / 36, [0.3, 0.55, 0.8], [0.7, 0.85, 1.0],
-                              indexing="ij")
+    h, sat, val = np.meshgrid(np.arange(36) / 36, [0.3, 0.55, 0.8], [0.7, 0.85, 1.0], indexing="ij")
     rgb = hsv_to_rgb(np.stack([h, sat, val], -1).reshape(-1, 3))
     lab = _lab(rgb)
     keep = (lab[:, 0] >= 52) & (lab[:, 0] <= 88)  # black text readable; never near-white silence

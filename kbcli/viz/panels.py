@@ -185,8 +185,7 @@ class PosteriorPanel:
                                cmap="magma", aspect="equal", interpolation="nearest")
         self.cross, = ax.plot([], [], "x", color="cyan", ms=10, mew=2.2,
                               label="truth" if rep.truth is not None else "_truth")
-        self.est, = ax.plot([], [], "o", mfc="none", mec="lime", ms=11, mew=1.8,
-                            label="estimate")
+        self.est, = ax.plot([], [], "o", mfc="none", mec="lime", ms=11, mew=1.8, label="estimate")
         ax.set_xlabel("dx (px)")
         ax.set_ylabel("dy (px)")
         ax.tick_params(labelsize=7.5)

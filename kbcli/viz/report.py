@@ -62,10 +62,7 @@ def _rows(art: Artifact, mode: str, key: str = "curves") -> list[tuple[str, str]
     for x in [x for x in method_names(art) if x in tree]:
         by = tree[x]
         strategies = art.attrs["methods"][x]["strategies"]
-        if key == "curves":
-            present = {s for by_s in by.values() for s in by_s}
-        else:
-            present = set(by)
+        present = {s for by_s in by.values() for s in by_s} if key == "curves" else set(by)
         out += [(x, s) for s in strategies if s in present]
     return out
 

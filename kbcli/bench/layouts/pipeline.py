@@ -30,13 +30,7 @@ from kbcli.stages import learn as learn_stage
 
 class Pipeline:
     """The layouts pipeline, stage by stage; each long stage is an iterator (for progress bars).
-
-    Parameters
-    ----------
-    cfg : LayoutsConfig
-    out : path
-        Output folder (``keyboards/``, ``models/``, ``cache/``, ``report/`` are made in it).
-    """
+    ``keyboards/``, ``models/``, ``cache/`` and ``report/`` are made in the folder ``out``."""
 
     def __init__(self, cfg: LayoutsConfig, out: str | os.PathLike) -> None:
         self.cfg = cfg

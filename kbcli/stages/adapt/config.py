@@ -47,33 +47,14 @@ class AdaptConfig(StageConfig):
     """One adaptation: the robot's settings (``robot``, a :class:`kbcli.core.adaptation.loop.AdapterConfig`)
     plus the simulated arm's and the loop's.
 
-    Parameters
-    ----------
-    robot : AdapterConfig
-        How the robot adapts: strategy, posterior, estimator, grid, ... (its defaults are kbcli's
-        best choice).
-    mode : str
-        ``ideal`` or ``dynamics`` (:class:`kbcli.sim.SimConfig`).
-    reach_noise : float
-        Landing scatter of the arm, px.
-    arm : ArmConfig
-        How the simulated arm errs (:mod:`kbcli.sim.arms`; a preset name or a table is accepted):
-        its landing error, its finger and how well it feels where it landed.
-    feedback : str
-        ``landed``: the robot observes where its finger landed (proprioception); ``aim``: only where
-        it aimed, and blurs its likelihood by ``reach_noise`` (``robot.blur`` is then set to it).
-    max_steps : int
-        T, observations at most.
-    stop : bool
-        End at the stopping rule (else always run T steps and record when the rule fired).
+    ``arm`` (a preset name or a table) is how the simulated arm errs; ``feedback = "landed"``:
+    the robot observes where its finger landed; ``"aim"``: only where it aimed, and
+    ``robot.blur`` is set to ``reach_noise`` (px). ``max_steps`` is T; ``stop``: end at the
+    stopping rule (else run T steps and record when the rule fired).
 
-    Notes
-    -----
-    The robot's own options read through as attributes (``cfg.family`` is ``cfg.robot.family``;
-    ``cfg.strategy`` the strategy's options, ``cfg.strategy.name`` its name).
-    They may also be given at the top level, beside ``mode`` (``AdaptConfig(strategy="random")``,
-    the flat layout of schema-1 artifacts and older TOML files): there they override the same
-    option of ``robot`` (as a command-line flag overrides a TOML file).
+    The robot's options read through as attributes (``cfg.family`` is ``cfg.robot.family``). They
+    may also be given at the top level (``AdaptConfig(strategy="random")``, the flat layout of
+    schema-1 artifacts and older TOML files), overriding the same option of ``robot``.
     """
 
     what: ClassVar[str] = "adapt"
@@ -148,18 +129,9 @@ class AdaptConfig(StageConfig):
 
 
 class PlayCheck(StageConfig):
-    """Playing success measured by replaying the melody (Algorithm 1) around an adaptation.
-
-    Parameters
-    ----------
-    melody : str
-        Notes ``NOTE:BEATS`` (:mod:`kbcli.core.instrument.melody`).
-    notes : int
-        Touches per replay.
-    reference : bool
-        Also replay before the displacement and after it without adaptation (else only after
-        adaptation, with the final estimate).
-    """
+    """Playing success measured by replaying the melody (Algorithm 1) around an adaptation:
+    ``notes`` touches per replay, after adaptation with the final estimate and, with
+    ``reference``, also before the displacement and after it without adaptation."""
 
     what: ClassVar[str] = "play"
 

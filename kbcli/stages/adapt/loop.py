@@ -79,40 +79,19 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
                keep: dict | None = None) -> dict[str, np.ndarray]:
     """One adaptation against a world whose keyboard sits at ``true_params``.
 
-    Parameters
-    ----------
-    model : SoundModel
-        The robot's model (exact or learned).
-    keyboard : Keyboard
-        The instrument (world side).
-    true_params : (P,) ndarray
-        The true displacement in ``world_family`` parameters (default: ``cfg.robot.family``).
-    rng : numpy.random.Generator
-        Split into the robot's and the world's generators.
-    snapshot_steps : tuple of int
-        Steps (0: the prior) at which to keep the posterior.
-    table, samples : LikelihoodTable, ActionSamples, optional
-        The model raster (:func:`build_shared_table`) and the ``kde`` posterior's per-class
-        samples (:func:`build_shared_samples`), shared across experiments; default: made per run.
-    play, play_pool, reference_rng : PlayCheck, ActionSamples, Generator, optional
-        Also measure the playing success (adds ``play_before``, ``play_unadapted``,
-        ``play_adapted``, each a float, NaN when not measured), from a third child of ``rng``,
-        resampling ``play_pool`` (default: the model samples), see :func:`_play_after`.
-    on_step : callable, optional
-        Called with the step number after each observation (a progress bar).
-    timings : dict, optional
-        Receives ``setup_ms``: the wall-clock time of the adapter's set-up before the first touch
-        (the model raster, :meth:`Adapter.prepare`), which ``step_ms`` leaves out.
-    keep : dict, optional
-        Receives ``adapter``: the robot's adapter (at the end, its state after the last touch).
+    ``true_params`` (P,) is in ``world_family`` parameters (default: ``cfg.robot.family``);
+    ``rng`` is split into the robot's and the world's generators; the posterior is kept at
+    ``snapshot_steps`` (0: the prior). ``table`` and ``samples`` (the model raster and the ``kde``
+    posterior's per-class samples) may be shared across experiments; default: made per run.
+    With ``play``, also measures the playing success (``play_before``, ``play_unadapted``,
+    ``play_adapted``, NaN when not measured), from a third child of ``rng``, resampling
+    ``play_pool`` (default: the model samples). ``on_step(step)`` is called after each
+    observation; ``timings`` receives ``setup_ms`` (the adapter's set-up, which ``step_ms`` leaves
+    out); ``keep`` receives ``adapter`` (its state after the last touch).
 
-    Returns
-    -------
-    dict of ndarrays, per step t = 1..T (T = ``max_steps``, fewer when ``cfg.stop`` ends early)
-        The records (:meth:`~kbcli.stages.adapt.record.Recorder.arrays`), with ``true_landed``
-        (T, 2) where the finger did land and ``truth_logratio`` (T,) the log of the posterior at
-        the truth over its maximum (:meth:`~kbcli.core.adaptation.posteriors.posterior.Posterior.log_ratio_at`),
-        both world side, for the evaluation.
+    Returns the records per step t = 1..T (:meth:`~kbcli.stages.adapt.record.Recorder.arrays`;
+    fewer than ``max_steps`` when ``cfg.stop`` ends early), with, world side, ``true_landed`` (T, 2)
+    and ``truth_logratio`` (T,): the log of the posterior at the truth over its maximum.
     """
     world_family = cfg.robot.family if world_family is None else world_family
     truth = np.asarray(true_params, float)
@@ -131,10 +110,8 @@ def experiment(cfg: AdaptConfig, model, keyboard: Keyboard, true_params: np.ndar
 def _run(cfg: AdaptConfig, adapter: Adapter, touch: _Touches, truth: np.ndarray,
          world_family: str, snapshot_steps: tuple[int, ...],
          on_step: Callable[[int], None] | None) -> dict[str, np.ndarray]:
-    """Adapt for ``cfg.max_steps`` touches (or to the stop), recording each step with its errors
-    against the truth; returns the records (:meth:`Recorder.arrays`) with, world side (only the
-    evaluation reads them), ``truth_logratio``: the log of the posterior at the truth over its
-    maximum after each step, and ``true_landed``."""
+    """Adapt for ``cfg.max_steps`` touches (or to the stop): the records :func:`experiment`
+    returns."""
     rec = Recorder(adapter, [s for s in snapshot_steps if 0 <= int(s) <= cfg.max_steps])
     truth_robot = _as_family(truth, world_family, cfg.robot.family)
     ratios = []
@@ -191,11 +168,9 @@ def _play_after(cfg: AdaptConfig, model, keyboard: Keyboard, truth: np.ndarray,
                 rng: np.random.Generator, pool: ActionSamples | None,
                 reference_rng: np.random.Generator | None = None) -> dict[str, float]:
     """:func:`play_success` around an adaptation whose records are ``out``, corrected by its final
-    estimate (``cfg.robot.estimator``'s) in the world's parameters. The reference replays
-    (``play.reference``: before the displacement and unadapted), which do not depend on the
-    adaptation, from ``reference_rng`` when given (the evaluation gives them a seed without method
-    and strategy, so they measure the same whichever experiment runs them); else from children of
-    ``rng``, as the adapted replay."""
+    estimate in the world's parameters. The reference replays (``play.reference``), which do not
+    depend on the adaptation, draw from ``reference_rng`` when given (so they measure the same
+    whichever experiment runs them), else from children of ``rng``, as the adapted replay."""
     final = ESTIMATORS.get(cfg.robot.estimator).final(out)
     if world_family != cfg.robot.family:  # correct in the world's parameters
         final = _as_family(final, cfg.robot.family, world_family)

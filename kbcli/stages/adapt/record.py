@@ -19,14 +19,8 @@ RECORDS = ("actions", "landed", "perceived", "classes", "estimates", "means", "e
 class Recorder:
     """The per-step records and posterior snapshots of one adaptation: what a ``run`` artifact
     holds, whoever touched (the simulated world in :func:`experiment`, or a robot in another
-    process through ``kbcli serve``, :mod:`kbcli.stages.serve`).
-
-    Parameters
-    ----------
-    adapter : Adapter
-        The robot's adapter (read after each step).
-    snapshot_steps : iterable of int
-        Steps (0: the prior) at which to keep the posterior.
+    process through ``kbcli serve``). ``adapter`` is read after each step; the posterior is kept
+    at ``snapshot_steps`` (0: the prior).
     """
 
     def __init__(self, adapter: Adapter, snapshot_steps=()) -> None:

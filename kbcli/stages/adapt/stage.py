@@ -60,25 +60,11 @@ def run(cfg: AdaptConfig, model_artifact: Artifact, scene_artifact: Artifact, *,
         timings: dict[str, float] | None = None, keep: dict | None = None) -> Artifact:
     """Adapt to a scene with a model: the ``run`` artifact.
 
-    Parameters
-    ----------
-    seed : int, optional
-        Recorded in the artifact (``rng`` should be ``default_rng(seed)``).
-    model : SoundModel, optional
-        The already loaded model of ``model_artifact`` (saves loading it again).
-    on_step : callable, optional
-        Called with the step number after each observation (a progress bar).
-    timings : dict, optional
-        Receives ``setup_ms``: the wall-clock time from the model artifact to the adapter ready
-        for its first touch (loading the model, its raster, :meth:`Adapter.prepare`).
-    keep : dict, optional
-        Receives ``adapter``, the robot's adapter after the last touch
-        (:func:`~kbcli.stages.adapt.experiment`).
-
-    Raises
-    ------
-    ArtifactError, KbcliError
-        Wrong kinds, mismatching keyboards.
+    ``seed`` is recorded (``rng`` should be ``default_rng(seed)``); ``model``: the already loaded
+    model of ``model_artifact``; ``timings`` receives ``setup_ms``, from the model artifact to the
+    adapter ready (loading included); ``on_step`` and ``keep`` as in
+    :func:`~kbcli.stages.adapt.experiment`. ArtifactError or KbcliError for wrong kinds or
+    mismatching keyboards.
     """
     check_inputs(model_artifact, scene_artifact)
     t0 = time.perf_counter()

@@ -19,15 +19,10 @@ and after it without adaptation. Each experiment is seeded by
 and repetition, so a result depends neither on the worker nor on which modes or methods were
 selected.
 
-This package holds the config (:mod:`.config`, :mod:`.categories`, :mod:`.methods`), plans the
-experiments (:func:`plan`, :mod:`.planning`), runs one in a worker (:func:`setup`,
-:func:`run_experiment`, :mod:`.worker`) and assembles the ``evaluation`` artifact (:func:`assemble`,
-:mod:`.assembly`): RMSE per step (Fig. 7), observations to each error threshold, Mann-Whitney U
-p-values against the method's baseline strategy, entropy per step (Fig. 6), playing success and
-one example run's posterior snapshots (Fig. 5). Execution and checkpoints are
-:mod:`kbcli.io.runner`'s job.
+The ``evaluation`` artifact (:func:`assemble`) holds RMSE per step (Fig. 7), observations to each
+error threshold, Mann-Whitney U p-values against the method's baseline strategy, entropy per step
+(Fig. 6), playing success and one example run's posterior snapshots (Fig. 5).
 """
-
 
 from __future__ import annotations
 

@@ -230,27 +230,11 @@ def resummarise(art: Artifact, rows: np.ndarray | None = None, *, error_scale: f
     """The evaluation ``art`` with its summaries (``curves/``, ``pvalues/``, ``entropy/``)
     recomputed from its per-run records, as :func:`assemble` computes them.
 
-    Parameters
-    ----------
-    rows : (n,) int ndarray, optional
-        The experiment rows to summarise, in this order, repeats allowed (a bootstrap resample);
-        default: every row.
-    error_scale : float
-        Every per-step error multiplied by it first (another reading of the error: 1 / sqrt(2)
-        reads each run's RMSE over the two coordinates instead of its Euclidean error).
-    only : (mode, method), optional
-        Summarise this mode and method alone (``rows`` then holds only theirs).
-
-    Returns
-    -------
-    Artifact
-        In memory (no sha256), without example runs.
-
-    Raises
-    ------
-    ConfigError
-        When the artifact's config or records cannot be read by this version (an evaluation made
-        before the per-run records it needs were kept).
+    ``rows`` (n,): the experiment rows to summarise, in order, repeats allowed (a bootstrap
+    resample; default every row); every per-step error is first multiplied by ``error_scale``
+    (1 / sqrt(2) reads each run's RMSE over the two coordinates); ``only=(mode, method)``
+    summarises those alone (``rows`` then holds only theirs). Returns an in-memory artifact (no
+    sha256) without example runs; ConfigError when the artifact lacks the per-run records.
     """
     cfg = EvaluateConfig.from_dict(art.config)
     if only is not None:
@@ -263,10 +247,7 @@ def resummarise(art: Artifact, rows: np.ndarray | None = None, *, error_scale: f
     table = {k: np.asarray(v)[idx] for k, v in exp.items()}
     st = {k: np.asarray(v)[idx] for k, v in steps.items()}
     for k in ERRORS.values():
-        if k in st:
-            st[k] = st[k] * error_scale
-        else:
-            st[k] = np.full(st["errors"].shape, np.nan)
+        st[k] = st[k] * error_scale if k in st else np.full(st["errors"].shape, np.nan)
     curves, pvalues, entropy, _ = _summaries(cfg, [], {}, table, st, art.array("thresholds"))
     data = {**art.data, "experiments": table, "steps": st, "curves": curves,
             "pvalues": pvalues, "entropy": entropy, "examples": {}}

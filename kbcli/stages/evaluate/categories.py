@@ -19,20 +19,10 @@ from kbcli.stages.perturb import displacement_size
 
 
 class Category(StageConfig):
-    """A group of displacement parametrizations of similar size.
-
-    Parameters
-    ----------
-    name : str
-    limit : float, optional
-        Largest displacement size (px) in this category: the Euclidean norm of each
-        parametrization's translation is at most this (and, for the size categories small, medium
-        and large of :data:`kbcli.stages.perturb.CATEGORIES`, above the category's lower bound).
-        Default (and required value) for those three: their upper bound.
-    displacements : tuple of tuples
-        Transform parameters of each parametrization (``(dx, dy)`` for translation,
-        ``(angle, dx, dy)`` for rigid).
-    """
+    """A group of displacement parametrizations (``(dx, dy)`` or ``(angle, dx, dy)``) of similar
+    size: each translation's norm is at most ``limit`` px (for the size categories of
+    :data:`kbcli.stages.perturb.CATEGORIES`, also above their lower bound; their ``limit`` is
+    their upper bound, the default)."""
 
     what: ClassVar[str] = "categories"
 

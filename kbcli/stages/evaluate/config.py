@@ -11,15 +11,7 @@ from typing import Annotated, Any, ClassVar
 from pydantic import AfterValidator, Field, InstanceOf, field_validator, model_validator
 
 from kbcli.core.adaptation.config import refuse_inactive
-from kbcli.core.config import (
-    Name,
-    Names,
-    NonNegativeInt,
-    Positive,
-    Whole,
-    between,
-    refused_option,
-)
+from kbcli.core.config import Name, Names, NonNegativeInt, Positive, Whole, between, refused_option
 from kbcli.core.instrument import transforms
 from kbcli.core.instrument.melody import DEFAULT_MELODY
 from kbcli.errors import ConfigError
@@ -82,50 +74,18 @@ def _legacy_layout(d: dict) -> dict:
 class EvaluateConfig(StageConfig):
     """The evaluation protocol (the ``[evaluate]`` table of ``pipelines/paper.toml``).
 
-    Parameters
-    ----------
-    seed : int
-        Root of every experiment's seed (and of the KDE samples, drawn once per class).
-    experiments : int
-        Repetitions per parametrization, method, strategy and mode (the paper: 50).
-    methods : tuple of Method
-        The named methods compared (default: ``paper`` and ``kbcli``, see the package docstring);
-        in TOML, a table of ``name = {strategies, adapt options}``, kept in file order.
-    judged : str
-        The method the paper's claims are judged on (``paper``); the others are shown beside it.
-    baseline : str
-        The strategy each method's others are tested against (in every method's strategies).
-    modes : tuple of str
-        Reaching modes (:data:`kbcli.sim.MODES`).
-    family : str
-        Transform family (:data:`kbcli.core.instrument.transforms.FAMILIES`).
-    max_steps : int
-        Observations per experiment (T).
-    thresholds : tuple of float
-        Error thresholds (px) for the observations-to-threshold table and the tests (kept sorted,
-        largest first).
-    example : str
-        Category whose first parametrization's first run, per mode, method and strategy, keeps its
-        posterior snapshots (Fig. 5).
-    snapshot_steps : tuple of int
-        Steps (observations) at which the example runs keep the posterior.
-    reach_noise : mapping
-        Landing scatter of the arm (px) in each mode: ``ideal`` lands exactly (0, the paper's
-        idealised problem); ``dynamics`` adds motor noise to the simulated arm.
-    arm : mapping
-        Arm of each mode: a preset name (``ideal``, ``servo``, ``realistic``) or a table
-        (:mod:`kbcli.sim.arms`); missing modes get ``ideal``.
-    categories : tuple of Category
-        Displacement categories, in order; in TOML, a table of ``name = {limit, displacements}``.
-    play_notes : int
-        Touches of each melody replay (Algorithm 1) measuring the playing success; 0: not measured.
-    melody : str
-        The melody replayed.
+    ``seed`` roots every experiment's seed and the KDE samples; ``experiments`` repetitions per
+    parametrization, method, strategy and mode. ``methods`` (in TOML, a table of ``name =
+    {strategies, adapt options}``, in file order) are compared; the paper's claims are judged on
+    ``judged``, each method's strategies tested against ``baseline``. ``max_steps`` is T;
+    ``thresholds`` (px) are kept largest first. The first run of ``example``'s first
+    parametrization keeps the posterior at ``snapshot_steps`` (Fig. 5). ``reach_noise`` (px) and
+    ``arm`` (a preset name or a table; missing modes get ``ideal``) are per mode. ``categories``:
+    in TOML, a table of ``name = {limit, displacements}``. ``play_notes`` touches of each replay
+    of ``melody`` (Algorithm 1) measure the playing success (0: not measured).
 
-    Notes
-    -----
-    The layout before named methods (``strategies = [...]`` and an ``[evaluate.adapt]`` table) is
-    still read, as one method ``kbcli`` that the claims are judged on.
+    The older layout (``strategies = [...]`` and an ``[evaluate.adapt]`` table) is read as one
+    method ``kbcli`` that the claims are judged on.
     """
 
     what: ClassVar[str] = "evaluate"

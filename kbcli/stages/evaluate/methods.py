@@ -67,25 +67,12 @@ check_modes = each(member_of("mode", MODES))
 class Method(StageConfig):
     """A named way to adapt: adapt options and the strategies compared under them.
 
-    Parameters
-    ----------
-    name : str
-    strategies : tuple of str
-        Strategies run with these options (the protocol's ``baseline`` must be one of them).
-    options : mapping
-        Adapt-stage options (:class:`kbcli.stages.adapt.AdaptConfig`: the robot's, such as
-        ``posterior`` or ``estimator``, at the top level or in a ``robot`` table, and the loop's,
-        such as ``feedback``); options left out take the adapt stage's defaults. ``strategy``,
-        ``mode``, ``max_steps``, ``family`` and ``reach_noise`` are set by the protocol.
-    modes, categories : tuple of str, optional
-        Run this method only in these modes / categories (None: all of the protocol's); for
-        ablations that answer one question.
-    description : str
-        One line for the report.
-    seeds_of : str, optional
-        Seed the experiments as the method of this name would be (its experiments' seeds contain
-        the method's name): a method renamed keeps its numbers (``paper-v1``, the ``paper``
-        method before issue 26). None: its own name.
+    ``strategies`` must include the protocol's ``baseline``. ``options`` are adapt-stage options
+    (:class:`kbcli.stages.adapt.AdaptConfig`; left out: its defaults); ``strategy``, ``mode``,
+    ``max_steps``, ``family`` and ``reach_noise`` are set by the protocol. ``modes`` and
+    ``categories`` restrict where the method runs (None: everywhere). ``seeds_of``: seed the
+    experiments as the method of that name (seeds contain the method's name), so a method renamed
+    keeps its numbers; None: its own name.
     """
 
     what: ClassVar[str] = "methods"

@@ -94,8 +94,7 @@ def _model_info(a: dict, exploration: str, budget: int) -> dict:
     return {"exploration": exploration, "budget": budget, "accuracy": float(a["accuracy"]),
             "boundary_error": berr, "threshold": threshold(berr),
             "estimated_boundary_error": rel.get("boundary_error"),
-            # held-out touches' rate (as before) and the pad's, as the
-            # calibrated model expects it (models learned since 2026-12-02)
+            # held-out touches' rate and the pad's, as the calibrated model expects it
             "estimated_mislabel_rate": rel.get("cv_error"),
             "expected_mislabel_rate": rel.get("expected_error"),
             "redundancy_radius": (REDUNDANCY_FACTOR * own if own is not None else None),

@@ -62,42 +62,13 @@ def compared_rows(d: Mapping[str, Any]) -> list[str]:
 class QualityConfig(Config):
     """The model-quality sweep (the ``[quality]`` table of ``pipelines/model-quality.toml``).
 
-    Parameters
-    ----------
-    seed : int
-        Root of every model's and experiment's seed.
-    budgets : tuple of int
-        Reaches of each learned model (>= 10; stored sorted, without repeats).
-    explorations : tuple of str
-        Exploration strategies (``active``, ``random``).
-    mode : str
-        Reach mode of learning and adapting (``ideal`` or ``dynamics``).
-    arm : str or table
-        Arm preset (:mod:`kbcli.sim.arms`) of learning and adapting (stored as the resolved table).
-    reach_noise : float
-        Extra landing scatter, px.
-    rows : mapping
-        Name -> adapt options (``strategy`` and any adapt option, e.g. ``robust = false``).
-    baseline : str
-        The row the others are compared with.
-    baselines : mapping
-        Rows compared with another row than ``baseline``: row -> its baseline row (the paper's
-        ``paper-active`` against the paper's own ``paper-random``, both on the paper's
-        posterior). A row that is a baseline is not compared itself.
-    experiments : int
-        Repetitions per displacement, model and row.
-    max_steps : int
-        Touches per adaptation.
-    categories : tuple of Category
-        The displacements (the paper's by default); from TOML a table of
-        ``name = {limit, displacements}``.
-    adapt : mapping
-        Adapt options shared by every row.
-    ideal : bool
-        Also adapt with the exact model (the keyboard's own map, no model error), with infogain,
-        on the same displacements and seeds: the touches infogain needs to reach each learned
-        model's threshold when the model is perfect, a reference for what a better model could
-        buy (not a strict bound: infogain is greedy, and a lucky run does better).
+    ``budgets``: reaches of each learned model (stored sorted, without repeats); ``arm`` is
+    stored as the resolved table; ``reach_noise``: extra landing scatter, px. ``rows``: name ->
+    adapt options, each compared with ``baseline`` or its entry in ``baselines`` (row -> its
+    baseline row); a row that is a baseline is not compared itself. ``experiments`` per
+    displacement, model and row; ``adapt``: options shared by every row. ``ideal``: also adapt
+    with the exact model, with infogain, on the same displacements and seeds (a reference for
+    what a better model could buy, not a strict bound: infogain is greedy).
     """
 
     what = "quality"

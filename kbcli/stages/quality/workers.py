@@ -52,9 +52,7 @@ def adapt_one(state: dict, task: Task) -> dict:
     model = state["models"][task.model]
     key = (task.model, table_key(model, acfg.adapter_config()))
     if key not in state["tables"]:
-        # keep the current model's tables only, which plan() runs together (two for the shipped
-        # rows, robust and plain, about 0.1 GB each): clearing at a fixed count rebuilt them at
-        # every displacement
+        # keep the current model's tables only: plan() runs a model's tasks together
         if any(m != task.model for m, _ in state["tables"]):
             state["tables"].clear()
         state["tables"][key] = adapt_stage.build_shared_table(acfg, model)

@@ -17,10 +17,6 @@ How each claim is judged, on the *judged* method (``paper``), every other method
 - *adaptation restores performance* (Sect. IV-C, dynamics mode): for every strategy, the median
   playing success after adaptation is at least the median before the displacement minus
   :data:`RESTORED_MARGIN`.
-
-The rules are :mod:`~kbcli.stages.report.judge` and :mod:`~kbcli.stages.report.effects`, the
-claims :mod:`~kbcli.stages.report.paper`, the text :mod:`~kbcli.stages.report.readme`
-(:func:`build`).
 """
 
 from __future__ import annotations

@@ -47,19 +47,9 @@ def counts(art: Artifact, mode: str, method: str, category: str, strategy: str,
 
 
 def superiority(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Probability of superiority of ``a`` over ``b`` (fewer observations) and its variance.
-
-    Parameters
-    ----------
-    a, b : (n, k) and (m, k) ndarrays
-        Observations to each of ``k`` thresholds of two independent samples of runs.
-
-    Returns
-    -------
-    A, var : (k,) ndarrays
-        ``A = P(a < b) + P(a = b) / 2``; ``var`` its DeLong variance
-        ``var_i(V10) / n + var_j(V01) / m``.
-    """
+    """Probability of superiority of ``a`` (n, k) over ``b`` (m, k), observations to each of ``k``
+    thresholds of two independent samples: (k,) ``A = P(a < b) + P(a = b) / 2`` and (k,) its
+    DeLong variance ``var_i(V10) / n + var_j(V01) / m``."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     psi = (a[:, None, :] < b[None, :, :]) + 0.5 * (a[:, None, :] == b[None, :, :])  # (n, m, k)
     v10, v01 = psi.mean(axis=1), psi.mean(axis=0)
@@ -121,8 +111,7 @@ def shrinks(art: Artifact, mode: str, method: str, strategy: str, cats: list[str
                            (seq[-1], float(adv[cats[-1]]["var"][j])))
         falls &= all(x > y for x, y in zip(seq, seq[1:], strict=False))
         shown |= p < EFFECT_LEVEL
-        parts.append(f"{thr[j]:g} px: " + " -> ".join(f"{x:.2f}" for x in seq)
-                     + f" (p={fmt_p(p)})")
+        parts.append(f"{thr[j]:g} px: " + " -> ".join(f"{x:.2f}" for x in seq) + f" (p={fmt_p(p)})")
     verdict = "agrees" if falls and shown else "differs"
     text = (f"advantage A = P({strategy} needs fewer observations) over "
             f"{' -> '.join(cats)}, one-sided p of the fall {cats[0]} -> {cats[-1]}: "

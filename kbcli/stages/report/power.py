@@ -74,20 +74,9 @@ def replication(art: Artifact, rule, mode: str, method: str, strategy: str, *,
                 replicates: int = REPLICATES, runs: int = PAPER_RUNS,
                 seed: int = 0) -> Replication | None:
     """The share of bootstrap replicates (``runs`` experiments per parametrization) in which
-    ``rule`` gives *agrees*.
-
-    Parameters
-    ----------
-    rule : callable
-        ``rule(artifact) -> fn(method, strategy) -> (text, verdict)``: the claim's rule for an
-        artifact (:func:`kbcli.stages.report.paper.claim_rules` of the replicate, by claim).
-    mode, method, strategy : str
-        The claim's mode, the judged method and the compared strategy.
-
-    Returns
-    -------
-    Replication or None
-        None when the evaluation cannot be resummarised (no per-run records).
+    ``rule`` gives *agrees*: ``rule(artifact) -> fn(method, strategy) -> (text, verdict)`` is the
+    claim's rule (:func:`kbcli.stages.report.paper.claim_rules`). None when the evaluation cannot
+    be resummarised (no per-run records).
     """
     from kbcli.stages.evaluate.assembly import resummarise
 

@@ -150,8 +150,7 @@ def rmse_table(art: Artifact, mode: str) -> list[str]:
     lines = [head, "|" + "---|" * (len(steps) + 3)]
     for x, c, s, cur in ordered(art, "curves", mode):
         r = cur["rmse"]
-        lines.append(f"| {x} | {c} | {s} | " + " | ".join(f"{r[t - 1]:.2f}" for t in steps)
-                     + " |")
+        lines.append(f"| {x} | {c} | {s} | " + " | ".join(f"{r[t - 1]:.2f}" for t in steps) + " |")
     return lines
 
 
