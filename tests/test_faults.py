@@ -872,3 +872,20 @@ def test_a_sigterm_right_after_the_temporary_file_is_made_leaves_nothing(tmp_pat
     finally:
         signals.restore(old)
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_stop_that_hangs_after_sigterm_is_cut_short_in_the_cli_process():
+    """A clean stop that never ends (a worker pool that will not shut down: CI once saw evaluate
+    still alive 30 s after SIGTERM) ends 143 after ``GRACE_S`` in the process the CLI runs in."""
+    script = ("import sys, threading, time\nfrom kbcli.io import signals\n"
+              "signals.GRACE_S = 1.0\nsignals.bound_the_stop()\nsignals.install()\n"
+              "threading.Thread(target=time.sleep, args=(60,)).start()  # exit waits for it\n"
+              "print('ready', flush=True)\n"
+              "try:\n    time.sleep(60)\nexcept signals.Terminated:\n    sys.exit(143)\n")
+    p = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert p.stdout.readline().strip() == "ready"
+    start = time.monotonic()
+    p.send_signal(signal.SIGTERM)
+    p.communicate(timeout=30)
+    assert p.returncode == 143 and time.monotonic() - start < 20

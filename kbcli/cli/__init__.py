@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 
 from kbcli.cli.app import app
+from kbcli.io import signals
 
 # Each stage's commands live in their own module; importing it registers them on ``app``.
 _COMMAND_MODULES = ("keyboard", "inspect", "learn", "perturb", "play", "detect", "adapt", "robust",
@@ -20,6 +21,7 @@ for _name in _COMMAND_MODULES:
 
 def main() -> None:
     """Console-script entry point."""
+    signals.bound_the_stop()
     app()
 
 
