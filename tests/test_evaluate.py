@@ -276,7 +276,7 @@ def test_paper_config_parses_and_plans():
     assert [m.name for m in cfg.methods] == ["paper", "paper-v1", "kbcli", "paper-likelihood"]
     assert cfg.judged == "paper"
     paper = stage.adapt_config(cfg, "paper", "paper-active", "ideal")
-    assert (paper.robot.posterior.name, paper.robot.estimator) == ("kde", "ml")
+    assert (paper.robot.posterior.name, paper.robot.estimator.name) == ("kde", "ml")
     assert (paper.robot.posterior.kde_draw, paper.robot.posterior.kde_floor,
             paper.robot.ml_ties) == \
         ("fresh", 0.0, "random")

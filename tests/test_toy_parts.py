@@ -2,7 +2,8 @@
 
 A toy posterior (``leaning``: every touch tilts the belief towards larger dx by ``lean``), a toy
 strategy (``corner``: always touch one corner of the working area, ``corner = "low"`` or
-``"high"``) and a toy layout (``row``: ``n_keys`` keys of ``key_width`` px side by side) are
+``"high"``), a toy estimator (``shrunk``: the posterior mean shrunk towards no displacement by
+``shrink``) and a toy layout (``row``: ``n_keys`` keys of ``key_width`` px side by side) are
 registered from this file alone and run through ``kbcli adapt`` and ``kbcli keyboard`` with their
 own option set; an option the chosen part does not take is refused by the part, naming it.
 """
@@ -19,6 +20,7 @@ from helpers import one_line_error
 from pydantic import AfterValidator
 
 from kbcli.cli import app
+from kbcli.core.adaptation.estimators import ESTIMATORS, Estimator
 from kbcli.core.adaptation.posteriors import POSTERIORS, KindBase, Observation
 from kbcli.core.adaptation.strategies import STRATEGIES
 from kbcli.core.config import Count, Name, Number, between, member_of
@@ -67,6 +69,18 @@ def corner_strategy(ctx, rng: np.random.Generator) -> np.ndarray:
     return np.array([x0, y0] if ctx.options.corner == "low" else [x1, y1], float)
 
 
+# -- an estimator with an option of its own ------------------------------------------------------
+class ShrunkOptions(Options):
+    """``shrink``: the fraction of the posterior mean taken off (0: the mean, 1: no displacement)."""
+
+    what: ClassVar[str] = "estimator shrunk"
+    shrink: between(Number, 0, 1) = 0.0
+
+
+def shrunk_mean(post, options: ShrunkOptions) -> np.ndarray:
+    return (1.0 - options.shrink) * post.mean()
+
+
 # -- a layout with an option of its own ---------------------------------------------------------
 class RowOptions(Options):
     """``n_keys`` keys of ``key_width`` x 60 px side by side."""
@@ -87,15 +101,18 @@ def build_row(cfg) -> LayoutGeometry:
 
 @contextlib.contextmanager
 def toy_parts():
-    """The three toy parts registered for the duration of a test."""
+    """The four toy parts registered for the duration of a test."""
     with (POSTERIORS.temporarily("leaning", LeaningPosterior(), summary="leans to larger dx",
                                  traits={"options": LeaningOptions}),
           STRATEGIES.temporarily("corner", corner_strategy, summary="one corner",
                                  traits={"options": CornerOptions}),
+          ESTIMATORS.temporarily("shrunk", Estimator("shrunk", "means", shrunk_mean),
+                                 summary="the mean, shrunk", traits={"options": ShrunkOptions}),
           LAYOUTS.temporarily("row", Layout("row", "keys in a row", build_row, RowOptions),
                               summary="keys in a row", traits={"options": RowOptions})):
         yield
     assert "leaning" not in POSTERIORS and "corner" not in STRATEGIES and "row" not in LAYOUTS
+    assert "shrunk" not in ESTIMATORS
 
 
 # -- kbcli keyboard -----------------------------------------------------------------------------
@@ -160,6 +177,20 @@ def test_a_toy_strategy_and_posterior_run_through_kbcli_adapt(runner, tmp_path, 
     assert np.allclose(art.data["estimates"][1:, -2], 5.0)  # leaning: dx at the prior's edge
 
 
+def test_a_toy_estimator_runs_through_kbcli_adapt(runner, tmp_path, scene_files):
+    toml = tmp_path / "toy.toml"
+    toml.write_text('[adapt]\nestimator = "shrunk"\nshrink = 0.5\nprior_halfwidth = 5.0\n')
+    out = tmp_path / "run.h5"
+    with toy_parts():
+        r = runner.invoke(app, ["adapt", *scene_files, "--config", str(toml), "-o", str(out),
+                                "--max-steps", "3", "--seed", "1"])
+        assert r.exit_code == 0, r.output
+        art = read_artifact(out, "run")
+    assert art.config["adapt"]["robot"]["estimator"] == {"name": "shrunk", "shrink": 0.5}
+    half = 0.5 * np.asarray(art.data["means"])[:, -2:]  # the errors are those of half the mean
+    assert np.allclose(art.data["errors"], np.hypot(*(half - [2.0, -1.0]).T))
+
+
 @pytest.mark.parametrize("body, args, fragments", [
     ('strategy = "corner"\ncandidates = 64\n', [],
      ["adapt: candidates (in", "does not apply", "strategy corner takes no option 'candidates'"]),
@@ -171,6 +202,10 @@ def test_a_toy_strategy_and_posterior_run_through_kbcli_adapt(runner, tmp_path, 
      ["posterior leaning takes no option 'kde_samples' (posterior kde does)"]),
     ('posterior = "likelihood"\nlean = 1.0\n', [],
      ["posterior likelihood takes no option 'lean' (posterior leaning does)"]),
+    ('estimator = "mean"\nshrink = 0.5\n', [],
+     ["estimator mean takes no option 'shrink' (estimator shrunk does)"]),
+    ('shrink = 0.5\n', ["--estimator", "ml"],
+     ["estimator ml takes no option 'shrink' (estimator shrunk does)"]),
 ])
 def test_a_toy_part_refuses_a_foreign_option_naming_it(runner, tmp_path, scene_files, body, args,
                                                        fragments):

@@ -33,7 +33,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from typing import Annotated, Any, ClassVar
 
-from pydantic import BeforeValidator, SerializeAsAny
+from pydantic import BeforeValidator, PlainSerializer, SerializeAsAny
 
 from kbcli.core.config import Config, Name
 from kbcli.core.registry import Registry
@@ -120,15 +120,21 @@ def refusal(registry: Registry, name: str, key: str) -> ConfigError:
     return err
 
 
-def part_field(registry: Registry, default: str) -> Any:
+def part_field(registry: Registry, default: str, *, named: bool = False) -> Any:
     """The type of a config field that chooses a part of ``registry`` and carries its options
     (default ``default``, a name): read by :func:`parse_part`, written with the part's own
-    fields (``{"name": ..., option: value, ...}``)."""
+    fields (``{"name": ..., option: value, ...}``); with ``named``, a part with no option of its
+    own is written as its name (the stored form of a field that was a name)."""
     def parse(v: Any) -> Options:
         return parse_part(registry, v, default)
 
     parse.__name__ = f"parse_{registry.kind.replace(' ', '_')}"
-    return Annotated[SerializeAsAny[Options], BeforeValidator(parse)]
+    field = Annotated[SerializeAsAny[Options], BeforeValidator(parse)]
+    return Annotated[field, PlainSerializer(_as_name)] if named else field
+
+
+def _as_name(part: Options) -> str | dict[str, Any]:
+    return part.to_dict() if part.own() else part.name
 
 
 def route(data: Mapping[str, Any], slots: Mapping[str, tuple[Registry, str]],
@@ -158,6 +164,8 @@ def route(data: Mapping[str, Any], slots: Mapping[str, tuple[Registry, str]],
     own = set(own)
     for slot, (registry, default) in slots.items():
         chosen = out.get(slot, default)
+        if not isinstance(chosen, (str, Mapping, Options)):
+            continue  # the field refuses it
         table = chosen.to_dict() if isinstance(chosen, Options) else (
             {"name": chosen} if isinstance(chosen, str) else dict(chosen))
         name = table.setdefault("name", default)

@@ -10,6 +10,7 @@ import numpy as np
 from kbcli.core.adaptation.estimators import ESTIMATORS
 from kbcli.core.instrument import transforms
 from kbcli.core.instrument.keyboard import Keyboard, sound_name
+from kbcli.core.options import flat_view
 from kbcli.errors import KbcliError
 from kbcli.sim.modes import MODES
 from kbcli.stages.artifact import Artifact
@@ -141,7 +142,8 @@ def _from_run(art: Artifact, kb: Keyboard) -> Replay:
     family = a.get("family", "translation")
     adapt_cfg = art.config.get("adapt") or {}
     # run schema 3 nests the robot's options under "robot"; sessions and schema <= 2: flat
-    estimator = ESTIMATORS.get((adapt_cfg.get("robot") or adapt_cfg).get("estimator", "mean"))
+    robot = flat_view(adapt_cfg.get("robot") or adapt_cfg, ("estimator",))
+    estimator = ESTIMATORS.get(robot.get("estimator", "mean"))
     belief = np.asarray(d[estimator.record], float)
     belief = belief.reshape(len(actions), -1)
     truth_d = a.get("truth")

@@ -331,8 +331,9 @@ class Adapter:
         return Estimate(ml=post.ml(), mean=post.mean(), ml_prob=post.ml_prob())
 
     def estimate(self) -> np.ndarray:
-        """(P,) the estimate the config asks for (posterior mean or maximum-likelihood cell)."""
-        return ESTIMATORS.get(self.cfg.estimator).read(self.posterior)
+        """(P,) the estimate of the config's estimator (the posterior mean, the ML cell, ...)."""
+        est = self.cfg.estimator
+        return ESTIMATORS.get(est.name).read(self.posterior, est)
 
     def entropy(self) -> float:
         """Posterior entropy, nats (over grid cells)."""

@@ -54,15 +54,17 @@ ML_TIES = ("first", "random")
 
 #: The fields of :class:`AdapterConfig` that choose a part and carry its options: slot ->
 #: (registry, default part).
-SLOTS = {"strategy": (STRATEGIES, "infogain"), "posterior": (POSTERIORS, "likelihood")}
+SLOTS = {"strategy": (STRATEGIES, "infogain"), "posterior": (POSTERIORS, "likelihood"),
+         "estimator": (ESTIMATORS, "mean")}
 
 
 class AdapterConfig(Config):
     """How the robot adapts (robot side only: nothing about the simulated world).
 
-    The strategy and the posterior are parts with options of their own: a name, a table ``{name,
-    options...}``, or the part's options given flat beside it (``AdapterConfig(posterior="kde",
-    kde_samples=1000)``). An option the chosen part does not take is refused by the part.
+    The strategy, the posterior and the estimator are parts with options of their own: a name, a
+    table ``{name, options...}``, or the part's options given flat beside it
+    (``AdapterConfig(posterior="kde", kde_samples=1000)``). An option the chosen part does not take
+    is refused by the part.
 
     Parameters
     ----------
@@ -92,8 +94,10 @@ class AdapterConfig(Config):
     kde_sampler : str
         What draws fresh samples of p(action | sound): ``model`` (its rejection sampler) or
         ``raster`` (:class:`kbcli.core.model.sampling.RasterSampler`).
-    estimator : str
-        ``mean`` or ``ml``: which estimate :meth:`Adapter.estimate` returns.
+    estimator : Options
+        Which estimate :meth:`Adapter.estimate` returns: a part of
+        :data:`kbcli.core.adaptation.estimators.ESTIMATORS` (``mean`` or ``ml``; written as its
+        name when it takes no option).
     ml_ties : str
         Which of equally probable cells is the maximum-likelihood one: ``first`` (the lowest grid
         index) or ``random`` (seeded from the adapter's generator).
@@ -120,7 +124,7 @@ class AdapterConfig(Config):
     model_blur: Blur | None = None
     raster_step: Positive | None = None
     kde_sampler: Annotated[Name, choice(*KDE_SAMPLERS)] = "model"
-    estimator: Annotated[Name, AfterValidator(ESTIMATORS.check)] = "mean"
+    estimator: part_field(ESTIMATORS, "mean", named=True) = "mean"
     ml_ties: Annotated[Name, choice(*ML_TIES)] = "first"
     stop_ml: Positive | None = None
     stop_mass: Annotated[float, Strict(), Field(ge=0, le=1, allow_inf_nan=False)] | None = 0.95
@@ -176,7 +180,7 @@ class AdapterConfig(Config):
         for slot in SLOTS:
             if isinstance(changes.get(slot), str):  # a new part: carry over what it takes
                 registry = SLOTS[slot][0]
-                kept = {k: v for k, v in base[slot].items()
+                kept = {k: v for k, v in getattr(self, slot).own().items()
                         if k in _declared(registry, changes[slot])}
                 changes = {**changes, slot: {**kept, "name": changes[slot]}}
         return type(self)(**{**base, **changes})
@@ -198,7 +202,8 @@ class AdapterConfig(Config):
         (:meth:`kbcli.core.options.Options.inactive`) and the adapter's (the angle's without a
         rotating family, the radius of ours without it, the ML ties where no ML cell is read)."""
         rotates = FAMILIES.get(self.family).rotates
-        out = {**self.posterior.inactive(), **self.strategy.inactive()}
+        out = {**self.posterior.inactive(), **self.strategy.inactive(),
+               **self.estimator.inactive()}
         if not rotates:
             out.update({o: "the family does not rotate" for o in ("max_angle",
                                                                    "angle_resolution")})
@@ -206,11 +211,11 @@ class AdapterConfig(Config):
             out.update({o: "stop_mass = 0" for o in ("stop_radius", "stop_angle")})
         elif not rotates:
             out["stop_angle"] = "the family does not rotate"
-        reads_ml = ESTIMATORS.trait(self.estimator, "ties", False) or self.stop_ml is not None \
+        reads_ml = ESTIMATORS.trait(self.estimator.name, "ties", False) or self.stop_ml is not None \
             or STRATEGIES.trait(self.strategy.name, "paper", False)
         if not reads_ml:
             out["ml_ties"] = (f"no maximum-likelihood cell is read (the estimator is "
-                              f"{self.estimator}, stop_ml is not set, strategy "
+                              f"{self.estimator.name}, stop_ml is not set, strategy "
                               f"{self.strategy.name} simulates at none)")
         if self.is_robust and not rotates and "cell_average" in type(self.posterior).model_fields:
             out["cell_average"] = "the robust posterior cell-averages a rotating grid only"

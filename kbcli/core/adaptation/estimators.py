@@ -2,7 +2,9 @@
 
 A registry of :class:`Estimator` entries (``AdapterConfig.estimator``): each reads its estimate off
 a posterior (:class:`~kbcli.core.adaptation.posteriors.posterior.Posterior`: the maximum-likelihood cell or the mean) and
-names the per-step record of a ``run`` artifact that holds it.
+names the per-step record of a ``run`` artifact that holds it. An estimator with options of its own
+registers their model (``traits={"options": ...}``, :mod:`kbcli.core.options`); ``mean`` and
+``ml`` take none.
 """
 
 from __future__ import annotations
@@ -26,12 +28,12 @@ class Estimator:
     record : str
         The per-step record of a run that holds this estimate (``means`` or ``estimates``).
     read : callable
-        ``read(posterior) -> (P,) ndarray``.
+        ``read(posterior, options) -> (P,) ndarray`` (``options``: ``AdapterConfig.estimator``).
     """
 
     name: str
     record: str
-    read: Callable[[Any], np.ndarray]
+    read: Callable[[Any, Any], np.ndarray]
 
     def final(self, records: dict[str, np.ndarray]) -> np.ndarray:
         """The last estimate in a run's per-step ``records``."""
@@ -40,7 +42,7 @@ class Estimator:
 
 #: The estimators (``--estimator``), read with ``ESTIMATORS.get(name)``.
 ESTIMATORS: Registry[Estimator] = Registry("estimator")
-ESTIMATORS.register("mean", Estimator("mean", "means", lambda post: post.mean()),
+ESTIMATORS.register("mean", Estimator("mean", "means", lambda post, _: post.mean()),
                     summary="the posterior mean (RMSE-optimal; ours)")
 def _ml_departure(r: dict) -> str:
     """How the ML cell departs from the paper's text (its tie rule, which the paper leaves open)."""
@@ -52,6 +54,6 @@ def _ml_departure(r: dict) -> str:
             "of the same runs")
 
 
-ESTIMATORS.register("ml", Estimator("ml", "estimates", lambda post: post.ml()),
+ESTIMATORS.register("ml", Estimator("ml", "estimates", lambda post, _: post.ml()),
                     summary="the maximum-likelihood cell (the paper's)",
                     traits={"ties": True, "departures": {"ml": _ml_departure}})

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from kbcli.core.adaptation.adapter import Adapter
-from kbcli.core.adaptation.estimators import ESTIMATORS
 
 
 @dataclass(frozen=True)
@@ -88,7 +87,7 @@ def step_record(adapter: Adapter, t: int, action: np.ndarray, landed: np.ndarray
     ms = 1e3 * (time.perf_counter() - t0) + extra_ms
     return Step(t=t, action=np.asarray(action, float), landed=np.asarray(landed, float),
                 perceived=np.asarray(perceived, float), cls=int(cls), ml=ml, mean=mean,
-                estimate=ESTIMATORS.get(adapter.cfg.estimator).read(post),
+                estimate=adapter.estimate(),
                 entropy=post.entropy(), ml_prob=post.ml_prob(),
                 mass=adapter.mass_near_estimate(), stop=adapter.should_stop(), ms=ms)
 

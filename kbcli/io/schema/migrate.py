@@ -20,6 +20,9 @@ from kbcli.core.options import route
 
 #: The first schema of each kind that records the robot's parts nested (older ones are migrated).
 NESTED = {"run": 4, "closed_loop": 4, "evaluation": 3, "model_quality": 2}
+#: The robot's parts that held options when a flat config was recorded (its estimator, a name,
+#: is kept as it is).
+FLAT_SLOTS = {k: SLOTS[k] for k in ("strategy", "posterior")}
 
 
 def _flat_robot(v: Any) -> bool:
@@ -28,7 +31,7 @@ def _flat_robot(v: Any) -> bool:
 
 def nest(robot: dict) -> dict:
     """A flat recorded robot config in the nested layout."""
-    return route(robot, SLOTS, AdapterConfig.model_fields, strict=False)
+    return route(robot, FLAT_SLOTS, AdapterConfig.model_fields, strict=False)
 
 
 def _flat_detector(v: Any) -> bool:

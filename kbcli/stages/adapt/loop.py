@@ -171,7 +171,7 @@ def _play_after(cfg: AdaptConfig, model, keyboard: Keyboard, truth: np.ndarray,
     estimate in the world's parameters. The reference replays (``play.reference``), which do not
     depend on the adaptation, draw from ``reference_rng`` when given (so they measure the same
     whichever experiment runs them), else from children of ``rng``, as the adapted replay."""
-    final = ESTIMATORS.get(cfg.robot.estimator).final(out)
+    final = ESTIMATORS.get(cfg.robot.estimator.name).final(out)
     if world_family != cfg.robot.family:  # correct in the world's parameters
         final = _as_family(final, cfg.robot.family, world_family)
     sim = cfg.sim_config()

@@ -132,7 +132,7 @@ def run_attrs(res: dict[str, np.ndarray], acfg: AdapterConfig, *, truth: np.ndar
     stop_at = np.flatnonzero(res["stop"])
     final = None
     if n:
-        final = ESTIMATORS.get(acfg.estimator).final(res)
+        final = ESTIMATORS.get(acfg.estimator.name).final(res)
     wf = world_family or acfg.family
     return {
         "strategy": acfg.strategy.name,

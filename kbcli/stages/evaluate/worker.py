@@ -93,7 +93,7 @@ def run_experiment(state: dict, task: Task) -> dict[str, np.ndarray]:
         out["stop_step"] = int(hit[0]) + 1 if len(hit) else 0
     if "means" in out:  # both estimates' errors, whichever the method reports
         out["mean_errors"] = np.hypot(*(np.asarray(out["means"])[:, -2:] - truth[-2:]).T)
-        est = ESTIMATORS.get(getattr(acfg, "estimator", "mean"))
+        est = ESTIMATORS.get(acfg.estimator.name)
         out["estimates"] = out[est.record]  # "errors" are those of the method's estimator
     return _normalise(out, cfg.max_steps, cfg.n_params, keep_extra=task.example)
 
