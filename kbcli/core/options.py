@@ -96,7 +96,7 @@ def parse_part(registry: Registry, value: Any, default: str | None = None) -> Op
     if isinstance(value, str):
         value = {"name": value}
     if not isinstance(value, Mapping):
-        raise ConfigError(f"a {registry.kind} must be a name or a table, got {value!r}")
+        raise ConfigError(f"{registry.kind} must be a name or a table, got {value!r}")
     table = dict(value)
     name = table.setdefault("name", default)
     registry.check(name)
