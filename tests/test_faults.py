@@ -889,3 +889,29 @@ def test_a_stop_that_hangs_after_sigterm_is_cut_short_in_the_cli_process():
     p.send_signal(signal.SIGTERM)
     p.communicate(timeout=30)
     assert p.returncode == 143 and time.monotonic() - start < 20
+
+
+def test_a_sigterm_that_lands_in_a_finaliser_is_not_lost():
+    """Python drops an exception raised inside a ``__del__`` or a weakref callback: CI saw the
+    SIGTERM of evaluate lost so ("Exception ignored in: ... WeakValueDictionary ... Terminated")
+    and the run went on. In the CLI's process the stop is delivered again, and caught."""
+    script = ("import sys, time\nfrom kbcli.io import signals\n"
+              "signals.GRACE_S = 60.0\nsignals.bound_the_stop()\nsignals.install()\n"
+              "class Slow:\n    def __del__(self):\n        print('finalising', flush=True)\n"
+              "        time.sleep(3)  # the signal lands here\n"
+              "x = Slow()\nprint('ready', flush=True)\nsys.stdin.readline()\n"
+              "try:\n    del x\n    time.sleep(10)\n    print('went on', flush=True)\n"
+              "except signals.Terminated as exc:\n    print(signals.what(exc), flush=True)\n"
+              "    sys.exit(signals.exit_code(exc))\n")
+    p = subprocess.Popen([sys.executable, "-c", script], stdin=subprocess.PIPE,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert p.stdout.readline().strip() == "ready"
+    p.stdin.write("\n")
+    p.stdin.flush()
+    assert p.stdout.readline().strip() == "finalising"
+    start = time.monotonic()
+    p.send_signal(signal.SIGTERM)
+    out, err = p.communicate(timeout=30)
+    assert p.returncode == 143 and out.strip() == "terminated", (out, err)
+    assert time.monotonic() - start < 5 and "Exception ignored" not in err

@@ -4,15 +4,17 @@
 ``except KeyboardInterrupt`` that keeps a checkpoint or removes a temporary file also runs on
 SIGTERM (what a batch system or ``kill`` sends); :func:`exit_code` gives the shell's convention,
 128 plus the signal number. In the ``kbcli`` process itself (:func:`bound_the_stop`, called by
-its entry point, never by kbcli used as a library), a clean stop that does not end within
-:data:`GRACE_S` seconds (a worker pool that will not shut down) is cut short: the process exits
-143 all the same, as a batch system's SIGKILL would end it.
+its entry point, never by kbcli used as a library), a stop that Python drops (raised inside a
+weakref callback or a ``__del__``) is delivered again, and a clean stop that does not end within :data:`GRACE_S` seconds (a worker pool
+that will not shut down) is cut short: the process exits 143 all the same, as a batch system's
+SIGKILL would end it.
 """
 
 from __future__ import annotations
 
 import os
 import signal
+import sys
 import threading
 from types import FrameType
 
@@ -23,7 +25,11 @@ EXIT_SIGTERM = 128 + int(signal.SIGTERM)
 
 #: Seconds a clean stop after SIGTERM may take before the process exits at once.
 GRACE_S = 20.0
-_bounded = False
+#: Seconds after which a stop Python dropped is delivered again.
+AGAIN_S = 0.05
+_bounded = False  # this process runs the CLI (bound_the_stop)
+_heard = False  # a SIGTERM arrived
+_again = False  # the handler's next call delivers a dropped stop again, not a second SIGTERM
 
 
 class Terminated(KeyboardInterrupt):
@@ -31,19 +37,51 @@ class Terminated(KeyboardInterrupt):
 
 
 def _raise(signum: int, frame: FrameType | None) -> None:
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # a second SIGTERM kills at once
-    if _bounded:
+    global _heard, _again
+    if not _bounded:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)  # a second SIGTERM kills at once
+        raise Terminated()
+    if _heard and not _again:
+        os._exit(EXIT_SIGTERM)  # a second SIGTERM kills at once
+    if not _heard:
+        _heard = True
         watchdog = threading.Timer(GRACE_S, os._exit, (EXIT_SIGTERM,))
         watchdog.daemon = True  # a stop that ends in time ends the watchdog with it
         watchdog.start()
+    _again = False
     raise Terminated()
 
 
+def _dropped(unraisable) -> None:
+    """``sys.unraisablehook``: Python drops an exception raised inside a weakref callback or a
+    ``__del__`` (CI saw a SIGTERM lost so, and evaluate ran on); a dropped stop is delivered
+    again, where it can be caught. Anything else goes to the hook this one replaced."""
+    if isinstance(unraisable.exc_value, Terminated):
+        # from another thread, a moment later: delivered here, it would be dropped again
+        again = threading.Timer(AGAIN_S, _deliver_again)
+        again.daemon = True
+        again.start()
+    else:
+        _previous_hook(unraisable)
+
+
+def _deliver_again() -> None:
+    global _again
+    if signal.getsignal(signal.SIGTERM) is _raise:
+        _again = True  # a real signal, to the main thread: it wakes a blocking call there
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGTERM)
+
+
+_previous_hook = sys.unraisablehook
+
+
 def bound_the_stop() -> None:
-    """From now on, this process exits 143 at the latest :data:`GRACE_S` seconds after SIGTERM
-    (for the process that runs the CLI: it ends after the command anyway)."""
-    global _bounded
+    """For the process that runs the CLI: from now on a SIGTERM dropped by Python is delivered
+    again, and the process exits 143 at the latest :data:`GRACE_S` seconds after the signal."""
+    global _bounded, _previous_hook
     _bounded = True
+    if sys.unraisablehook is not _dropped:
+        _previous_hook, sys.unraisablehook = sys.unraisablehook, _dropped
 
 
 def install() -> object:
