@@ -54,30 +54,34 @@ def _raise(signum: int, frame: FrameType | None) -> None:
 
 def _dropped(unraisable) -> None:
     """``sys.unraisablehook``: Python drops an exception raised inside a weakref callback or a
-    ``__del__`` (CI saw a SIGTERM lost so, and evaluate ran on); a dropped stop is delivered
-    again, where it can be caught. Anything else goes to the hook this one replaced."""
-    if isinstance(unraisable.exc_value, Terminated):
+    ``__del__`` (CI saw a SIGTERM lost so, and evaluate ran on); a dropped stop (SIGTERM or
+    Ctrl-C) is delivered again, where it can be caught. Anything else goes to the hook this one
+    replaced."""
+    exc = unraisable.exc_value
+    if isinstance(exc, KeyboardInterrupt):
+        sig = signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT
         # from another thread, a moment later: delivered here, it would be dropped again
-        again = threading.Timer(AGAIN_S, _deliver_again)
+        again = threading.Timer(AGAIN_S, _deliver_again, (sig,))
         again.daemon = True
         again.start()
     else:
         _previous_hook(unraisable)
 
 
-def _deliver_again() -> None:
+def _deliver_again(sig: signal.Signals) -> None:
     global _again
-    if signal.getsignal(signal.SIGTERM) is _raise:
-        _again = True  # a real signal, to the main thread: it wakes a blocking call there
-        signal.pthread_kill(threading.main_thread().ident, signal.SIGTERM)
+    if signal.getsignal(sig) in (_raise, signal.default_int_handler):
+        _again = sig == signal.SIGTERM
+        # a real signal, to the main thread: it wakes a blocking call there
+        signal.pthread_kill(threading.main_thread().ident, sig)
 
 
 _previous_hook = sys.unraisablehook
 
 
 def bound_the_stop() -> None:
-    """For the process that runs the CLI: from now on a SIGTERM dropped by Python is delivered
-    again, and the process exits 143 at the latest :data:`GRACE_S` seconds after the signal."""
+    """For the process that runs the CLI: from now on a SIGTERM or Ctrl-C dropped by Python is
+    delivered again, and the process exits 143 at the latest :data:`GRACE_S` seconds after the signal."""
     global _bounded, _previous_hook
     _bounded = True
     if sys.unraisablehook is not _dropped:
