@@ -159,16 +159,22 @@ def scene_files(tmp_path):
     return ["--model", str(tmp_path / "model.h5"), "--scene", str(tmp_path / "scene.h5")]
 
 
-def test_a_toy_strategy_and_posterior_run_through_kbcli_adapt(runner, tmp_path, scene_files):
+def _adapt_toy(runner, tmp_path, scene_files, steps: int, adapt: str):
+    """``kbcli adapt`` with the toy parts registered and ``adapt`` (TOML lines) in its ``[adapt]``
+    table (prior half-width 5 px): the run artifact."""
     toml = tmp_path / "toy.toml"
-    toml.write_text('[adapt]\nstrategy = "corner"\ncorner = "high"\nposterior = "leaning"\n'
-                    "lean = 2.0\nprior_halfwidth = 5.0\n")
+    toml.write_text(f"[adapt]\n{adapt}prior_halfwidth = 5.0\n")
     out = tmp_path / "run.h5"
     with toy_parts():
         r = runner.invoke(app, ["adapt", *scene_files, "--config", str(toml), "-o", str(out),
-                                "--max-steps", "4", "--seed", "1"])
+                                "--max-steps", str(steps), "--seed", "1"])
         assert r.exit_code == 0, r.output
-        art = read_artifact(out, "run")
+        return read_artifact(out, "run")
+
+
+def test_a_toy_strategy_and_posterior_run_through_kbcli_adapt(runner, tmp_path, scene_files):
+    art = _adapt_toy(runner, tmp_path, scene_files, 4,
+                     'strategy = "corner"\ncorner = "high"\nposterior = "leaning"\nlean = 2.0\n')
     robot = art.config["adapt"]["robot"]
     assert robot["strategy"] == {"name": "corner", "corner": "high"}
     assert robot["posterior"] == {"name": "leaning", "lean": 2.0}
@@ -178,14 +184,7 @@ def test_a_toy_strategy_and_posterior_run_through_kbcli_adapt(runner, tmp_path, 
 
 
 def test_a_toy_estimator_runs_through_kbcli_adapt(runner, tmp_path, scene_files):
-    toml = tmp_path / "toy.toml"
-    toml.write_text('[adapt]\nestimator = "shrunk"\nshrink = 0.5\nprior_halfwidth = 5.0\n')
-    out = tmp_path / "run.h5"
-    with toy_parts():
-        r = runner.invoke(app, ["adapt", *scene_files, "--config", str(toml), "-o", str(out),
-                                "--max-steps", "3", "--seed", "1"])
-        assert r.exit_code == 0, r.output
-        art = read_artifact(out, "run")
+    art = _adapt_toy(runner, tmp_path, scene_files, 3, 'estimator = "shrunk"\nshrink = 0.5\n')
     assert art.config["adapt"]["robot"]["estimator"] == {"name": "shrunk", "shrink": 0.5}
     half = 0.5 * np.asarray(art.data["means"])[:, -2:]  # the errors are those of half the mean
     assert np.allclose(art.data["errors"], np.hypot(*(half - [2.0, -1.0]).T))
