@@ -144,6 +144,7 @@ def test_bench_repair_cli_pools_replicates_and_skips_the_lifelong_section(runner
                       env={"COLUMNS": "200"})
     assert r.exit_code == 0, r.output
     assert "2 moves x 2 adaptation seeds" in r.output and "lifelong" not in r.output
+    assert "samples floor" in r.output
     assert not (tmp_path / "l.png").exists()
 
 

@@ -9,7 +9,8 @@ displacements (:func:`moves`), each ``replicates`` times (one adaptation seed ea
 method: the median final error, the share of runs under 1 px, the median touches to *stay* under
 1 px (``touches + 1`` when never), the runs made worse than ``plain`` by more than 0.5 px, the share
 of 90 % credible discs holding the truth (:mod:`kbcli.core.adaptation.credible`) and the median
-time of a touch; per model, the median final error.
+time of a touch; per model, the median final error, beside the model's samples floor
+(:func:`sample_floors`).
 
 **Lifelong.** One weak model, the keyboard moved ``episodes`` times in a row
 (:func:`lifelong_moves`), the robot adapting with ``repair`` and carrying its repaired model
@@ -28,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from kbcli.bench.repair_floor import model_floor
 from kbcli.core.adaptation import credible
 from kbcli.core.instrument.keyboard import KeyboardConfig
 from kbcli.core.model.base import ExactModel
@@ -91,6 +93,12 @@ def weak_models(seeds=(1, 2, 3), budget: int = 250, arms=ARMS,
             art = learn_stage.run(cfg, kb_art, rng=np.random.default_rng(s), seed=s)
             out.append(WeakModel(f"{arm}-{s}", art, load_model(art), mode, arm))
     return out
+
+
+def sample_floors(models: list[WeakModel]) -> dict[str, float]:
+    """Each model's samples floor (px, :mod:`kbcli.bench.repair_floor`): what its own training
+    samples pin the shift to with the whole moved keyboard known."""
+    return {wm.name: model_floor(wm.model, keyboard_stage.load(wm.artifact)) for wm in models}
 
 
 def stay_under(errors: np.ndarray, level: float = 1.0) -> int:

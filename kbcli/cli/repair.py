@@ -63,7 +63,9 @@ def bench_repair_cmd(
     displacements (each --replicates times) with --touches infogain touches: plain (the robust posterior), repair (the
     repaired belief) and exact (the keyboard's own map), paired. Prints the median final error,
     the share under 1 px, the touches to stay under 1 px, the runs made worse than plain by more
-    than 0.5 px, the coverage of the 90 % credible discs and the time per touch; then the lifelong
+    than 0.5 px, the coverage of the 90 % credible discs and the time per touch; per model, the
+    median final error and the samples floor (the shift the model's own training samples pin
+    when the whole moved keyboard is known); then the lifelong
     section (the first ideal-arm model carried over --episodes moves) and writes its figure.
     """
     from kbcli.bench import repair as bench
@@ -78,8 +80,10 @@ def bench_repair_cmd(
         runs = bench.side_by_side(models, n_moves=moves, touches=touches, seed=seed,
                                   replicates=replicates, progress=tick)
     con = wide(160)
+    with busy("registering each model's samples to the moved keyboard"):
+        floors = bench.sample_floors(models)
     _side_table(con, bench.summarize(runs, touches), models, f"{moves} moves x {replicates} "
-                f"adaptation seed{'s' if replicates > 1 else ''}", touches)
+                f"adaptation seed{'s' if replicates > 1 else ''}", touches, floors)
     if episodes:
         with ticker(episodes, "lifelong moves") as tick:
             start, eps = bench.lifelong(models[0], episodes=episodes, touches=touches, seed=seed,
@@ -92,7 +96,8 @@ def bench_repair_cmd(
         con.print(f"wrote {plot}")
 
 
-def _side_table(con, rows: list[dict], models, runs: str, touches: int) -> None:
+def _side_table(con, rows: list[dict], models, runs: str, touches: int,
+                floors: dict[str, float]) -> None:
     t = table(f"repair vs plain infogain vs exact model: {len(models)} weak models (random, 250 "
               f"reaches) x {runs} (moves of 5-30 px), {touches} touches",
               ("method", "runs", "median final px", "under 1 px", "touches to stay < 1 px",
@@ -109,7 +114,10 @@ def _side_table(con, rows: list[dict], models, runs: str, touches: int) -> None:
     pm = table("median final error per model, px", ("method", *names))
     for r in rows:
         pm.add_row(r["method"], *(f"{r['per_model'][n]:.2f}" for n in names))
+    pm.add_row("samples floor", *(f"{floors[n]:.2f}" for n in names))
     show_table(con, pm)
+    con.print("samples floor: the shift the model's own training samples pin with the whole "
+              "moved keyboard known (kbcli.bench.repair_floor)")
 
 
 def _lifelong_table(con, wm, start: float, eps: list, touches: int) -> None:
