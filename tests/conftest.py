@@ -2,12 +2,25 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
+from threadpoolctl import threadpool_limits
 from typer.testing import CliRunner
 
 from kbcli.core.instrument.keyboard import KeyboardConfig
 from kbcli.io.artifact import write_artifact
 from kbcli.stages import keyboard as keyboard_stage
+
+# One BLAS / OpenMP thread per test process: `make test` runs one pytest worker per core, and a
+# BLAS pool of one thread per core in each worker oversubscribes them (the pools spin waiting on
+# each other). kbcli's own runner limits its workers the same way (kbcli/io/runner.py). The
+# variables reach the processes the tests start; numpy is loaded already here, so this process
+# is limited through threadpoolctl. The learned bytes are the same (test_golden's rebuild and
+# test_stored_results' learn compare them with the stored ones).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+threadpool_limits(limits=1)
 
 
 @pytest.fixture
