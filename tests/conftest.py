@@ -2,12 +2,25 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
+from threadpoolctl import threadpool_limits
 from typer.testing import CliRunner
 
 from kbcli.core.instrument.keyboard import KeyboardConfig
 from kbcli.io.artifact import write_artifact
 from kbcli.stages import keyboard as keyboard_stage
+
+# One BLAS / OpenMP thread per test process: `make test` runs one pytest worker per core, and a
+# BLAS pool of one thread per core in each worker oversubscribes them (the pools spin waiting on
+# each other). kbcli's own runner limits its workers the same way (kbcli/io/runner.py). The
+# variables reach the processes the tests start; numpy is loaded already here, so this process
+# is limited through threadpoolctl. The learned bytes are the same (test_golden's rebuild and
+# test_stored_results' learn compare them with the stored ones).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+threadpool_limits(limits=1)
 
 
 @pytest.fixture
@@ -21,3 +34,18 @@ def kb_path(tmp_path):
     path = tmp_path / "kb.h5"
     write_artifact(keyboard_stage.run(KeyboardConfig()), path)
     return path
+
+
+#: The slowest files (each over ~40 s of one worker in `make test`), slowest first. Under
+#: ``--dist loadfile`` a worker takes whole files in collection order, so a slow file collected
+#: last (alphabetically: test_stored_results, test_serve) leaves the other worker idle at the end;
+#: handing these out first lets the many small files fill in behind them (longest job first).
+SLOW_FIRST = ("test_golden.py", "test_doc_examples.py", "test_damaged_artifacts.py",
+              "test_faults.py", "test_model_classes.py", "test_stored_results.py",
+              "test_robust.py", "test_learn_cli.py", "test_evaluate.py", "test_serve.py")
+
+
+def pytest_collection_modifyitems(items):
+    """Run the files of SLOW_FIRST first, in that order; the others keep theirs (a stable sort)."""
+    rank = {name: i for i, name in enumerate(SLOW_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(SLOW_FIRST)))
