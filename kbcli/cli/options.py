@@ -250,8 +250,9 @@ ModelBlur = Annotated[float | None, _opt(
 Repair = Annotated[bool | None, _opt(
     "--repair/--no-repair", help="Adapt with the model repaired by the touches: a joint belief over "
     "the shift and the model's map (each hypothesis scored by the map its own touches repaired, "
-    "the model's local uncertainty), infogain planning under it; translation family, likelihood "
-    "posterior. Needed by --model-out.", show_default="--no-repair")]
+    "the model's local uncertainty), infogain planning with its posterior over the shift; "
+    "translation family, likelihood posterior. Needed by --model-out.",
+    show_default="--no-repair")]
 ModelOut = Annotated[Path | None, _opt(
     "--model-out", help="Also write the model repaired by this run's adaptation touches (kind "
     "'model', recording its parent's sha256 and the touches it absorbed; never the input model's "
