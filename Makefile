@@ -67,6 +67,7 @@ results: $(STAMP)
 	$(KBCLI) bench --json $(RESULTS)/reliability-realistic.json reliability --seeds 3 \
 	    --mode dynamics --arm realistic
 	$(KBCLI) bench --json $(RESULTS)/repair.json repair --plot $(OUT)/repair-lifelong.png
+	$(KBCLI) bench --json $(RESULTS)/repair-long.json repair --touches 150 --episodes 0 --replicates 1
 
 # kbcli's default learner beside scikit-activeml's (issue 27): 5 layouts x 5 seeds x 5 learners,
 # about 20 minutes on 2 cores with both at work (18 min measured, 2026-12-05).
