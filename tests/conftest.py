@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 
 import pytest
+import typer.main
+import typer.testing
 from threadpoolctl import threadpool_limits
 from typer.testing import CliRunner
 
@@ -21,6 +23,22 @@ from kbcli.stages import keyboard as keyboard_stage
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 threadpool_limits(limits=1)
+
+#: The click command Typer builds from an app, built once per test process. Typer's CliRunner
+#: rebuilds it from the app's functions at every invoke (evaluating every option's annotations:
+#: 60 ms an invoke, minutes over the suite's thousands of invokes); the command is the same each
+#: time (kbcli registers its commands at import and never changes them), and a real ``kbcli``
+#: process builds it once too. Tests that build it themselves (typer.main.get_command) still do.
+_COMMANDS: dict[int, tuple[typer.Typer, object]] = {}
+
+
+def _command_built_once(app: typer.Typer):
+    if id(app) not in _COMMANDS:
+        _COMMANDS[id(app)] = (app, typer.main.get_command(app))  # the app kept: its id stays its
+    return _COMMANDS[id(app)][1]
+
+
+typer.testing._get_command = _command_built_once
 
 
 @pytest.fixture

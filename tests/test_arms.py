@@ -113,8 +113,9 @@ def test_arm_from_a_toml_table_is_recorded_in_the_model(runner, kb_path, tmp_pat
     r = runner.invoke(app, ["learn", "--keyboard", str(kb_path), "--budget", "20", "-o", str(out),
                             "--arm", str(bad)])
     assert r.exit_code == 1 and not out.exists()
+    # a named class (knn, the cheapest): the arm is recorded whichever class is learned
     r = runner.invoke(app, ["learn", "--keyboard", str(kb_path), "--budget", "20", "-o", str(out),
-                            "--arm", str(toml)])
+                            "--arm", str(toml), "--model-class", "knn"])
     assert r.exit_code == 0, r.output
     from kbcli.io.artifact import read_artifact
 

@@ -21,7 +21,8 @@ MODEL = str(ROOT / "data" / "golden" / "model.h5")
 
 
 def test_builtin_agents_reproduce_bench_adapt_exactly():
-    cfg = bench.GymBenchConfig(experiments=3, max_steps=6, categories=("small",), seed=1)
+    # 2 experiments (the fewest a bench takes): every cell's errors and summary still compared
+    cfg = bench.GymBenchConfig(experiments=2, max_steps=6, categories=("small",), seed=1)
     env = bench.make_env(cfg, MODEL)
     agents = {a: load_agent(a, env) for a in cfg.agents}
     cells = bench.plan(cfg, env)
@@ -29,7 +30,7 @@ def test_builtin_agents_reproduce_bench_adapt_exactly():
     gym_rows = bench.summarize(cells)
 
     base = env.unwrapped
-    acfg = adapt_bench.BenchConfig(experiments=3, max_steps=6, categories=("small",), seed=1,
+    acfg = adapt_bench.BenchConfig(experiments=2, max_steps=6, categories=("small",), seed=1,
                                    sections=("learned",))
     ref = [c for c in adapt_bench.plan(acfg, base.model, base.keyboard) if "/" not in c.label]
     list(adapt_bench.run_cells(ref))

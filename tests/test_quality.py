@@ -315,7 +315,7 @@ def test_the_default_keyboard_is_found_from_any_folder(runner, tmp_path, monkeyp
         '[quality]\nbudgets = [20]\nexplorations = ["random"]\nmode = "ideal"\narm = "ideal"\n'
         'experiments = 1\nmax_steps = 2\nideal = false\n[quality.rows]\nrandom = '
         '{ strategy = "random" }\n[quality.categories.small]\nlimit = 10.0\n'
-        'displacements = [[3.0, -2.0]]\n')
+        'displacements = [[3.0, -2.0]]\n[quality.adapt]\nresolution = 2.0\n')  # as TINY's
     r = runner.invoke(app, ["quality", "--config", "q.toml", "-o", "q.h5"])
     assert r.exit_code == 0, r.output
     kb = read_artifact(tmp_path / "q.h5").inputs["keyboard"]
