@@ -5,9 +5,9 @@
 SIGTERM (what a batch system or ``kill`` sends); :func:`exit_code` gives the shell's convention,
 128 plus the signal number. In the ``kbcli`` process itself (:func:`bound_the_stop`, called by
 its entry point, never by kbcli used as a library), a stop that Python drops (raised inside a
-weakref callback or a ``__del__``) is delivered again, and a clean stop that does not end within :data:`GRACE_S` seconds (a worker pool
-that will not shut down) is cut short: the process exits 143 all the same, as a batch system's
-SIGKILL would end it.
+weakref callback or a ``__del__``) is delivered again, and a clean stop that does not end within
+:data:`GRACE_S` seconds (a worker pool that will not shut down) is cut short: the process exits
+143 all the same, as a batch system's SIGKILL would end it.
 """
 
 from __future__ import annotations
@@ -81,7 +81,8 @@ _previous_hook = sys.unraisablehook
 
 def bound_the_stop() -> None:
     """For the process that runs the CLI: from now on a SIGTERM or Ctrl-C dropped by Python is
-    delivered again, and the process exits 143 at the latest :data:`GRACE_S` seconds after the signal."""
+    delivered again, and the process exits 143 at the latest :data:`GRACE_S` seconds after the
+    signal."""
     global _bounded, _previous_hook
     _bounded = True
     if sys.unraisablehook is not _dropped:

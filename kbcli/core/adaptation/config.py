@@ -211,8 +211,9 @@ class AdapterConfig(Config):
             out.update({o: "stop_mass = 0" for o in ("stop_radius", "stop_angle")})
         elif not rotates:
             out["stop_angle"] = "the family does not rotate"
-        reads_ml = ESTIMATORS.trait(self.estimator.name, "ties", False) or self.stop_ml is not None \
-            or STRATEGIES.trait(self.strategy.name, "paper", False)
+        reads_ml = (ESTIMATORS.trait(self.estimator.name, "ties", False)
+                    or self.stop_ml is not None
+                    or STRATEGIES.trait(self.strategy.name, "paper", False))
         if not reads_ml:
             out["ml_ties"] = (f"no maximum-likelihood cell is read (the estimator is "
                               f"{self.estimator.name}, stop_ml is not set, strategy "
