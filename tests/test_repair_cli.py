@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from helpers import one_line_error
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from kbcli.cli import app
 from kbcli.core.instrument.keyboard import KeyboardConfig
@@ -144,7 +146,7 @@ def test_bench_repair_cli_pools_replicates_and_skips_the_lifelong_section(runner
                       env={"COLUMNS": "200"})
     assert r.exit_code == 0, r.output
     assert "2 moves x 2 adaptation seeds" in r.output and "lifelong" not in r.output
-    assert "samples floor" in r.output
+    assert "samples floor" in r.output and "systematic part / spread" in r.output
     assert not (tmp_path / "l.png").exists()
 
 
@@ -154,3 +156,36 @@ def test_bench_repair_refuses_counts_out_of_range(runner, flag, value):
     r = runner.invoke(app, ["bench", "repair", flag, value])
     assert r.exit_code != 0
     one_line_error(r, flag)
+
+
+def test_systematic_split_known_answer():
+    """A model whose runs all end at the same offset is all systematic; one whose offsets
+    cancel is all spread; the share weighs each model's mean by its runs."""
+    from kbcli.bench.repair import systematic
+
+    off = np.array([[3.0, 4.0], [3.0, 4.0], [1.0, 0.0], [-1.0, 0.0]])
+    share, per = systematic(off, ["a", "a", "b", "b"])
+    assert per["a"] == pytest.approx((5.0, 0.0))
+    assert per["b"] == pytest.approx((0.0, 1.0))
+    assert share == pytest.approx(50.0 / 52.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(-20, 20), st.floats(-20, 20), st.integers(0, 2)),
+                min_size=1, max_size=30),
+       st.tuples(st.floats(-5, 5), st.floats(-5, 5)))
+def test_systematic_part_and_spread_add_up_and_the_spread_ignores_a_common_offset(data, shift):
+    """Per model, systematic^2 + spread^2 is its mean squared offset; the share lies in
+    [0, 1]; moving every run of a model by the same vector leaves its spread as it was."""
+    from kbcli.bench.repair import systematic
+
+    off = np.array([d[:2] for d in data], float)
+    keys = [d[2] for d in data]
+    share, per = systematic(off, keys)
+    assert -1e-9 <= share <= 1 + 1e-9
+    for k, (bias, spread) in per.items():
+        e = off[np.asarray(keys) == k]
+        assert bias**2 + spread**2 == pytest.approx((e**2).sum(axis=1).mean(), rel=1e-9, abs=1e-9)
+    moved = off + np.where(np.asarray(keys)[:, None] == keys[0], np.array(shift), 0.0)
+    _, per2 = systematic(moved, keys)
+    assert per2[keys[0]][1] == pytest.approx(per[keys[0]][1], rel=1e-9, abs=1e-9)

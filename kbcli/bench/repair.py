@@ -10,7 +10,9 @@ method: the median final error, the share of runs under 1 px, the median touches
 1 px (``touches + 1`` when never), the runs made worse than ``plain`` by more than 0.5 px, the share
 of 90 % credible discs holding the truth (:mod:`kbcli.core.adaptation.credible`) and the median
 time of a touch; per model, the median final error, beside the model's samples floor
-(:func:`sample_floors`).
+(:func:`sample_floors`), and the final offset split into the model's *systematic* part (its mean
+offset over its runs, the same whatever the move and seed) and the *spread* around it
+(:func:`systematic`).
 
 **Lifelong.** One weak model, the keyboard moved ``episodes`` times in a row
 (:func:`lifelong_moves`), the robot adapting with ``repair`` and carrying its repaired model
@@ -119,6 +121,7 @@ class Run:
     errors: np.ndarray
     covered: bool
     step_ms: float
+    offset: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
 
     @property
     def final(self) -> float:
@@ -152,13 +155,32 @@ def side_by_side(models: list[WeakModel], *, n_moves: int = 8, touches: int = 30
                 for k, truth in enumerate(moves(n_moves)):
                     rng = np.random.default_rng([seed + r, mi, k])
                     res, ad = adapt_once(wm, model, truth, options, touches, rng, table)
+                    est = np.asarray(ad.estimate(), float)
                     runs.append(Run(name, wm.name, r * n_moves + k,
                                     np.asarray(res["errors"], float),
-                                    credible.covers(ad.posterior, ad.estimate(), truth),
-                                    float(np.median(res["step_ms"]))))
+                                    credible.covers(ad.posterior, est, truth),
+                                    float(np.median(res["step_ms"])), est[-2:] - truth))
                     if progress is not None:
                         progress(1)
     return runs
+
+
+def systematic(offsets: np.ndarray, groups) -> tuple[float, dict]:
+    """Split final offsets (estimate - truth, (n, 2) px) by ``groups`` (n,; a model's name):
+    (the share of the total squared offset that the groups' mean offsets carry, and per group its
+    systematic part, the length of its mean offset, and its spread, the rms distance of its
+    offsets from that mean). Per group, systematic^2 + spread^2 is its mean squared offset.
+    """
+    off = np.asarray(offsets, float).reshape(-1, 2)
+    keys = np.asarray(groups)
+    per, between = {}, 0.0
+    for g in dict.fromkeys(keys.tolist()):
+        e = off[keys == g]
+        mu = e.mean(axis=0)
+        between += len(e) * float(mu @ mu)
+        per[g] = (float(np.hypot(*mu)), float(np.sqrt(((e - mu) ** 2).sum(axis=1).mean())))
+    total = float((off**2).sum())
+    return (between / total if total > 0 else 0.0), per
 
 
 def summarize(runs: list[Run], touches: int) -> list[dict]:
@@ -174,6 +196,7 @@ def summarize(runs: list[Run], touches: int) -> list[dict]:
         per_model = {m: float(np.median([r.final for r in mine if r.model == m]))
                      for m in dict.fromkeys(r.model for r in mine)}
         ms = float(np.median([r.step_ms for r in mine]))
+        share, split = systematic(np.array([r.offset for r in mine]), [r.model for r in mine])
         rows.append({"method": name, "runs": len(mine), "median_final_px": float(np.median(fin)),
                      "under_1px": float(np.mean(fin < 1.0)),
                      "median_touches_stay_1px": float(np.median(stay)),
@@ -181,7 +204,8 @@ def summarize(runs: list[Run], touches: int) -> list[dict]:
                      "worse_than_plain": int(worse) if name != "plain" else 0,
                      "coverage_90": float(np.mean([r.covered for r in mine])),
                      "median_ms": ms, "ms_ratio": float(ms / plain_ms),
-                     "per_model": per_model})
+                     "per_model": per_model, "systematic_share": share,
+                     "per_model_offset": split})
     return rows
 
 

@@ -65,7 +65,8 @@ def bench_repair_cmd(
     the share under 1 px, the touches to stay under 1 px, the runs made worse than plain by more
     than 0.5 px, the coverage of the 90 % credible discs and the time per touch; per model, the
     median final error and the samples floor (the shift the model's own training samples pin
-    when the whole moved keyboard is known); then the lifelong
+    when the whole moved keyboard is known), and the final offset's systematic part (the model's
+    mean offset over its runs) and spread; then the lifelong
     section (the first ideal-arm model carried over --episodes moves) and writes its figure.
     """
     from kbcli.bench import repair as bench
@@ -118,6 +119,16 @@ def _side_table(con, rows: list[dict], models, runs: str, touches: int,
     show_table(con, pm)
     con.print("samples floor: the shift the model's own training samples pin with the whole "
               "moved keyboard known (kbcli.bench.repair_floor)")
+    so = table("final offset per model, px: systematic part / spread", ("method", *names,
+               "systematic share of squared error"))
+    for r in rows:
+        so.add_row(r["method"], *(f"{r['per_model_offset'][n][0]:.2f} / "
+                                  f"{r['per_model_offset'][n][1]:.2f}" for n in names),
+                   f"{100 * r['systematic_share']:.0f} %")
+    show_table(con, so)
+    con.print("systematic part: the length of the model's mean final offset (estimate - truth) "
+              "over its runs, which more moves or seeds do not average away; spread: the rms "
+              "distance of its runs' offsets from that mean")
 
 
 def _lifelong_table(con, wm, start: float, eps: list, touches: int) -> None:
