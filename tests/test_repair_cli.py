@@ -189,3 +189,38 @@ def test_systematic_part_and_spread_add_up_and_the_spread_ignores_a_common_offse
     moved = off + np.where(np.asarray(keys)[:, None] == keys[0], np.array(shift), 0.0)
     _, per2 = systematic(moved, keys)
     assert per2[keys[0]][1] == pytest.approx(per[keys[0]][1], rel=1e-9, abs=1e-9)
+
+
+def test_lifelong_summary_reads_the_targets():
+    """Falls are counted move by move against the error before it (the learned model's first);
+    the first and last moves' touches are the repaired belief's."""
+    from kbcli.bench.repair import Episode, lifelong_summary
+
+    def ep(i, berr, stay):
+        return Episode(i, np.zeros(2), stay, 0.5, 31, 1.0, berr, 30, i)
+
+    s = lifelong_summary(3.2, [ep(1, 3.0, 31), ep(2, 2.5, 20), ep(3, 2.6, 12)])
+    assert s["errors"] == [3.2, 3.0, 2.5, 2.6]
+    assert s["falls"] == 2 and not s["falls_every"]
+    assert (s["first_stay"], s["last_stay"]) == (31, 12)
+    assert lifelong_summary(3.2, [ep(1, 3.1, 5), ep(2, 3.0, 5)])["falls_every"]
+    assert not lifelong_summary(3.0, [ep(1, 3.0, 5)])["falls_every"]  # level is not a fall
+
+
+def test_bench_repair_cli_carries_every_model_and_summarises_it(runner, tiny_weak, tmp_path,
+                                                                 monkeypatch):
+    from kbcli.bench import repair as bench
+
+    monkeypatch.setattr(bench, "weak_models", lambda **_: tiny_weak)
+    plot = tmp_path / "l.png"
+    r = runner.invoke(app, ["bench", "repair", "--moves", "1", "-T", "3", "--replicates", "1",
+                            "--episodes", "2", "--plot", str(plot)], env={"COLUMNS": "200"})
+    assert r.exit_code == 0, r.output
+    assert "lifelong, every carried model: 2 moves" in r.output
+    assert "fell after every move on" in r.output and "of 1 models" in r.output
+    assert plot.exists() and plot.stat().st_size > 0
+
+
+def test_bench_repair_cli_refuses_a_lifelong_model_count_out_of_range(runner):
+    r = runner.invoke(app, ["bench", "repair", "--lifelong-models", "0"])
+    one_line_error(r, "--lifelong-models", "[1, 6]")

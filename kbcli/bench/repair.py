@@ -14,11 +14,12 @@ time of a touch; per model, the median final error, beside the model's samples f
 offset over its runs, the same whatever the move and seed) and the *spread* around it
 (:func:`systematic`).
 
-**Lifelong.** One weak model, the keyboard moved ``episodes`` times in a row
+**Lifelong.** A weak model, the keyboard moved ``episodes`` times in a row
 (:func:`lifelong_moves`), the robot adapting with ``repair`` and carrying its repaired model
 (:func:`kbcli.stages.repair.repaired_model`) from episode to episode, beside ``plain`` with the
 model as learned. Per episode: both methods' touches to stay under 1 px and final error, and the
-carried model's boundary error.
+carried model's boundary error; per model, what the lifelong targets read of it
+(:func:`lifelong_summary`).
 
 Pure: returns rows.
 """
@@ -248,3 +249,15 @@ def lifelong(wm: WeakModel, *, episodes: int = 5, touches: int = 30, seed: int =
         if progress is not None:
             progress(1)
     return start, out
+
+
+def lifelong_summary(start: float, episodes: list[Episode]) -> dict:
+    """What the lifelong targets read of one model's section: the carried model's boundary
+    error before the first move and after each (``errors``), the moves after which it fell
+    (``falls``), whether it fell after every move, and the touches the repaired belief needed to
+    stay under 1 px on the first and on the last move (``touches + 1``: never)."""
+    errors = [float(start)] + [float(e.boundary_error) for e in episodes]
+    falls = int(sum(b < a for a, b in zip(errors[:-1], errors[1:], strict=True)))
+    return {"errors": errors, "falls": falls, "falls_every": falls == len(episodes),
+            "first_stay": int(episodes[0].repair_stay) if episodes else 0,
+            "last_stay": int(episodes[-1].repair_stay) if episodes else 0}

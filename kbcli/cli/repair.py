@@ -49,6 +49,10 @@ def bench_repair_cmd(
                                        "at most 10.")] = 3,
     episodes: Annotated[int, typer.Option("--episodes", help="Moves in a row of the lifelong "
                                           "section, at most 20 (0: skip it).")] = 5,
+    lifelong_models: Annotated[int | None, typer.Option(
+        "--lifelong-models", help="Weak models the lifelong section carries over the moves: the "
+        "first N, ideal arm first (default: every one). The first is shown move by move and "
+        "drawn; each gets a line of the summary.")] = None,
     plot: Annotated[Path, typer.Option("--plot", help="Figure of the lifelong section (PNG, PDF "
                                        "or SVG by the suffix).")] = Path("repair-lifelong.png"),
     replicates: Annotated[int, typer.Option("--replicates", help="Adaptations of each move, "
@@ -66,14 +70,16 @@ def bench_repair_cmd(
     than 0.5 px, the coverage of the 90 % credible discs and the time per touch; per model, the
     median final error and the samples floor (the shift the model's own training samples pin
     when the whole moved keyboard is known), and the final offset's systematic part (the model's
-    mean offset over its runs) and spread; then the lifelong
-    section (the first ideal-arm model carried over --episodes moves) and writes its figure.
+    mean offset over its runs) and spread; then the lifelong section: each weak model (or the
+    first --lifelong-models) carried over --episodes moves, the first shown move by move and
+    drawn, and a line per model of what the lifelong targets read.
     """
     from kbcli.bench import repair as bench
 
     opts.check_counts(("--moves", moves, MAX_EXPERIMENTS), ("--touches", touches, MAX_ADAPT_STEPS),
                       ("--seeds", seeds, 10), ("--episodes", episodes or None, 20),
-                      ("--replicates", replicates, 10))
+                      ("--replicates", replicates, 10),
+                      ("--lifelong-models", lifelong_models, 2 * seeds))
     check_io({}, figure_output(plot))
     with busy("learning the weak models"):
         models = bench.weak_models(seeds=tuple(range(1, seeds + 1)))
@@ -86,10 +92,13 @@ def bench_repair_cmd(
     _side_table(con, bench.summarize(runs, touches), models, f"{moves} moves x {replicates} "
                 f"adaptation seed{'s' if replicates > 1 else ''}", touches, floors)
     if episodes:
-        with ticker(episodes, "lifelong moves") as tick:
-            start, eps = bench.lifelong(models[0], episodes=episodes, touches=touches, seed=seed,
-                                        progress=tick)
+        carried = models[:lifelong_models] if lifelong_models else models
+        with ticker(episodes * len(carried), "lifelong moves") as tick:
+            sections = [bench.lifelong(wm, episodes=episodes, touches=touches, seed=seed,
+                                       progress=tick) for wm in carried]
+        start, eps = sections[0]
         _lifelong_table(con, models[0], start, eps, touches)
+        _lifelong_models_table(con, carried, sections, touches)
         from kbcli.viz.repair import plot_lifelong  # (matplotlib: seconds)
         with busy("drawing"):
             plot_lifelong(start, eps, plot, touches=touches,
@@ -143,6 +152,26 @@ def _lifelong_table(con, wm, start: float, eps: list, touches: int) -> None:
                   _stay(e.plain_stay, touches), f"{e.plain_final:.2f}", str(e.absorbed),
                   f"{e.boundary_error:.2f}")
     show_table(con, t)
+
+
+def _lifelong_models_table(con, models, sections: list, touches: int) -> None:
+    from kbcli.bench.repair import lifelong_summary
+
+    n = len(sections[0][1])
+    sums = [lifelong_summary(start, eps) for start, eps in sections]
+    t = table(f"lifelong, every carried model: {n} moves, {touches} touches each",
+              ("model", "boundary error px: as learned, then after each move",
+               "moves after which it fell", "repair: touches to stay < 1 px, first move",
+               "last move"), left=0)
+    for wm, s in zip(models, sums, strict=True):
+        t.add_row(wm.name, "  ".join(f"{e:.2f}" for e in s["errors"]), f"{s['falls']} of {n}",
+                  _stay(s["first_stay"], touches), _stay(s["last_stay"], touches))
+    show_table(con, t)
+    every = sum(s["falls_every"] for s in sums)
+    fewer = sum(s["last_stay"] < s["first_stay"] for s in sums)
+    con.print(f"the carried model's boundary error fell after every move on {every} of "
+              f"{len(sums)} models; the last move needed fewer touches to stay under 1 px than "
+              f"the first on {fewer} of {len(sums)}")
 
 
 def _stay(v: int, touches: int) -> str:
