@@ -78,6 +78,28 @@ def test_an_old_model_has_no_lineage_and_adapts_as_before(runner, files):
     assert "repair" not in read_artifact(files / "plain.h5", "run").config["adapt"]["robot"]
 
 
+def test_a_generation_that_absorbs_nothing_keeps_its_parents_model(files):
+    """An adaptation whose credible disc is wider than the absorb radius gives nothing: the new
+    generation records it, and its model is the parent's, byte for byte, so it adapts exactly as
+    its parent (a refit or a new calibration would change it)."""
+    from kbcli.stages import repair as repair_stage
+
+    parent = read_artifact(files / "model.h5", "model")
+    model = load_model(parent)
+    pts = np.array([[300.0, 300.0], [420.0, 380.0]])
+    wide = repair_stage.Adaptation(pts, pts, np.full((2, 1), np.nan), np.array([0, 1]),
+                                   np.zeros(2), repair_stage.ABSORB_RADIUS + 1.0)
+    art, summary = repair_stage.repaired_model(parent, model, [wide], source="adapt")
+    assert (summary["absorbed"], summary["skipped"], summary["generation"]) == (0, 1, 1)
+    assert art.attrs["lineage"][-1]["absorbed"] == 0
+    for key, arr in parent.data["model"].items():
+        np.testing.assert_array_equal(art.data["model"][key], arr)
+    grid = np.random.default_rng(0).uniform((200, 250), (600, 450), (500, 2))
+    np.testing.assert_array_equal(load_model(art).predict_proba(grid), model.predict_proba(grid))
+    assert art.attrs["boundary_error_px"] == pytest.approx(parent.attrs["boundary_error_px"])
+    assert art.attrs["reliability"] == parent.attrs["reliability"]  # not assessed anew
+
+
 def test_model_out_never_overwrites_its_input(runner, files):
     before = sha256_file(files / "model.h5")
     r = _adapt(runner, files, "--repair", "--model-out", str(files / "model.h5"), out="x.h5")
@@ -196,13 +218,15 @@ def test_lifelong_summary_reads_the_targets():
     the first and last moves' touches are the repaired belief's."""
     from kbcli.bench.repair import Episode, lifelong_summary
 
-    def ep(i, berr, stay):
-        return Episode(i, np.zeros(2), stay, 0.5, 31, 1.0, berr, 30, i)
+    def ep(i, berr, stay, final=0.5, learned=0.5):
+        return Episode(i, np.zeros(2), stay, final, 31, 1.0, berr, 30, i, 31, learned)
 
-    s = lifelong_summary(3.2, [ep(1, 3.0, 31), ep(2, 2.5, 20), ep(3, 2.6, 12)])
+    s = lifelong_summary(3.2, [ep(1, 3.0, 31, 2.0, 2.0), ep(2, 2.5, 20, 0.4, 0.9),
+                               ep(3, 2.6, 12, 1.1, 0.3)])
     assert s["errors"] == [3.2, 3.0, 2.5, 2.6]
     assert s["falls"] == 2 and not s["falls_every"]
     assert (s["first_stay"], s["last_stay"]) == (31, 12)
+    assert (s["carried_closer"], s["carried_further"], s["later"]) == (1, 1, 2)
     assert lifelong_summary(3.2, [ep(1, 3.1, 5), ep(2, 3.0, 5)])["falls_every"]
     assert not lifelong_summary(3.0, [ep(1, 3.0, 5)])["falls_every"]  # level is not a fall
 
@@ -218,6 +242,7 @@ def test_bench_repair_cli_carries_every_model_and_summarises_it(runner, tiny_wea
     assert r.exit_code == 0, r.output
     assert "lifelong, every carried model: 2 moves" in r.output
     assert "fell after every move on" in r.output and "of 1 models" in r.output
+    assert "model as learned" in r.output
     assert plot.exists() and plot.stat().st_size > 0
 
 

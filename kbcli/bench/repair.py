@@ -17,9 +17,9 @@ offset over its runs, the same whatever the move and seed) and the *spread* arou
 **Lifelong.** A weak model, the keyboard moved ``episodes`` times in a row
 (:func:`lifelong_moves`), the robot adapting with ``repair`` and carrying its repaired model
 (:func:`kbcli.stages.repair.repaired_model`) from episode to episode, beside ``plain`` with the
-model as learned. Per episode: both methods' touches to stay under 1 px and final error, and the
-carried model's boundary error; per model, what the lifelong targets read of it
-(:func:`lifelong_summary`).
+model as learned, and beside ``repair`` with the model as learned (what carrying the model
+changed). Per episode: the three's touches to stay under 1 px and final error, and the carried
+model's boundary error; per model, what the lifelong targets read of it (:func:`lifelong_summary`).
 
 Pure: returns rows.
 """
@@ -223,6 +223,8 @@ class Episode:
     boundary_error: float
     absorbed: int
     generation: int
+    learned_stay: int = 0
+    learned_final: float = float("nan")
     extra: dict = field(default_factory=dict)
 
 
@@ -237,6 +239,9 @@ def lifelong(wm: WeakModel, *, episodes: int = 5, touches: int = 30, seed: int =
         rng = np.random.default_rng([seed, 100, e])
         res, ad = adapt_once(wm, model, truth, {"repair": True}, touches, rng)
         plain, _ = adapt_once(wm, wm.model, truth, {}, touches, np.random.default_rng([seed, 100, e]))
+        learned = (res if e == 0 else  # the first move's model is the learned one
+                   adapt_once(wm, wm.model, truth, {"repair": True}, touches,
+                              np.random.default_rng([seed, 100, e]))[0])
         t0 = time.perf_counter()
         art, summary = repair_stage.repaired_model(
             art, model, [repair_stage.run_adaptation(ad, res)], source="bench")
@@ -244,8 +249,8 @@ def lifelong(wm: WeakModel, *, episodes: int = 5, touches: int = 30, seed: int =
         out.append(Episode(e + 1, truth, stay_under(res["errors"]), float(res["errors"][-1]),
                            stay_under(plain["errors"]), float(plain["errors"][-1]),
                            float(summary["boundary_error_px"]), int(summary["absorbed"]),
-                           int(summary["generation"]),
-                           {"refit_s": time.perf_counter() - t0}))
+                           int(summary["generation"]), stay_under(learned["errors"]),
+                           float(learned["errors"][-1]), {"refit_s": time.perf_counter() - t0}))
         if progress is not None:
             progress(1)
     return start, out
@@ -254,10 +259,16 @@ def lifelong(wm: WeakModel, *, episodes: int = 5, touches: int = 30, seed: int =
 def lifelong_summary(start: float, episodes: list[Episode]) -> dict:
     """What the lifelong targets read of one model's section: the carried model's boundary
     error before the first move and after each (``errors``), the moves after which it fell
-    (``falls``), whether it fell after every move, and the touches the repaired belief needed to
-    stay under 1 px on the first and on the last move (``touches + 1``: never)."""
+    (``falls``), whether it fell after every move, the touches the repaired belief needed to stay
+    under 1 px on the first and on the last move (``touches + 1``: never), and on the ``later``
+    moves (all but the first, which adapts with the learned model either way) how often the
+    carried model ended closer to the truth than the model as learned, and how often further."""
     errors = [float(start)] + [float(e.boundary_error) for e in episodes]
     falls = int(sum(b < a for a, b in zip(errors[:-1], errors[1:], strict=True)))
+    later = episodes[1:]  # the first move adapts with the learned model either way
     return {"errors": errors, "falls": falls, "falls_every": falls == len(episodes),
             "first_stay": int(episodes[0].repair_stay) if episodes else 0,
-            "last_stay": int(episodes[-1].repair_stay) if episodes else 0}
+            "last_stay": int(episodes[-1].repair_stay) if episodes else 0,
+            "carried_closer": int(sum(e.repair_final < e.learned_final for e in later)),
+            "carried_further": int(sum(e.repair_final > e.learned_final for e in later)),
+            "later": len(later)}

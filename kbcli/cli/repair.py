@@ -144,11 +144,13 @@ def _lifelong_table(con, wm, start: float, eps: list, touches: int) -> None:
     t = table(f"lifelong: the {wm.name} model (boundary error {start:.2f} px as learned) "
               f"carried over {len(eps)} moves, {touches} touches each",
               ("move", "dx", "dy", "repair: touches to stay < 1 px", "repair final px",
+               "repair, model as learned: touches", "final px",
                "plain: touches to stay < 1 px", "plain final px", "touches absorbed",
                "carried model's boundary error px"), left=0)
     for e in eps:
         t.add_row(str(e.episode), f"{e.truth[0]:+.1f}", f"{e.truth[1]:+.1f}",
                   _stay(e.repair_stay, touches), f"{e.repair_final:.2f}",
+                  _stay(e.learned_stay, touches), f"{e.learned_final:.2f}",
                   _stay(e.plain_stay, touches), f"{e.plain_final:.2f}", str(e.absorbed),
                   f"{e.boundary_error:.2f}")
     show_table(con, t)
@@ -162,16 +164,22 @@ def _lifelong_models_table(con, models, sections: list, touches: int) -> None:
     t = table(f"lifelong, every carried model: {n} moves, {touches} touches each",
               ("model", "boundary error px: as learned, then after each move",
                "moves after which it fell", "repair: touches to stay < 1 px, first move",
-               "last move"), left=0)
+               "last move", "later moves ending closer / further than with the model as learned"),
+              left=0)
     for wm, s in zip(models, sums, strict=True):
         t.add_row(wm.name, "  ".join(f"{e:.2f}" for e in s["errors"]), f"{s['falls']} of {n}",
-                  _stay(s["first_stay"], touches), _stay(s["last_stay"], touches))
+                  _stay(s["first_stay"], touches), _stay(s["last_stay"], touches),
+                  f"{s['carried_closer']} / {s['carried_further']} of {s['later']}")
     show_table(con, t)
     every = sum(s["falls_every"] for s in sums)
     fewer = sum(s["last_stay"] < s["first_stay"] for s in sums)
+    closer = sum(s["carried_closer"] for s in sums)
+    further = sum(s["carried_further"] for s in sums)
     con.print(f"the carried model's boundary error fell after every move on {every} of "
               f"{len(sums)} models; the last move needed fewer touches to stay under 1 px than "
-              f"the first on {fewer} of {len(sums)}")
+              f"the first on {fewer} of {len(sums)}; on the later moves, repair with the carried "
+              f"model ended closer to the truth than with the model as learned {closer} times "
+              f"and further {further} times, of {sum(s['later'] for s in sums)}")
 
 
 def _stay(v: int, touches: int) -> str:

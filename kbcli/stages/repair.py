@@ -4,7 +4,8 @@
 the input model refitted (:func:`kbcli.core.adaptation.repair.absorb`) with its adaptations'
 touches, mapped back by each adaptation's estimate, then calibrated and self-assessed again
 (:func:`kbcli.core.model.reliability.assess`); an adaptation whose 90 % credible disc is wider than
-``absorb_radius`` px gives nothing. Its ``inputs`` hold its ``parent`` (recursively) and its attrs
+``absorb_radius`` px gives nothing, and a generation that absorbed nothing keeps its parent's model
+as it was (not refitted nor calibrated anew, so that it adapts exactly as its parent). Its ``inputs`` hold its ``parent`` (recursively) and its attrs
 ``lineage`` every generation (parent sha256, touches absorbed, shift, credible radius); a model
 ``kbcli learn`` writes is generation 0.
 """
@@ -128,28 +129,34 @@ def repaired_model(parent: Artifact, model, adaptations: list[Adaptation], *,
                           "model")
     kept = [a for a in adaptations if a.radius <= absorb_radius]
     felt, aims, heard, classes = absorbed(kept, np.asarray(model.class_features_).shape[1])
-    fitted = absorb(model, felt, classes, np.zeros(2))
-    rng = np.random.default_rng(np.random.SeedSequence(0, spawn_key=(REPAIR_KEY,)))
-    feats = np.asarray(fitted.class_features_, float)[fitted.labels_]
-    calibrated, rel = reliability.assess(fitted, fitted.actions_, feats, rng=rng)
+    data = copy.deepcopy(parent.data)
+    if len(classes):
+        fitted = absorb(model, felt, classes, np.zeros(2))
+        rng = np.random.default_rng(np.random.SeedSequence(0, spawn_key=(REPAIR_KEY,)))
+        feats = np.asarray(fitted.class_features_, float)[fitted.labels_]
+        calibrated, rel = reliability.assess(fitted, fitted.actions_, feats, rng=rng)
+        rel_dict = rel.to_dict()
+        samples = data.get("samples", {})
+        for key, extra in (("actions", aims), ("landed", felt), ("perceived", heard)):
+            if key in samples:
+                samples[key] = np.vstack([np.asarray(samples[key], float), extra])
+        samples.pop("start_angles", None)  # an absorbed touch has no start pose of the learning arm
+        data["model"] = calibrated.to_arrays()
+    else:  # nothing absorbed: the parent's model as it was, not refitted nor calibrated anew
+        calibrated, rel_dict = model, parent.attrs.get("reliability")
     kb = keyboard_stage.load(parent)
     pred, true = scoring.key_maps(calibrated, kb, EVAL_STEP)
     acc = scoring.accuracy_from_maps(pred, true)
     berr = scoring.boundary_error(pred, true, EVAL_STEP)
     lineage = [*list(parent.attrs.get("lineage") or []),
                generation(parent, adaptations, kept, len(classes), source, absorb_radius)]
-    data = copy.deepcopy(parent.data)
-    samples = data.get("samples", {})
-    for key, extra in (("actions", aims), ("landed", felt), ("perceived", heard)):
-        if key in samples:
-            samples[key] = np.vstack([np.asarray(samples[key], float), extra])
-    samples.pop("start_angles", None)  # an absorbed touch has no start pose of the learning arm
-    data["model"] = calibrated.to_arrays()
     data["evaluation"] = {**data.get("evaluation", {}), "predicted_keys": pred.astype(np.int16)}
     attrs = {**parent.attrs, "accuracy": acc, "boundary_error_px": berr,
              "n_reaches": int(parent.attrs.get("n_reaches", 0)) + int(len(classes)),
-             "reliability": rel.to_dict(), "lineage": lineage,
+             "reliability": rel_dict, "lineage": lineage,
              "generation": len(lineage), "absorbed_touches": int(len(classes))}
+    if rel_dict is None:
+        attrs.pop("reliability")
     inputs = {"keyboard": parent.inputs.get("keyboard"), "parent": ref(parent)}
     art = Artifact(kind="model", config=copy.deepcopy(parent.config), seed=parent.seed, data=data,
                    attrs=attrs, inputs={k: v for k, v in inputs.items() if v is not None})

@@ -15,8 +15,8 @@ def plot_lifelong(start_error: float, episodes: list, path: str | os.PathLike, *
                   touches: int, title: str = "") -> None:
     """Two panels over the moves: the carried model's boundary error (px, its learned model's
     before the first move), and the touches each method needed to stay under 1 px (``touches +
-    1``: never), the repaired belief with the carried model beside infogain with the model as
-    learned."""
+    1``: never), the repaired belief with the carried model beside the repaired belief and plain
+    infogain with the model as learned."""
     n = np.arange(len(episodes) + 1)
     berr = [start_error] + [e.boundary_error for e in episodes]
     ep = np.arange(1, len(episodes) + 1)
@@ -28,6 +28,7 @@ def plot_lifelong(start_error: float, episodes: list, path: str | os.PathLike, *
     a.set_ylim(0, max(berr) * 1.15)
     a.grid(alpha=0.3)
     for label, key, style in (("repair, model carried", "repair_stay", "o-"),
+                              ("repair, model as learned", "learned_stay", "^:"),
                               ("plain infogain, model as learned", "plain_stay", "s--")):
         b.plot(ep, [getattr(e, key) for e in episodes], style, label=label)
     b.axhline(touches + 0.5, color="0.6", lw=0.8)
