@@ -51,8 +51,8 @@ def bench_repair_cmd(
                                           "section, at most 20 (0: skip it).")] = 5,
     lifelong_models: Annotated[int | None, typer.Option(
         "--lifelong-models", help="Weak models the lifelong section carries over the moves: the "
-        "first N, ideal arm first (default: every one). The first is shown move by move and "
-        "drawn; each gets a line of the summary.")] = None,
+        "first N, ideal arm first. The first is shown move by move and drawn; each gets a line "
+        "of the summary.", show_default="every one")] = None,
     plot: Annotated[Path, typer.Option("--plot", help="Figure of the lifelong section (PNG, PDF "
                                        "or SVG by the suffix).")] = Path("repair-lifelong.png"),
     replicates: Annotated[int, typer.Option("--replicates", help="Adaptations of each move, "
@@ -92,18 +92,27 @@ def bench_repair_cmd(
     _side_table(con, bench.summarize(runs, touches), models, f"{moves} moves x {replicates} "
                 f"adaptation seed{'s' if replicates > 1 else ''}", touches, floors)
     if episodes:
-        carried = models[:lifelong_models] if lifelong_models else models
-        with ticker(episodes * len(carried), "lifelong moves") as tick:
-            sections = [bench.lifelong(wm, episodes=episodes, touches=touches, seed=seed,
-                                       progress=tick) for wm in carried]
-        start, eps = sections[0]
-        _lifelong_table(con, models[0], start, eps, touches)
-        _lifelong_models_table(con, carried, sections, touches)
-        from kbcli.viz.repair import plot_lifelong  # (matplotlib: seconds)
-        with busy("drawing"):
-            plot_lifelong(start, eps, plot, touches=touches,
-                          title=f"lifelong: {models[0].name} model carried over {episodes} moves")
-        con.print(f"wrote {plot}")
+        _lifelong_section(con, models[:lifelong_models] if lifelong_models else models,
+                          episodes, touches, seed, plot)
+
+
+def _lifelong_section(con, carried: list, episodes: int, touches: int, seed: int,
+                      plot: Path) -> None:
+    """Carry each of ``carried`` over the moves; tabulate the first move by move and draw it, and
+    every one in a line of the summary."""
+    from kbcli.bench import repair as bench
+
+    with ticker(episodes * len(carried), "lifelong moves") as tick:
+        sections = [bench.lifelong(wm, episodes=episodes, touches=touches, seed=seed,
+                                   progress=tick) for wm in carried]
+    start, eps = sections[0]
+    _lifelong_table(con, carried[0], start, eps, touches)
+    _lifelong_models_table(con, carried, sections, touches)
+    from kbcli.viz.repair import plot_lifelong  # (matplotlib: seconds)
+    with busy("drawing"):
+        plot_lifelong(start, eps, plot, touches=touches,
+                      title=f"lifelong: {carried[0].name} model carried over {episodes} moves")
+    con.print(f"wrote {plot}")
 
 
 def _side_table(con, rows: list[dict], models, runs: str, touches: int,
