@@ -223,8 +223,8 @@ class Episode:
     boundary_error: float
     absorbed: int
     generation: int
-    learned_stay: int = 0
-    learned_final: float = float("nan")
+    learned_stay: int
+    learned_final: float
     extra: dict = field(default_factory=dict)
 
 

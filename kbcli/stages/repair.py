@@ -5,9 +5,9 @@ the input model refitted (:func:`kbcli.core.adaptation.repair.absorb`) with its 
 touches, mapped back by each adaptation's estimate, then calibrated and self-assessed again
 (:func:`kbcli.core.model.reliability.assess`); an adaptation whose 90 % credible disc is wider than
 ``absorb_radius`` px gives nothing, and a generation that absorbed nothing keeps its parent's model
-as it was (not refitted nor calibrated anew, so that it adapts exactly as its parent). Its ``inputs`` hold its ``parent`` (recursively) and its attrs
-``lineage`` every generation (parent sha256, touches absorbed, shift, credible radius); a model
-``kbcli learn`` writes is generation 0.
+as it was (not refitted nor calibrated anew, so that it adapts exactly as its parent). Its
+``inputs`` hold its ``parent`` (recursively) and its attrs ``lineage`` every generation (parent
+sha256, touches absorbed, shift, credible radius); a model ``kbcli learn`` writes is generation 0.
 """
 
 from __future__ import annotations
