@@ -234,14 +234,26 @@ def lifelong(wm: WeakModel, *, episodes: int = 5, touches: int = 30, seed: int =
     :class:`Episode` per move)."""
     art, model = wm.artifact, wm.model
     start = float(art.attrs["boundary_error_px"])
+    tables: dict = {}  # the learned model's raster per method, built once for every move
+
+    def as_learned(options: dict, truth: np.ndarray, e: int) -> tuple[dict, object]:
+        key = tuple(sorted(options))
+        if key not in tables:
+            cfg = AdaptConfig(strategy="infogain", mode=wm.mode, arm=wm.arm, max_steps=touches,
+                              **options)
+            tables[key] = build_shared_table(cfg, wm.model)
+        return adapt_once(wm, wm.model, truth, options, touches,
+                          np.random.default_rng([seed, 100, e]), tables[key])
+
     out = []
     for e, truth in enumerate(lifelong_moves(episodes, seed)):
-        rng = np.random.default_rng([seed, 100, e])
-        res, ad = adapt_once(wm, model, truth, {"repair": True}, touches, rng)
-        plain, _ = adapt_once(wm, wm.model, truth, {}, touches, np.random.default_rng([seed, 100, e]))
-        learned = (res if e == 0 else  # the first move's model is the learned one
-                   adapt_once(wm, wm.model, truth, {"repair": True}, touches,
-                              np.random.default_rng([seed, 100, e]))[0])
+        if e == 0:  # the first move's model is the learned one
+            res, ad = as_learned({"repair": True}, truth, e)
+        else:
+            res, ad = adapt_once(wm, model, truth, {"repair": True}, touches,
+                                 np.random.default_rng([seed, 100, e]))
+        plain, _ = as_learned({}, truth, e)
+        learned = res if e == 0 else as_learned({"repair": True}, truth, e)[0]
         t0 = time.perf_counter()
         art, summary = repair_stage.repaired_model(
             art, model, [repair_stage.run_adaptation(ad, res)], source="bench")
