@@ -122,7 +122,7 @@ class Run:
     errors: np.ndarray
     covered: bool
     step_ms: float
-    offset: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
+    offset: np.ndarray
 
     @property
     def final(self) -> float:
